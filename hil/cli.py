@@ -1,0 +1,77 @@
+"""`hil`: the command line of the USV HIL stack.
+
+Conventions shared by every subcommand:
+
+* ``--config FILE`` (default ``configs/default.toml``) and repeatable ``--set section.key=value``;
+* ``--json`` prints one JSON object, the run's summary, on stdout at the end;
+* human-readable progress goes to stderr;
+* exit 0 on success, 1 when the run itself failed, 2 on a usage or configuration error, which is
+  reported as one line and never as a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from hil.errors import HilError
+
+# Subcommand modules under hil/commands/, in the order `hil --help` lists them.
+COMMANDS = ("run", "sim", "plan", "montecarlo", "bench")
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line (and exit code 2), not usage plus message."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def common_options() -> argparse.ArgumentParser:
+    """The options every subcommand accepts."""
+    p = argparse.ArgumentParser(add_help=False)
+    g = p.add_argument_group("common options")
+    g.add_argument("--config", metavar="FILE", default=None,
+                   help="complete TOML configuration (default: configs/default.toml)")
+    g.add_argument("--set", metavar="SECTION.KEY=VALUE", action="append", default=[], dest="overrides",
+                   help="override one configuration key, value in TOML syntax "
+                        "(e.g. --set current.enabled=false); repeatable")
+    g.add_argument("--json", action="store_true",
+                   help="print the run's summary as one JSON object on stdout at the end")
+    return p
+
+
+def build_parser() -> ArgumentParser:
+    parser = ArgumentParser(
+        prog="hil",
+        description="Hardware-in-the-loop simulation of a USV with DDRRT* online path planning "
+                    "(Wen et al., J. Navigation 2019).",
+        epilog="Exit codes: 0 success, 1 the run failed, 2 usage or configuration error. "
+               "`hil COMMAND --help` explains each command.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=ArgumentParser)
+    sub.required = True
+    parents = [common_options()]
+    for name in COMMANDS:
+        try:
+            module = importlib.import_module(f"hil.commands.{name}")
+        except ModuleNotFoundError as exc:  # TODO(integration): remove once every command exists
+            if exc.name != f"hil.commands.{name}":
+                raise
+            continue
+        module.add_parser(sub, parents)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except HilError as exc:
+        print(f"hil {args.command}: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print(f"hil {args.command}: interrupted", file=sys.stderr)
+        return 130

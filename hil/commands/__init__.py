@@ -1,0 +1,1 @@
+"""One module a `hil` subcommand; each defines ``add_parser(subparsers, parents)``."""

@@ -1,0 +1,37 @@
+"""The root of the configuration: one frozen dataclass per TOML section of configs/default.toml.
+
+A configuration file is complete: every section and key must be present (copy
+``configs/default.toml`` and edit it, or use ``--set section.key=value``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from hil import config
+from simulator.config import (
+    CurrentParams,
+    GeodesyParams,
+    LinkParams,
+    SensorParams,
+    SimParams,
+    VesselParams,
+    WaveParams,
+)
+
+
+@dataclass(frozen=True)
+class HilConfig:
+    vessel: VesselParams
+    waves: WaveParams
+    current: CurrentParams
+    sensors: SensorParams
+    sim: SimParams
+    link: LinkParams
+    geodesy: GeodesyParams
+
+
+def load(path: str | Path | None = None, overrides: list[str] | None = None) -> HilConfig:
+    """Load and validate a whole configuration (default: configs/default.toml)."""
+    return config.load(HilConfig, path, overrides)

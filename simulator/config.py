@@ -1,0 +1,154 @@
+"""Typed configuration of the simulator: the vessel, its sea, its sensors, its clock and its link.
+
+Frozen dataclasses, filled strictly from the TOML sections of the same names by
+``hil.config``. Units are SI (metres, seconds, radians, newtons, kilograms) unless a field's
+``unit`` says otherwise; frames are NED (x north, y east, yaw clockwise from north).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from common.params import param
+
+
+@dataclass(frozen=True)
+class VesselParams:
+    """Parameters of the 3-DOF model of eqs. (2)-(5) (the paper's Table 1, which is missing)."""
+
+    m: float = param("rigid-body mass", "kg", gt=0)
+    L: float = param("hull length used in eq. (5)", "m", gt=0)
+    W: float = param("hull width (beam) used in eq. (5)", "m", gt=0)
+    D: float = param("average draft (depth of underwater penetration), eq. (5)", "m", gt=0)
+    B_u: float = param("distance between port and starboard propellers", "m", gt=0)
+    rho: float = param("water density", "kg/m^3", gt=0)
+    d_u: float = param("linear surge damping; d_u2 = 0.2 d_u, d_u3 = 0.1 d_u", "kg/s", ge=0)
+    d_v: float = param("linear sway damping; d_v2 = 0.2 d_v, d_v3 = 0.1 d_v", "kg/s", ge=0)
+    d_r: float = param("linear yaw damping; d_r2 = 0.2 d_r, d_r3 = 0.1 d_r", "kg m^2/s", ge=0)
+    T_max: float = param("largest forward thrust of one propeller", "N", gt=0)
+    T_min: float = param("largest reverse thrust of one propeller (<= 0)", "N", le=0)
+
+
+@dataclass(frozen=True)
+class WaveParams:
+    """Wave forces of eq. (6) (the paper's Table 2, which is missing)."""
+
+    enabled: bool = param("apply the wave forces of eq. (6)")
+    amplitude: float = param("mean wave amplitude alpha", "m", ge=0)
+    amplitude_std: float = param("std of the slow variation of the amplitude", "m", ge=0)
+    direction: float = param("mean direction the waves travel towards, clockwise from north", "rad")
+    direction_std: float = param("std of the slow variation of the wave direction", "rad", ge=0)
+    correlation_time: float = param("time constant of the slow (Ornstein-Uhlenbeck) variation", "s", gt=0)
+    C_X: float = param("non-dimensional surge wave coefficient")
+    C_Y: float = param("non-dimensional sway wave coefficient")
+    C_N: float = param("non-dimensional yaw wave coefficient")
+
+
+@dataclass(frozen=True)
+class CurrentParams:
+    """The meandering-jet current of eq. (13), constants of section 4.1."""
+
+    enabled: bool = param("apply the current (vessel dynamics are water-relative)")
+    b: float = param("mean meander amplitude b of B(t) = b + e cos(omega t + theta_u)")
+    c: float = param("phase speed c of the meander (non-dimensional)")
+    k_u: float = param("meander wave number k_u (non-dimensional)")
+    omega: float = param("frequency omega of the amplitude modulation (non-dimensional)")
+    e: float = param("modulation amplitude e")
+    theta_u: float = param("modulation phase theta_u", "rad")
+    sc: float = param("length scale: non-dimensional coordinate = sc * metres", "1/m", gt=0)
+    time_scale: float = param("time scale: non-dimensional time = time_scale * seconds", "1/s", ge=0)
+    speed_scale: float = param("velocity of unit stream-function gradient", "m/s", ge=0)
+    origin_x: float = param("north coordinate of the jet's origin", "m")
+    origin_y: float = param("east coordinate of the jet's axis", "m")
+
+
+@dataclass(frozen=True)
+class GpsParams:
+    rate_hz: float = param("GPS output rate", "Hz", gt=0, le=50)
+    latency: float = param("delay between the measured instant and its output", "s", ge=0)
+    pos_std: float = param("horizontal position noise, per axis", "m", ge=0)
+    vel_std: float = param("velocity noise, per axis", "m/s", ge=0)
+    dropouts: tuple[tuple[float, float], ...] = param(
+        "scheduled dropout windows [[start_s, duration_s], ...] in simulated time")
+    dropout_rate: float = param("random dropouts started per second", "1/s", ge=0)
+    dropout_duration: float = param("duration of a random dropout", "s", ge=0)
+    glitch_probability: float = param("probability that a GPS fix is a glitch", "", ge=0, le=1)
+    glitch_magnitude: float = param("position jump of a glitch", "m", ge=0)
+
+
+@dataclass(frozen=True)
+class ImuParams:
+    rate_hz: float = param("IMU (HIL_SENSOR) output rate", "Hz", gt=0, le=1000)
+    gyro_std: float = param("gyro white noise", "rad/s", ge=0)
+    gyro_bias: float = param("initial gyro bias std (constant per run)", "rad/s", ge=0)
+    gyro_bias_walk: float = param("gyro bias random walk", "rad/s/sqrt(s)", ge=0)
+    accel_std: float = param("accelerometer white noise", "m/s^2", ge=0)
+    accel_bias: float = param("initial accelerometer bias std (constant per run)", "m/s^2", ge=0)
+
+
+@dataclass(frozen=True)
+class CompassParams:
+    heading_std: float = param("heading noise", "rad", ge=0)
+    field_strength: float = param("horizontal magnetic field strength", "gauss", gt=0)
+    declination: float = param("magnetic declination, east positive", "rad")
+
+
+@dataclass(frozen=True)
+class DvlParams:
+    enabled: bool = param("send DVL bottom-lock body velocity")
+    rate_hz: float = param("DVL output rate", "Hz", gt=0, le=50)
+    vel_std: float = param("body velocity noise, per axis", "m/s", ge=0)
+
+
+@dataclass(frozen=True)
+class SensorParams:
+    gps: GpsParams
+    imu: ImuParams
+    compass: CompassParams
+    dvl: DvlParams
+
+
+@dataclass(frozen=True)
+class InitialState:
+    """Where the vessel starts (NED metres, radians, m/s, rad/s)."""
+
+    x: float = param("north", "m")
+    y: float = param("east", "m")
+    psi: float = param("heading, clockwise from north", "rad")
+    u: float = param("surge velocity", "m/s")
+    v: float = param("sway velocity", "m/s")
+    r: float = param("yaw rate", "rad/s")
+
+
+@dataclass(frozen=True)
+class SimParams:
+    """Clock and integration of the simulator process."""
+
+    dt: float = param("integration step (fixed-step RK4)", "s", gt=0, le=0.1)
+    seed: int = param("seed of every random process (sensors, waves)", ge=0)
+    duration: float = param("simulated time after which the run ends; 0 = until stopped", "s", ge=0)
+    lockstep: bool = param("advance one step per HIL_ACTUATOR_CONTROLS instead of the wall clock")
+    speedup: float = param("real-time mode: simulated seconds per wall second", "", gt=0)
+    truth_rate_hz: float = param("HIL_STATE_QUATERNION (truth) rate", "Hz", gt=0)
+    stale_command_timeout: float = param("no command for this long (simulated time) -> thrust 0", "s", gt=0)
+    lockstep_resend: float = param("lockstep: re-send the latest frame when no command for this long (wall)", "s", gt=0)
+    initial: InitialState
+
+
+@dataclass(frozen=True)
+class LinkParams:
+    """UDP/MAVLink endpoints of the simulator."""
+
+    state_to: tuple[str, ...] = param("HOST:PORT destinations of the sensor/truth broadcast")
+    commands_on: str = param("HOST:PORT where HIL_ACTUATOR_CONTROLS are received")
+    system_id: int = param("MAVLink system id of the simulator", ge=1, le=255)
+    component_id: int = param("MAVLink component id of the simulator", ge=0, le=255)
+
+
+@dataclass(frozen=True)
+class GeodesyParams:
+    """Origin of the local NED frame on WGS-84."""
+
+    lat0: float = param("latitude of the NED origin", "deg", ge=-89, le=89)
+    lon0: float = param("longitude of the NED origin", "deg", ge=-180, le=180)
+    alt0: float = param("height of the NED origin above the ellipsoid", "m")
