@@ -1,0 +1,90 @@
+"""CLI conventions, checked on the real `hil` entry point in a subprocess."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from hil.cli import COMMANDS, build_parser
+
+
+def test_top_level_help_lists_commands_and_exit_codes(hil):
+    r = hil("--help")
+    assert r.returncode == 0
+    for name in COMMANDS:
+        assert name in r.stdout
+    assert "Exit codes" in r.stdout
+
+
+def test_every_command_has_help_with_common_options(hil):
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    assert set(sub.choices) == set(COMMANDS), "every listed command must exist"
+    for name in COMMANDS:
+        if name == "bench":
+            continue  # its targets carry the options; checked below
+        r = hil(name, "--help")
+        assert r.returncode == 0, r.stderr
+        for opt in ("--config", "--set", "--json"):
+            assert opt in r.stdout, f"hil {name} --help lacks {opt}"
+
+
+def test_bench_targets_have_help(hil):
+    from hil.commands.bench import TARGETS
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    bench = sub.choices["bench"]
+    targets = next(a for a in bench._actions if a.dest == "target")
+    for name in targets.choices:
+        assert name in TARGETS
+        r = hil("bench", name, "--help")
+        assert r.returncode == 0 and "--json" in r.stdout
+
+
+def test_unknown_command_and_option_are_one_line_exit_2(hil):
+    r = hil("no-such-command")
+    assert r.returncode == 2
+    assert len(r.stderr.strip().splitlines()) == 1
+    r = hil("sim", "--no-such-option")
+    assert r.returncode == 2
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("overrides", [["vessel.m=-3"], ["vessel.bogus=1"], ["vessel.m=fast"]])
+def test_config_errors_are_one_line_exit_2(hil, overrides):
+    args = ["sim", "--duration", "0.1", "--json"]
+    for o in overrides:
+        args += ["--set", o]
+    r = hil(*args)
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hil sim: error: "), r.stderr
+    assert "vessel." in lines[0]
+    assert r.stdout == ""
+
+
+def test_missing_config_file_is_one_line(hil, tmp_path):
+    r = hil("sim", "--config", str(tmp_path / "missing.toml"), "--duration", "0.1")
+    assert r.returncode == 2
+    assert r.stderr.strip().endswith("missing.toml: no such file")
+
+
+def test_json_summary_is_one_object_on_stdout(hil):
+    import socket
+
+    sink = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sink.bind(("127.0.0.1", 0))
+    try:
+        port = sink.getsockname()[1]
+        r = hil("sim", "--duration", "0.2", "--speedup", "4", "--json",
+                "--commands-on", "127.0.0.1:0", "--state-to", f"127.0.0.1:{port}", timeout=60)
+    finally:
+        sink.close()
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.strip().splitlines()
+    assert len(lines) == 1, r.stdout
+    summary = json.loads(lines[0])
+    assert summary["steps"] == 20
