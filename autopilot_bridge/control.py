@@ -1,0 +1,153 @@
+"""Control: heading PID, speed by pole placement, and thrust allocation to the two propellers.
+
+As on the paper's platform (section 4.2): a PID controls the heading and pole placement the
+linear speed. Their outputs are the surge force ``tau_u`` (N) and the yaw moment ``tau_r`` (N m);
+the allocation inverts ``tau`` of eq. (3),
+
+    tau_u = T_port + T_stdb,    tau_r = (T_port - T_stdb) * B_u / 2,
+
+and saturates to [T_min, T_max] per propeller, keeping the yaw moment first (a boat that cannot
+turn cannot avoid anything) and giving up surge force when both do not fit. Commands leave
+normalised to the simulator's [-1, 1]: u >= 0 means u * T_max, u < 0 means |u| * T_min.
+
+Frames: NED, heading clockwise from north, positive yaw moment turns to starboard.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from common.params import param
+
+
+def wrap_angle(a: float) -> float:
+    """Wrap an angle to [-pi, pi)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@dataclass(frozen=True)
+class ControlParams:
+    """Gains of the heading and speed controllers (the [control] TOML section)."""
+
+    heading_kp: float = param("heading PID proportional gain", "N m/rad", ge=0)
+    heading_ki: float = param("heading PID integral gain", "N m/(rad s)", ge=0)
+    heading_kd: float = param("heading PID derivative gain (on the measured yaw rate)", "N m s/rad", ge=0)
+    heading_integral_limit: float = param("anti-windup bound on the integral's yaw moment", "N m", ge=0)
+    speed_bandwidth: float = param("speed loop natural frequency omega_n (closed-loop poles)", "rad/s", gt=0)
+    speed_damping: float = param("speed loop damping ratio zeta", gt=0)
+    speed_integral_limit: float = param("anti-windup bound on the speed integral's force", "N", ge=0)
+    speed_reference_time_constant: float = param("first-order reference model of the speed set-point", "s", gt=0)
+    max_acceleration: float = param("acceleration limit of the speed reference model", "m/s^2", gt=0)
+
+
+@dataclass(frozen=True)
+class SurgeModel:
+    """The nominal surge dynamics of eq. (4) used by the speed controller (vessel computer's model)."""
+
+    m11: float      # kg, surge inertia incl. added mass, eq. (5)
+    m22: float      # kg, sway inertia, eq. (5)
+    d_u: float      # kg/s, linear surge damping; d_u2 = 0.2 d_u, d_u3 = 0.1 d_u
+
+    def damping(self, u: float) -> float:
+        """Surge damping force of eq. (4) at speed ``u`` (N)."""
+        return self.d_u * (u + 0.2 * abs(u) * u + 0.1 * u * u * u)
+
+
+class HeadingPID:
+    """PID on the wrapped heading error; derivative on the measured yaw rate (no set-point kick)."""
+
+    def __init__(self, p: ControlParams) -> None:
+        self.p = p
+        self.integral = 0.0
+
+    def reset(self) -> None:
+        self.integral = 0.0
+
+    def update(self, psi_ref: float, psi: float, r: float, dt: float, r_ref: float = 0.0) -> float:
+        """Yaw moment (N m) to steer heading ``psi`` (rad) to ``psi_ref`` given yaw rate ``r`` (rad/s)."""
+        e = wrap_angle(psi_ref - psi)
+        if self.p.heading_ki > 0.0 and dt > 0.0:
+            self.integral += self.p.heading_ki * e * dt
+            lim = self.p.heading_integral_limit
+            self.integral = min(max(self.integral, -lim), lim)
+        return self.p.heading_kp * e + self.integral + self.p.heading_kd * (r_ref - r)
+
+
+class SpeedController:
+    """Surge speed by feedback linearisation and pole placement, behind a reference model.
+
+    A first-order, acceleration-limited reference model turns the set-point ``u_ref`` into a smooth
+    desired speed ``u_d`` with derivative ``du_d`` (Fossen's reference models: a step set-point would
+    otherwise excite the zero of the integral action and overshoot). With ``e = u - u_d`` and
+
+        tau_u = D(u) - m22 v r + m11 (du_d - 2 zeta omega e - omega^2 I),   I = integral of e,
+
+    the surge row of eq. (4) closes to ``e'' + 2 zeta omega e' + omega^2 e = 0`` (disturbances
+    aside, which the integral removes): poles at ``-zeta omega +- omega sqrt(zeta^2 - 1)``.
+    """
+
+    def __init__(self, p: ControlParams, model: SurgeModel) -> None:
+        self.p, self.model = p, model
+        self.integral = 0.0
+        self.u_d: float | None = None
+
+    def reset(self, u: float | None = None) -> None:
+        self.integral = 0.0
+        self.u_d = u
+
+    def update(self, u_ref: float, u: float, v: float, r: float, dt: float) -> float:
+        """Surge force (N) to bring surge speed ``u`` (m/s) to the set-point ``u_ref``."""
+        m, w, z = self.model, self.p.speed_bandwidth, self.p.speed_damping
+        if self.u_d is None:
+            self.u_d = u
+        du_d = (u_ref - self.u_d) / self.p.speed_reference_time_constant
+        du_d = min(max(du_d, -self.p.max_acceleration), self.p.max_acceleration)
+        self.u_d += du_d * dt
+        e = u - self.u_d
+        if dt > 0.0:
+            self.integral += e * dt
+            lim = self.p.speed_integral_limit / max(m.m11 * w * w, 1e-9)
+            self.integral = min(max(self.integral, -lim), lim)
+        return m.damping(u) - m.m22 * v * r + m.m11 * (du_d - 2.0 * z * w * e - w * w * self.integral)
+
+
+@dataclass(frozen=True)
+class Thrust:
+    """Allocated propeller thrusts (N) and the normalised commands sent to the simulator."""
+
+    port: float
+    stdb: float
+    port_cmd: float
+    stdb_cmd: float
+    saturated: bool
+
+
+def normalise(thrust: float, t_max: float, t_min: float) -> float:
+    """Thrust (N) to the simulator's command in [-1, 1] (u >= 0: u T_max; u < 0: |u| T_min)."""
+    if thrust >= 0.0:
+        return min(thrust / t_max, 1.0)
+    return -min(thrust / t_min, 1.0)
+
+
+def allocate(tau_u: float, tau_r: float, b_u: float, t_max: float, t_min: float) -> Thrust:
+    """Invert tau of eq. (3) and saturate, keeping the yaw moment before the surge force.
+
+    The differential ``delta = T_port - T_stdb = 2 tau_r / B_u`` is limited first to what the
+    propellers can produce at all (``T_max - T_min``); the common part ``tau_u / 2`` is then
+    clipped to the interval that keeps both propellers inside [T_min, T_max].
+    """
+    delta = 2.0 * tau_r / b_u
+    span = t_max - t_min
+    saturated = False
+    if abs(delta) > span:
+        delta = math.copysign(span, delta)
+        saturated = True
+    mean = tau_u / 2.0
+    lo = t_min + abs(delta) / 2.0
+    hi = t_max - abs(delta) / 2.0
+    if mean < lo or mean > hi:
+        mean = min(max(mean, lo), hi)
+        saturated = True
+    port, stdb = mean + delta / 2.0, mean - delta / 2.0
+    return Thrust(port, stdb, normalise(port, t_max, t_min), normalise(stdb, t_max, t_min), saturated)

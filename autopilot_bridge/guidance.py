@@ -1,0 +1,77 @@
+"""Line-of-sight path following on a polyline (Fossen, Breivik and Skjetne 2003).
+
+The local path (Dubins-smoothed, densely sampled) is a polyline in NED. For the vessel's position
+the guidance finds the closest point ahead of the last progress, the cross-track error ``e``
+(positive to starboard of the path) and commands
+
+    psi_d = pi_p - atan(e / Delta)
+
+where ``pi_p`` is the path-tangential angle and ``Delta`` the look-ahead distance. The progress
+along the path only moves forward, so a path that folds back on itself is followed in order.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class GuidanceOutput:
+    heading: float          # rad, desired heading (NED, clockwise from north)
+    cross_track: float      # m, positive when the vessel is to starboard of the path
+    remaining: float        # m, path length from the closest point to the end
+    finished: bool          # within the acceptance radius of the end point
+
+
+class LineOfSight:
+    """LOS guidance along an NED polyline ``path`` of shape (N, 2) (north, east)."""
+
+    def __init__(self, path: np.ndarray, lookahead: float, acceptance_radius: float) -> None:
+        path = np.asarray(path, dtype=float)
+        if path.ndim != 2 or path.shape[1] != 2 or len(path) < 2:
+            raise ValueError("path must be an (N >= 2, 2) array of NED points")
+        seg = np.diff(path, axis=0)
+        keep = np.hypot(seg[:, 0], seg[:, 1]) > 1e-9
+        self.path = np.vstack([path[:1], path[1:][keep]])
+        if len(self.path) < 2:
+            raise ValueError("path has no length")
+        self.seg = np.diff(self.path, axis=0)
+        self.seg_len = np.hypot(self.seg[:, 0], self.seg[:, 1])
+        self.cum = np.concatenate([[0.0], np.cumsum(self.seg_len)])
+        self.lookahead = lookahead
+        self.acceptance_radius = acceptance_radius
+        self.index = 0  # segment of the last progress
+
+    @property
+    def length(self) -> float:
+        return float(self.cum[-1])
+
+    def update(self, north: float, east: float) -> GuidanceOutput:
+        """Desired heading for the vessel at (north, east)."""
+        p = np.array([north, east])
+        best = (math.inf, self.index, 0.0)
+        # Search a window ahead of the last progress only, so the vessel never skips back.
+        for i in range(self.index, min(self.index + 50, len(self.seg))):
+            a, d, ln = self.path[i], self.seg[i], self.seg_len[i]
+            s = float(np.clip(np.dot(p - a, d) / (ln * ln), 0.0, 1.0))
+            dist = float(np.hypot(*(a + s * d - p)))
+            if dist < best[0] - 1e-9:
+                best = (dist, i, s)
+        _, i, s = best
+        self.index = i
+        d = self.seg[i]
+        pi_p = math.atan2(d[1], d[0])
+        a = self.path[i]
+        # Cross-track error in the path frame: positive to starboard (right of the direction of travel).
+        e = -(p[0] - a[0]) * math.sin(pi_p) + (p[1] - a[1]) * math.cos(pi_p)
+        remaining = float(self.cum[-1] - (self.cum[i] + s * self.seg_len[i]))
+        end_dist = float(np.hypot(*(self.path[-1] - p)))
+        heading = pi_p - math.atan2(e, self.lookahead)
+        if remaining < self.lookahead:
+            # Near the end, aim at the end point itself.
+            heading = math.atan2(self.path[-1][1] - east, self.path[-1][0] - north) if end_dist > 1e-6 else pi_p
+        return GuidanceOutput(heading=heading, cross_track=e, remaining=remaining,
+                              finished=end_dist <= self.acceptance_radius)
