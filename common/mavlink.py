@@ -1,0 +1,83 @@
+"""MAVLink 2 codec on pymavlink's ``ardupilotmega`` dialect (a superset of ``common``).
+
+:class:`Codec` encodes messages into bytes (one MAVLink 2 frame each, sequence numbers counted
+from 0, so a run is reproducible byte for byte) and decodes one UDP datagram at a time into the
+messages it wants, reporting why anything else was rejected so that callers can count it.
+Each datagram is parsed on its own: a frame cut at the datagram's end is "truncated", never
+joined with the next datagram.
+"""
+
+from __future__ import annotations
+
+from typing import Iterable
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+# Rejection reasons (keys of the counters reported by the simulator and the bridge).
+NOT_MAVLINK = "not_mavlink"          # bytes that do not start a MAVLink frame
+BAD_CRC = "bad_crc"                  # a frame whose checksum does not match
+TRUNCATED = "truncated"              # a frame cut short by the end of the datagram
+MALFORMED = "malformed"              # any other framing or payload error
+UNKNOWN_MESSAGE = "unknown_message"  # a valid frame of a message id the dialect does not know
+UNWANTED_MESSAGE = "unwanted_message"  # a valid, known message this endpoint does not take
+REJECT_REASONS = (NOT_MAVLINK, BAD_CRC, TRUNCATED, MALFORMED, UNKNOWN_MESSAGE, UNWANTED_MESSAGE)
+
+MAV_TYPE = mavlink2  # the dialect module, for enums (e.g. MAV_FRAME_BODY_FRD)
+
+
+class Codec:
+    """Encoder/decoder for one MAVLink endpoint (system id, component id, accepted message types)."""
+
+    def __init__(self, system_id: int, component_id: int, accept: Iterable[str] = ()) -> None:
+        self.mav = mavlink2.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+        self.mav.robust_parsing = True
+        self.accept = frozenset(accept)
+
+    # -- encoding --------------------------------------------------------------------------
+    def pack(self, msg: mavlink2.MAVLink_message) -> bytes:
+        """One MAVLink 2 frame of ``msg``; advances the sequence number."""
+        buf = msg.pack(self.mav)
+        self.mav.seq = (self.mav.seq + 1) % 256
+        return bytes(buf)
+
+    def encode(self, name: str, *args, **kwargs) -> bytes:
+        """Frame of message ``name`` (e.g. ``"hil_sensor"``) built from its encode() arguments."""
+        return self.pack(getattr(self.mav, f"{name}_encode")(*args, **kwargs))
+
+    # -- decoding --------------------------------------------------------------------------
+    def _reset_parser(self) -> None:
+        m = self.mav
+        m.buf = bytearray()
+        m.buf_index = 0
+        m.expected_length = mavlink2.HEADER_LEN_V1 + 2
+        m.have_prefix_error = False
+
+    def decode(self, datagram: bytes) -> tuple[list[mavlink2.MAVLink_message], list[str]]:
+        """Accepted messages of one datagram, and the rejection reason of every rejected part."""
+        self._reset_parser()
+        accepted: list[mavlink2.MAVLink_message] = []
+        rejects: list[str] = []
+        try:
+            msgs = self.mav.parse_buffer(datagram) or []
+        except Exception:  # pymavlink raises struct/Value errors on some corrupt payloads
+            self._reset_parser()
+            return [], [MALFORMED]
+        for m in msgs:
+            if isinstance(m, mavlink2.MAVLink_bad_data):
+                reason = str(getattr(m, "reason", ""))
+                if "prefix" in reason:
+                    rejects.append(NOT_MAVLINK)
+                elif "CRC" in reason or "crc" in reason:
+                    rejects.append(BAD_CRC)
+                else:
+                    rejects.append(MALFORMED)
+            elif isinstance(m, mavlink2.MAVLink_unknown):
+                rejects.append(UNKNOWN_MESSAGE)
+            elif m.get_type() in self.accept:
+                accepted.append(m)
+            else:
+                rejects.append(UNWANTED_MESSAGE)
+        if self.mav.buf_len() > 0:
+            rejects.append(TRUNCATED)
+        self._reset_parser()
+        return accepted, rejects

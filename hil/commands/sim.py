@@ -1,0 +1,99 @@
+"""`hil sim`: run the simulator process alone (truth, sensors, MAVLink over UDP)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+
+from common.udp import UdpEndpoint, parse_hostport
+from hil.console import emit, load_settings, progress
+from hil.errors import ConfigError, UsageError
+from simulator.core import SimulatorCore
+from simulator.server import SimulatorServer
+
+
+def _hostport(text: str) -> str:
+    try:
+        parse_hostport(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "sim", parents=parents,
+        help="run the USV simulator alone (HIL_SENSOR/HIL_GPS/HIL_STATE_QUATERNION out, "
+             "HIL_ACTUATOR_CONTROLS in)",
+        description="Run the 3-DOF USV simulator of Wen et al. (2019) eqs. (2)-(6) with the current of "
+                    "eq. (13). It sends one datagram per IMU period (HIL_SENSOR, plus HIL_GPS and "
+                    "HIL_STATE_QUATERNION when due; MAVLink 2) to every --state-to destination, from the "
+                    "--commands-on socket, and applies the newest HIL_ACTUATOR_CONTROLS received there "
+                    "(controls[0] port, controls[1] starboard, in [-1, 1]). Ends after --duration "
+                    "simulated seconds or on SIGINT/SIGTERM, printing its summary.",
+        epilog="Options given here override the [sim] and [link] configuration keys.",
+    )
+    p.add_argument("--state-to", metavar="HOST:PORT", action="append", type=_hostport, default=None,
+                   help="destination of the sensor/truth datagrams; repeatable "
+                        "(default: link.state_to = 127.0.0.1:14560)")
+    p.add_argument("--commands-on", metavar="HOST:PORT", type=_hostport, default=None,
+                   help="UDP address to receive HIL_ACTUATOR_CONTROLS on; port 0 picks a free port "
+                        "(default: link.commands_on = 127.0.0.1:14561)")
+    p.add_argument("--lockstep", action="store_true", default=None,
+                   help="advance exactly one IMU period per HIL_ACTUATOR_CONTROLS whose time_usec equals "
+                        "the current frame's, instead of following the wall clock (default: sim.lockstep = false)")
+    p.add_argument("--duration", metavar="SECONDS", type=float, default=None,
+                   help="simulated seconds to run; 0 runs until SIGINT/SIGTERM (default: sim.duration = 60 s)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="seed of every random process: sensor noise, GPS events, waves (default: sim.seed = 1)")
+    p.add_argument("--speedup", metavar="N", type=float, default=None,
+                   help="real-time mode: simulated seconds per wall-clock second (default: sim.speedup = 1)")
+    p.set_defaults(func=run)
+
+
+def config_overrides(args: argparse.Namespace) -> list[str]:
+    """The command-line options as ``--set`` overrides (validated by the configuration loader)."""
+    out = []
+    if args.state_to is not None:
+        out.append("link.state_to=" + json.dumps(args.state_to))
+    if args.commands_on is not None:
+        out.append("link.commands_on=" + json.dumps(args.commands_on))
+    if args.lockstep:
+        out.append("sim.lockstep=true")
+    if args.duration is not None:
+        out.append(f"sim.duration={float(args.duration)!r}")
+    if args.seed is not None:
+        out.append(f"sim.seed={int(args.seed)}")
+    if args.speedup is not None:
+        out.append(f"sim.speedup={float(args.speedup)!r}")
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    args.overrides = list(args.overrides) + config_overrides(args)
+    cfg = load_settings(args)
+    try:
+        core = SimulatorCore(cfg)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    try:
+        endpoint = UdpEndpoint(cfg.link.commands_on, cfg.link.state_to)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    server = SimulatorServer(core, endpoint, lockstep=cfg.sim.lockstep, duration=cfg.sim.duration,
+                             speedup=cfg.sim.speedup, lockstep_resend=cfg.sim.lockstep_resend, progress=progress)
+    previous = {sig: signal.signal(sig, lambda *_: server.stop()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    host, port = endpoint.address
+    mode = "lockstep" if cfg.sim.lockstep else f"real time x{cfg.sim.speedup:g}"
+    progress(f"sim: commands on {host}:{port}, state to {', '.join(cfg.link.state_to)}, {mode}, "
+             f"duration {cfg.sim.duration:g} s, seed {cfg.sim.seed}")
+    try:
+        summary = server.run()
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        endpoint.close()
+    summary["commands_on"] = f"{host}:{port}"
+    emit(args, summary)
+    return 0

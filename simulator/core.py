@@ -1,0 +1,209 @@
+"""The simulator without sockets: truth, environment, sensors, MAVLink frames and commands.
+
+One *frame* is the period of the IMU (``1 / sensors.imu.rate_hz``), an integer number of RK4
+steps of ``sim.dt``. :meth:`SimulatorCore.frame` encodes everything due at the current time as
+one datagram (HIL_SENSOR always; HIL_GPS, HIL_STATE_QUATERNION and the DVL's ODOMETRY when their
+rate says so); :meth:`SimulatorCore.step` advances the truth by one frame with the newest
+command. The socket loops live in :mod:`simulator.server`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from typing import Any
+
+from common.current_field import CurrentField
+from common.geodesy import LocalFrame
+from common.mavlink import Codec, MAV_TYPE
+from simulator.integrator import rk4_step
+from simulator.sensors import G, Compass, Dvl, Gps, Imu, sensor_rngs
+from simulator.vessel import Vessel
+from simulator.waves import WaveModel
+
+# Rejections counted by the simulator besides the codec's framing reasons.
+INVALID_CONTROLS = "invalid_controls"      # NaN/inf control: previous command kept
+OUT_OF_STEP = "out_of_step_command"        # lockstep: time_usec is not the current frame's
+
+HIL_SENSOR_FIELDS = 0x1FF  # bits 0-8: x/y/z acc, x/y/z gyro, x/y/z mag
+
+
+class Command:
+    """One HIL_ACTUATOR_CONTROLS, validated: normalised port/starboard commands."""
+
+    __slots__ = ("time_usec", "port", "stdb")
+
+    def __init__(self, time_usec: int, port: float, stdb: float) -> None:
+        self.time_usec, self.port, self.stdb = time_usec, port, stdb
+
+
+class _Schedule:
+    """Is an output of ``rate_hz`` due at frame n? (integer-safe, no drift)."""
+
+    def __init__(self, rate_hz: float, frame_dt: float) -> None:
+        self.k = rate_hz * frame_dt
+
+    def due(self, n: int) -> bool:
+        return n == 0 or int(n * self.k + 1e-9) != int((n - 1) * self.k + 1e-9)
+
+
+def frame_layout(dt: float, imu_rate_hz: float) -> tuple[float, int]:
+    """(frame period s, RK4 steps per frame); ValueError('key: problem') if they do not divide."""
+    frame_dt = 1.0 / imu_rate_hz
+    sub = int(round(frame_dt / dt))
+    if sub < 1 or abs(sub * dt - frame_dt) > 1e-9 * max(1.0, frame_dt):
+        raise ValueError(f"sensors.imu.rate_hz: the IMU period 1/{imu_rate_hz:g} s must be a whole "
+                         f"number of sim.dt = {dt:g} s steps")
+    return frame_dt, sub
+
+
+class SimulatorCore:
+    """Truth + sensors + MAVLink encoding for one run (``cfg`` is a ``hil.settings.HilConfig``)."""
+
+    def __init__(self, cfg: Any) -> None:
+        self.cfg = cfg
+        self.frame_dt, self.substeps = frame_layout(cfg.sim.dt, cfg.sensors.imu.rate_hz)
+        self.dt = self.frame_dt / self.substeps
+        self.vessel = Vessel(cfg.vessel)
+        self.current = CurrentField(cfg.current)
+        self.geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
+        rngs = sensor_rngs(cfg.sim.seed)
+        s = cfg.sensors
+        self.waves = WaveModel(cfg.waves, cfg.vessel, rngs["waves"])
+        self.imu = Imu(s.imu, rngs["imu"], self.frame_dt)
+        self.compass = Compass(s.compass, rngs["compass"])
+        self.gps = Gps(s.gps, rngs["gps"], rngs["gps_events"], self.geo, self.frame_dt)
+        self.dvl = Dvl(s.dvl, rngs["dvl"]) if s.dvl.enabled else None
+        self.gps_due = _Schedule(s.gps.rate_hz, self.frame_dt)
+        self.truth_due = _Schedule(cfg.sim.truth_rate_hz, self.frame_dt)
+        self.dvl_due = _Schedule(s.dvl.rate_hz, self.frame_dt)
+        self.codec = Codec(cfg.link.system_id, cfg.link.component_id, accept=("HIL_ACTUATOR_CONTROLS",))
+        i = cfg.sim.initial
+        self.state: tuple[float, ...] = (i.x, i.y, i.psi, i.u, i.v, i.r)
+        self.n = 0
+        self.controls = (0.0, 0.0)
+        self.last_command_t = 0.0
+        self.stale = False
+        self.stale_command_events = 0
+        self.commands_received = 0
+        self.clamped_controls = 0
+        self.messages_sent: Counter = Counter()
+        self.rejects: Counter = Counter()
+        self.distance = 0.0
+        self._env = self._environment(0.0)
+
+    # -- time ------------------------------------------------------------------------------
+    @property
+    def t(self) -> float:
+        """Simulated time (s) of the current frame."""
+        return self.n * self.frame_dt
+
+    @property
+    def time_usec(self) -> int:
+        return int(round(self.n * self.frame_dt * 1e6))
+
+    # -- commands --------------------------------------------------------------------------
+    def receive(self, datagram: bytes) -> list[Command]:
+        """Valid commands in one datagram; every rejected part is counted by reason."""
+        msgs, rejects = self.codec.decode(datagram)
+        for r in rejects:
+            self.rejects[r] += 1
+        out = []
+        for m in msgs:
+            c = m.controls
+            port, stdb = float(c[0]), float(c[1])
+            if not (math.isfinite(port) and math.isfinite(stdb)):
+                self.rejects[INVALID_CONTROLS] += 1
+                continue
+            if abs(port) > 1.0 or abs(stdb) > 1.0:
+                self.clamped_controls += 1
+                port, stdb = max(-1.0, min(1.0, port)), max(-1.0, min(1.0, stdb))
+            out.append(Command(int(m.time_usec), port, stdb))
+        return out
+
+    def apply(self, cmd: Command) -> None:
+        """Make ``cmd`` the newest command (received at the current simulated time)."""
+        self.controls = (cmd.port, cmd.stdb)
+        self.last_command_t = self.t
+        self.stale = False
+        self.commands_received += 1
+
+    def thrusts(self) -> tuple[float, float]:
+        """Port and starboard thrust (N) now, after the stale-command failsafe."""
+        if self.t - self.last_command_t > self.cfg.sim.stale_command_timeout + 1e-9:
+            if not self.stale:
+                self.stale = True
+                self.stale_command_events += 1
+            return 0.0, 0.0
+        return self.vessel.thrust(self.controls[0]), self.vessel.thrust(self.controls[1])
+
+    # -- truth -----------------------------------------------------------------------------
+    def _environment(self, t: float) -> tuple[tuple[float, float, float], tuple[float, float]]:
+        """Wave forces (body) and current (north, east) at the present state and time t."""
+        s = self.state
+        return self.waves.forces(s[2]), self.current.velocity_at(s[0], s[1], t)
+
+    def derivative(self) -> tuple[float, ...]:
+        """State derivative now (with the thrust currently applied)."""
+        tau = self.vessel.propulsion(*self.thrusts())
+        return self.vessel.dynamics(self.state, tau, *self._env)
+
+    def step(self) -> None:
+        """Advance the truth by one frame: RK4 substeps with thrust held for the frame and waves and
+        current evaluated at the start of each substep (they vary over tens of seconds)."""
+        tau = self.vessel.propulsion(*self.thrusts())
+        dyn = self.vessel.dynamics
+        for k in range(1, self.substeps + 1):
+            tau_w, cur = self._env
+            x0, y0 = self.state[0], self.state[1]
+            self.state = rk4_step(lambda s: dyn(s, tau, tau_w, cur), self.state, self.dt)
+            self.distance += math.hypot(self.state[0] - x0, self.state[1] - y0)
+            self.waves.advance(self.dt)
+            self._env = self._environment(self.n * self.frame_dt + k * self.dt)
+        self.n += 1
+
+    # -- output ----------------------------------------------------------------------------
+    def frame(self) -> bytes:
+        """One datagram with every message due at the current time (HIL_SENSOR always)."""
+        x, y, psi, u, v, r = self.state
+        t, tu = self.t, self.time_usec
+        c, sn = math.cos(psi), math.sin(psi)
+        vn, ve = u * c - v * sn, u * sn + v * c
+        self.gps.record(t, x, y, vn, ve)
+        d = self.derivative()
+        ax, ay = d[3] - v * r, d[4] + u * r  # acceleration over ground in body axes
+        parts = []
+        acc_gyro = self.imu.measure(r, ax, ay)
+        mag = self.compass.measure(psi)
+        parts.append(self.codec.encode("hil_sensor", tu, *acc_gyro, *mag, 0.0, 0.0, 0.0, 0.0, HIL_SENSOR_FIELDS))
+        self.messages_sent["HIL_SENSOR"] += 1
+        if self.gps_due.due(self.n):
+            parts.append(self.codec.encode("hil_gps", tu, **self.gps.measure(t, self.cfg.geodesy.alt0)))
+            self.messages_sent["HIL_GPS"] += 1
+        if self.truth_due.due(self.n):
+            lat, lon = self.geo.sea_level_to_geodetic(x, y)
+            mg = 1000.0 / G
+            parts.append(self.codec.encode(
+                "hil_state_quaternion", tu, [math.cos(psi / 2), 0.0, 0.0, math.sin(psi / 2)], 0.0, 0.0, r,
+                int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(self.cfg.geodesy.alt0 * 1000)),
+                _i16(100 * vn), _i16(100 * ve), 0, 0, 0, _i16(ax * mg), _i16(ay * mg), _i16(-1000.0)))
+            self.messages_sent["HIL_STATE_QUATERNION"] += 1
+        if self.dvl is not None and self.dvl_due.due(self.n):
+            bu, bv, bw = self.dvl.measure(u, v)
+            var = self.cfg.sensors.dvl.vel_std ** 2
+            nan = float("nan")
+            parts.append(self.codec.encode(
+                "odometry", tu, MAV_TYPE.MAV_FRAME_LOCAL_FRD, MAV_TYPE.MAV_FRAME_BODY_FRD, nan, nan, nan,
+                [nan, nan, nan, nan], bu, bv, bw, nan, nan, nan, [nan] + [0.0] * 20,
+                [var, 0, 0, 0, 0, 0, var, 0, 0, 0, 0, var] + [0.0] * 9, 0, 0, 100))
+            self.messages_sent["ODOMETRY"] += 1
+        return b"".join(parts)
+
+    def truth(self) -> dict[str, float]:
+        x, y, psi, u, v, r = self.state
+        lat, lon = self.geo.sea_level_to_geodetic(x, y)
+        return dict(t=self.t, x=x, y=y, psi=psi, u=u, v=v, r=r, lat=lat, lon=lon)
+
+
+def _i16(v: float) -> int:
+    return max(-32768, min(32767, int(round(v))))

@@ -1,0 +1,153 @@
+"""The simulator's socket loops: lockstep and real time (see docs/simulator.md for the protocol).
+
+Both loops send one datagram per frame from the command socket to every destination and stop
+when ``duration`` simulated seconds have been run (0: never), or when ``stop()`` is called
+(the ``hil sim`` command calls it from its SIGINT/SIGTERM handler).
+"""
+
+from __future__ import annotations
+
+import time
+from array import array
+from typing import Any, Callable
+
+import numpy as np
+
+from common.udp import UdpEndpoint
+from simulator.core import OUT_OF_STEP, SimulatorCore
+
+POLL_S = 0.05  # longest wait before the stop flag is looked at again (wall seconds)
+
+
+class SimulatorServer:
+    """Runs a :class:`SimulatorCore` over a :class:`UdpEndpoint` in lockstep or real time."""
+
+    def __init__(self, core: SimulatorCore, endpoint: UdpEndpoint, *, lockstep: bool, duration: float,
+                 speedup: float = 1.0, lockstep_resend: float = 1.0,
+                 progress: Callable[[str], None] | None = None, progress_every_s: float = 5.0) -> None:
+        self.core, self.ep = core, endpoint
+        self.lockstep, self.duration, self.speedup = lockstep, duration, speedup
+        self.lockstep_resend = lockstep_resend
+        self.progress, self.progress_every_s = progress, progress_every_s
+        self.end_frame = int(round(duration / core.frame_dt)) if duration > 0 else None
+        self.lockstep_resends = 0
+        self.datagrams_sent = 0
+        self.lateness = array("d")  # real time: lateness of each step vs its ideal wall time (s)
+        self._stop = False
+        self.wall_time = 0.0
+
+    def stop(self) -> None:
+        """Ask the loop to end after the current step (safe from a signal handler)."""
+        self._stop = True
+
+    def _done(self) -> bool:
+        return self._stop or (self.end_frame is not None and self.core.n >= self.end_frame)
+
+    def _publish(self, datagram: bytes) -> None:
+        self.ep.send(datagram)
+        self.datagrams_sent += 1
+
+    def _maybe_progress(self, start: float, last: list[float]) -> None:
+        now = time.monotonic()
+        if self.progress and now - last[0] >= self.progress_every_s:
+            last[0] = now
+            c = self.core
+            self.progress(f"sim: t={c.t:.1f} s, {c.n} steps, {c.n / max(1e-9, now - start):.0f} steps/s, "
+                          f"{c.commands_received} commands")
+
+    def run(self) -> dict[str, Any]:
+        start = time.monotonic()
+        try:
+            if self.lockstep:
+                self._run_lockstep(start)
+            else:
+                self._run_realtime(start)
+        finally:
+            self.wall_time = time.monotonic() - start
+        return self.summary()
+
+    # -- lockstep --------------------------------------------------------------------------
+    def _run_lockstep(self, start: float) -> None:
+        core, last_progress = self.core, [start]
+        frame = core.frame()
+        self._publish(frame)
+        last_send = time.monotonic()
+        while not self._done():
+            wait = min(POLL_S, max(0.0, last_send + self.lockstep_resend - time.monotonic()))
+            data = self.ep.recv(timeout=wait)
+            if data is None:
+                if time.monotonic() - last_send >= self.lockstep_resend:
+                    self._publish(frame)  # the latest frame, unchanged: a lost datagram cannot deadlock
+                    self.lockstep_resends += 1
+                    last_send = time.monotonic()
+                continue
+            stepped = False
+            for cmd in core.receive(data):
+                if not stepped and cmd.time_usec == core.time_usec:
+                    core.apply(cmd)
+                    core.step()
+                    stepped = True
+                else:
+                    core.rejects[OUT_OF_STEP] += 1
+            if stepped:
+                frame = core.frame()
+                self._publish(frame)
+                last_send = time.monotonic()
+                if core.n % 1000 == 0:
+                    self._maybe_progress(start, last_progress)
+
+    # -- real time -------------------------------------------------------------------------
+    def _run_realtime(self, start: float) -> None:
+        core, last_progress = self.core, [start]
+        period = core.frame_dt / self.speedup
+        t0 = time.perf_counter()
+        self._publish(core.frame())
+        k = 0
+        while not self._done():
+            k += 1
+            ideal = t0 + k * period
+            while (remaining := ideal - time.perf_counter()) > 0:
+                if self._stop:
+                    return
+                time.sleep(min(remaining, POLL_S))
+            self.lateness.append(time.perf_counter() - ideal)
+            newest = None
+            for data in self.ep.drain():
+                cmds = core.receive(data)
+                if cmds:
+                    newest = cmds[-1]
+            if newest is not None:
+                core.apply(newest)
+            core.step()
+            self._publish(core.frame())
+            self._maybe_progress(start, last_progress)
+
+    # -- report ----------------------------------------------------------------------------
+    def jitter_ms(self) -> dict[str, float] | None:
+        if not len(self.lateness):
+            return None
+        a = np.frombuffer(self.lateness, dtype=float) * 1e3
+        return {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)), "max": float(a.max())}
+
+    def summary(self) -> dict[str, Any]:
+        c = self.core
+        return {
+            "mode": "lockstep" if self.lockstep else "realtime",
+            "seed": c.cfg.sim.seed,
+            "steps": c.n,
+            "sim_time_s": c.t,
+            "wall_time_s": self.wall_time,
+            "steps_per_wall_s": c.n / self.wall_time if self.wall_time > 0 else None,
+            "messages_sent": dict(sorted(c.messages_sent.items())),
+            "datagrams_sent": self.datagrams_sent,
+            "commands_received": c.commands_received,
+            "rejects": dict(sorted(c.rejects.items())),
+            "malformed_dropped": sum(v for k, v in c.rejects.items() if k != OUT_OF_STEP),
+            "clamped_controls": c.clamped_controls,
+            "stale_command_events": c.stale_command_events,
+            "lockstep_resends": self.lockstep_resends,
+            "jitter_ms": self.jitter_ms(),
+            "gps": {"fixes": c.gps.fixes, "dropout_fixes": c.gps.dropout_fixes, "glitches": c.gps.glitches},
+            "distance_m": c.distance,
+            "final_state": c.truth(),
+        }
