@@ -1,0 +1,277 @@
+"""Scenarios: a map, start and goal, a global reference path and the current, from ``configs/scenarios/NAME.toml``.
+
+Map frame (planner/API): x east, y north in metres, headings counter-clockwise from +x (rad).
+The map's origin (x = 0, y = 0, its south-west corner) is the NED origin of the simulator, so
+a map point (x, y) is NED (north = y, east = x); the HIL loop starts the simulated vessel at
+``start``.
+
+A scenario file is loaded strictly (unknown or missing keys, wrong types and out-of-range values
+are one-line errors). Its optional tables override keys of other sections:
+
+* ``[current]``  keys of the configuration's ``[current]`` section (eq. 13 field, NED metres):
+  ``enabled``, ``origin_x`` (north), ``origin_y`` (east, i.e. the map x of the jet axis) ...;
+  ``field_time`` (s) is the instant at which the quasi-static field is frozen for planning.
+* ``[planner]``  keys of ``planner.params.PlannerParams``.
+* ``[online]``   keys of ``planner.online.OnlineParams`` (cycle time, local budget ...).
+* ``[random]``   for ``kind = "random"`` (Figure 11): each Monte Carlo run draws its own map,
+  start and goal from the run's seed; the reference path is then the straight line between
+  them, which may cross obstacles.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from common.params import param
+from hil import config
+from hil.config import CONFIG_DIR
+from hil.errors import ConfigError, UsageError
+
+SCENARIO_DIR = CONFIG_DIR / "scenarios"
+
+
+@dataclass(frozen=True)
+class RandomSpec:
+    """How a random (Figure 11) scenario draws one run's map and end points."""
+
+    width: float = param("map width (x, east)", "m", gt=0, le=2000)
+    height: float = param("map height (y, north)", "m", gt=0, le=2000)
+    resolution: float = param("cell size", "m", gt=0)
+    discs: tuple[int, int] = param("range of the number of discs [min, max]", "", ge=0)
+    rects: tuple[int, int] = param("range of the number of rotated rectangles [min, max]", "", ge=0)
+    radius: tuple[float, float] = param("range of disc radii [min, max]", "m", gt=0)
+    margin: float = param("start and goal keep this far from the map edges", "m", ge=0)
+    min_distance: float = param("minimum start-goal distance", "m", gt=0)
+    clearance: float = param("start and goal are cleared of obstacles within this radius", "m", ge=0)
+    reference_spacing: float = param("spacing of the straight reference path's waypoints", "m", gt=0)
+
+    def __post_init__(self) -> None:
+        for key in ("discs", "rects", "radius"):
+            lo, hi = getattr(self, key)
+            if lo > hi:
+                raise ValueError(f"{key}: min must not exceed max")
+        if self.min_distance >= math.hypot(self.width - 2 * self.margin, self.height - 2 * self.margin):
+            raise ValueError("min_distance: larger than the map's usable diagonal")
+
+
+@dataclass(frozen=True)
+class ScenarioSpec:
+    """The contents of a scenario TOML file."""
+
+    name: str = param("scenario name (the file's stem)")
+    description: str = param("one-line description")
+    kind: Literal["fixed", "random"] = param("'fixed' map and end points, or 'random' per Monte Carlo run")
+    map: str = param("map file (.npy or .png) relative to configs/ (fixed scenarios)", default="")
+    resolution: float = param("map cell size", "m", gt=0, default=0.5)
+    start: tuple[float, float] = param("start position [x east, y north]", "m", default=(0.0, 0.0))
+    start_heading: float = param("start heading, counter-clockwise from east", "rad", default=0.0)
+    goal: tuple[float, float] = param("final goal [x east, y north]", "m", default=(0.0, 0.0))
+    reference_path: tuple[tuple[float, float], ...] = param(
+        "global reference path [[x, y], ...], start to goal; may cross obstacles (Figure 9)", "m", default=())
+    current: dict[str, Any] = field(default_factory=dict, metadata={"help": "overrides of [current]"})
+    planner: dict[str, Any] = field(default_factory=dict, metadata={"help": "overrides of [planner]"})
+    online: dict[str, Any] = field(default_factory=dict, metadata={"help": "overrides of the online process"})
+    random: RandomSpec | None = field(default=None, metadata={"help": "random map generator (kind = 'random')"})
+
+    def __post_init__(self) -> None:
+        if self.kind == "fixed":
+            if not self.map:
+                raise ValueError("map: a fixed scenario needs a map file")
+            if len(self.reference_path) < 2:
+                raise ValueError("reference_path: needs at least two points (start ... goal)")
+        elif self.random is None:
+            raise ValueError("random: a random scenario needs a [random] table")
+
+
+@dataclass
+class Scenario:
+    """A concrete scenario instance: what the planners and the online process consume."""
+
+    name: str
+    description: str
+    occ: np.ndarray                 # bool [rows, cols], True = obstacle (map frame)
+    resolution: float               # m / cell
+    start: tuple[float, float]      # m, map frame
+    start_heading: float            # rad, map frame
+    goal: tuple[float, float]
+    reference_path: np.ndarray      # (M, 2) m
+    current: Any                    # simulator.config.CurrentParams (NED)
+    field_time: float               # s, instant of the frozen planning field
+    planner_overrides: dict[str, Any]
+    online_overrides: dict[str, Any]
+
+    @property
+    def width(self) -> float:
+        return self.occ.shape[1] * self.resolution
+
+    @property
+    def height(self) -> float:
+        return self.occ.shape[0] * self.resolution
+
+    def current_field(self):
+        """The eq. (13) current (``common.current_field.CurrentField``, NED), or None when disabled."""
+        if not self.current.enabled:
+            return None
+        from common.current_field import CurrentField
+        return CurrentField(self.current)
+
+    def map_field(self) -> "MapFrameCurrent | None":
+        """The current frozen at ``field_time`` as a map-frame DisturbanceField, or None."""
+        f = self.current_field()
+        return None if f is None else MapFrameCurrent(f, self.field_time)
+
+
+class MapFrameCurrent:
+    """A NED current seen in the map frame at a fixed time: (x east, y north) -> (v_east, v_north)."""
+
+    def __init__(self, ned_field: Any, t: float) -> None:
+        self.ned_field, self.t = ned_field, float(t)
+
+    def __call__(self, x, y):
+        v_north, v_east = self.ned_field.velocity(y, x, self.t)   # NED x = north = map y
+        if np.ndim(x) == 0 and np.ndim(y) == 0:
+            return float(v_east), float(v_north)
+        return v_east, v_north
+
+
+def scenario_path(name: str) -> Path:
+    """``configs/scenarios/NAME.toml`` (a path to a .toml file is accepted too)."""
+    p = Path(name)
+    if p.suffix == ".toml":
+        return p
+    return SCENARIO_DIR / f"{name}.toml"
+
+
+def available() -> list[str]:
+    """Names of the scenarios in configs/scenarios/."""
+    return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
+
+
+def load_spec(name: str) -> ScenarioSpec:
+    """Parse and validate a scenario file (ConfigError with one line on any problem)."""
+    path = scenario_path(name)
+    if not path.exists():
+        raise UsageError(f"unknown scenario {name!r} (no {path}; available: {', '.join(available())})")
+    table = config.read_toml(path)
+    return config.from_table(ScenarioSpec, table, str(path))
+
+
+def _current_params(base_current: Any, overrides: dict[str, Any], source: str) -> tuple[Any, float]:
+    table = config.to_table(base_current)
+    ov = dict(overrides)
+    field_time = ov.pop("field_time", 0.0)
+    if isinstance(field_time, bool) or not isinstance(field_time, (int, float)):
+        raise ConfigError(f"{source}: current.field_time: expected a number, got {field_time!r}")
+    for k, v in ov.items():
+        if k not in table:
+            raise ConfigError(f"{source}: current.{k}: unknown key (expected one of: {', '.join(table)}, field_time)")
+        table[k] = v
+    return config.from_table(type(base_current), table, source, prefix="current"), float(field_time)
+
+
+def load_occupancy(path: Path, resolution: float) -> np.ndarray:
+    """A map file's obstacle array, bool [rows, cols], via the planner's loader (MapError -> UsageError)."""
+    from planner.gridmap import MapError, OccupancyGrid
+    try:
+        return OccupancyGrid.load(path, resolution).occ
+    except MapError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _check_point(what: str, p: tuple[float, float], occ: np.ndarray, res: float, source: str) -> None:
+    h, w = occ.shape[0] * res, occ.shape[1] * res
+    if not (0 <= p[0] < w and 0 <= p[1] < h):
+        raise ConfigError(f"{source}: {what}: ({p[0]:g}, {p[1]:g}) m is outside the {w:g} m x {h:g} m map")
+    if occ[int(p[1] / res), int(p[0] / res)]:
+        raise ConfigError(f"{source}: {what}: ({p[0]:g}, {p[1]:g}) m is inside an obstacle")
+
+
+def load(name: str, base_current: Any = None) -> Scenario:
+    """Load a fixed scenario (for a random one, use :func:`instance` with a run's generator)."""
+    spec = load_spec(name)
+    return instance(spec, None, base_current)
+
+
+def _default_current() -> Any:
+    from hil import settings
+    return settings.load().current
+
+
+def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: Any = None) -> Scenario:
+    """A concrete :class:`Scenario`; random scenarios draw map and end points from ``rng``."""
+    source = str(scenario_path(spec.name))
+    current, field_time = _current_params(base_current if base_current is not None else _default_current(),
+                                          spec.current, source)
+    if spec.kind == "fixed":
+        map_path = CONFIG_DIR / spec.map
+        if not map_path.exists():
+            raise ConfigError(f"{source}: map: no such file {map_path}")
+        occ = load_occupancy(map_path, spec.resolution)
+        for what, p in (("start", spec.start), ("goal", spec.goal)):
+            _check_point(what, p, occ, spec.resolution, source)
+        ref = np.asarray(spec.reference_path, dtype=float)
+        return Scenario(spec.name, spec.description, occ, spec.resolution, spec.start, spec.start_heading,
+                        spec.goal, ref, current, field_time, dict(spec.planner), dict(spec.online))
+    if rng is None:
+        raise UsageError(f"scenario {spec.name!r} is random: it needs a run seed (use hil montecarlo)")
+    return _random_instance(spec, rng, current, field_time)
+
+
+def _random_instance(spec: ScenarioSpec, rng: np.random.Generator, current: Any, field_time: float) -> Scenario:
+    from hil.maps import Canvas, random_map
+    r = spec.random
+    assert r is not None
+    occ = random_map(rng, r.width, r.height, r.discs, r.rects, r.radius, r.resolution)
+    for _ in range(1000):
+        start = rng.uniform([r.margin, r.margin], [r.width - r.margin, r.height - r.margin])
+        goal = rng.uniform([r.margin, r.margin], [r.width - r.margin, r.height - r.margin])
+        if math.hypot(*(goal - start)) >= r.min_distance:
+            break
+    canvas = Canvas(r.width, r.height, r.resolution)
+    canvas.occ = occ
+    canvas.clear_disc(start[0], start[1], r.clearance)
+    canvas.clear_disc(goal[0], goal[1], r.clearance)
+    n = max(int(math.ceil(math.hypot(*(goal - start)) / r.reference_spacing)), 1)
+    ref = start + (goal - start) * np.linspace(0.0, 1.0, n + 1)[:, None]
+    heading = math.atan2(goal[1] - start[1], goal[0] - start[0])
+    return Scenario(spec.name, spec.description, canvas.occ, r.resolution, (float(start[0]), float(start[1])),
+                    heading, (float(goal[0]), float(goal[1])), ref, current, field_time,
+                    dict(spec.planner), dict(spec.online))
+
+
+def planner_params(base: Any, overrides: dict[str, Any], source: str = "scenario") -> Any:
+    """``base`` PlannerParams with ``overrides`` applied and validated (ConfigError on problems)."""
+    table = config.to_table(base)
+    for k, v in overrides.items():
+        if k not in table:
+            raise ConfigError(f"{source}: planner.{k}: unknown key")
+        table[k] = v
+    return config.from_table(type(base), table, source, prefix="planner")
+
+
+def online_params(overrides: dict[str, Any], source: str = "scenario", base: Any = None) -> Any:
+    """OnlineParams (defaults or ``base``) with ``overrides`` applied and validated."""
+    from planner.online import OnlineParams
+    table = config.to_table(base if base is not None else OnlineParams())
+    for k, v in overrides.items():
+        if k not in table:
+            raise ConfigError(f"{source}: online.{k}: unknown key (expected one of: {', '.join(table)})")
+        table[k] = v
+    return config.from_table(OnlineParams, table, source, prefix="online")
+
+
+def base_planner_params(settings_obj: Any) -> Any:
+    """The ``[planner]`` section of the loaded configuration, or the library defaults."""
+    from planner.params import PlannerParams
+    return getattr(settings_obj, "planner", None) or PlannerParams()
+
+
+def with_overrides(obj: Any, **kw: Any) -> Any:
+    """``dataclasses.replace`` that ignores ``None`` values (CLI options not given)."""
+    return dataclasses.replace(obj, **{k: v for k, v in kw.items() if v is not None})

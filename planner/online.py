@@ -1,0 +1,380 @@
+"""The online planning process of section 4.2 (Figures 9 and 10): plan, smooth, move, repeat.
+
+Pure: no sockets, no processes, no global random state; the clock is injected. One planning
+cycle (:func:`plan_cycle`) is
+
+1. select the subgoal on the global reference path from the vessel position with the
+   perceptual radius (section 3.1, :func:`planner.subgoal.select_subgoal`); a subgoal inside an
+   obstacle (the reference path may cross obstacles, Figure 9) is moved back along the reference
+   path to the nearest free point, else to the nearest free cell;
+2. build the local problem inside the perceptual domain (a circle of ``perceptual_radius``
+   around the vessel) on the obstacle map inflated by the safety radius and, section 3.3, by
+   the velocity estimated from the reference path;
+3. plan with the chosen algorithm within the cycle's budget (iterations and/or seconds);
+4. prune (section 2.4) and smooth with Dubins curves of radius ``turn_radius_factor * speed``;
+   a smoothed path that is not collision-free falls back to the pruned polyline.
+
+:func:`advance` then moves the vessel ``speed * cycle_time`` metres along the smoothed path (a
+kinematic model is enough here; the HIL loop replaces it with the simulator) and
+:func:`run_online` repeats until the final goal is within ``goal_tolerance`` or a cap is hit.
+
+Table 3's "time" is :attr:`OnlineResult.search_time_s`: the sum over cycles of each cycle's time
+to its first solution (the whole cycle's planning time when it found none) - "the sum of the
+search durations of paths before the subgoals were reached". Its "cost", Σcos α_y, Σsin α_y and
+cf(π) are measured on the executed path resampled every ``metric_spacing`` metres.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field as dc_field, replace
+from typing import Any, Callable
+
+import numpy as np
+from scipy import ndimage
+
+from planner import make_planner
+from planner.cost import path_cost
+from planner.gridmap import OccupancyGrid
+from planner.metrics import path_metrics
+from planner.params import PlannerParams
+from planner.postprocess import prune, smooth
+from planner.problem import PlanningProblem
+from planner.result import PlannerResult
+from planner.subgoal import select_subgoal
+from planner.termination import Termination
+
+
+def _p(help: str, unit: str = "", **bounds: float) -> dict[str, Any]:
+    return {"help": help, "unit": unit, **bounds}
+
+
+@dataclass(frozen=True)
+class OnlineParams:
+    """Settings of the online process (scenario ``[online]`` table; CLI options override)."""
+
+    cycle_time: float = dc_field(default=6.0, metadata=_p(
+        "vessel motion per planning cycle: the vessel sails speed * cycle_time along each local path", "s", gt=0))
+    local_iterations: int = dc_field(default=1500, metadata=_p(
+        "iteration budget of each local planning cycle (deterministic: the Monte Carlo default)", "", ge=0))
+    local_time: float = dc_field(default=0.0, metadata=_p(
+        "wall-clock budget of each local planning cycle; 0 = iterations only", "s", ge=0))
+    max_cycles: int = dc_field(default=120, metadata=_p("cap on planning cycles per run", "", gt=0))
+    max_failures: int = dc_field(default=6, metadata=_p(
+        "consecutive cycles without any local path before the run is declared failed", "", gt=0))
+    metric_spacing: float = dc_field(default=2.0, metadata=_p(
+        "waypoint spacing of the executed path for cost, Σcos, Σsin and cf(π)", "m", gt=0))
+    clearance_sigma: float = dc_field(default=1.0, metadata=_p(
+        "standard deviation of the vessel's position error, for cf(π) (eq. 14)", "m", gt=0))
+    smoothing: bool = dc_field(default=True, metadata=_p("Dubins smoothing of each local path"))
+    velocity_inflation: bool = dc_field(default=True, metadata=_p(
+        "extra obstacle inflation from the velocity estimated on the reference path (section 3.3)"))
+
+    def __post_init__(self) -> None:
+        if self.local_iterations == 0 and self.local_time == 0:
+            raise ValueError("local_iterations: a cycle needs a budget (local_iterations or local_time > 0)")
+
+
+@dataclass(frozen=True)
+class VesselState:
+    """Kinematic vessel state in the map frame: position (m), heading (rad from +x), time (s)."""
+
+    x: float
+    y: float
+    heading: float
+    t: float = 0.0
+
+
+@dataclass
+class CycleRecord:
+    """Everything one planning cycle produced (kept for Figure 10 plots and diagnostics)."""
+
+    index: int
+    start: VesselState
+    subgoal: tuple[float, float]
+    subgoal_rule: int
+    status: str
+    search_time_s: float           # time to first solution, or the whole planning time if none
+    planning_time_s: float
+    iterations: int
+    local_path: np.ndarray         # pruned polyline (N, 2)
+    smooth_path: np.ndarray        # dense Dubins polyline (or the pruned path when it collided)
+    smoothed_ok: bool
+    tree_nodes: np.ndarray
+    tree_parents: np.ndarray
+    travelled: np.ndarray = dc_field(default_factory=lambda: np.zeros((0, 2)))
+    reason: str = ""
+
+
+@dataclass
+class OnlineResult:
+    """Outcome of a whole online run."""
+
+    reached: bool
+    reason: str
+    cycles: list[CycleRecord]
+    executed: np.ndarray           # (N, 2) the path the vessel sailed, dense
+    final: VesselState
+    search_time_s: float           # Table 3 "time"
+    planning_time_s: float         # total planning time of all cycles
+    metrics: dict[str, float]      # cost, length, sum_cos, sum_sin, cf, turns, ... (executed path)
+
+
+@dataclass
+class OnlineContext:
+    """The fixed inputs of a run: maps (raw and inflated), field, reference path and parameters."""
+
+    grid: OccupancyGrid            # raw obstacle map
+    goal: tuple[float, float]
+    reference_path: np.ndarray
+    params: PlannerParams
+    online: OnlineParams
+    field: Any = None              # DisturbanceField in the map frame, or None
+    safe_grid: OccupancyGrid | None = None
+    _free_index: np.ndarray | None = None
+    _velocity_grids: dict = dc_field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.reference_path = np.asarray(self.reference_path, dtype=float).reshape(-1, 2)
+        if self.safe_grid is None:
+            self.safe_grid = self.grid.inflate(self.params.safety_radius) if self.params.safety_radius > 0 else self.grid
+
+    def planning_grid(self, velocity: tuple[float, float]) -> OccupancyGrid:
+        """The safety-inflated map plus the section 3.3 velocity inflation (cached per direction)."""
+        if not self.online.velocity_inflation or self.params.velocity_inflation_gain <= 0:
+            return self.safe_grid
+        key = (round(velocity[0], 1), round(velocity[1], 1))
+        if key not in self._velocity_grids:
+            if len(self._velocity_grids) > 32:
+                self._velocity_grids.clear()
+            self._velocity_grids[key] = self.grid.inflate_velocity(
+                key, self.params.velocity_inflation_gain, self.params.safety_radius)
+        return self._velocity_grids[key]
+
+    def nearest_free(self, grid: OccupancyGrid, point: tuple[float, float]) -> tuple[float, float] | None:
+        """The centre of the free cell of ``grid`` nearest to ``point`` (None if the map is full)."""
+        occ = grid.occ
+        if occ.all():
+            return None
+        _, idx = ndimage.distance_transform_edt(occ, return_indices=True)
+        res = grid.resolution
+        r = min(max(int(point[1] / res), 0), occ.shape[0] - 1)
+        c = min(max(int(point[0] / res), 0), occ.shape[1] - 1)
+        rr, cc = idx[0][r, c], idx[1][r, c]
+        return ((cc + 0.5) * res, (rr + 0.5) * res)
+
+
+def _polyline_length(path: np.ndarray) -> float:
+    if len(path) < 2:
+        return 0.0
+    return float(np.sum(np.hypot(*np.diff(path, axis=0).T)))
+
+
+def resample(path: np.ndarray, spacing: float) -> np.ndarray:
+    """Points every ``spacing`` m along a polyline (first and last point kept)."""
+    path = np.asarray(path, dtype=float).reshape(-1, 2)
+    if len(path) < 2:
+        return path.copy()
+    seg = np.hypot(*np.diff(path, axis=0).T)
+    keep = np.concatenate([[True], seg > 1e-9])
+    path = path[keep]
+    if len(path) < 2:
+        return path.copy()
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))])
+    n = max(int(math.ceil(s[-1] / spacing)), 1)
+    t = np.linspace(0.0, s[-1], n + 1)
+    return np.column_stack([np.interp(t, s, path[:, 0]), np.interp(t, s, path[:, 1])])
+
+
+def advance(path: np.ndarray, distance: float) -> tuple[np.ndarray, float]:
+    """Sail ``distance`` m along ``path``: the travelled polyline and the final heading (rad)."""
+    path = np.asarray(path, dtype=float).reshape(-1, 2)
+    if len(path) < 2 or distance <= 0:
+        return path[:1].copy(), math.nan
+    out = [path[0]]
+    left = distance
+    heading = math.nan
+    for a, b in zip(path[:-1], path[1:]):
+        d = math.hypot(b[0] - a[0], b[1] - a[1])
+        if d <= 1e-12:
+            continue
+        heading = math.atan2(b[1] - a[1], b[0] - a[0])
+        if d >= left:
+            out.append(a + (b - a) * (left / d))
+            return np.array(out), heading
+        out.append(b)
+        left -= d
+    return np.array(out), heading
+
+
+def reference_velocity(reference_path: np.ndarray, point: tuple[float, float], speed: float) -> tuple[float, float]:
+    """Velocity (m/s) estimated from the reference path: ``speed`` along the nearest segment."""
+    ref = reference_path
+    if len(ref) < 2:
+        return (0.0, 0.0)
+    a, b = ref[:-1], ref[1:]
+    ab = b - a
+    L2 = np.maximum(np.sum(ab * ab, axis=1), 1e-12)
+    t = np.clip(np.sum((np.asarray(point) - a) * ab, axis=1) / L2, 0.0, 1.0)
+    d = np.hypot(*(a + ab * t[:, None] - np.asarray(point)).T)
+    i = int(np.argmin(d))
+    n = math.sqrt(L2[i])
+    return (speed * ab[i, 0] / n, speed * ab[i, 1] / n)
+
+
+def _free_subgoal(ctx: OnlineContext, grid: OccupancyGrid, position: tuple[float, float],
+                  index: int, point: tuple[float, float]) -> tuple[float, float] | None:
+    """A free stand-in for a subgoal inside an obstacle: back along the reference path towards
+    the vessel (inside the perceptual domain), else the nearest free cell."""
+    if grid.is_free(*point):
+        return point
+    ref = ctx.reference_path
+    radius = ctx.params.perceptual_radius
+    pts = [np.asarray(point)]
+    # Walk back along the reference path from the subgoal (and along the segment into it).
+    for k in range(min(index, len(ref) - 1), 0, -1):
+        a, b = ref[k - 1], ref[k] if k < len(ref) else ref[-1]
+        n = max(int(math.hypot(*(b - a)) / (0.5 * grid.resolution)), 1)
+        pts.extend(b + (a - b) * (i / n) for i in range(1, n + 1))
+    for q in pts:
+        if math.hypot(q[0] - position[0], q[1] - position[1]) > radius:
+            continue
+        if grid.is_free(float(q[0]), float(q[1])):
+            return (float(q[0]), float(q[1]))
+    return ctx.nearest_free(grid, point)
+
+
+def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
+               clock: Callable[[], float] = time.monotonic) -> CycleRecord:
+    """One planning cycle from ``state`` (see the module docstring); does not move the vessel."""
+    params, online = ctx.params, ctx.online
+    pos = (state.x, state.y)
+    if math.hypot(ctx.goal[0] - pos[0], ctx.goal[1] - pos[1]) <= params.perceptual_radius:
+        # Rule 1 of section 3.1, also when the reference path ends elsewhere.
+        sub_point, sub_index, rule = ctx.goal, len(ctx.reference_path) - 1, 1
+    else:
+        sub = select_subgoal(ctx.reference_path, pos, params.perceptual_radius)
+        sub_point, sub_index, rule = (float(sub.point[0]), float(sub.point[1])), sub.index, sub.rule
+
+    # Planning map: velocity-inflated, else only safety-inflated, else raw when the vessel
+    # itself is inside the inflation (it may have been pushed there; it must still get out).
+    velocity = reference_velocity(ctx.reference_path, sub_point, params.speed)
+    grid = None
+    for candidate in (ctx.planning_grid(velocity), ctx.safe_grid, ctx.grid):
+        if candidate.is_free(*pos):
+            grid = candidate
+            break
+    empty = np.zeros((0, 2))
+    if grid is None:
+        return CycleRecord(index, state, sub_point, rule, "none", 0.0, 0.0, 0, empty, empty, False,
+                           empty, np.zeros(0, dtype=int), reason="vessel inside an obstacle")
+    goal = _free_subgoal(ctx, grid, pos, sub_index, sub_point)
+    if goal is None:
+        return CycleRecord(index, state, sub_point, rule, "none", 0.0, 0.0, 0, empty, empty, False,
+                           empty, np.zeros(0, dtype=int), reason="no free subgoal")
+
+    r = params.perceptual_radius
+    xmin, xmax = max(0.0, pos[0] - r), min(grid.width, pos[0] + r)
+    ymin, ymax = max(0.0, pos[1] - r), min(grid.height, pos[1] + r)
+    problem = PlanningProblem(
+        grid=grid, start=pos, goal=goal, start_heading=state.heading, field=ctx.field,
+        reference_path=ctx.reference_path, bounds=(xmin, xmax, ymin, ymax),
+        domain_center=pos, domain_radius=r,
+    )
+    conds = []
+    if online.local_iterations > 0:
+        conds.append(Termination.iterations(online.local_iterations))
+    if online.local_time > 0:
+        conds.append(Termination.deadline(online.local_time, clock))
+    termination = conds[0] if len(conds) == 1 else Termination.any_of(*conds)
+    planner = make_planner(params.algorithm, replace(params, seed=int(seed)))
+    result: PlannerResult = planner.solve(problem, termination)
+
+    search = result.time_to_first_solution_s
+    if search is None:
+        search = result.planning_time_s
+    if result.status == "none" or len(result.path) < 2:
+        return CycleRecord(index, state, goal, rule, result.status, float(search), result.planning_time_s,
+                           result.iterations, empty, empty, False, result.tree_nodes, result.tree_parents,
+                           reason=result.reason or "no local path")
+
+    cost_fn = (lambda p: path_cost(p, ctx.field, params))
+    local = prune(result.path, grid, cost_fn)
+    smoothed, ok = local, False
+    if online.smoothing and len(local) >= 2:
+        dense = smooth(local, params.turn_radius_factor * params.speed, start_heading=state.heading)
+        ok = _polyline_free(ctx.safe_grid if ctx.safe_grid.is_free(*pos) else ctx.grid, dense)
+        if ok:
+            smoothed = dense
+    return CycleRecord(index, state, goal, rule, result.status, float(search), result.planning_time_s,
+                       result.iterations, local, smoothed, ok, result.tree_nodes, result.tree_parents,
+                       reason=result.reason)
+
+
+def _polyline_free(grid: OccupancyGrid, path: np.ndarray) -> bool:
+    return all(grid.segment_free(float(a[0]), float(a[1]), float(b[0]), float(b[1]))
+               for a, b in zip(path[:-1], path[1:]))
+
+
+def run_online(ctx: OnlineContext, start: VesselState, seed: int,
+               clock: Callable[[], float] = time.monotonic,
+               on_cycle: Callable[[CycleRecord], None] | None = None) -> OnlineResult:
+    """Repeat :func:`plan_cycle` and :func:`advance` until the goal is reached or a cap is hit.
+
+    ``seed`` seeds every cycle's planner (cycle ``i`` uses a seed derived from ``(seed, i)``),
+    so a run with an iteration budget is reproducible.
+    """
+    params, online = ctx.params, ctx.online
+    seeds = np.random.SeedSequence(int(seed)).generate_state(online.max_cycles, dtype=np.uint32)
+    state = start
+    cycles: list[CycleRecord] = []
+    executed = [np.array([[start.x, start.y]])]
+    failures = 0
+    reached, reason = False, f"gave up after {online.max_cycles} cycles"
+    step = params.speed * online.cycle_time
+    for i in range(online.max_cycles):
+        if math.hypot(ctx.goal[0] - state.x, ctx.goal[1] - state.y) <= params.goal_tolerance:
+            reached, reason = True, "goal reached"
+            break
+        rec = plan_cycle(ctx, state, i, int(seeds[i]), clock)
+        cycles.append(rec)
+        if len(rec.smooth_path) < 2:
+            failures += 1
+            if on_cycle:
+                on_cycle(rec)
+            if failures >= online.max_failures:
+                reason = f"no local path in {failures} consecutive cycles ({rec.reason})"
+                break
+            state = replace(state, t=state.t + online.cycle_time)
+            continue
+        failures = 0
+        travelled, heading = advance(rec.smooth_path, step)
+        rec.travelled = travelled
+        executed.append(travelled[1:])
+        sailed = _polyline_length(travelled)
+        end = travelled[-1]
+        state = VesselState(float(end[0]), float(end[1]),
+                            state.heading if math.isnan(heading) else heading,
+                            state.t + (sailed / params.speed if params.speed > 0 else online.cycle_time))
+        if on_cycle:
+            on_cycle(rec)
+    else:
+        if math.hypot(ctx.goal[0] - state.x, ctx.goal[1] - state.y) <= params.goal_tolerance:
+            reached, reason = True, "goal reached"
+    path = np.concatenate(executed)
+    sampled = resample(path, online.metric_spacing)
+    metrics = path_metrics(sampled, ctx.field, ctx.grid, params, online.clearance_sigma) if len(sampled) >= 2 else {}
+    return OnlineResult(
+        reached=reached, reason=reason, cycles=cycles, executed=path, final=state,
+        search_time_s=float(sum(c.search_time_s for c in cycles)),
+        planning_time_s=float(sum(c.planning_time_s for c in cycles)),
+        metrics={k: float(v) for k, v in metrics.items() if np.isscalar(v)},
+    )
+
+
+def make_context(grid: OccupancyGrid, goal: tuple[float, float], reference_path: np.ndarray,
+                 params: PlannerParams, online: OnlineParams, algorithm: str, field: Any = None) -> OnlineContext:
+    """An :class:`OnlineContext` for ``algorithm`` (one of ``planner.ALGORITHMS``)."""
+    return OnlineContext(grid=grid, goal=(float(goal[0]), float(goal[1])), reference_path=reference_path,
+                         params=replace(params, algorithm=algorithm), online=online, field=field)
