@@ -1,0 +1,193 @@
+"""`hil run`: the simulator in its own OS process, driven over loopback UDP by a demo controller.
+
+For now the vessel computer is a built-in constant-thrust controller (a steady turn) running in
+this process and speaking MAVLink like the autopilot will: it answers every sensor frame with one
+HIL_ACTUATOR_CONTROLS carrying the frame's ``time_usec``. A later issue replaces it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+from common.mavlink import Codec
+from common.udp import UdpEndpoint
+from hil.console import emit, load_settings, progress
+from hil.errors import ConfigError, RunFailed
+
+FRAME_TIMEOUT_S = 15.0  # wall seconds to wait for the simulator's next frame before giving up
+DEMO_CONTROLS = (0.6, 0.5)  # port, starboard: a gentle starboard turn
+
+
+@dataclass
+class Frame:
+    """The messages of one simulator datagram, by type."""
+
+    raw: bytes
+    time_usec: int | None
+    messages: dict[str, Any] = field(default_factory=dict)
+
+
+class HilClient:
+    """The vessel-computer side of the link: receives frames, answers with HIL_ACTUATOR_CONTROLS.
+
+    Bound to 127.0.0.1 on a free port (see :attr:`port`); commands go back to the address the
+    frames come from (the simulator sends from its command socket).
+    """
+
+    ACCEPT = ("HIL_SENSOR", "HIL_GPS", "HIL_STATE_QUATERNION", "ODOMETRY")
+
+    def __init__(self, bind: str = "127.0.0.1:0", system_id: int = 1, component_id: int = 191) -> None:
+        self.ep = UdpEndpoint(bind)
+        self.codec = Codec(system_id, component_id, accept=self.ACCEPT)
+        self.frames = self.commands = self.rejects = 0
+
+    @property
+    def port(self) -> int:
+        return self.ep.address[1]
+
+    def next_frame(self, timeout: float, latest: bool = False) -> Frame | None:
+        """The next datagram (``latest``: the newest queued one) decoded, or None on timeout."""
+        data = self.ep.drain_latest() if latest else None
+        if data is None:
+            data = self.ep.recv(timeout)
+        if data is None:
+            return None
+        msgs, rejects = self.codec.decode(data)
+        self.rejects += len(rejects)
+        self.frames += 1
+        f = Frame(data, None, {m.get_type(): m for m in msgs})
+        if "HIL_SENSOR" in f.messages:
+            f.time_usec = int(f.messages["HIL_SENSOR"].time_usec)
+        return f
+
+    def command(self, time_usec: int, port: float, stdb: float) -> bytes:
+        """Send one HIL_ACTUATOR_CONTROLS (controls[0] port, [1] starboard) to the simulator."""
+        data = self.codec.encode("hil_actuator_controls", time_usec, [port, stdb] + [0.0] * 14, 0, 0)
+        if self.ep.last_sender is not None:
+            self.ep.sock.sendto(data, self.ep.last_sender)
+            self.commands += 1
+        return data
+
+    def close(self) -> None:
+        self.ep.close()
+
+
+def sim_command(args: argparse.Namespace, client_port: int, lockstep: bool) -> list[str]:
+    cmd = [sys.executable, "-m", "hil", "sim", "--json", "--state-to", f"127.0.0.1:{client_port}",
+           "--commands-on", "127.0.0.1:0", "--duration", repr(float(args.duration))]
+    if args.config:
+        cmd += ["--config", args.config]
+    for o in args.overrides:
+        cmd += ["--set", o]
+    if args.seed is not None:
+        cmd += ["--seed", str(args.seed)]
+    cmd += ["--lockstep"] if lockstep else ["--speedup", repr(float(args.speedup))]
+    return cmd
+
+
+def stop_process(proc: subprocess.Popen, timeout: float = 5.0) -> None:
+    """SIGTERM, then SIGKILL if it has not ended within ``timeout`` seconds."""
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout)
+
+
+def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "run", parents=parents,
+        help="run the simulator (separate process) in a closed loop with the vessel computer",
+        description="Start the simulator as a separate process (hil sim) and close the loop over "
+                    "loopback UDP/MAVLink. For now the vessel computer is a built-in demo controller "
+                    f"holding constant thrust (port {DEMO_CONTROLS[0]}, starboard {DEMO_CONTROLS[1]}: "
+                    "a steady starboard turn). Prints distance travelled, final position, heading and "
+                    "speed, messages exchanged and wall time.",
+    )
+    p.add_argument("--duration", metavar="SECONDS", type=float, default=60.0,
+                   help="simulated seconds to run (default: 60)")
+    p.add_argument("--seed", type=int, default=None, help="seed of every random process (default: sim.seed)")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--lockstep", dest="speedup", action="store_const", const=None,
+                      help="advance the simulator one IMU period per command (the default)")
+    mode.add_argument("--speedup", metavar="N", type=float, default=None,
+                      help="real-time mode instead: N simulated seconds per wall second")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    if not args.duration > 0:
+        raise ConfigError("--duration: must be > 0 seconds")
+    if args.speedup is not None and not args.speedup > 0:
+        raise ConfigError("--speedup: must be > 0")
+    cfg = load_settings(args)  # fail here, with one line, on a bad configuration
+    lockstep = args.speedup is None
+    client = HilClient(component_id=191)
+    proc = subprocess.Popen(sim_command(args, client.port, lockstep), stdout=subprocess.PIPE, text=True)
+    start = time.monotonic()
+    end_usec = int(round(args.duration * 1e6))
+    last_truth = None
+    try:
+        progress(f"run: simulator pid {proc.pid}, {'lockstep' if lockstep else f'real time x{args.speedup:g}'}, "
+                 f"{args.duration:g} s simulated, demo controller {DEMO_CONTROLS}")
+        next_report = start + 5.0
+        while True:
+            frame = client.next_frame(timeout=0.2 if not lockstep else FRAME_TIMEOUT_S, latest=not lockstep)
+            if frame is None:
+                if proc.poll() is not None:
+                    break
+                if lockstep or time.monotonic() - start > FRAME_TIMEOUT_S + args.duration / args.speedup:
+                    raise RunFailed(f"no frame from the simulator for {FRAME_TIMEOUT_S:g} s")
+                continue
+            if "HIL_STATE_QUATERNION" in frame.messages:
+                last_truth = frame.messages["HIL_STATE_QUATERNION"]
+            if frame.time_usec is None:
+                continue
+            if frame.time_usec >= end_usec:
+                break
+            client.command(frame.time_usec, *DEMO_CONTROLS)
+            if time.monotonic() > next_report:
+                next_report += 5.0
+                progress(f"run: t={frame.time_usec / 1e6:.1f} s")
+        try:
+            out, _ = proc.communicate(timeout=FRAME_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            raise RunFailed("the simulator did not end after its last frame") from None
+    finally:
+        stop_process(proc)
+        client.close()
+    wall = time.monotonic() - start
+    if proc.returncode != 0:
+        raise RunFailed(f"the simulator exited with code {proc.returncode}")
+    try:
+        sim = json.loads(out.strip().splitlines()[-1])
+    except (ValueError, IndexError):
+        raise RunFailed("the simulator printed no summary") from None
+    fs = sim["final_state"]
+    summary = {
+        "mode": "lockstep" if lockstep else "realtime",
+        "seed": sim["seed"],
+        "sim_time_s": sim["sim_time_s"],
+        "wall_time_s": wall,
+        "distance_travelled_m": sim["distance_m"],
+        "final_position": {"x_north_m": fs["x"], "y_east_m": fs["y"], "lat_deg": fs["lat"], "lon_deg": fs["lon"]},
+        "final_heading_deg": math.degrees(fs["psi"]) % 360.0,
+        "final_speed_m_s": math.hypot(fs["u"], fs["v"]),
+        "messages": {"frames_received": client.frames, "commands_sent": client.commands,
+                     "frame_rejects": client.rejects, "simulator": sim["messages_sent"],
+                     "simulator_commands_received": sim["commands_received"]},
+        "last_truth_time_s": (last_truth.time_usec / 1e6) if last_truth is not None else None,
+        "simulator": sim,
+    }
+    _ = cfg
+    emit(args, summary)
+    return 0
