@@ -1,0 +1,229 @@
+"""The local planner in a separate process, under a watchdog (section 2.2: "a watching dog timer
+which stops the current local planning by an interruption style").
+
+The control loop hands a :class:`PlanRequest` to :meth:`PlannerWorker.submit` and goes on; it
+collects the answer later with :meth:`PlannerWorker.poll`, which never blocks. Each request
+carries its own termination budget, so a healthy planner stops itself at the deadline with its
+best-so-far (OMPL-style anytime planning). If the worker has not answered ``grace`` seconds after
+the deadline, :meth:`PlannerWorker.watchdog` kills the process, starts a fresh one and counts the
+event: a hung planner costs the control loop nothing but the plan it did not deliver.
+
+Two budgets:
+
+* ``deadline_s`` (real time): the planner's termination is a wall-clock deadline;
+* ``iterations`` (lockstep): the planner's termination is an iteration count, so the same seed
+  gives the same plan whatever the machine's speed, and a lockstep run is repeatable.
+"""
+
+from __future__ import annotations
+
+import importlib
+import multiprocessing as mp
+import time
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
+from typing import Any
+
+
+@dataclass(frozen=True)
+class PlanRequest:
+    """One local planning cycle's problem and budget."""
+
+    cycle: int
+    algorithm: str
+    params: Any                      # planner.params.PlannerParams
+    problem: Any                     # planner.problem.PlanningProblem (picklable)
+    deadline_s: float                # wall-clock budget of the planner itself
+    iterations: int | None = None    # if set, an iteration budget replaces the deadline (lockstep)
+
+
+@dataclass(frozen=True)
+class PlanReply:
+    cycle: int
+    result: Any                      # planner.result.PlannerResult, or None if the planner raised
+    error: str = ""
+    compute_time_s: float = 0.0
+
+
+@dataclass
+class WorkerStats:
+    submitted: int = 0
+    answered: int = 0
+    overruns: int = 0                # answers that came after deadline (but before the kill)
+    killed: int = 0                  # watchdog kills (the worker hung past deadline + grace)
+    restarts: int = 0
+    errors: int = 0                  # the planner raised
+    busy_rejections: int = 0         # submit() while a request was still running
+    events: list[str] = field(default_factory=list)
+
+
+def default_planner_factory(algorithm: str, params: Any) -> Any:
+    from planner import make_planner
+
+    return make_planner(algorithm, params)
+
+
+def _solve(request: PlanRequest, factory: Any) -> PlanReply:
+    from planner.termination import Termination
+
+    if request.iterations is not None:
+        term = Termination.iterations(request.iterations)
+    else:
+        term = Termination.deadline(request.deadline_s)
+    t0 = time.perf_counter()
+    result = factory(request.algorithm, request.params).solve(request.problem, term)
+    return PlanReply(request.cycle, result, compute_time_s=time.perf_counter() - t0)
+
+
+def _resolve(factory_path: str) -> Any:
+    module, _, name = factory_path.partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def _worker_main(conn: Connection, factory_path: str) -> None:
+    factory = _resolve(factory_path)
+    while True:
+        try:
+            request = conn.recv()
+        except (EOFError, OSError, KeyboardInterrupt):
+            return
+        if request is None:
+            return
+        try:
+            reply = _solve(request, factory)
+        except Exception as exc:  # a planner bug must not take the worker down silently
+            reply = PlanReply(request.cycle, None, error=f"{type(exc).__name__}: {exc}")
+        try:
+            conn.send(reply)
+        except (BrokenPipeError, OSError):
+            return
+
+
+class PlannerWorker:
+    """A planner process with a non-blocking request/answer interface and a watchdog.
+
+    ``factory`` is ``"module:function"``; the function takes ``(algorithm, params)`` and returns an
+    object with ``solve(problem, termination)``. Tests put a hanging double behind it.
+    """
+
+    def __init__(self, factory: str = "autopilot_bridge.planning_worker:default_planner_factory",
+                 grace_s: float = 0.5, start_method: str = "spawn") -> None:
+        self.factory = factory
+        self.grace_s = grace_s
+        self.ctx = mp.get_context(start_method)
+        self.stats = WorkerStats()
+        self._proc: Any = None
+        self._conn: Connection | None = None
+        self._pending: PlanRequest | None = None
+        self._pending_since = 0.0
+        self._start()
+
+    # -- process management ---------------------------------------------------------------
+    def _start(self) -> None:
+        parent, child = self.ctx.Pipe(duplex=True)
+        self._proc = self.ctx.Process(target=_worker_main, args=(child, self.factory),
+                                      name="planner-worker", daemon=True)
+        self._proc.start()
+        child.close()
+        self._conn = parent
+
+    def _kill(self) -> None:
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+        if self._proc is not None:
+            self._proc.kill()
+            self._proc.join(timeout=5.0)
+            self._proc = None
+
+    def close(self) -> None:
+        """Stop the worker (politely, then by force)."""
+        if self._proc is None:
+            return
+        try:
+            if self._conn is not None and self._pending is None:
+                self._conn.send(None)
+                self._proc.join(timeout=2.0)
+        except (BrokenPipeError, OSError):
+            pass
+        if self._proc is not None and self._proc.is_alive():
+            self._proc.kill()
+        self._kill()
+
+    def __enter__(self) -> PlannerWorker:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def pid(self) -> int | None:
+        return self._proc.pid if self._proc is not None else None
+
+    @property
+    def busy(self) -> bool:
+        return self._pending is not None
+
+    # -- requests -----------------------------------------------------------------------------
+    def submit(self, request: PlanRequest, now: float | None = None) -> bool:
+        """Start planning ``request``; False (and counted) if the previous one is still running."""
+        if self._pending is not None:
+            self.stats.busy_rejections += 1
+            return False
+        assert self._conn is not None
+        self._conn.send(request)
+        self._pending = request
+        self._pending_since = time.monotonic() if now is None else now
+        self.stats.submitted += 1
+        return True
+
+    def poll(self, now: float | None = None) -> PlanReply | None:
+        """The answer to the pending request if it has arrived; never blocks."""
+        if self._pending is None or self._conn is None:
+            return None
+        try:
+            if not self._conn.poll(0):
+                return None
+            reply: PlanReply = self._conn.recv()
+        except (EOFError, OSError):
+            self._restart("worker died")
+            return None
+        now = time.monotonic() if now is None else now
+        if now - self._pending_since > self._pending.deadline_s and self._pending.iterations is None:
+            self.stats.overruns += 1
+            self.stats.events.append(f"cycle {reply.cycle}: planner answered after its deadline")
+        if reply.error:
+            self.stats.errors += 1
+            self.stats.events.append(f"cycle {reply.cycle}: planner error {reply.error}")
+        self.stats.answered += 1
+        self._pending = None
+        return reply
+
+    def wait(self, timeout: float) -> PlanReply | None:
+        """Block up to ``timeout`` s for the pending answer (lockstep only: simulated time stands still)."""
+        if self._pending is None or self._conn is None:
+            return None
+        try:
+            self._conn.poll(timeout)
+        except (EOFError, OSError):
+            pass
+        return self.poll()
+
+    def watchdog(self, now: float | None = None) -> bool:
+        """Kill and restart a worker that is ``grace_s`` past its request's deadline. True if it did."""
+        if self._pending is None:
+            return False
+        now = time.monotonic() if now is None else now
+        limit = self._pending.deadline_s + self.grace_s
+        if now - self._pending_since <= limit:
+            return False
+        self.stats.killed += 1
+        self._restart(f"cycle {self._pending.cycle}: planner hung {now - self._pending_since:.2f} s, killed")
+        return True
+
+    def _restart(self, why: str) -> None:
+        self.stats.events.append(why)
+        self._pending = None
+        self._kill()
+        self._start()
+        self.stats.restarts += 1

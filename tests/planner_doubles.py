@@ -1,0 +1,41 @@
+"""Planner test doubles that run inside the planner worker process (imported there by name)."""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+
+
+@dataclass
+class FakeResult:
+    status: str
+    pid: int
+    iterations: int
+
+
+class ScriptedPlanner:
+    """Behaviour chosen by the algorithm name: 'echo' answers at once, 'hang' never returns,
+    'raise' raises, 'slow' runs its termination condition out (like a real anytime planner)."""
+
+    def __init__(self, behaviour: str) -> None:
+        self.behaviour = behaviour
+
+    def solve(self, problem, termination):
+        if self.behaviour == "hang":
+            # A planner stuck in a loop that never looks at its termination condition.
+            end = time.monotonic() + 3600.0
+            while time.monotonic() < end:
+                time.sleep(0.01)
+        if self.behaviour == "raise":
+            raise RuntimeError("planner bug")
+        n = 0
+        if self.behaviour == "slow":
+            while not termination():
+                n += 1
+                termination.notify(n, False)  # as a real planner reports its progress
+        return FakeResult("exact", os.getpid(), n)
+
+
+def scripted_factory(algorithm: str, params) -> ScriptedPlanner:
+    return ScriptedPlanner(algorithm)
