@@ -104,10 +104,11 @@ class SimulatorCore:
 
     # -- commands --------------------------------------------------------------------------
     def receive(self, datagram: bytes) -> list[Command]:
-        """Valid commands in one datagram; every rejected part is counted by reason."""
+        """Valid commands in one datagram. A datagram with any invalid part counts as one reject
+        (by the first reason); valid commands in it are still returned."""
         msgs, rejects = self.codec.decode(datagram)
-        for r in rejects:
-            self.rejects[r] += 1
+        if rejects:
+            self.rejects[rejects[0]] += 1
         out = []
         for m in msgs:
             c = m.controls
