@@ -22,7 +22,7 @@ import multiprocessing as mp
 import time
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
-from typing import Any
+from typing import Any, Callable
 
 
 @dataclass(frozen=True)
@@ -30,17 +30,23 @@ class PlanRequest:
     """One local planning cycle's problem and budget."""
 
     cycle: int
-    algorithm: str
-    params: Any                      # planner.params.PlannerParams
-    problem: Any                     # planner.problem.PlanningProblem (picklable)
+    problem: Any                     # whatever the worker's handler takes (picklable)
     deadline_s: float                # wall-clock budget of the planner itself
     iterations: int | None = None    # if set, an iteration budget replaces the deadline (lockstep)
+
+    def termination(self) -> Any:
+        """The planner's termination condition for this budget."""
+        from planner.termination import Termination
+
+        if self.iterations is not None:
+            return Termination.iterations(self.iterations)
+        return Termination.deadline(self.deadline_s)
 
 
 @dataclass(frozen=True)
 class PlanReply:
     cycle: int
-    result: Any                      # planner.result.PlannerResult, or None if the planner raised
+    result: Any                      # what the handler returned, or None if it raised
     error: str = ""
     compute_time_s: float = 0.0
 
@@ -52,27 +58,17 @@ class WorkerStats:
     overruns: int = 0                # answers that came after deadline (but before the kill)
     killed: int = 0                  # watchdog kills (the worker hung past deadline + grace)
     restarts: int = 0
-    errors: int = 0                  # the planner raised
+    errors: int = 0                  # the handler raised
     busy_rejections: int = 0         # submit() while a request was still running
     events: list[str] = field(default_factory=list)
 
 
-def default_planner_factory(algorithm: str, params: Any) -> Any:
+def planning_problem_handler(algorithm: str, params: Any) -> Callable[[PlanRequest], Any]:
+    """Handler that solves a ``planner.problem.PlanningProblem`` with one planner, under the budget."""
     from planner import make_planner
 
-    return make_planner(algorithm, params)
-
-
-def _solve(request: PlanRequest, factory: Any) -> PlanReply:
-    from planner.termination import Termination
-
-    if request.iterations is not None:
-        term = Termination.iterations(request.iterations)
-    else:
-        term = Termination.deadline(request.deadline_s)
-    t0 = time.perf_counter()
-    result = factory(request.algorithm, request.params).solve(request.problem, term)
-    return PlanReply(request.cycle, result, compute_time_s=time.perf_counter() - t0)
+    planner = make_planner(algorithm, params)
+    return lambda request: planner.solve(request.problem, request.termination())
 
 
 def _resolve(factory_path: str) -> Any:
@@ -80,8 +76,8 @@ def _resolve(factory_path: str) -> Any:
     return getattr(importlib.import_module(module), name)
 
 
-def _worker_main(conn: Connection, factory_path: str) -> None:
-    factory = _resolve(factory_path)
+def _worker_main(conn: Connection, factory_path: str, factory_args: tuple) -> None:
+    handler = _resolve(factory_path)(*factory_args)
     while True:
         try:
             request = conn.recv()
@@ -89,10 +85,12 @@ def _worker_main(conn: Connection, factory_path: str) -> None:
             return
         if request is None:
             return
+        t0 = time.perf_counter()
         try:
-            reply = _solve(request, factory)
+            reply = PlanReply(request.cycle, handler(request), compute_time_s=time.perf_counter() - t0)
         except Exception as exc:  # a planner bug must not take the worker down silently
-            reply = PlanReply(request.cycle, None, error=f"{type(exc).__name__}: {exc}")
+            reply = PlanReply(request.cycle, None, error=f"{type(exc).__name__}: {exc}",
+                              compute_time_s=time.perf_counter() - t0)
         try:
             conn.send(reply)
         except (BrokenPipeError, OSError):
@@ -102,13 +100,15 @@ def _worker_main(conn: Connection, factory_path: str) -> None:
 class PlannerWorker:
     """A planner process with a non-blocking request/answer interface and a watchdog.
 
-    ``factory`` is ``"module:function"``; the function takes ``(algorithm, params)`` and returns an
-    object with ``solve(problem, termination)``. Tests put a hanging double behind it.
+    ``factory`` is ``"module:function"``, called once in the worker process (and again after a
+    restart) with ``factory_args`` (pickled once); it returns the handler, a callable that takes a
+    :class:`PlanRequest` and returns the plan. Tests put a hanging double behind it.
     """
 
-    def __init__(self, factory: str = "autopilot_bridge.planning_worker:default_planner_factory",
-                 grace_s: float = 0.5, start_method: str = "spawn") -> None:
+    def __init__(self, factory: str, factory_args: tuple = (), grace_s: float = 0.5,
+                 start_method: str = "spawn") -> None:
         self.factory = factory
+        self.factory_args = factory_args
         self.grace_s = grace_s
         self.ctx = mp.get_context(start_method)
         self.stats = WorkerStats()
@@ -121,7 +121,7 @@ class PlannerWorker:
     # -- process management ---------------------------------------------------------------
     def _start(self) -> None:
         parent, child = self.ctx.Pipe(duplex=True)
-        self._proc = self.ctx.Process(target=_worker_main, args=(child, self.factory),
+        self._proc = self.ctx.Process(target=_worker_main, args=(child, self.factory, self.factory_args),
                                       name="planner-worker", daemon=True)
         self._proc.start()
         child.close()

@@ -15,27 +15,25 @@ class FakeResult:
 
 
 class ScriptedPlanner:
-    """Behaviour chosen by the algorithm name: 'echo' answers at once, 'hang' never returns,
+    """Behaviour chosen by the request's problem: 'echo' answers at once, 'hang' never returns,
     'raise' raises, 'slow' runs its termination condition out (like a real anytime planner)."""
 
-    def __init__(self, behaviour: str) -> None:
-        self.behaviour = behaviour
-
-    def solve(self, problem, termination):
-        if self.behaviour == "hang":
+    def __call__(self, request):
+        behaviour, termination = request.problem, request.termination()
+        if behaviour == "hang":
             # A planner stuck in a loop that never looks at its termination condition.
             end = time.monotonic() + 3600.0
             while time.monotonic() < end:
                 time.sleep(0.01)
-        if self.behaviour == "raise":
+        if behaviour == "raise":
             raise RuntimeError("planner bug")
         n = 0
-        if self.behaviour == "slow":
+        if behaviour == "slow":
             while not termination():
                 n += 1
                 termination.notify(n, False)  # as a real planner reports its progress
         return FakeResult("exact", os.getpid(), n)
 
 
-def scripted_factory(algorithm: str, params) -> ScriptedPlanner:
-    return ScriptedPlanner(algorithm)
+def scripted_factory() -> ScriptedPlanner:
+    return ScriptedPlanner()

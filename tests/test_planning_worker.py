@@ -13,8 +13,7 @@ FACTORY = "planner_doubles:scripted_factory"
 
 
 def request(cycle: int, behaviour: str, deadline: float = 0.2, iterations: int | None = None) -> PlanRequest:
-    return PlanRequest(cycle=cycle, algorithm=behaviour, params=None, problem=None,
-                       deadline_s=deadline, iterations=iterations)
+    return PlanRequest(cycle=cycle, problem=behaviour, deadline_s=deadline, iterations=iterations)
 
 
 def wait_for_reply(worker: PlannerWorker, timeout: float = 30.0):
