@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from hil import config
+from planner.params import PlannerParams
 from simulator.config import (
     CurrentParams,
     GeodesyParams,
@@ -30,6 +31,7 @@ class HilConfig:
     sim: SimParams
     link: LinkParams
     geodesy: GeodesyParams
+    planner: PlannerParams
 
 
 def load(path: str | Path | None = None, overrides: list[str] | None = None) -> HilConfig:

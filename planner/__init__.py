@@ -1,0 +1,41 @@
+"""Sampling-based local path planning for USVs (Wen et al. 2019), a pure algorithm library.
+
+Map frame: x east, y north (metres), angles counter-clockwise from +x (radians). Imports
+nothing of the rest of the project (numpy, scipy, numba only).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from planner.params import ALGORITHM_NAMES, PlannerParams
+from planner.problem import PlanningProblem
+from planner.result import PlannerResult
+from planner.termination import Termination
+
+ALGORITHMS = ALGORITHM_NAMES
+
+
+class Planner(Protocol):
+    def solve(self, problem: PlanningProblem, termination: Termination) -> PlannerResult: ...
+
+
+def make_planner(name: str, params: PlannerParams, seed: int | None = None) -> Planner:
+    """The planner called ``name`` (one of ALGORITHMS); ValueError for an unknown name."""
+    if name == "rrt-star":
+        from planner.rrt_star import RRTStar
+
+        return RRTStar(params, seed)
+    if name == "informed-rrt-star":
+        from planner.informed_rrt_star import InformedRRTStar
+
+        return InformedRRTStar(params, seed)
+    if name == "ddrrt-star":
+        from planner.ddrrt_star import DDRRTStar
+
+        return DDRRTStar(params, seed)
+    raise ValueError(f"unknown planner {name!r} (expected one of: {', '.join(ALGORITHMS)})")
+
+
+__all__ = ["ALGORITHMS", "Planner", "PlannerParams", "PlannerResult", "PlanningProblem", "Termination",
+           "make_planner"]

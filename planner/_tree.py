@@ -1,0 +1,529 @@
+"""The compiled tree core shared by RRT*, Informed RRT* and DDRRT*.
+
+Everything lives in preallocated arrays (see :class:`TreeArrays`); ``grow`` runs up to
+``max_iter`` iterations (one iteration = one sample drawn) and returns early at a
+``CLOCK_MONOTONIC`` deadline (checked before every iteration), at the first exact solution when
+asked, or when the tree is full.
+
+Nearest and near searches use grid buckets of side ``step``: a near query (radius <= step) scans
+3 x 3 buckets, a k-nearest query scans rings of buckets outwards until the k-th distance is
+certain. Collision checks are the exact cell traversal of :mod:`planner._kernels`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from planner._kernels import edge_cost, field_at, monotonic_ns, segment_free, sigmoid_arg
+
+# algorithm codes
+RRT_STAR = 0
+INFORMED_RRT_STAR = 1
+DDRRT_STAR = 2
+
+# grow() return codes
+DONE_ITERATIONS = 0
+DONE_DEADLINE = 1
+DONE_EXACT = 2
+DONE_FULL = 3
+
+# float config indices
+C_STEP, C_MAXTURN, C_GOALTOL, C_GOALBIAS, C_PNGP, C_PNGX, C_PNGY, C_DR, C_DALPHA, C_GAMMA = range(10)
+C_RGAMMA, C_FMIN, C_BUCKET, C_BX0, C_BX1, C_BY0, C_BY1, C_DCX, C_DCY, C_DR_DOM = range(10, 20)
+C_GX, C_GY, C_SX, C_SY, C_RES, C_FRES, C_FOX, C_FOY = range(20, 28)
+N_FCFG = 28
+# int config indices
+I_ALGO, I_FIELD, I_K, I_NBX, I_NBY, I_CAP, I_PNG = range(7)
+N_ICFG = 7
+# int state indices
+S_N, S_GOAL, S_ITER, S_REJ, S_CLOSEST, S_FIRST_ITER, S_CHECKS = range(7)
+N_ISTATE = 8
+# float state indices
+F_CLOSEST_D, F_FIRST_NS = range(2)
+N_FSTATE = 4
+
+NEAR_CAP = 1024
+TWO_PI = 2.0 * math.pi
+
+
+@njit(cache=True)
+def seed_rng(seed):
+    np.random.seed(seed)
+
+
+@njit(cache=True)
+def _wrap(a):
+    while a > math.pi:
+        a -= TWO_PI
+    while a < -math.pi:
+        a += TWO_PI
+    return a
+
+
+@njit(cache=True)
+def _fan_ok(head, dx, dy, max_turn):
+    """Section 2.4: the new edge must lie in the fan of half-angle max_turn about the heading."""
+    if math.isnan(head) or max_turn >= math.pi:
+        return True
+    return abs(_wrap(math.atan2(dy, dx) - head)) <= max_turn + 1e-9
+
+
+@njit(cache=True)
+def _bucket(x, y, fc, ic):
+    bx = int(x / fc[C_BUCKET])  # buckets cover the whole map from (0, 0)
+    by = int(y / fc[C_BUCKET])
+    bx = min(max(bx, 0), ic[I_NBX] - 1)
+    by = min(max(by, 0), ic[I_NBY] - 1)
+    return bx, by
+
+
+@njit(cache=True)
+def _insert_bucket(i, X, fc, ic, bucket_head, node_next):
+    bx, by = _bucket(X[i, 0], X[i, 1], fc, ic)
+    b = by * ic[I_NBX] + bx
+    node_next[i] = bucket_head[b]
+    bucket_head[b] = i
+
+
+@njit(cache=True)
+def _knn(qx, qy, k, X, fc, ic, bucket_head, node_next, out_i, out_d):
+    """k nearest nodes (Euclidean), ascending; returns how many were found (<= k)."""
+    cx, cy = _bucket(qx, qy, fc, ic)
+    nbx = ic[I_NBX]
+    nby = ic[I_NBY]
+    m = 0
+    rmax = max(nbx, nby)
+    B = fc[C_BUCKET]
+    for ring in range(rmax + 1):
+        for by in range(cy - ring, cy + ring + 1):
+            if by < 0 or by >= nby:
+                continue
+            edge_row = by == cy - ring or by == cy + ring
+            bx = cx - ring
+            while bx <= cx + ring:
+                if 0 <= bx < nbx:
+                    j = bucket_head[by * nbx + bx]
+                    while j >= 0:
+                        d = math.hypot(X[j, 0] - qx, X[j, 1] - qy)
+                        if m < k or d < out_d[m - 1]:
+                            p = m if m < k else k - 1
+                            while p > 0 and out_d[p - 1] > d:
+                                out_d[p] = out_d[p - 1]
+                                out_i[p] = out_i[p - 1]
+                                p -= 1
+                            out_d[p] = d
+                            out_i[p] = j
+                            if m < k:
+                                m += 1
+                        j = node_next[j]
+                if edge_row or ring == 0:
+                    bx += 1
+                else:
+                    bx += 2 * ring  # interior rows: only the two edge columns
+        if m == k and out_d[m - 1] <= ring * B:
+            break
+    return m
+
+
+@njit(cache=True)
+def _near(qx, qy, radius, X, fc, ic, bucket_head, node_next, out_i):
+    """Nodes within ``radius`` (at most NEAR_CAP of them)."""
+    B = fc[C_BUCKET]
+    nbx = ic[I_NBX]
+    nby = ic[I_NBY]
+    bx0 = int(math.floor((qx - radius) / B))
+    bx1 = int(math.floor((qx + radius) / B))
+    by0 = int(math.floor((qy - radius) / B))
+    by1 = int(math.floor((qy + radius) / B))
+    m = 0
+    for by in range(max(by0, 0), min(by1, nby - 1) + 1):
+        for bx in range(max(bx0, 0), min(bx1, nbx - 1) + 1):
+            j = bucket_head[by * nbx + bx]
+            while j >= 0:
+                if m < NEAR_CAP and math.hypot(X[j, 0] - qx, X[j, 1] - qy) <= radius:
+                    out_i[m] = j
+                    m += 1
+                j = node_next[j]
+    return m
+
+
+@njit(cache=True)
+def _in_domain(x, y, fc):
+    if x < fc[C_BX0] or x > fc[C_BX1] or y < fc[C_BY0] or y > fc[C_BY1]:
+        return False
+    if fc[C_DR_DOM] > 0.0:
+        return math.hypot(x - fc[C_DCX], y - fc[C_DCY]) <= fc[C_DR_DOM]
+    return True
+
+
+@njit(cache=True)
+def _uniform(fc):
+    x = 0.0
+    y = 0.0
+    for _ in range(64):
+        x = fc[C_BX0] + np.random.random() * (fc[C_BX1] - fc[C_BX0])
+        y = fc[C_BY0] + np.random.random() * (fc[C_BY1] - fc[C_BY0])
+        if _in_domain(x, y, fc):
+            break
+    return x, y
+
+
+@njit(cache=True)
+def _informed(fc, c_best):
+    """Gammell et al. 2014: uniform sample of the prolate hyperspheroid (an ellipse in 2-D) with
+    foci start and goal and transverse diameter c_best / f_min (f_min D_C <= Ed keeps it a lower
+    bound of the cost through a point), intersected with the sampling domain."""
+    sx = fc[C_SX]
+    sy = fc[C_SY]
+    gx = fc[C_GX]
+    gy = fc[C_GY]
+    c_min = math.hypot(gx - sx, gy - sy)
+    cb = c_best / fc[C_FMIN]
+    if cb <= c_min:
+        cb = c_min * (1.0 + 1e-9)
+    a = 0.5 * cb                                  # semi-major axis
+    b = 0.5 * math.sqrt(max(cb * cb - c_min * c_min, 0.0))  # semi-minor axis
+    th = math.atan2(gy - sy, gx - sx)             # rotation to the world frame (C in Gammell)
+    ct = math.cos(th)
+    st = math.sin(th)
+    mx = 0.5 * (sx + gx)
+    my = 0.5 * (sy + gy)
+    box = (fc[C_BX1] - fc[C_BX0]) * (fc[C_BY1] - fc[C_BY0])
+    x = mx
+    y = my
+    if math.pi * a * b < box:
+        # direct sampling: uniform in the unit disc, scaled by L = diag(a, b), rotated by C
+        for _ in range(64):
+            r = math.sqrt(np.random.random())
+            phi = TWO_PI * np.random.random()
+            ex = a * r * math.cos(phi)
+            ey = b * r * math.sin(phi)
+            x = mx + ct * ex - st * ey
+            y = my + st * ex + ct * ey
+            if _in_domain(x, y, fc):
+                return x, y
+        return _uniform(fc)
+    # the ellipse covers more than the box: sample the box, keep points inside the ellipse
+    for _ in range(64):
+        x, y = _uniform(fc)
+        if math.hypot(x - sx, y - sy) + math.hypot(x - gx, y - gy) <= cb:
+            return x, y
+    return x, y
+
+
+@njit(cache=True)
+def _children_fan_ok(j, new_head, X, first_child, next_sib, max_turn):
+    if max_turn >= math.pi:
+        return True
+    c = first_child[j]
+    while c >= 0:
+        if not _fan_ok(new_head, X[c, 0] - X[j, 0], X[c, 1] - X[j, 1], max_turn):
+            return False
+        c = next_sib[c]
+    return True
+
+
+@njit(cache=True)
+def _reparent(j, p, new_cost, X, parent, cost, head, first_child, next_sib, stack):
+    """Make p the parent of j and propagate the cost change to j's subtree."""
+    old = parent[j]
+    if old >= 0:
+        if first_child[old] == j:
+            first_child[old] = next_sib[j]
+        else:
+            c = first_child[old]
+            while next_sib[c] != j:
+                c = next_sib[c]
+            next_sib[c] = next_sib[j]
+    parent[j] = p
+    next_sib[j] = first_child[p]
+    first_child[p] = j
+    head[j] = math.atan2(X[j, 1] - X[p, 1], X[j, 0] - X[p, 0])
+    delta = new_cost - cost[j]
+    top = 0
+    stack[top] = j
+    top += 1
+    while top > 0:
+        top -= 1
+        n = stack[top]
+        cost[n] += delta
+        c = first_child[n]
+        while c >= 0:
+            stack[top] = c
+            top += 1
+            c = next_sib[c]
+
+
+@njit(cache=True)
+def _add_node(x, y, p, c, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head,
+              node_next, st):
+    i = st[S_N]
+    X[i, 0] = x
+    X[i, 1] = y
+    parent[i] = p
+    cost[i] = c
+    head[i] = math.atan2(y - X[p, 1], x - X[p, 0])
+    dd[i] = np.inf
+    first_child[i] = -1
+    next_sib[i] = first_child[p]
+    first_child[p] = i
+    _insert_bucket(i, X, fc, ic, bucket_head, node_next)
+    st[S_N] = i + 1
+    return i
+
+
+@njit(cache=True)
+def _cost(x0, y0, x1, y1, fc, ic, fvx, fvy):
+    return edge_cost(x0, y0, x1, y1, ic[I_FIELD] != 0, fvx, fvy, fc[C_FRES], fc[C_FOX], fc[C_FOY],
+                     fc[C_STEP], fc[C_DALPHA], fc[C_GAMMA])
+
+
+@njit(cache=True)
+def _free(occ, fc, st, x0, y0, x1, y1):
+    st[S_CHECKS] += 1
+    return segment_free(occ, fc[C_RES], x0, y0, x1, y1)
+
+
+@njit(cache=True)
+def _esd(i, qx, qy, X, dd, fc, ic, fvx, fvy):
+    """Eq. (11) for node i towards (qx, qy); the current is taken at the node."""
+    second = fc[C_DALPHA] * fc[C_DR]
+    if ic[I_FIELD] != 0:
+        vx, vy = field_at(fvx, fvy, fc[C_FRES], fc[C_FOX], fc[C_FOY], X[i, 0], X[i, 1])
+        dx = qx - X[i, 0]
+        dy = qy - X[i, 1]
+        arg, ok = sigmoid_arg(dx, dy, math.hypot(dx, dy), vx, vy, fc[C_GAMMA])
+        if ok:
+            second = fc[C_DALPHA] * fc[C_DR] / (1.0 + math.exp(-arg))
+    return min(dd[i], second)
+
+
+@njit(cache=True)
+def _sort_by(keys, idx, m):
+    """Insertion sort of idx[:m] by keys[:m] (m is small)."""
+    for a in range(1, m):
+        kk = keys[a]
+        ii = idx[a]
+        b = a - 1
+        while b >= 0 and keys[b] > kk:
+            keys[b + 1] = keys[b]
+            idx[b + 1] = idx[b]
+            b -= 1
+        keys[b + 1] = kk
+        idx[b + 1] = ii
+
+
+@njit(cache=True)
+def _try_goal(i, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head, node_next,
+              st, fs, fvx, fvy, stack, clockbuf):
+    """After node i joined the tree: track the closest node and connect the goal exactly."""
+    gx = fc[C_GX]
+    gy = fc[C_GY]
+    d = math.hypot(X[i, 0] - gx, X[i, 1] - gy)
+    if d < fs[F_CLOSEST_D]:
+        fs[F_CLOSEST_D] = d
+        st[S_CLOSEST] = i
+    g = st[S_GOAL]
+    if d > fc[C_GOALTOL] or i == g:
+        return
+    if d < 1e-9:
+        if g < 0:
+            st[S_GOAL] = i
+            st[S_FIRST_ITER] = st[S_ITER]
+            fs[F_FIRST_NS] = monotonic_ns(clockbuf)
+        return
+    c = cost[i] + _cost(X[i, 0], X[i, 1], gx, gy, fc, ic, fvx, fvy)
+    if g >= 0 and c >= cost[g] - 1e-12:
+        return
+    dx = gx - X[i, 0]
+    dy = gy - X[i, 1]
+    if not _fan_ok(head[i], dx, dy, fc[C_MAXTURN]):
+        return
+    if g >= 0 and not _children_fan_ok(g, math.atan2(dy, dx), X, first_child, next_sib, fc[C_MAXTURN]):
+        return
+    if not _free(occ, fc, st, X[i, 0], X[i, 1], gx, gy):
+        return
+    if g < 0:
+        if st[S_N] >= ic[I_CAP]:
+            return
+        g = _add_node(gx, gy, i, c, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head,
+                      node_next, st)
+        st[S_GOAL] = g
+        st[S_FIRST_ITER] = st[S_ITER]
+        fs[F_FIRST_NS] = monotonic_ns(clockbuf)
+        fs[F_CLOSEST_D] = 0.0
+        st[S_CLOSEST] = g
+    else:
+        _reparent(g, i, c, X, parent, cost, head, first_child, next_sib, stack)
+
+
+@njit(cache=True)
+def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib, bucket_head, node_next,
+         st, fs, stack, max_iter, deadline_ns, stop_on_exact):
+    """Run up to max_iter iterations; see the module docstring for the return codes."""
+    clockbuf = np.zeros(2, np.int64)
+    k = ic[I_K]
+    kn_i = np.empty(max(k, 1), np.int64)
+    kn_d = np.empty(max(k, 1), np.float64)
+    ext_i = np.empty(max(k, 1), np.int64)
+    ext_k = np.empty(max(k, 1), np.float64)
+    near_i = np.empty(NEAR_CAP, np.int64)
+    near_c = np.empty(NEAR_CAP, np.float64)
+    step = fc[C_STEP]
+    max_turn = fc[C_MAXTURN]
+    algo = ic[I_ALGO]
+    for _ in range(max_iter):
+        if deadline_ns >= 0 and monotonic_ns(clockbuf) >= deadline_ns:
+            return DONE_DEADLINE
+        if st[S_N] + 2 > ic[I_CAP]:
+            return DONE_FULL
+        st[S_ITER] += 1
+        # ---- sample: PNG node with probability P (DDRRT*), else goal bias, else uniform/informed
+        if ic[I_PNG] != 0 and np.random.random() < fc[C_PNGP]:
+            sx = fc[C_PNGX]
+            sy = fc[C_PNGY]
+        elif np.random.random() < fc[C_GOALBIAS]:
+            sx = fc[C_GX]
+            sy = fc[C_GY]
+        elif algo == INFORMED_RRT_STAR and st[S_GOAL] >= 0:
+            sx, sy = _informed(fc, cost[st[S_GOAL]])
+        else:
+            sx, sy = _uniform(fc)
+        n = st[S_N]
+        if algo == DDRRT_STAR:
+            # ---- Figure 6 lines 5-11: k nearest sorted by D_C, keep those with D_C <= ESD
+            m = _knn(sx, sy, k, X, fc, ic, bucket_head, node_next, kn_i, kn_d)
+            ne = 0
+            for a in range(m):
+                i = kn_i[a]
+                dc = _cost(X[i, 0], X[i, 1], sx, sy, fc, ic, fvx, fvy)
+                if dc <= _esd(i, sx, sy, X, dd, fc, ic, fvx, fvy):
+                    ext_i[ne] = i
+                    ext_k[ne] = dc
+                    ne += 1
+            if ne == 0:
+                st[S_REJ] += 1
+                continue
+            _sort_by(ext_k, ext_i, ne)
+            q0 = ext_i[0]
+            d0 = math.hypot(sx - X[q0, 0], sy - X[q0, 1])
+            if d0 < 1e-9:
+                continue
+            if d0 > step:
+                nx = X[q0, 0] + (sx - X[q0, 0]) * step / d0
+                ny = X[q0, 1] + (sy - X[q0, 1]) * step / d0
+            else:
+                nx = sx
+                ny = sy
+            # ---- lines 12-17: extendable nodes in order of the cost through them
+            nc = 0
+            for a in range(ne):
+                i = ext_i[a]
+                if math.hypot(nx - X[i, 0], ny - X[i, 1]) <= step * (1.0 + 1e-9):
+                    near_i[nc] = i
+                    near_c[nc] = cost[i] + _cost(X[i, 0], X[i, 1], nx, ny, fc, ic, fvx, fvy)
+                    nc += 1
+            _sort_by(near_c, near_i, nc)
+            p = -1
+            pc = 0.0
+            for a in range(nc):
+                i = near_i[a]
+                if not _fan_ok(head[i], nx - X[i, 0], ny - X[i, 1], max_turn):
+                    continue
+                if _free(occ, fc, st, X[i, 0], X[i, 1], nx, ny):
+                    p = i
+                    pc = near_c[a]
+                    break
+                dd[i] = fc[C_DR]  # a failed extension: the dynamic domain shrinks to DR
+            if p < 0:
+                continue
+            new = _add_node(nx, ny, p, pc, X, parent, cost, head, dd, first_child, next_sib, fc, ic,
+                            bucket_head, node_next, st)
+            # ---- lines 18-21: rewire the other extendable nodes through q_new
+            for a in range(ne):
+                j = ext_i[a]
+                if j == p or j == new:
+                    continue
+                dx = X[j, 0] - nx
+                dy = X[j, 1] - ny
+                if math.hypot(dx, dy) > step * (1.0 + 1e-9):
+                    continue
+                c = cost[new] + _cost(nx, ny, X[j, 0], X[j, 1], fc, ic, fvx, fvy)
+                if c >= cost[j] - 1e-12:
+                    continue
+                if not _fan_ok(head[new], dx, dy, max_turn):
+                    continue
+                if not _children_fan_ok(j, math.atan2(dy, dx), X, first_child, next_sib, max_turn):
+                    continue
+                if _free(occ, fc, st, nx, ny, X[j, 0], X[j, 1]):
+                    _reparent(j, new, c, X, parent, cost, head, first_child, next_sib, stack)
+        else:
+            # ---- RRT* (Karaman & Frazzoli 2011), radius version
+            m = _knn(sx, sy, 1, X, fc, ic, bucket_head, node_next, kn_i, kn_d)
+            q0 = kn_i[0]
+            d0 = kn_d[0]
+            if d0 < 1e-9:
+                continue
+            if d0 > step:
+                nx = X[q0, 0] + (sx - X[q0, 0]) * step / d0
+                ny = X[q0, 1] + (sy - X[q0, 1]) * step / d0
+            else:
+                nx = sx
+                ny = sy
+            if not _fan_ok(head[q0], nx - X[q0, 0], ny - X[q0, 1], max_turn):
+                continue
+            if not _free(occ, fc, st, X[q0, 0], X[q0, 1], nx, ny):
+                continue
+            radius = step
+            if n > 1:
+                radius = min(step, fc[C_RGAMMA] * math.sqrt(math.log(n) / n))
+            nn = _near(nx, ny, radius, X, fc, ic, bucket_head, node_next, near_i)
+            c0 = cost[q0] + _cost(X[q0, 0], X[q0, 1], nx, ny, fc, ic, fvx, fvy)
+            # choose-parent: candidates cheaper than the nearest, in ascending cost order
+            nc = 0
+            for a in range(nn):
+                j = near_i[a]
+                if j == q0:
+                    continue
+                c = cost[j] + _cost(X[j, 0], X[j, 1], nx, ny, fc, ic, fvx, fvy)
+                if c < c0 - 1e-12:
+                    near_i[nc] = j
+                    near_c[nc] = c
+                    nc += 1
+            _sort_by(near_c, near_i, nc)
+            p = q0
+            pc = c0
+            for a in range(nc):
+                j = near_i[a]
+                if _fan_ok(head[j], nx - X[j, 0], ny - X[j, 1], max_turn) and _free(
+                        occ, fc, st, X[j, 0], X[j, 1], nx, ny):
+                    p = j
+                    pc = near_c[a]
+                    break
+            new = _add_node(nx, ny, p, pc, X, parent, cost, head, dd, first_child, next_sib, fc, ic,
+                            bucket_head, node_next, st)
+            # rewire: the near set again (the buffer was reordered above)
+            nn = _near(nx, ny, radius, X, fc, ic, bucket_head, node_next, near_i)
+            for a in range(nn):
+                j = near_i[a]
+                if j == p or j == new:
+                    continue
+                dx = X[j, 0] - nx
+                dy = X[j, 1] - ny
+                c = cost[new] + _cost(nx, ny, X[j, 0], X[j, 1], fc, ic, fvx, fvy)
+                if c >= cost[j] - 1e-12:
+                    continue
+                if not _fan_ok(head[new], dx, dy, max_turn):
+                    continue
+                if not _children_fan_ok(j, math.atan2(dy, dx), X, first_child, next_sib, max_turn):
+                    continue
+                if _free(occ, fc, st, nx, ny, X[j, 0], X[j, 1]):
+                    _reparent(j, new, c, X, parent, cost, head, first_child, next_sib, stack)
+        _try_goal(new, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head, node_next,
+                  st, fs, fvx, fvy, stack, clockbuf)
+        if stop_on_exact and st[S_GOAL] >= 0:
+            return DONE_EXACT
+    return DONE_ITERATIONS

@@ -1,0 +1,59 @@
+"""DDRRT* (Wen et al. 2019, section 3.5, Figure 6).
+
+Per sample q_s (the PGNode with probability P, else the goal with probability goal_bias, else
+uniform in the perceptual domain): the k nearest nodes are sorted by the cost distance D_C of
+eq. (12); a node is extendable if D_C(q_i, q_s) <= ESD(q_i) of eq. (11); when none is, the sample
+is dropped (lines 10-11). q_new is one step from the best extendable node towards q_s; the
+extendable nodes are tried as parents in order of c(q_i) + D_C(q_i, q_new); a collision on the
+way sets DD(q_i) = DR = 10 v sigma_t (the dynamic domain; DD starts at infinity). Rewiring
+(lines 18-21) tries the other extendable nodes through q_new.
+
+The PGNode comes from :func:`planner.png.pg_node`: the virtual target is the reference waypoint
+nearest the start, moving along the reference path; the USV covers twice the target's distance
+per step, and the step is chosen so that the USV covers the reference arc length from that
+waypoint to the goal (s_t = arc / 2). Without a reference path the straight start-goal line is
+the reference.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from planner import _tree
+from planner.core import TreePlanner
+from planner.png import pg_node
+from planner.problem import PlanningProblem
+
+
+class DDRRTStar(TreePlanner):
+    algorithm_code = _tree.DDRRT_STAR
+    name = "ddrrt-star"
+    uses_png = True
+
+    def png_node(self, problem: PlanningProblem) -> tuple[float, float] | None:
+        sx, sy = map(float, problem.start)
+        gx, gy = map(float, problem.goal)
+        ref = problem.reference_path
+        if ref is None or len(ref) < 2:
+            ref = np.array([[sx, sy], [gx, gy]])
+        ref = np.asarray(ref, dtype=np.float64)
+        j = int(np.argmin(np.hypot(ref[:, 0] - sx, ref[:, 1] - sy)))
+        k = int(np.argmin(np.hypot(ref[:, 0] - gx, ref[:, 1] - gy)))
+        if k <= j:
+            k = min(j + 1, len(ref) - 1)
+        if j == len(ref) - 1:
+            j = max(0, j - 1)
+        seg = np.diff(ref[j:k + 1], axis=0)
+        arc = float(np.sum(np.hypot(seg[:, 0], seg[:, 1]))) if len(seg) else 0.0
+        arc = max(arc, math.hypot(gx - sx, gy - sy))
+        t_head = math.atan2(ref[j + 1, 1] - ref[j, 1], ref[j + 1, 0] - ref[j, 0])
+        heading = problem.start_heading
+        if heading is None:
+            heading = math.atan2(ref[j, 1] - sy, ref[j, 0] - sx) if math.hypot(ref[j, 0] - sx, ref[j, 1] - sy) > 1e-9 else t_head
+        p = self.params
+        x, y = pg_node((sx, sy), heading, ref[j], t_head, 0.5 * arc, p.png_nav_ratio, p.png_tolerance,
+                       p.png_max_iterations)
+        bx0, bx1, by0, by1 = problem.sampling_box()
+        return min(max(x, bx0), bx1), min(max(y, by0), by1)

@@ -1,0 +1,89 @@
+"""Parameters of the local planner: the ``[planner]`` section of the configuration.
+
+The planner library imports nothing of ours, so the fields carry the project's metadata
+convention (``help``, ``unit``, ``gt``/``ge``/``lt``/``le``) through ``dataclasses.field``
+directly; ``hil.config`` checks the bounds on load. Defaults and their sources are explained in
+``docs/planner.md`` and in ``configs/default.toml``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+ALGORITHM_NAMES = ("rrt-star", "informed-rrt-star", "ddrrt-star")
+OBJECTIVES = ("length", "current")
+
+
+def _p(help: str, unit: str = "", *, gt=None, ge=None, lt=None, le=None, default=None):
+    meta = {"help": help, "unit": unit, "gt": gt, "ge": ge, "lt": lt, "le": le}
+    return field(default=default, metadata=meta)
+
+
+@dataclass(frozen=True)
+class PlannerParams:
+    """Tuning of the sampling-based local planners (map frame: x east, y north, metres)."""
+
+    algorithm: Literal["rrt-star", "informed-rrt-star", "ddrrt-star"] = _p(
+        "planner: rrt-star | informed-rrt-star | ddrrt-star", default="ddrrt-star")
+    objective: Literal["length", "current"] = _p(
+        "path cost: 'length' (Euclidean) or 'current' (cost distance D_C of eq. (12))", default="current")
+    step: float = _p("maximum extension length of one tree edge", "m", gt=0, default=4.0)
+    speed: float = _p("planning speed v (DR = dr_factor v sigma_t, turning radius factor * v)", "m/s",
+                      gt=0, default=2.0)
+    sigma_t: float = _p("duration sigma_t of one path extension", "s", gt=0, default=2.0)
+    dr_factor: float = _p("DR = dr_factor * v * sigma_t, the dynamic-domain radius of eq. (11)", "",
+                          gt=0, default=10.0)
+    d_alpha: float = _p("D_alpha of eqs. (11)-(12)", "", gt=0, default=1.0)
+    gamma_alpha: float = _p("gamma_alpha of eqs. (11)-(12)", "", ge=0, default=0.1)
+    k_nearest: int = _p("k nearest tree nodes examined per sample by DDRRT*", "", ge=1, le=64, default=5)
+    png_probability: float = _p("probability P of sampling the PNG node (section 3.2)", "", ge=0, le=1,
+                                default=0.2)
+    png_nav_ratio: float = _p("effective navigation ratio N of theta' = N q' (section 3.2)", "", gt=0,
+                              default=3.0)
+    png_tolerance: float = _p("stop iterating eqs. (7)-(8) when delta-q changes less than this", "rad",
+                              gt=0, default=1e-3)
+    png_max_iterations: int = _p("cap on the iterations of eqs. (7)-(8)", "", ge=1, default=20)
+    goal_bias: float = _p("probability of sampling the goal (when the PNG node is not drawn)", "",
+                          ge=0, le=1, default=0.05)
+    goal_tolerance: float = _p("a node this close to the goal tries the exact connection", "m", gt=0,
+                               default=2.0)
+    turn_radius_factor: float = _p(
+        "minimum turning radius = factor * speed (1.5 in section 2.4); 0 disables the fan limit", "",
+        ge=0, default=1.5)
+    rewire_gamma: float = _p(
+        "RRT* near radius = rewire_gamma * gamma*_RRT (log n / n)^(1/2), capped by step (OMPL's rewire factor)",
+        "", gt=0, default=1.1)
+    safety_radius: float = _p("obstacle inflation by the vessel's safety radius", "m", ge=0, default=1.5)
+    velocity_inflation_gain: float = _p(
+        "extra inflation per m/s of velocity towards an obstacle (section 3.3)", "s", ge=0, default=1.0)
+    perceptual_radius: float = _p("radius of the perceptual domain (33 m in section 4.2)", "m", gt=0,
+                                  default=33.0)
+    max_nodes: int = _p("capacity of the tree (the planner stops when full)", "", ge=2, default=200_000)
+    seed: int = _p("seed of the planner's random numbers (same seed -> same path)", "", ge=0, default=1)
+
+    def __post_init__(self) -> None:
+        if self.algorithm not in ALGORITHM_NAMES:
+            raise ValueError(f"algorithm: must be one of {', '.join(ALGORITHM_NAMES)} (got {self.algorithm!r})")
+        if self.objective not in OBJECTIVES:
+            raise ValueError(f"objective: must be one of {', '.join(OBJECTIVES)} (got {self.objective!r})")
+
+    @property
+    def dynamic_domain_radius(self) -> float:
+        """DR of eq. (11): dr_factor * v * sigma_t (m)."""
+        return self.dr_factor * self.speed * self.sigma_t
+
+    @property
+    def turning_radius(self) -> float:
+        """Minimum turning radius of section 2.4 (m); 0 = no kinematic limit."""
+        return self.turn_radius_factor * self.speed
+
+    @property
+    def max_turn_angle(self) -> float:
+        """Half-angle of the fan of section 2.4 (rad): the heading change of an arc of length step
+        on the minimum turning circle, step / R_min (pi when the limit is disabled)."""
+        r = self.turning_radius
+        if r <= 0:
+            return math.pi
+        return min(math.pi, self.step / r)

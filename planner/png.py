@@ -1,0 +1,73 @@
+"""Section 3.2: the PGNode of proportional navigation guidance, eqs. (7)-(8).
+
+The vessel at U_{k-1} (heading theta_{k-1}) chases a virtual target at P_{k-1} moving along the
+reference path (heading psi_t) by s_t per step; the vessel moves u_t = 2 s_t (twice the target's
+speed, section 3.2). With theta' = N q', the new heading is theta_k = theta_{k-1} + N dq. The
+line-of-sight increment dq is first estimated with the vessel held still (eq. (7), first line),
+then corrected by eq. (8) until it changes by less than ``tol``. The PGNode U_k is the point
+u_t along the new heading, on the segment U_{k-1} C (similar triangles).
+
+All angles here are signed (counter-clockwise positive); the magnitudes are the arccos
+expressions of eqs. (7)-(8) and the signs come from the geometry.
+"""
+
+from __future__ import annotations
+
+import math
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _acos(x: float) -> float:
+    return math.acos(max(-1.0, min(1.0, x)))
+
+
+def pg_node(usv_pos, usv_heading, target_pos, target_heading, s_t, nav_ratio=3.0, tol=1e-3, max_iter=20):
+    """The PGNode (x, y) of eqs. (7)-(8) (map frame, metres; headings in rad)."""
+    ux, uy = float(usv_pos[0]), float(usv_pos[1])
+    px, py = float(target_pos[0]), float(target_pos[1])
+    s_t = float(s_t)
+    u_t = 2.0 * s_t
+    r = math.hypot(px - ux, py - uy)                     # r_{k-1}
+    if s_t <= 0.0 or r < 1e-12:
+        return ux + u_t * math.cos(usv_heading), uy + u_t * math.sin(usv_heading)
+    q0 = math.atan2(py - uy, px - ux)                    # sight line angle q_{k-1}
+    p1x = px + s_t * math.cos(target_heading)            # P_k
+    p1y = py + s_t * math.sin(target_heading)
+    c_k = math.hypot(p1x - ux, p1y - uy)
+    # eq. (7) line 1 (cosine theorem), signed by the side the target moves to
+    sign = 1.0 if _wrap(math.atan2(p1y - uy, p1x - ux) - q0) >= 0.0 else -1.0
+    dq = sign * _acos((c_k * c_k + r * r - s_t * s_t) / (2.0 * c_k * r)) if c_k > 1e-12 else 0.0
+    # beta_k: angle at P_{k-1} between P_{k-1}U_{k-1} and the target's motion (eq. (7) line 4)
+    beta = _acos((s_t * s_t + r * r - c_k * c_k) / (2.0 * s_t * r))
+    theta = usv_heading
+    for _ in range(int(max_iter)):
+        theta = usv_heading + nav_ratio * dq              # eq. (7) line 2
+        alpha = _wrap(theta - q0)                        # eq. (7) line 3 (signed)
+        a = abs(alpha)
+        # the triangle U_{k-1} P_{k-1} C exists only if the vessel's ray meets the target's ray
+        det = math.sin(theta - target_heading)
+        if abs(det) < 1e-12:
+            break
+        ray_u = (-(px - ux) * math.sin(target_heading) + (py - uy) * math.cos(target_heading)) / det
+        ray_p = (math.cos(theta) * (py - uy) - math.sin(theta) * (px - ux)) / det
+        if ray_u <= 0.0 or ray_p < 0.0 or a + beta >= math.pi - 1e-12:
+            break
+        sab = math.sin(a + beta)
+        c1 = r * math.sin(beta) / sab                    # |U_{k-1} C|
+        c2 = r * math.sin(a) / sab                       # |P_{k-1} C|
+        uc = c1 - u_t
+        sc = c2 - s_t
+        c3 = math.sqrt(max(uc * uc + sc * sc + 2.0 * uc * sc * math.cos(a + beta), 0.0))
+        if abs(uc) < 1e-12 or c3 < 1e-12:
+            break
+        # eq. (8): the corrected sight-line increment
+        new_dq = math.copysign(a - _acos((uc * uc + c3 * c3 - sc * sc) / (2.0 * uc * c3)), alpha)
+        converged = abs(new_dq - dq) < tol
+        dq = new_dq
+        if converged:
+            theta = usv_heading + nav_ratio * dq
+            break
+    return ux + u_t * math.cos(theta), uy + u_t * math.sin(theta)
