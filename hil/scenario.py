@@ -126,6 +126,14 @@ class Scenario:
         f = self.current_field()
         return None if f is None else MapFrameCurrent(f, self.field_time)
 
+    def planning_field(self, resolution: float = 1.0):
+        """The frozen map-frame current sampled on a grid (``planner.field.GridField``), or None."""
+        f = self.map_field()
+        if f is None:
+            return None
+        from planner.field import GridField
+        return GridField.sample(f, self.width, self.height, resolution)
+
 
 class MapFrameCurrent:
     """A NED current seen in the map frame at a fixed time: (x east, y north) -> (v_east, v_north)."""

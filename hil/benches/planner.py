@@ -1,0 +1,273 @@
+"""`hil bench planner`: speed and convergence of the three planners, against the exact optimum and OMPL.
+
+For each map (sparse discs, a bug trap, a maze with narrow doors: the ``bench_*`` scenarios)
+and algorithm, in one process, length objective, no inflation, no turning-radius fan:
+
+* iterations per second (the 1 s runs: iterations / planning time);
+* time to the first solution (median over seeds; stop at the first exact solution);
+* path length at the 0.05, 0.2 and 1 s budgets as a ratio to the optimum (median over seeds),
+  the optimum being the visibility-graph shortest path of ``hil.optimum`` on the same grid.
+
+If the ``ompl`` Python package is importable, OMPL's geometric RRT* (RealVector(2) space, a
+Python state-validity checker on the same grid, the same range and goal) runs on the same maps
+and budgets, and the report gives our/OMPL ratios. ``ompl`` is not a project dependency
+(``pip install ompl`` to include it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import time
+from dataclasses import replace
+from typing import Any, Callable
+
+import numpy as np
+
+from hil import console, scenario as scenarios
+from hil.errors import UsageError
+from hil.optimum import shortest_path
+
+MAPS = ("bench_discs", "bench_bugtrap", "bench_maze")
+ALGORITHMS = ("rrt-star", "informed-rrt-star", "ddrrt-star")
+BUDGETS = (0.05, 0.2, 1.0)
+FIRST_SOLUTION_CAP_S = 2.0
+TARGETS = {"iterations_per_s": 15000.0, "first_solution_s": 0.040, "ratio_0.2": 1.03, "ratio_1": 1.01}
+
+
+def _floats(text: str) -> tuple[float, ...]:
+    try:
+        vals = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated seconds, got {text!r}") from None
+    if not vals or any(not (v > 0) or not math.isfinite(v) for v in vals):
+        raise argparse.ArgumentTypeError("budgets must be positive seconds")
+    return vals
+
+
+def _names(choices: tuple[str, ...]) -> Callable[[str], tuple[str, ...]]:
+    def parse(text: str) -> tuple[str, ...]:
+        names = tuple(n.strip() for n in text.split(",") if n.strip())
+        bad = [n for n in names if n not in choices]
+        if bad or not names:
+            raise argparse.ArgumentTypeError(f"unknown {', '.join(bad) or '(none)'}; choose from {','.join(choices)}")
+        return names
+    return parse
+
+
+def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "planner", parents=parents,
+        help="planner speed and convergence vs the exact optimum (and OMPL's RRT* when installed)",
+        description=__doc__.split("\n\n", 1)[1] if __doc__ else None,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--maps", type=_names(MAPS), default=MAPS, metavar="LIST",
+                   help=f"comma-separated maps (default {','.join(MAPS)})")
+    p.add_argument("--algorithms", type=_names(ALGORITHMS), default=ALGORITHMS, metavar="LIST",
+                   help=f"comma-separated planners (default {','.join(ALGORITHMS)})")
+    p.add_argument("--seeds", type=int, default=5, metavar="N", help="seeds per measurement (median; default 5)")
+    p.add_argument("--budgets", type=_floats, default=BUDGETS, metavar="S,S,...",
+                   help="time budgets for the cost ratios (s, default 0.05,0.2,1)")
+    p.add_argument("--quick", action="store_true",
+                   help="CI-size run: 2 seeds, budgets 0.05,0.2 s (overrides --seeds and --budgets)")
+    p.add_argument("--no-ompl", action="store_true", help="do not run OMPL even if it is installed")
+    p.add_argument("--step", type=float, default=None, metavar="M",
+                   help="extension length / OMPL range (m, default: [planner] step)")
+    p.set_defaults(func=run)
+
+
+def _median(values: list[float]) -> float | None:
+    vals = [v for v in values if v is not None]
+    if not vals:
+        return None
+    return float(statistics.median(vals))
+
+
+class OursRunner:
+    """Runs one of our planners on a fixed problem with a given budget."""
+
+    def __init__(self, algorithm: str, params: Any, problem: Any) -> None:
+        self.algorithm, self.params, self.problem = algorithm, replace(params, algorithm=algorithm), problem
+
+    def solve(self, seed: int, budget_s: float, first: bool = False) -> dict[str, Any]:
+        from planner import make_planner
+        from planner.termination import Termination
+        planner = make_planner(self.algorithm, replace(self.params, seed=seed))
+        term = Termination.deadline(budget_s)
+        if first:
+            term = Termination.any_of(Termination.exact_solution(), term)
+        r = planner.solve(self.problem, term)
+        return {"exact": r.status == "exact", "length": r.length if r.status == "exact" else math.inf,
+                "iterations": r.iterations, "time": r.planning_time_s,
+                "first": r.time_to_first_solution_s if r.status == "exact" else None}
+
+
+class OmplRunner:
+    """OMPL's geometric RRT* on the same grid, with a Python state-validity checker."""
+
+    def __init__(self, occ: np.ndarray, resolution: float, start, goal, step: float) -> None:
+        from ompl import base as ob, geometric as og, util as ou
+        ou.setLogLevel(ou.LogLevel.LOG_NONE) if hasattr(ou.LogLevel, "LOG_NONE") else None
+        self.ob, self.og = ob, og
+        self.occ, self.res = occ, resolution
+        h, w = occ.shape[0] * resolution, occ.shape[1] * resolution
+        space = ob.RealVectorStateSpace(2)
+        bounds = ob.RealVectorBounds(2)
+        bounds.setLow(0, 0.0)
+        bounds.setHigh(0, w)
+        bounds.setLow(1, 0.0)
+        bounds.setHigh(1, h)
+        space.setBounds(bounds)
+        self.space = space
+        rows, cols = occ.shape
+        free = ~occ
+
+        def valid(state) -> bool:
+            c, r = int(state[0] / resolution), int(state[1] / resolution)
+            return 0 <= r < rows and 0 <= c < cols and bool(free[r, c])
+
+        self._valid = valid
+        self.start, self.goal, self.step = start, goal, step
+        self.extent = max(w, h)
+
+    def solve(self, seed: int, budget_s: float, first: bool = False) -> dict[str, Any]:
+        ob, og = self.ob, self.og
+        from ompl import util as ou
+        if hasattr(ou, "RNG") and hasattr(ou.RNG, "setSeed"):
+            try:
+                ou.RNG.setSeed(int(seed) + 1)
+            except Exception:  # only allowed before the first RNG is created; then keep OMPL's stream
+                pass
+        si = ob.SpaceInformation(self.space)
+        si.setStateValidityChecker(self._valid)
+        # Check motions every quarter cell, as a fraction of the space's extent.
+        si.setStateValidityCheckingResolution(0.25 * self.res / self.extent)
+        si.setup()
+        pdef = ob.ProblemDefinition(si)
+        s, g = self.space.allocState(), self.space.allocState()
+        s[0], s[1] = self.start
+        g[0], g[1] = self.goal
+        pdef.setStartAndGoalStates(s, g, 1e-6)
+        pdef.setOptimizationObjective(ob.PathLengthOptimizationObjective(si))
+        planner = og.RRTstar(si)
+        planner.setRange(self.step)
+        planner.setProblemDefinition(pdef)
+        planner.setup()
+        t0 = time.monotonic()
+        if first:
+            end = t0 + budget_s
+            planner.solve(lambda: pdef.hasExactSolution() or time.monotonic() >= end)
+        else:
+            planner.solve(budget_s)
+        dt = time.monotonic() - t0
+        exact = bool(pdef.hasExactSolution())
+        length = pdef.getSolutionPath().length() if exact else math.inf
+        return {"exact": exact, "length": length, "iterations": int(planner.numIterations()), "time": dt,
+                "first": dt if (first and exact) else None}
+
+
+def _measure(runner, seeds: list[int], budgets: tuple[float, ...], optimum: float, label: str) -> dict[str, Any]:
+    firsts, ratios, rates = [], {b: [] for b in budgets}, []
+    for s in seeds:
+        firsts.append(runner.solve(s, FIRST_SOLUTION_CAP_S, first=True)["first"])
+        for b in budgets:
+            r = runner.solve(s, b)
+            ratios[b].append(r["length"] / optimum if r["exact"] else math.inf)
+            if b == max(budgets) and r["time"] > 0:
+                rates.append(r["iterations"] / r["time"])
+        console.progress(f"  {label}: seed {s} done")
+    return {
+        "iterations_per_s": _median(rates),
+        "first_solution_s": _median(firsts),
+        "first_solution_found": sum(f is not None for f in firsts),
+        "ratio": {f"{b:g}": _median(ratios[b]) for b in budgets},
+        "solved": {f"{b:g}": int(sum(math.isfinite(x) for x in ratios[b])) for b in budgets},
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    from planner.gridmap import OccupancyGrid
+    from planner.problem import PlanningProblem
+
+    seeds_n, budgets = (2, (0.05, 0.2)) if args.quick else (args.seeds, args.budgets)
+    if seeds_n < 1:
+        raise UsageError("--seeds must be >= 1")
+    settings = console.load_settings(args)
+    base = scenarios.base_planner_params(settings)
+    params = replace(base, objective="length", safety_radius=0.0, turn_radius_factor=0.0,
+                     velocity_inflation_gain=0.0, step=args.step if args.step else base.step)
+    if not (params.step > 0):
+        raise UsageError("--step must be > 0")
+    ompl_note = "disabled (--no-ompl)"
+    have_ompl = False
+    if not args.no_ompl:
+        try:
+            import ompl.base  # noqa: F401
+            import ompl.geometric  # noqa: F401
+            have_ompl, ompl_note = True, "ompl " + getattr(__import__("ompl"), "__version__", "installed")
+        except Exception as exc:  # ImportError or a broken binary wheel: report and go on
+            ompl_note = f"skipped: cannot import ompl ({type(exc).__name__}: {exc}); pip install ompl to compare"
+    console.progress(f"hil bench planner: {len(args.maps)} maps x {len(args.algorithms)} planners, {seeds_n} seeds, "
+                     f"budgets {', '.join(f'{b:g}' for b in budgets)} s, step {params.step:g} m; OMPL: {ompl_note}")
+    seeds = list(range(1, seeds_n + 1))
+    report: dict[str, Any] = {"seeds": seeds_n, "budgets_s": list(budgets), "step_m": params.step,
+                              "ompl": ompl_note, "targets": TARGETS, "maps": {}}
+    for name in args.maps:
+        sc = scenarios.load(name, settings.current)
+        grid = OccupancyGrid(sc.occ, sc.resolution)
+        opt = shortest_path(sc.occ, sc.resolution, sc.start, sc.goal)
+        if not math.isfinite(opt.length):
+            raise UsageError(f"{name}: no path from start to goal")
+        problem = PlanningProblem(grid=grid, start=sc.start, goal=sc.goal)
+        entry: dict[str, Any] = {"optimum_m": opt.length, "optimum_vertices": opt.vertices, "planners": {}}
+        console.progress(f"{name}: optimum {opt.length:.2f} m ({opt.vertices} visibility vertices)")
+        for alg in args.algorithms:
+            runner = OursRunner(alg, params, problem)
+            runner.solve(0, 0.05)    # warm-up: numba compilation / cache load outside the timings
+            entry["planners"][alg] = _measure(runner, seeds, budgets, opt.length, f"{name} {alg}")
+        if have_ompl:
+            try:
+                orunner = OmplRunner(sc.occ, sc.resolution, sc.start, sc.goal, params.step)
+                entry["ompl_rrt_star"] = m = _measure(orunner, seeds, budgets, opt.length, f"{name} ompl")
+                ours = entry["planners"].get("rrt-star")
+                if ours and m["iterations_per_s"]:
+                    entry["rrt_star_vs_ompl"] = {
+                        "iterations_per_s": (ours["iterations_per_s"] or 0) / m["iterations_per_s"],
+                        **{f"ratio_{b}": (ours["ratio"][b] / m["ratio"][b]
+                                          if ours["ratio"][b] and m["ratio"][b] and math.isfinite(m["ratio"][b]) else None)
+                           for b in ours["ratio"]},
+                    }
+            except Exception as exc:  # an OMPL API mismatch must not lose our own figures
+                entry["ompl_rrt_star"] = {"error": f"{type(exc).__name__}: {exc}"}
+        report["maps"][name] = entry
+    _print_table(report)
+    console.emit(args, report)
+    return 0
+
+
+def _f(v: Any, fmt: str) -> str:
+    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, fmt)
+
+
+def _print_table(report: dict[str, Any]) -> None:
+    budgets = [f"{b:g}" for b in report["budgets_s"]]
+    head = f"{'map':15} {'planner':18} {'iter/s':>9} {'first (ms)':>10} " + " ".join(f"{'x@' + b + 's':>8}" for b in budgets)
+    lines = [head, "-" * len(head)]
+    for name, e in report["maps"].items():
+        rows = list(e["planners"].items())
+        if isinstance(e.get("ompl_rrt_star"), dict) and "ratio" in e["ompl_rrt_star"]:
+            rows.append(("OMPL rrt-star", e["ompl_rrt_star"]))
+        for alg, m in rows:
+            fs = m["first_solution_s"]
+            lines.append(f"{name:15} {alg:18} {_f(m['iterations_per_s'], '9.0f')} "
+                         f"{_f(fs * 1000 if fs is not None else None, '10.1f')} "
+                         + " ".join(f"{_f(m['ratio'][b], '8.4f')}" for b in budgets))
+        if "rrt_star_vs_ompl" in e:
+            v = e["rrt_star_vs_ompl"]
+            lines.append(f"{'':15} {'ours/OMPL RRT*':18} {_f(v['iterations_per_s'], '9.2f')} {'':>10} "
+                         + " ".join(f"{_f(v.get('ratio_' + b), '8.4f')}" for b in budgets))
+    lines.append(f"(x@B = path length at budget B / optimum, median over {report['seeds']} seeds; "
+                 f"targets: >= 15000 iter/s, first <= 40 ms on bug trap and maze, <= 1.03 @0.2 s, <= 1.01 @1 s)")
+    console.progress("\n".join(lines))

@@ -1,0 +1,157 @@
+"""`hil montecarlo`: the paper's online planning experiment (Table 3, Figures 10 and 11)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from hil import console, experiment, scenario as scenarios
+from hil.errors import RunFailed, UsageError
+
+
+def _algorithms(text: str) -> tuple[str, ...]:
+    names = tuple(a.strip() for a in text.split(",") if a.strip())
+    bad = [a for a in names if a not in experiment.ALGORITHMS]
+    if bad or not names:
+        raise argparse.ArgumentTypeError(
+            f"unknown algorithm(s) {', '.join(bad) or '(none)'}; choose from {','.join(experiment.ALGORITHMS)}")
+    if len(set(names)) != len(names):
+        raise argparse.ArgumentTypeError("an algorithm is listed twice")
+    return names
+
+
+def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "montecarlo", parents=parents,
+        help="Monte Carlo of the online planning process (Table 3, Figures 10 and 11)",
+        description="Run the online planning process of section 4.2 (subgoals on the global reference path, "
+                    "local planning in the perceptual domain, prune + Dubins smoothing, the vessel sailing each "
+                    "local path for one cycle) RUNS times per algorithm on a scenario, on J worker processes. "
+                    "Writes DIR/runs.csv (one row per run), DIR/table3.csv and DIR/table3.md (Table 3 with the "
+                    "changes vs RRT*), DIR/figure10.png (trees, paths, perceptual circles, current arrows of run 0) "
+                    "and DIR/figure11.png (the paths of the first runs), and DIR/summary.json. Every run is seeded "
+                    "from --seed and its index only, so results do not depend on --jobs; with the default iteration "
+                    "budget per cycle they are reproducible (only the measured times vary). Ctrl-C stops the workers "
+                    "and keeps the finished runs.",
+    )
+    p.add_argument("--scenario", metavar="NAME", default="labyrinth",
+                   help=f"scenario in configs/scenarios/ (default labyrinth; {', '.join(scenarios.available())})")
+    p.add_argument("--runs", metavar="N", type=int, default=20, help="runs per algorithm (default 20; the paper: 1000)")
+    p.add_argument("--algorithms", metavar="LIST", type=_algorithms, default=experiment.ALGORITHMS,
+                   help="comma-separated algorithms (default rrt-star,informed-rrt-star,ddrrt-star)")
+    p.add_argument("--jobs", "-j", metavar="J", type=int, default=experiment.default_jobs(),
+                   help=f"worker processes (default: the CPUs available, {experiment.default_jobs()})")
+    p.add_argument("--seed", metavar="S", type=int, default=1, help="master seed (default 1)")
+    p.add_argument("--out", metavar="DIR", type=Path, default=None,
+                   help="output folder (default runs/montecarlo-SCENARIO-sSEED)")
+    g = p.add_argument_group("online process (defaults: planner.online.OnlineParams, then the scenario's [online])")
+    g.add_argument("--local-iterations", metavar="N", type=int, default=None,
+                   help="iteration budget of each local planning cycle (reproducible)")
+    g.add_argument("--local-time", metavar="S", type=float, default=None,
+                   help="wall-clock budget of each local planning cycle (s; 0 = none). With --local-iterations 0 "
+                        "the runs are timed like the paper's but no longer reproducible")
+    g.add_argument("--cycle-time", metavar="S", type=float, default=None,
+                   help="simulated seconds the vessel sails along each local path before replanning")
+    g.add_argument("--figure-runs", metavar="K", type=int, default=9,
+                   help="runs drawn in figure11.png (default 9)")
+    g.add_argument("--no-plots", action="store_true", help="skip the figures")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.runs < 1:
+        raise UsageError("--runs must be >= 1")
+    if args.jobs < 1:
+        raise UsageError("--jobs must be >= 1")
+    if args.seed < 0:
+        raise UsageError("--seed must be >= 0")
+    if args.figure_runs < 0:
+        raise UsageError("--figure-runs must be >= 0")
+    settings = console.load_settings(args)
+    spec = scenarios.load_spec(args.scenario)
+    online_ov = {k: v for k, v in (("local_iterations", args.local_iterations), ("local_time", args.local_time),
+                                   ("cycle_time", args.cycle_time)) if v is not None}
+    # Validate everything once in this process (one-line errors) before starting workers.
+    online = scenarios.online_params({**spec.online, **online_ov}, "command line")
+    scenarios.planner_params(scenarios.base_planner_params(settings), spec.planner, f"scenario {spec.name}")
+    if spec.kind == "fixed":
+        experiment.scenario_instance(args.scenario, args.seed, 0, args.config, tuple(args.overrides))
+
+    out = args.out or Path("runs") / f"montecarlo-{spec.name}-s{args.seed}"
+    out.mkdir(parents=True, exist_ok=True)
+    tasks = experiment.make_tasks(args.scenario, args.runs, args.algorithms, args.seed, online_ov, args.config,
+                                  args.overrides, args.figure_runs)
+    jobs = min(args.jobs, len(tasks))
+    console.progress(f"hil montecarlo: {args.runs} runs x {len(args.algorithms)} algorithms on {spec.name}, "
+                     f"{jobs} worker(s), seed {args.seed}, budget/cycle: "
+                     f"{online.local_iterations or '-'} iterations, {online.local_time or '-'} s; "
+                     f"cycle {online.cycle_time:g} s -> {out}")
+    bar = console.ProgressBar(len(tasks), "montecarlo", every_s=2.0)
+    failed = [0]
+
+    def on_row(done: int, row: dict) -> None:
+        failed[0] += 0 if row["reached"] else 1
+        bar.update(done, f"failed {failed[0]}")
+
+    t0 = time.monotonic()
+    camp = experiment.run_campaign(tasks, jobs, out / "runs.csv", progress=on_row)
+    wall = time.monotonic() - t0
+    if not camp.rows:
+        raise RunFailed("interrupted before any run finished" if camp.interrupted else "no run finished")
+    experiment.write_runs_csv(out / "runs.csv", camp.rows)
+    table = experiment.table3(camp.rows, args.algorithms)
+    title = (f"Table 3 on scenario '{spec.name}': {len(camp.rows)} runs "
+             f"({'INTERRUPTED, partial' if camp.interrupted else 'complete'}), seed {args.seed}")
+    experiment.write_table_csv(out / "table3.csv", table)
+    experiment.write_table_md(out / "table3.md", table, title)
+    figures = {}
+    if not args.no_plots:
+        figures = _figures(args, spec, camp, out)
+    summary = {
+        "scenario": spec.name, "runs_requested": args.runs, "runs_done": len(camp.rows),
+        "interrupted": camp.interrupted, "algorithms": list(args.algorithms), "jobs": jobs, "seed": args.seed,
+        "online": {"local_iterations": online.local_iterations, "local_time_s": online.local_time,
+                   "cycle_time_s": online.cycle_time},
+        "wall_time_s": wall, "out": str(out),
+        "files": {"runs": str(out / "runs.csv"), "table_csv": str(out / "table3.csv"),
+                  "table_md": str(out / "table3.md"), **figures},
+        "table3": table,
+    }
+    (out / "summary.json").write_text(console.to_json(summary))
+    console.progress(experiment.table_markdown(table, title))
+    console.emit(args, summary)
+    if camp.interrupted:
+        return 130
+    return 0
+
+
+def _figures(args, spec, camp, out: Path) -> dict[str, str]:
+    from hil import plots
+
+    files = {}
+    algs = [a for a in ("ddrrt-star", "informed-rrt-star", "rrt-star") if a in camp.details]
+    if algs:
+        sc = experiment.scenario_instance(args.scenario, args.seed, 0, args.config, tuple(args.overrides))
+        from planner.gridmap import OccupancyGrid
+        params = scenarios.planner_params(scenarios.base_planner_params(console.load_settings(args)),
+                                          sc.planner_overrides)
+        inflated = OccupancyGrid(sc.occ, sc.resolution).inflate(params.safety_radius).occ
+        files["figure10"] = str(plots.plot_online(
+            out / "figure10.png", sc.occ, sc.resolution,
+            [(experiment.LABELS[a], camp.details[a]) for a in algs], sc.reference_path, sc.start, sc.goal,
+            params.perceptual_radius, inflated=inflated, field=sc.map_field(),
+            title=f"Figure 10 style: scenario {spec.name}, run 0 (seed {args.seed})"))
+    runs = sorted({r for r, _ in camp.paths})[: args.figure_runs]
+    if runs:
+        panels = []
+        for r in runs:
+            sc = experiment.scenario_instance(args.scenario, args.seed, r, args.config, tuple(args.overrides))
+            paths = [(a, *camp.paths[(r, a)]) for a in args.algorithms if (r, a) in camp.paths]
+            panels.append({"occ": sc.occ, "resolution": sc.resolution, "start": sc.start, "goal": sc.goal,
+                           "reference_path": sc.reference_path, "paths": paths, "title": f"run {r}"})
+        files["figure11"] = str(plots.plot_runs_grid(
+            out / "figure11.png", panels, title=f"Figure 11 style: scenario {spec.name}, first {len(runs)} runs "
+                                               f"(dashed = goal not reached)"))
+    return files

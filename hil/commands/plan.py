@@ -1,0 +1,158 @@
+"""`hil plan`: one planning query on a map (or a scenario), printed as JSON and optionally plotted."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+import numpy as np
+
+from hil import console, scenario as scenarios
+from hil.errors import UsageError
+
+ALGORITHMS = ("rrt-star", "informed-rrt-star", "ddrrt-star")
+
+
+def _point(text: str) -> tuple[float, float]:
+    parts = text.split(",")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        x, y = float(parts[0]), float(parts[1])
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y in metres (e.g. 5,12.5), got {text!r}") from None
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise argparse.ArgumentTypeError(f"expected finite X,Y, got {text!r}")
+    return x, y
+
+
+def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "plan", parents=parents,
+        help="plan one path on a map or a scenario (RRT*, Informed-RRT*, DDRRT*)",
+        description="Plan one path from --start to --goal on an occupancy map (x east, y north, metres; "
+                    "map row 0 at y = 0) or on a scenario of configs/scenarios/. Obstacles are inflated by "
+                    "the [planner] safety_radius (or --inflate). Exit 0 with a path, 1 when no path was "
+                    "found within the budget, 2 on bad input.",
+    )
+    src = p.add_argument_group("problem (either --scenario or --map/--resolution/--start/--goal)")
+    src.add_argument("--scenario", metavar="NAME",
+                     help=f"take map, start, goal, heading and current from configs/scenarios/NAME.toml "
+                          f"({', '.join(scenarios.available())})")
+    src.add_argument("--map", metavar="FILE", type=Path, help="occupancy map: .npy (bool/0-1) or .png (dark = obstacle)")
+    src.add_argument("--resolution", metavar="R", type=float, help="map cell size (m per cell, > 0)")
+    src.add_argument("--start", metavar="X,Y", type=_point, help="start position (m, map frame)")
+    src.add_argument("--goal", metavar="X,Y", type=_point, help="goal position (m, map frame)")
+    src.add_argument("--heading", metavar="RAD", type=float, default=None,
+                     help="start heading (rad, counter-clockwise from east); enables the turning-radius fan at the "
+                          "root (default: the scenario's, none with --map)")
+    alg = p.add_argument_group("planner")
+    alg.add_argument("--algorithm", choices=ALGORITHMS, default=None,
+                     help="planner (default: [planner] algorithm of the configuration)")
+    alg.add_argument("--objective", choices=("length", "current"), default=None,
+                     help="path cost: Euclidean length, or eq. (12) with the scenario's current "
+                          "(default: [planner] objective; 'current' without a current field is the length)")
+    alg.add_argument("--deadline", metavar="S", type=float, default=1.0, help="planning time budget (s, default 1.0)")
+    alg.add_argument("--iterations", metavar="N", type=int, default=0,
+                     help="also stop after N iterations (0 = no iteration cap, the default)")
+    alg.add_argument("--seed", metavar="N", type=int, default=None, help="random seed (default: [planner] seed)")
+    alg.add_argument("--inflate", metavar="M", type=float, default=None,
+                     help="obstacle inflation radius (m, default: [planner] safety_radius)")
+    out = p.add_argument_group("output")
+    out.add_argument("--plot", metavar="PNG", type=Path, help="write a plot of the map, tree and path")
+    out.add_argument("--tree", action="store_true", help="include the tree (nodes, parents) in the JSON")
+    p.set_defaults(func=run)
+
+
+def _problem_inputs(args: argparse.Namespace):
+    """(occ, resolution, start, goal, heading, field or None, overrides, label)"""
+    if args.scenario:
+        if args.map is not None or args.resolution is not None:
+            raise UsageError("--scenario already names the map: do not combine it with --map/--resolution")
+        spec = scenarios.load_spec(args.scenario)
+        sc = scenarios.instance(spec, None)
+        start = args.start or sc.start
+        goal = args.goal or sc.goal
+        heading = args.heading if args.heading is not None else sc.start_heading
+        return sc.occ, sc.resolution, start, goal, heading, sc, sc.planner_overrides, sc.name
+    missing = [o for o, v in (("--map", args.map), ("--resolution", args.resolution), ("--start", args.start),
+                              ("--goal", args.goal)) if v is None]
+    if missing:
+        raise UsageError(f"missing {', '.join(missing)} (or use --scenario NAME)")
+    if not (args.resolution > 0) or not math.isfinite(args.resolution):
+        raise UsageError(f"--resolution must be > 0 m per cell (got {args.resolution:g})")
+    if not args.map.exists():
+        raise UsageError(f"--map {args.map}: no such file")
+    occ = scenarios.load_occupancy(args.map, args.resolution)
+    return occ, args.resolution, args.start, args.goal, args.heading, None, {}, args.map.name
+
+
+def run(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from planner import make_planner
+    from planner.gridmap import OccupancyGrid
+    from planner.problem import PlanningProblem
+    from planner.termination import Termination
+
+    if not (args.deadline > 0) or not math.isfinite(args.deadline):
+        raise UsageError(f"--deadline must be a positive number of seconds (got {args.deadline:g})")
+    if args.iterations < 0:
+        raise UsageError("--iterations must be >= 0")
+    if args.inflate is not None and not (args.inflate >= 0):
+        raise UsageError("--inflate must be >= 0 m")
+    settings = console.load_settings(args)
+    occ, res, start, goal, heading, sc, overrides, label = _problem_inputs(args)
+    params = scenarios.planner_params(scenarios.base_planner_params(settings), overrides,
+                                      f"scenario {label}")
+    params = scenarios.with_overrides(params, algorithm=args.algorithm, objective=args.objective, seed=args.seed,
+                                      safety_radius=args.inflate)
+    if params.seed < 0:
+        raise UsageError("--seed must be >= 0")
+    raw = OccupancyGrid(occ, res)
+    for what, pt in (("--start", start), ("--goal", goal)):
+        if not raw.contains(*pt):
+            raise UsageError(f"{what} {pt[0]:g},{pt[1]:g}: outside the {raw.width:g} m x {raw.height:g} m map")
+        if not raw.is_free(*pt):
+            raise UsageError(f"{what} {pt[0]:g},{pt[1]:g}: inside an obstacle")
+    grid = raw.inflate(params.safety_radius) if params.safety_radius > 0 else raw
+    field = sc.planning_field() if (sc is not None and params.objective == "current") else None
+    problem = PlanningProblem(grid=grid, start=tuple(start), goal=tuple(goal), start_heading=heading, field=field)
+    conds = [Termination.deadline(args.deadline)]
+    if args.iterations:
+        conds.append(Termination.iterations(args.iterations))
+    termination = conds[0] if len(conds) == 1 else Termination.any_of(*conds)
+    console.progress(f"hil plan: {params.algorithm} on {label} ({raw.width:g} m x {raw.height:g} m), "
+                     f"budget {args.deadline:g} s, seed {params.seed}")
+    result = make_planner(params.algorithm, replace(params, seed=params.seed)).solve(problem, termination)
+    summary = {
+        "status": result.status,
+        "reason": result.reason,
+        "algorithm": params.algorithm,
+        "objective": params.objective,
+        "seed": params.seed,
+        "start": list(start),
+        "goal": list(goal),
+        "path": np.asarray(result.path).tolist(),
+        "cost": result.cost if result.status != "none" else None,
+        "length": result.length if result.status != "none" else None,
+        "iterations": result.iterations,
+        "time_to_first_solution_s": result.time_to_first_solution_s,
+        "planning_time_s": result.planning_time_s,
+        "iterations_per_s": result.iterations / result.planning_time_s if result.planning_time_s > 0 else None,
+        "tree_size": int(len(result.tree_nodes)),
+        "samples_rejected": result.samples_rejected,
+    }
+    if args.tree:
+        summary["tree_nodes"] = np.asarray(result.tree_nodes).tolist()
+        summary["tree_parents"] = np.asarray(result.tree_parents).tolist()
+    if args.plot:
+        from hil.plots import plot_plan
+        plot_plan(args.plot, occ, res, start, goal, result, inflated=grid.occ,
+                  field=sc.map_field() if sc is not None else None,
+                  title=f"{params.algorithm} on {label}: {result.status}")
+        summary["plot"] = str(args.plot)
+        console.progress(f"hil plan: plot written to {args.plot}")
+    console.emit(args, summary)
+    return 0 if result.status != "none" else 1

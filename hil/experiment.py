@@ -1,0 +1,371 @@
+"""The Monte Carlo experiment of section 4.2 (Table 3, Figures 10 and 11): tasks, workers, tables.
+
+A *task* is one online planning run (``planner.online.run_online``) of one algorithm on one
+scenario instance. Seeds come from ``numpy.random.SeedSequence(seed, spawn_key=(run, k))``:
+``k = 0`` draws the scenario instance (random maps, the same for every algorithm of a run) and
+``k = 1 + index in ALGORITHMS`` seeds that algorithm's planner, so results depend only on
+(seed, run, algorithm), never on the number of worker processes or the order of the work.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import signal
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+ALGORITHMS = ("rrt-star", "informed-rrt-star", "ddrrt-star")
+LABELS = {"rrt-star": "RRT*", "informed-rrt-star": "IRRT*", "ddrrt-star": "DDRRT*"}
+
+# Per-run CSV columns; DETERMINISTIC ones must be identical for the same seed whatever --jobs is
+# (with an iteration budget); the time columns are wall-clock measurements.
+DETERMINISTIC = ("run", "algorithm", "planner_seed", "reached", "reason", "cycles", "iterations", "cost", "length",
+                 "sum_cos", "sum_sin", "cf", "turns", "total_curvature", "bending_energy", "smoothing_fallbacks",
+                 "start_x", "start_y", "goal_x", "goal_y")
+TIMES = ("time_s", "planning_time_s", "wall_s")
+COLUMNS = DETERMINISTIC + TIMES
+
+# Table 3 as the paper reports it (its numbers are missing from our copy; only the relative
+# figures of section 4.2 survive), percentages relative to RRT*.
+PAPER_RELATIVE = {
+    "informed-rrt-star": {"sum_cos": +38.81, "sum_sin": -13.54},
+    "ddrrt-star": {"sum_cos": +82.09, "sum_sin": -17.23},
+}
+
+
+@dataclass(frozen=True)
+class Task:
+    """One run of one algorithm (picklable, sent to a worker process)."""
+
+    scenario: str
+    run: int
+    algorithm: str
+    seed: int
+    online_overrides: tuple[tuple[str, Any], ...] = ()
+    config: str | None = None
+    config_overrides: tuple[str, ...] = ()
+    detail: bool = False          # return cycles (trees, local paths) for Figure 10
+    path: bool = False            # return the executed path for Figure 11
+
+
+def seed_sequence(seed: int, run: int, k: int) -> np.random.SeedSequence:
+    return np.random.SeedSequence(int(seed), spawn_key=(int(run), int(k)))
+
+
+def planner_seed(seed: int, run: int, algorithm: str) -> int:
+    """The planner seed of ``algorithm`` in Monte Carlo run ``run``."""
+    return int(seed_sequence(seed, run, 1 + ALGORITHMS.index(algorithm)).generate_state(1)[0] & 0x7FFFFFFF)
+
+
+_CACHE: dict[Any, Any] = {}
+
+
+def _settings(config: str | None, overrides: tuple[str, ...]):
+    key = ("settings", config, overrides)
+    if key not in _CACHE:
+        from hil import settings
+        _CACHE[key] = settings.load(config, list(overrides))
+    return _CACHE[key]
+
+
+def scenario_instance(name: str, seed: int, run: int, config: str | None = None, overrides: tuple[str, ...] = ()):
+    """The scenario instance of run ``run`` (fixed scenarios: the same for every run)."""
+    from hil import scenario as scenarios
+    cfg = _settings(config, overrides)
+    spec_key = ("spec", name)
+    if spec_key not in _CACHE:
+        _CACHE[spec_key] = scenarios.load_spec(name)
+    spec = _CACHE[spec_key]
+    if spec.kind == "fixed":
+        key = ("fixed", name, config, overrides)
+        if key not in _CACHE:
+            _CACHE[key] = scenarios.instance(spec, None, cfg.current)
+        return _CACHE[key]
+    rng = np.random.default_rng(seed_sequence(seed, run, 0))
+    return scenarios.instance(spec, rng, cfg.current)
+
+
+def _context(task: Task, sc):
+    """The OnlineContext of a task (cached per process for fixed scenarios: inflation is costly)."""
+    from hil import scenario as scenarios
+    from planner.gridmap import OccupancyGrid
+    from planner.online import make_context
+
+    cfg = _settings(task.config, task.config_overrides)
+    params = scenarios.planner_params(scenarios.base_planner_params(cfg), sc.planner_overrides, f"scenario {sc.name}")
+    online = scenarios.online_params(dict(sc.online_overrides), f"scenario {sc.name}")
+    online = scenarios.online_params(dict(task.online_overrides), "command line", base=online)
+    key = ("ctx", task.scenario, task.config, task.config_overrides, task.online_overrides)
+    fixed = scenarios.load_spec(task.scenario).kind == "fixed"
+    if fixed and key in _CACHE:
+        base = _CACHE[key]
+    else:
+        from planner.online import OnlineContext
+        field_ = sc.planning_field() if params.objective == "current" else None
+        base = OnlineContext(grid=OccupancyGrid(sc.occ, sc.resolution), goal=sc.goal,
+                             reference_path=sc.reference_path, params=params, online=online, field=field_)
+        if fixed:
+            _CACHE[key] = base
+    ctx = make_context(base.grid, sc.goal, sc.reference_path, params, online, task.algorithm, base.field)
+    ctx.safe_grid = base.safe_grid
+    ctx._velocity_grids = base._velocity_grids   # the section 3.3 inflations do not depend on the algorithm
+    return ctx
+
+
+def run_task(task: Task) -> dict[str, Any]:
+    """Run one task; returns the CSV row (plus ``_detail`` / ``_path`` when asked)."""
+    from planner.online import VesselState, run_online
+
+    t0 = time.monotonic()
+    sc = scenario_instance(task.scenario, task.seed, task.run, task.config, task.config_overrides)
+    ctx = _context(task, sc)
+    pseed = planner_seed(task.seed, task.run, task.algorithm)
+    res = run_online(ctx, VesselState(sc.start[0], sc.start[1], sc.start_heading), pseed)
+    m = res.metrics
+    row: dict[str, Any] = {
+        "run": task.run, "algorithm": task.algorithm, "planner_seed": pseed, "reached": bool(res.reached),
+        "reason": res.reason, "cycles": len(res.cycles), "iterations": int(sum(c.iterations for c in res.cycles)),
+        "cost": m.get("cost", math.nan), "length": m.get("length", math.nan),
+        "sum_cos": m.get("sum_cos", math.nan), "sum_sin": m.get("sum_sin", math.nan), "cf": m.get("cf", math.nan),
+        "turns": m.get("turns", math.nan), "total_curvature": m.get("total_curvature", math.nan),
+        "bending_energy": m.get("bending_energy", math.nan),
+        "smoothing_fallbacks": int(sum(1 for c in res.cycles if len(c.smooth_path) >= 2 and not c.smoothed_ok)),
+        "start_x": sc.start[0], "start_y": sc.start[1], "goal_x": sc.goal[0], "goal_y": sc.goal[1],
+        "time_s": res.search_time_s, "planning_time_s": res.planning_time_s, "wall_s": time.monotonic() - t0,
+    }
+    if task.detail:
+        row["_detail"] = res
+    if task.path:
+        row["_path"] = res.executed
+    return row
+
+
+def worker_init() -> None:
+    """Workers ignore Ctrl-C: the parent decides, terminates them and keeps finished runs."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, bool):
+        return "1" if v else "0"
+    if isinstance(v, float):
+        return "nan" if math.isnan(v) else repr(round(v, 9))
+    return str(v)
+
+
+class RunsWriter:
+    """Appends per-run rows to a CSV as they finish (so an interrupted campaign keeps them)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.fh = path.open("w", newline="")
+        self.w = csv.writer(self.fh)
+        self.w.writerow(COLUMNS)
+        self.fh.flush()
+
+    def add(self, row: dict[str, Any]) -> None:
+        self.w.writerow([_fmt(row[c]) for c in COLUMNS])
+        self.fh.flush()
+
+    def close(self) -> None:
+        self.fh.close()
+
+
+def write_runs_csv(path: Path, rows: Iterable[dict[str, Any]]) -> Path:
+    """All rows, sorted by (run, algorithm order), as CSV."""
+    rows = sorted(rows, key=lambda r: (r["run"], ALGORITHMS.index(r["algorithm"])))
+    w = RunsWriter(path)
+    for r in rows:
+        w.add(r)
+    w.close()
+    return path
+
+
+def read_runs_csv(path: Path) -> list[dict[str, Any]]:
+    """Rows back from :func:`write_runs_csv` with numbers parsed."""
+    out = []
+    with Path(path).open(newline="") as fh:
+        for rec in csv.DictReader(fh):
+            row: dict[str, Any] = {}
+            for k, v in rec.items():
+                if k in ("algorithm", "reason"):
+                    row[k] = v
+                elif k == "reached":
+                    row[k] = v == "1"
+                elif k in ("run", "cycles", "iterations", "planner_seed", "smoothing_fallbacks"):
+                    row[k] = int(v)
+                else:
+                    row[k] = float(v)
+            out.append(row)
+    return out
+
+
+def _mean_std(values: Sequence[float]) -> tuple[float, float]:
+    a = np.asarray([v for v in values if math.isfinite(v)], dtype=float)
+    if len(a) == 0:
+        return math.nan, math.nan
+    return float(a.mean()), float(a.std(ddof=1)) if len(a) > 1 else 0.0
+
+
+def table3(rows: Sequence[dict[str, Any]], algorithms: Sequence[str] = ALGORITHMS) -> list[dict[str, Any]]:
+    """Aggregate per algorithm: means over the runs that reached the goal (success rate over all).
+
+    Columns: time (s, mean of the per-run sums of search durations), time_std ("time EVP"),
+    cost (eq. 12), cost_std ("cost EVP"), sum_cos, sum_sin, cf (cf(π), eq. 14), and each
+    mean's change relative to RRT* in percent (``*_vs_rrt_pct``).
+    """
+    out = []
+    for alg in algorithms:
+        rs = [r for r in rows if r["algorithm"] == alg]
+        ok = [r for r in rs if r["reached"]]
+        rec: dict[str, Any] = {"algorithm": alg, "runs": len(rs), "reached": len(ok),
+                               "success_rate": len(ok) / len(rs) if rs else math.nan}
+        rec["time_s"], rec["time_std_s"] = _mean_std([r["time_s"] for r in ok])
+        rec["cost"], rec["cost_std"] = _mean_std([r["cost"] for r in ok])
+        for k in ("sum_cos", "sum_sin", "cf", "length", "turns", "bending_energy", "cycles"):
+            rec[k] = _mean_std([float(r[k]) for r in ok])[0]
+        out.append(rec)
+    base = next((r for r in out if r["algorithm"] == "rrt-star"), None)
+    for rec in out:
+        for k in ("time_s", "cost", "sum_cos", "sum_sin", "cf", "time_std_s", "cost_std"):
+            b = base[k] if base else math.nan
+            rec[f"{k}_vs_rrt_pct"] = (rec[k] - b) / abs(b) * 100.0 if base and b and math.isfinite(b) else math.nan
+    return out
+
+
+TABLE_COLUMNS = ("algorithm", "runs", "reached", "success_rate", "time_s", "time_std_s", "cost", "cost_std",
+                 "sum_cos", "sum_sin", "cf", "length", "turns", "bending_energy", "cycles",
+                 "time_s_vs_rrt_pct", "cost_vs_rrt_pct", "sum_cos_vs_rrt_pct", "sum_sin_vs_rrt_pct", "cf_vs_rrt_pct",
+                 "time_std_s_vs_rrt_pct", "cost_std_vs_rrt_pct")
+
+
+def write_table_csv(path: Path, table: Sequence[dict[str, Any]]) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(TABLE_COLUMNS)
+        for rec in table:
+            w.writerow([_fmt(rec[c]) for c in TABLE_COLUMNS])
+    return path
+
+
+def _n(v: float, digits: int = 3) -> str:
+    return "n/a" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.{digits}f}"
+
+
+def _pct(v: float) -> str:
+    return "n/a" if v is None or not math.isfinite(v) else f"{v:+.2f}%"
+
+
+def table_markdown(table: Sequence[dict[str, Any]], title: str = "") -> str:
+    """Table 3 in Markdown, with our percentages vs RRT* next to the paper's."""
+    lines = []
+    if title:
+        lines += [f"**{title}**", ""]
+    lines += [
+        "| algorithm | runs | reached | time (s) | time EVP (s) | cost | cost EVP | Σcos α_y | Σsin α_y | cf(π) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in table:
+        lines.append(f"| {LABELS.get(r['algorithm'], r['algorithm'])} | {r['runs']} | {r['reached']} | "
+                     f"{_n(r['time_s'], 4)} | {_n(r['time_std_s'], 4)} | {_n(r['cost'], 2)} | {_n(r['cost_std'], 2)} | "
+                     f"{_n(r['sum_cos'], 2)} | {_n(r['sum_sin'], 2)} | {_n(r['cf'], 4)} |")
+    lines += [
+        "",
+        "Relative to RRT* (ours; the paper's in brackets where section 4.2 gives it):",
+        "",
+        "| algorithm | time | cost | time EVP | cost EVP | Σcos α_y | Σsin α_y | cf(π) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in table:
+        if r["algorithm"] == "rrt-star":
+            continue
+        paper = PAPER_RELATIVE.get(r["algorithm"], {})
+        pc = f" ({paper['sum_cos']:+.2f}%)" if "sum_cos" in paper else ""
+        ps = f" ({paper['sum_sin']:+.2f}%)" if "sum_sin" in paper else ""
+        lines.append(f"| {LABELS.get(r['algorithm'], r['algorithm'])} | {_pct(r['time_s_vs_rrt_pct'])} | "
+                     f"{_pct(r['cost_vs_rrt_pct'])} | {_pct(r['time_std_s_vs_rrt_pct'])} | "
+                     f"{_pct(r['cost_std_vs_rrt_pct'])} | {_pct(r['sum_cos_vs_rrt_pct'])}{pc} | "
+                     f"{_pct(r['sum_sin_vs_rrt_pct'])}{ps} | {_pct(r['cf_vs_rrt_pct'])} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_table_md(path: Path, table: Sequence[dict[str, Any]], title: str = "") -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(table_markdown(table, title))
+    return path
+
+
+def default_jobs() -> int:
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+
+
+@dataclass
+class Campaign:
+    """Result of :func:`run_campaign`: the rows finished and what was kept for the figures."""
+
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    details: dict[str, Any] = field(default_factory=dict)      # algorithm -> OnlineResult of run 0
+    paths: dict[tuple[int, str], Any] = field(default_factory=dict)
+    interrupted: bool = False
+
+
+def make_tasks(scenario: str, runs: int, algorithms: Sequence[str], seed: int, online_overrides: dict[str, Any],
+               config: str | None, config_overrides: Sequence[str], figure_runs: int) -> list[Task]:
+    ov = tuple(sorted(online_overrides.items()))
+    return [Task(scenario, i, alg, seed, ov, config, tuple(config_overrides), detail=(i == 0), path=(i < figure_runs))
+            for i in range(runs) for alg in algorithms]
+
+
+def run_campaign(tasks: Sequence[Task], jobs: int, out_csv: Path | None = None, progress=None) -> Campaign:
+    """Run ``tasks`` on ``jobs`` worker processes (spawn context; ``jobs == 1`` runs in-process).
+
+    Rows are appended to ``out_csv`` as they finish. Ctrl-C terminates the workers and returns
+    what finished, with ``interrupted`` set.
+    """
+    camp = Campaign()
+    writer = RunsWriter(out_csv) if out_csv else None
+
+    def take(row: dict[str, Any]) -> None:
+        det = row.pop("_detail", None)
+        if det is not None:
+            camp.details[row["algorithm"]] = det
+        p = row.pop("_path", None)
+        if p is not None:
+            camp.paths[(row["run"], row["algorithm"])] = (p, row["reached"])
+        camp.rows.append(row)
+        if writer:
+            writer.add(row)
+        if progress:
+            progress(len(camp.rows), row)
+
+    try:
+        if jobs <= 1:
+            for t in tasks:
+                take(run_task(t))
+        else:
+            import multiprocessing as mp
+            ctx = mp.get_context("spawn")
+            pool = ctx.Pool(jobs, initializer=worker_init)
+            try:
+                for row in pool.imap_unordered(run_task, tasks, chunksize=1):
+                    take(row)
+                pool.close()
+            except KeyboardInterrupt:
+                pool.terminate()
+                raise
+            finally:
+                pool.join()
+    except KeyboardInterrupt:
+        camp.interrupted = True
+    finally:
+        if writer:
+            writer.close()
+    return camp
