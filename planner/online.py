@@ -39,7 +39,7 @@ from planner.cost import path_cost
 from planner.gridmap import OccupancyGrid
 from planner.metrics import path_metrics
 from planner.params import PlannerParams
-from planner.postprocess import prune, smooth
+from planner.postprocess import check_and_replan, prune
 from planner.problem import PlanningProblem
 from planner.result import PlannerResult
 from planner.subgoal import select_subgoal
@@ -66,7 +66,8 @@ class OnlineParams:
     metric_spacing: float = dc_field(default=2.0, metadata=_p(
         "waypoint spacing of the executed path for cost, Σcos, Σsin and cf(π)", "m", gt=0))
     clearance_sigma: float = dc_field(default=1.0, metadata=_p(
-        "standard deviation of the vessel's position error, for cf(π) (eq. 14)", "m", gt=0))
+        "standard deviation of the vessel's deviation from the path, for cf(π) (eq. 14): GPS 0.5 m per axis "
+        "plus path-following error", "m", gt=0))
     smoothing: bool = dc_field(default=True, metadata=_p("Dubins smoothing of each local path"))
     velocity_inflation: bool = dc_field(default=True, metadata=_p(
         "extra obstacle inflation from the velocity estimated on the reference path (section 3.3)"))
@@ -301,15 +302,31 @@ def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
 
     cost_fn = (lambda p: path_cost(p, ctx.field, params))
     local = prune(result.path, grid, cost_fn)
-    smoothed, ok = local, False
+    smoothed, ok = _densify(local, 0.5), False
     if online.smoothing and len(local) >= 2:
-        dense = smooth(local, params.turn_radius_factor * params.speed, start_heading=state.heading)
-        ok = _polyline_free(ctx.safe_grid if ctx.safe_grid.is_free(*pos) else ctx.grid, dense)
-        if ok:
-            smoothed = dense
+        # Section 2.4: Dubins smoothing, then the constraints are re-checked on the smoothed
+        # path (collision against the safety-inflated map, curvature); violating legs are
+        # refined by check_and_replan. If that still fails, sail the pruned polyline.
+        check_grid = ctx.safe_grid if ctx.safe_grid.is_free(*pos) else ctx.grid
+        sm = check_and_replan(local, check_grid, params.turn_radius_factor * params.speed,
+                              start_heading=state.heading, step=0.5)
+        if sm.ok:
+            smoothed, ok = sm.dense, True
     return CycleRecord(index, state, goal, rule, result.status, float(search), result.planning_time_s,
                        result.iterations, local, smoothed, ok, result.tree_nodes, result.tree_parents,
                        reason=result.reason)
+
+
+def _densify(path: np.ndarray, step: float) -> np.ndarray:
+    """The polyline with extra points at most ``step`` m apart (keeps every vertex)."""
+    path = np.asarray(path, dtype=float).reshape(-1, 2)
+    if len(path) < 2:
+        return path.copy()
+    out = [path[:1]]
+    for a, b in zip(path[:-1], path[1:]):
+        n = max(int(math.ceil(math.hypot(*(b - a)) / step)), 1)
+        out.append(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
+    return np.concatenate(out)
 
 
 def _polyline_free(grid: OccupancyGrid, path: np.ndarray) -> bool:

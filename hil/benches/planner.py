@@ -150,17 +150,17 @@ class OmplRunner:
         s[0], s[1] = self.start
         g[0], g[1] = self.goal
         pdef.setStartAndGoalStates(s, g, 1e-6)
-        pdef.setOptimizationObjective(ob.PathLengthOptimizationObjective(si))
+        objective = ob.PathLengthOptimizationObjective(si)
+        if first:
+            # RRT* stops as soon as the best solution satisfies the objective: any solution does.
+            objective.setCostThreshold(ob.Cost(math.inf))
+        pdef.setOptimizationObjective(objective)
         planner = og.RRTstar(si)
         planner.setRange(self.step)
         planner.setProblemDefinition(pdef)
         planner.setup()
         t0 = time.monotonic()
-        if first:
-            end = t0 + budget_s
-            planner.solve(lambda: pdef.hasExactSolution() or time.monotonic() >= end)
-        else:
-            planner.solve(budget_s)
+        planner.solve(budget_s)
         dt = time.monotonic() - t0
         exact = bool(pdef.hasExactSolution())
         length = pdef.getSolutionPath().length() if exact else math.inf
