@@ -26,9 +26,13 @@ class Subgoal:
     rule: int
 
 
-def select_subgoal(reference_path: np.ndarray, position, radius: float, goal_index: int | None = None) -> Subgoal:
-    """The subgoal for a vessel at ``position`` with perceptual radius ``radius`` (metres).
-    ``goal_index`` is the global goal's index on the path (default: its last waypoint)."""
+def select_subgoal(reference_path: np.ndarray, position, radius: float, goal_index: int | None = None,
+                   start=None) -> Subgoal:
+    """The subgoal for a vessel at ``position`` (the perceptual domain's centre) with perceptual
+    radius ``radius`` (metres). ``start`` is the local planning start point (default
+    ``position``; the root of the next local tree may lie ahead of the vessel), q_j is the
+    reference waypoint nearest to it. ``goal_index`` is the global goal's index on the path
+    (default: its last waypoint)."""
     path = np.asarray(reference_path, dtype=np.float64)
     if path.ndim != 2 or path.shape[1] != 2 or len(path) == 0:
         raise ValueError("reference_path must be an (M, 2) array with M >= 1")
@@ -44,7 +48,8 @@ def select_subgoal(reference_path: np.ndarray, position, radius: float, goal_ind
 
     if inside[last]:
         return pick(last, 1)
-    j = int(np.argmin(dist))
+    st = pos if start is None else np.asarray(start, dtype=np.float64)
+    j = int(np.argmin(np.hypot(path[: last + 1, 0] - st[0], path[: last + 1, 1] - st[1])))
     if j == last:
         return pick(j, 2)
     if inside[j]:
