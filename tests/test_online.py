@@ -1,0 +1,97 @@
+"""The online planning process (planner/online.py) on the committed scenarios."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from hil import scenario as scenarios
+from hil.optimum import segment_clear
+from planner.gridmap import OccupancyGrid
+from planner.online import (OnlineParams, VesselState, _free_subgoal, advance, make_context, plan_cycle,
+                            resample, run_online)
+from planner.params import PlannerParams
+
+
+def _context(name: str, algorithm: str, **online):
+    sc = scenarios.load(name)
+    params = scenarios.planner_params(PlannerParams(), sc.planner_overrides)
+    op = scenarios.online_params({**sc.online_overrides, **online})
+    ctx = make_context(OccupancyGrid(sc.occ, sc.resolution), sc.goal, sc.reference_path, params, op, algorithm,
+                       sc.planning_field())
+    return sc, ctx
+
+
+def _assert_sailed_safely(sc, res):
+    path = res.executed
+    assert np.allclose(path[0], sc.start)
+    for a, b in zip(path[:-1], path[1:]):
+        assert segment_clear(sc.occ, sc.resolution, a[0], a[1], b[0], b[1]), (a, b)
+
+
+@pytest.mark.parametrize("name, algorithm", [("harbour", "ddrrt-star"), ("labyrinth", "ddrrt-star"),
+                                             ("labyrinth", "rrt-star"), ("labyrinth", "informed-rrt-star")])
+def test_online_process_reaches_the_goal(name, algorithm):
+    sc, ctx = _context(name, algorithm)
+    res = run_online(ctx, VesselState(*sc.start, sc.start_heading), seed=11)
+    assert res.reached, res.reason
+    assert math.dist((res.final.x, res.final.y), sc.goal) <= ctx.params.goal_tolerance
+    _assert_sailed_safely(sc, res)
+    assert len(res.cycles) >= 3                       # it really replanned along the way
+    assert all(c.subgoal_rule in (1, 2, 3, 4, 5) for c in res.cycles)
+    assert res.search_time_s == pytest.approx(sum(c.search_time_s for c in res.cycles))
+    m = res.metrics
+    assert m["length"] >= math.dist(sc.start, sc.goal)
+    assert 0 < m["cost"] <= m["length"] + 1e-9      # eq. (12): D_C <= Euclidean distance
+    assert 0.0 <= m["cf"] <= 1.0
+    assert m["sum_sin"] >= 0
+
+
+def test_same_seed_same_run():
+    sc, ctx = _context("labyrinth", "ddrrt-star", local_iterations=600)
+    a = run_online(ctx, VesselState(*sc.start, sc.start_heading), seed=3)
+    b = run_online(ctx, VesselState(*sc.start, sc.start_heading), seed=3)
+    c = run_online(ctx, VesselState(*sc.start, sc.start_heading), seed=4)
+    assert np.array_equal(a.executed, b.executed)
+    assert a.metrics == b.metrics
+    assert not np.array_equal(a.executed, c.executed)
+
+
+def test_subgoal_inside_obstacle_is_moved_to_free_water():
+    sc, ctx = _context("harbour", "ddrrt-star")
+    # The chart route crosses pier 1 (x 40-46 m, y 12-68 m) near (41, 62.5).
+    pos = (30.0, 50.0)
+    assert not ctx.safe_grid.is_free(43.0, 60.0)
+    idx = int(np.argmin(np.hypot(*(sc.reference_path - [41.0, 62.5]).T)))
+    q = _free_subgoal(ctx, ctx.safe_grid, pos, idx, (43.0, 60.0))
+    assert q is not None and ctx.safe_grid.is_free(*q)
+
+
+def test_cycle_with_injected_clock_stops_on_time():
+    """A wall-clock budget reads the injected clock: 1 ms per call, 20 ms budget."""
+    sc, ctx = _context("labyrinth", "ddrrt-star", local_iterations=0, local_time=0.02)
+    ticks = iter(range(10**7))
+    clock = lambda: next(ticks) * 1e-3  # noqa: E731
+    rec = plan_cycle(ctx, VesselState(*sc.start, sc.start_heading), 0, seed=1, clock=clock)
+    assert 0 < rec.iterations <= 25
+    assert rec.start.x == sc.start[0]
+
+
+def test_advance_and_resample():
+    path = np.array([[0.0, 0.0], [3.0, 0.0], [3.0, 4.0]])
+    out, heading = advance(path, 5.0)
+    assert np.allclose(out[-1], [3.0, 2.0]) and heading == pytest.approx(math.pi / 2)
+    out, _ = advance(path, 100.0)
+    assert np.allclose(out[-1], [3.0, 4.0])
+    r = resample(path, 1.0)
+    assert len(r) == 8 and np.allclose(r[0], path[0]) and np.allclose(r[-1], path[-1])
+    assert np.allclose(np.hypot(*np.diff(r, axis=0).T), 1.0)
+
+
+def test_online_params_need_a_budget():
+    with pytest.raises(ValueError, match="local_iterations"):
+        OnlineParams(local_iterations=0, local_time=0.0)
+    assert replace(OnlineParams(), local_time=0.1).local_time == 0.1

@@ -1,0 +1,121 @@
+"""`hil plan`: bad input is one line and exit 2; a good query returns a valid, collision-free path."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from hil.optimum import segment_clear, shortest_path
+
+
+def _one_line_error(proc) -> None:
+    assert proc.returncode == 2, proc.stderr
+    lines = [ln for ln in proc.stderr.strip().splitlines() if ln.strip()]
+    assert len(lines) >= 1
+    assert "Traceback" not in proc.stderr
+    assert lines[-1].startswith("hil") and "error" in lines[-1]
+
+
+@pytest.fixture
+def wall_map(tmp_path):
+    """20 m x 20 m at 0.5 m/cell, a wall x in [9, 11] m, y in [0, 14] m."""
+    occ = np.zeros((40, 40), dtype=bool)
+    occ[0:28, 18:22] = True
+    path = tmp_path / "wall.npy"
+    np.save(path, occ)
+    return path, occ
+
+
+def test_missing_map_file(hil, tmp_path):
+    p = hil("plan", "--map", str(tmp_path / "nope.npy"), "--resolution", "0.5", "--start", "1,1", "--goal", "5,5")
+    _one_line_error(p)
+    assert "no such file" in p.stderr
+
+
+def test_map_not_a_grid(hil, tmp_path):
+    bad = tmp_path / "bad.npy"
+    np.save(bad, np.zeros(10))               # 1-D: not a grid
+    p = hil("plan", "--map", str(bad), "--resolution", "0.5", "--start", "1,1", "--goal", "2,2")
+    _one_line_error(p)
+    text = tmp_path / "text.png"
+    text.write_text("this is not an image")
+    p = hil("plan", "--map", str(text), "--resolution", "0.5", "--start", "1,1", "--goal", "2,2")
+    _one_line_error(p)
+
+
+@pytest.mark.parametrize("res", ["0", "-1"])
+def test_resolution_not_positive(hil, wall_map, res):
+    path, _ = wall_map
+    p = hil("plan", "--map", str(path), f"--resolution={res}", "--start", "1,1", "--goal", "5,5")
+    _one_line_error(p)
+    assert "resolution" in p.stderr
+
+
+@pytest.mark.parametrize("start", ["25,1", "1,-3", "-1,1"])
+def test_start_outside_map(hil, wall_map, start):
+    path, _ = wall_map
+    p = hil("plan", "--map", str(path), "--resolution", "0.5", f"--start={start}", "--goal", "5,5")
+    _one_line_error(p)
+    assert "outside" in p.stderr
+
+
+def test_bad_point_syntax_and_obstacle_start(hil, wall_map):
+    path, _ = wall_map
+    _one_line_error(hil("plan", "--map", str(path), "--resolution", "0.5", "--start", "1;1", "--goal", "5,5"))
+    p = hil("plan", "--map", str(path), "--resolution", "0.5", "--start", "10,5", "--goal", "15,5")
+    _one_line_error(p)
+    assert "obstacle" in p.stderr
+
+
+def test_unknown_scenario(hil):
+    _one_line_error(hil("plan", "--scenario", "atlantis", "--json"))
+
+
+@pytest.mark.parametrize("algorithm", ["rrt-star", "informed-rrt-star", "ddrrt-star"])
+def test_plan_json_path_is_valid(hil, wall_map, algorithm):
+    path, occ = wall_map
+    p = hil("plan", "--map", str(path), "--resolution", "0.5", "--start", "3,3", "--goal", "17,3",
+            "--algorithm", algorithm, "--deadline", "20", "--iterations", "3000", "--seed", "4",
+            "--inflate", "0", "--objective", "length", "--json")
+    assert p.returncode == 0, p.stderr
+    d = json.loads(p.stdout)
+    for key in ("status", "path", "cost", "length", "iterations", "time_to_first_solution_s", "planning_time_s"):
+        assert key in d
+    assert d["status"] == "exact"
+    pts = np.array(d["path"])
+    assert np.allclose(pts[0], [3, 3]) and np.allclose(pts[-1], [17, 3])
+    for a, b in zip(pts[:-1], pts[1:]):
+        assert segment_clear(occ, 0.5, a[0], a[1], b[0], b[1]), (a, b)
+    length = float(np.sum(np.hypot(*np.diff(pts, axis=0).T)))
+    assert math.isclose(length, d["length"], rel_tol=1e-6)
+    opt = shortest_path(occ, 0.5, (3, 3), (17, 3)).length
+    assert opt - 1e-6 <= d["length"] <= 1.5 * opt
+    assert d["iterations"] <= 3000
+    assert 0 <= d["time_to_first_solution_s"] <= d["planning_time_s"]
+
+
+def test_same_seed_same_path(hil, wall_map):
+    path, _ = wall_map
+    args = ("plan", "--map", str(path), "--resolution", "0.5", "--start", "3,3", "--goal", "17,3", "--deadline", "20",
+            "--iterations", "1500", "--inflate", "0.5", "--json")
+    a = json.loads(hil(*args, "--seed", "7").stdout)
+    b = json.loads(hil(*args, "--seed", "7").stdout)
+    c = json.loads(hil(*args, "--seed", "8").stdout)
+    assert a["path"] == b["path"]
+    assert a["path"] != c["path"]
+
+
+def test_scenario_plot(hil, tmp_path):
+    out = tmp_path / "harbour.png"
+    p = hil("plan", "--scenario", "harbour", "--deadline", "0.5", "--seed", "2", "--plot", str(out), "--json")
+    assert p.returncode == 0, p.stderr
+    d = json.loads(p.stdout)
+    assert d["status"] == "exact"
+    assert d["objective"] == "current"
+    assert out.stat().st_size > 20_000
+    import matplotlib.image as mpimg
+    img = mpimg.imread(out)
+    assert img.shape[0] > 300 and img.std() > 0.05     # not a blank canvas

@@ -1,0 +1,158 @@
+"""Scenario files, the map generators and the map-frame current adapter."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hil import maps, scenario as scenarios
+from hil.errors import ConfigError, UsageError
+from hil.optimum import shortest_path
+
+FIXED = ("harbour", "labyrinth", "bench_discs", "bench_bugtrap", "bench_maze")
+
+
+def test_committed_maps_match_their_generators():
+    for name, make in maps.MAPS.items():
+        committed = np.load(maps.MAP_DIR / f"{name}.npy")
+        assert committed.dtype == bool
+        assert np.array_equal(committed, make()), f"configs/maps/{name}.npy is stale: run python -m hil.maps"
+        assert (maps.MAP_DIR / f"{name}.npy").stat().st_size < 200_000
+
+
+@pytest.mark.parametrize("name", FIXED)
+def test_fixed_scenarios_load_and_are_solvable(name):
+    sc = scenarios.load(name)
+    assert sc.occ.dtype == bool and sc.resolution > 0
+    for p in (sc.start, sc.goal):
+        assert 0 <= p[0] < sc.width and 0 <= p[1] < sc.height
+        assert not sc.occ[int(p[1] / sc.resolution), int(p[0] / sc.resolution)]
+    assert np.allclose(sc.reference_path[0], sc.start) and np.allclose(sc.reference_path[-1], sc.goal)
+    assert math.isfinite(shortest_path(sc.occ, sc.resolution, sc.start, sc.goal).length)
+
+
+def test_harbour_reference_path_crosses_obstacles():
+    """Figure 9: the chart route cuts through piers/breakwater; the planner must go around."""
+    from hil.optimum import segment_clear
+    sc = scenarios.load("harbour")
+    ref = sc.reference_path
+    blocked = [not segment_clear(sc.occ, sc.resolution, *a, *b) for a, b in zip(ref[:-1], ref[1:])]
+    assert sum(blocked) >= 2
+
+
+def test_labyrinth_has_the_current():
+    sc = scenarios.load("labyrinth")
+    f = sc.map_field()
+    assert f is not None
+    vx, vy = f(np.array([50.0, 10.0]), np.array([50.0, 50.0]))
+    assert np.hypot(vx[0], vy[0]) > 0.1                 # on the jet axis (map x = 50 m)
+    assert np.hypot(vx[1], vy[1]) < np.hypot(vx[0], vy[0])
+
+
+def test_map_frame_conversion_matches_ned_field():
+    sc = scenarios.load("labyrinth")
+    ned = sc.current_field()
+    f = sc.map_field()
+    x, y = 37.0, 61.0                                   # map: east 37, north 61
+    v_north, v_east = ned.velocity_at(61.0, 37.0, sc.field_time)
+    vx, vy = f(x, y)
+    assert vx == pytest.approx(v_east) and vy == pytest.approx(v_north)
+
+
+def test_random_scenario_is_reproducible_and_valid():
+    spec = scenarios.load_spec("random")
+    a = scenarios.instance(spec, np.random.default_rng(3))
+    b = scenarios.instance(spec, np.random.default_rng(3))
+    c = scenarios.instance(spec, np.random.default_rng(4))
+    assert np.array_equal(a.occ, b.occ) and a.start == b.start and a.goal == b.goal
+    assert not np.array_equal(a.occ, c.occ)
+    for sc in (a, c):
+        assert math.dist(sc.start, sc.goal) >= spec.random.min_distance
+        for p in (sc.start, sc.goal):
+            assert not sc.occ[int(p[1] / sc.resolution), int(p[0] / sc.resolution)]
+        assert np.allclose(sc.reference_path[0], sc.start) and np.allclose(sc.reference_path[-1], sc.goal)
+    with pytest.raises(UsageError):
+        scenarios.instance(spec, None)
+
+
+BASE = """
+name = "t"
+description = "test"
+kind = "fixed"
+map = "maps/labyrinth.npy"
+resolution = 0.5
+start = [8.0, 8.0]
+start_heading = 0.0
+goal = [92.0, 92.0]
+reference_path = [[8.0, 8.0], [92.0, 92.0]]
+"""
+
+
+def _full_load(path):
+    """Everything a command does with a scenario file: spec, instance, planner and online params."""
+    from planner.params import PlannerParams
+    sc = scenarios.instance(scenarios.load_spec(str(path)), None)
+    scenarios.planner_params(PlannerParams(), sc.planner_overrides, str(path))
+    scenarios.online_params(sc.online_overrides, str(path))
+    return sc
+
+
+def test_base_scenario_loads(tmp_path):
+    path = tmp_path / "t.toml"
+    path.write_text(BASE)
+    assert _full_load(path).name == "t"
+
+
+@pytest.mark.parametrize("extra, message", [
+    ('colour = "red"\n', "colour: unknown key"),
+    ("[current]\nspeed = 3\n", "current.speed: unknown key"),
+    ("[current]\norigin_y = true\n", "current.origin_y"),
+    ("[planner]\nstep = -1.0\n", "planner.step"),
+    ("[planner]\nwarp = 9\n", "planner.warp"),
+    ("[online]\ncycle_time = 0\n", "online.cycle_time"),
+])
+def test_scenario_errors_are_one_line(tmp_path, extra, message):
+    path = tmp_path / "t.toml"
+    path.write_text(BASE + extra)
+    with pytest.raises(ConfigError, match=message) as err:
+        _full_load(path)
+    assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("replace, message", [
+    ('start = [8.0, 8.0]', 'start = [500.0, 8.0]', ),
+    ('start = [8.0, 8.0]', 'start = "here"'),
+    ('map = "maps/labyrinth.npy"', 'map = "maps/none.npy"'),
+    ('kind = "fixed"', 'kind = "spiral"'),
+    ('resolution = 0.5', 'resolution = 0.0'),
+    ('reference_path = [[8.0, 8.0], [92.0, 92.0]]', 'reference_path = [[8.0, 8.0]]'),
+])
+def test_scenario_bad_values(tmp_path, replace, message):
+    path = tmp_path / "t.toml"
+    path.write_text(BASE.replace(replace, message))
+    with pytest.raises(ConfigError) as err:
+        scenarios.instance(scenarios.load_spec(str(path)), None)
+    assert "\n" not in str(err.value)
+
+
+def test_start_inside_obstacle(tmp_path):
+    occ = np.load(maps.MAP_DIR / "labyrinth.npy")
+    r, c = np.argwhere(occ)[0]
+    path = tmp_path / "t.toml"
+    path.write_text(BASE.replace("start = [8.0, 8.0]", f"start = [{(c + 0.5) * 0.5}, {(r + 0.5) * 0.5}]"))
+    with pytest.raises(ConfigError, match="inside an obstacle"):
+        scenarios.instance(scenarios.load_spec(str(path)), None)
+
+
+def test_unknown_scenario_name():
+    with pytest.raises(UsageError, match="unknown scenario"):
+        scenarios.load_spec("atlantis")
+
+
+def test_random_spec_needs_table(tmp_path):
+    path = tmp_path / "r.toml"
+    path.write_text('name = "r"\ndescription = "x"\nkind = "random"\n')
+    with pytest.raises(ConfigError, match="random"):
+        scenarios.load_spec(str(path))
