@@ -302,19 +302,43 @@ def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
 
     cost_fn = (lambda p: path_cost(p, ctx.field, params))
     local = prune(result.path, grid, cost_fn)
+    radius = params.turn_radius_factor * params.speed
+    # The bypass of a short leg must be clear of the safety-inflated map (the velocity
+    # inflation is a planning margin; the smoothed path is checked against the same map).
+    check_grid = ctx.safe_grid if ctx.safe_grid.is_free(*pos) else ctx.grid
+    local = drop_short_legs(local, check_grid, radius)
     smoothed, ok = _densify(local, 0.5), False
     if online.smoothing and len(local) >= 2:
         # Section 2.4: Dubins smoothing, then the constraints are re-checked on the smoothed
         # path (collision against the safety-inflated map, curvature); violating legs are
         # refined by check_and_replan. If that still fails, sail the pruned polyline.
-        check_grid = ctx.safe_grid if ctx.safe_grid.is_free(*pos) else ctx.grid
-        sm = check_and_replan(local, check_grid, params.turn_radius_factor * params.speed,
+        sm = check_and_replan(local, check_grid, radius,
                               start_heading=state.heading, step=0.5)
         if sm.ok:
             smoothed, ok = sm.dense, True
     return CycleRecord(index, state, goal, rule, result.status, float(search), result.planning_time_s,
                        result.iterations, local, smoothed, ok, result.tree_nodes, result.tree_parents,
                        reason=result.reason)
+
+
+def drop_short_legs(path: np.ndarray, grid: OccupancyGrid, min_leg: float) -> np.ndarray:
+    """Remove interior waypoints next to a leg shorter than ``min_leg`` (m) when the bypass is
+    collision free. A Dubins curve between poses closer than about one turning radius needs a
+    full loop; this is the section 2.4 re-check applied before smoothing rather than after."""
+    wp = [np.asarray(p, dtype=float) for p in np.asarray(path, dtype=float).reshape(-1, 2)]
+    if min_leg <= 0:
+        return np.array(wp).reshape(-1, 2)
+    changed = True
+    while changed and len(wp) > 2:
+        changed = False
+        for i in range(1, len(wp) - 1):
+            short = (math.hypot(*(wp[i] - wp[i - 1])) < min_leg or math.hypot(*(wp[i + 1] - wp[i])) < min_leg)
+            if short and grid.segment_free(float(wp[i - 1][0]), float(wp[i - 1][1]),
+                                           float(wp[i + 1][0]), float(wp[i + 1][1])):
+                del wp[i]
+                changed = True
+                break
+    return np.array(wp).reshape(-1, 2)
 
 
 def _densify(path: np.ndarray, step: float) -> np.ndarray:
