@@ -235,17 +235,55 @@ class SmoothResult:
     reason: str
 
 
+def _leg_ok(grid: OccupancyGrid, piece: DubinsPath, radius: float, step: float) -> tuple[bool, np.ndarray]:
+    poses = piece.sample(step)
+    seg_len = piece.length / max(1, len(poses) - 1)
+    dth = np.abs((np.diff(poses[:, 2]) + math.pi) % TWO_PI - math.pi)
+    curv_ok = bool(np.all(dth <= seg_len / radius + 1e-6))
+    return curv_ok and _dense_free(grid, poses[:, :2]), poses
+
+
+def _try_headings(wp, heads, i, grid, radius, step, fixed_start) -> bool:
+    """Leg i violates: try the incoming/outgoing leg directions instead of the bisector at its
+    end waypoint, then at its start waypoint; keep the first choice that clears the adjacent legs."""
+    legs = np.arctan2(np.diff(wp[:, 1]), np.diff(wp[:, 0]))
+    for w in (i + 1, i):
+        if w == 0 and fixed_start:
+            continue
+        if w == len(wp) - 1:
+            continue
+        options = [legs[w]] + ([legs[w - 1]] if w > 0 else [])
+        old = heads[w]
+        for h in options:
+            heads[w] = h
+            ok = True
+            for leg in (w - 1, w):
+                if 0 <= leg < len(wp) - 1:
+                    piece = dubins_path((*wp[leg], heads[leg]), (*wp[leg + 1], heads[leg + 1]), radius)
+                    if not _leg_ok(grid, piece, radius, step)[0]:
+                        ok = False
+                        break
+            if ok:
+                return True
+        heads[w] = old
+    return False
+
+
 def check_and_replan(waypoints: np.ndarray, grid: OccupancyGrid, radius: float,
                      start_heading: float | None = None, step: float = 0.25,
                      replan: Callable[[tuple, tuple, float], np.ndarray | None] | None = None,
                      max_rounds: int = 4) -> SmoothResult:
     """Smooth, then re-check each Dubins leg: collision free against ``grid`` (exact traversal
-    between samples ``step`` apart) and curvature at most 1 / radius. A violating leg is
-    replanned: by ``replan(p, q, heading_at_p)`` when given (e.g. a short planner run returning
-    a polyline p..q), else by inserting the leg's midpoint so the curve hugs the collision-free
-    polyline more tightly. Up to ``max_rounds`` rounds."""
+    between samples ``step`` apart) and curvature at most 1 / radius. A violating leg is first
+    re-tried with the adjacent leg directions as waypoint headings instead of the bisector; if
+    that fails it is replanned: by ``replan(p, q, heading_at_p)`` when given (e.g. a short
+    planner run returning a polyline p..q), else by inserting the leg's midpoint so the curve
+    hugs the collision-free polyline more tightly. Up to ``max_rounds`` rounds."""
     wp = np.asarray(waypoints, dtype=np.float64).copy()
     replanned = 0
+    bad: list[int] = []
+    dense = wp.copy()
+    checked = wp
     for _ in range(max_rounds + 1):
         if len(wp) < 2:
             return SmoothResult(wp.copy(), wp, grid.path_free(wp), replanned, "trivial path")
@@ -253,22 +291,21 @@ def check_and_replan(waypoints: np.ndarray, grid: OccupancyGrid, radius: float,
             dense = _densify(wp, step)
             ok = _dense_free(grid, dense)
             return SmoothResult(dense, wp, ok, replanned, "no turning-radius limit" if ok else "polyline collides")
-        pieces = smooth_pieces(wp, radius, start_heading)
         heads = waypoint_headings(wp, start_heading)
         bad = []
-        dense_parts = [wp[:1]]
-        for i, piece in enumerate(pieces):
-            poses = piece.sample(step)
-            dense_parts.append(poses[1:, :2])
-            seg_len = piece.length / max(1, len(poses) - 1)
-            dth = np.abs((np.diff(poses[:, 2]) + math.pi) % TWO_PI - math.pi)
-            curv_ok = bool(np.all(dth <= seg_len / radius + 1e-6))
-            if not curv_ok or not _dense_free(grid, poses[:, :2]):
-                bad.append(i)
-        dense = np.vstack(dense_parts)
+        for i in range(len(wp) - 1):
+            piece = dubins_path((*wp[i], heads[i]), (*wp[i + 1], heads[i + 1]), radius)
+            if not _leg_ok(grid, piece, radius, step)[0]:
+                if not _try_headings(wp, heads, i, grid, radius, step, start_heading is not None):
+                    bad.append(i)
+        parts = [wp[:1]]
+        for i in range(len(wp) - 1):
+            piece = dubins_path((*wp[i], heads[i]), (*wp[i + 1], heads[i + 1]), radius)
+            parts.append(piece.sample(step)[1:, :2])
+        dense = np.vstack(parts)
+        checked = wp
         if not bad:
             return SmoothResult(dense, wp, True, replanned, "all legs feasible")
-        checked = wp
         new = [wp[0]]
         for i in range(len(wp) - 1):
             if i in bad:
@@ -280,4 +317,5 @@ def check_and_replan(waypoints: np.ndarray, grid: OccupancyGrid, radius: float,
                 replanned += 1
             new.append(wp[i + 1])
         wp = np.asarray(new)
-    return SmoothResult(dense, checked, False, replanned, f"legs {bad} still violate the constraints after {max_rounds} rounds")
+    return SmoothResult(dense, checked, False, replanned,
+                        f"legs {bad} still violate the constraints after {max_rounds} rounds")
