@@ -9,6 +9,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from autopilot_bridge.config import AutopilotParams
+from autopilot_bridge.control import ControlParams
+from autopilot_bridge.navigation import NavigationParams
 from hil import config
 from planner.params import PlannerParams
 from simulator.config import (
@@ -32,6 +35,9 @@ class HilConfig:
     link: LinkParams
     geodesy: GeodesyParams
     planner: PlannerParams
+    autopilot: AutopilotParams
+    navigation: NavigationParams
+    control: ControlParams
 
 
 def load(path: str | Path | None = None, overrides: list[str] | None = None) -> HilConfig:

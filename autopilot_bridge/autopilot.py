@@ -1,0 +1,326 @@
+"""The vessel computer's main loop (Figure 2 of the paper): sense, plan online, follow, control.
+
+Event-driven by the simulator's sensor frames (one per IMU period). For each new frame:
+
+1. navigation fusion (:mod:`autopilot_bridge.navigation`) of gyro, compass, GPS and DVL;
+2. every ``planning_period`` of simulated time, a local planning cycle is handed to the planner
+   worker process (:mod:`autopilot_bridge.planning_worker`) from the position predicted at the
+   end of the cycle's deadline; its answer is collected without blocking (real time), or at
+   exactly ``planning_deadline`` later in simulated time (lockstep, where the simulator waits
+   for us, so waiting costs no simulated time and runs are repeatable);
+3. behaviour arbitration: follow the newest valid local path; when there is none (planner
+   failure, overrun with nothing usable, vessel inside an inflated obstacle), the reactive
+   avoidance behaviour (:mod:`autopilot_bridge.reactive`) steers until planning succeeds again;
+4. line-of-sight guidance, heading PID and speed pole placement, allocation to the two thrusters
+   (:mod:`autopilot_bridge.control`), sent back as HIL_ACTUATOR_CONTROLS answering that frame.
+
+A frame that repeats the last one (the simulator re-sends after a lost command) is answered with
+the same command again. Sensor time jumping backwards means the simulator restarted: navigation
+and planning start over.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from autopilot_bridge.config import AutopilotParams
+from autopilot_bridge.control import (
+    ControlParams,
+    HeadingPID,
+    SpeedController,
+    SurgeModel,
+    Thrust,
+    allocate,
+)
+from autopilot_bridge.guidance import LineOfSight
+from autopilot_bridge.hil_link import HilLink, SensorFrame
+from autopilot_bridge.local_planning import CycleInput, LocalPlan, World, map_to_ned_path, ned_to_map
+from autopilot_bridge.navigation import NavigationFilter, NavigationParams, NavState
+from autopilot_bridge.planning_worker import PlannerWorker, PlanRequest
+from autopilot_bridge.reactive import ReactiveAvoidance
+from autopilot_bridge.telemetry import Telemetry
+
+PLANNED, FALLBACK, COMPLETE, WAITING = "planned", "fallback", "complete", "waiting_for_navigation"
+
+
+@dataclass(frozen=True)
+class Propulsion:
+    """What the controller knows of the vessel: nominal surge model and the thrusters."""
+
+    surge: SurgeModel
+    B_u: float       # m
+    T_max: float     # N
+    T_min: float     # N (<= 0)
+
+
+@dataclass
+class AutopilotStats:
+    frames: int = 0
+    duplicate_frames: int = 0
+    commands: int = 0
+    planning_cycles: int = 0
+    plans_accepted: int = 0
+    plans_rejected: Counter = field(default_factory=Counter)
+    fallback_activations: int = 0
+    simulator_restarts: int = 0
+    latency_ms: list[float] = field(default_factory=list)
+    events: list[tuple[float, str]] = field(default_factory=list)
+
+
+class Autopilot:
+    """One vessel computer: owns its link, navigation filter, planner worker and controllers."""
+
+    def __init__(self, params: AutopilotParams, nav: NavigationParams, control: ControlParams,
+                 propulsion: Propulsion, world: World, link: HilLink, worker: PlannerWorker,
+                 telemetry: Telemetry | None = None, *, lockstep: bool, seed: int,
+                 log: Callable[[str], None] | None = None) -> None:
+        self.p, self.nav_params, self.control_params = params, nav, control
+        self.prop, self.world, self.link, self.worker = propulsion, world, link, worker
+        self.telemetry = telemetry
+        self.lockstep, self.seed = lockstep, seed
+        self.log = log or (lambda _m: None)
+        self.goal_ned = (world.goal[1], world.goal[0])
+        self.reference_ned = map_to_ned_path(world.reference_path)
+        from planner.gridmap import OccupancyGrid
+
+        self.grid = OccupancyGrid(world.occ, world.resolution)
+        self.reactive = ReactiveAvoidance(self.grid, params.fallback_range, params.min_clearance, params.fallback_speed)
+        self.stats = AutopilotStats()
+        self.local_paths: list[dict[str, Any]] = []
+        self.track: list[tuple[float, float, float, float]] = []
+        self._reset()
+
+    # -- state ---------------------------------------------------------------------------------
+    def _reset(self) -> None:
+        self.nav = NavigationFilter(self.nav_params)
+        self.heading_pid = HeadingPID(self.control_params)
+        self.speed_ctl = SpeedController(self.control_params, self.prop.surge)
+        self.mode = WAITING
+        self.los: LineOfSight | None = None
+        self.next_plan_t = 0.0
+        self.cycle = 0
+        self.pending_since: float | None = None  # simulated time of the pending request
+        self.last_frame_usec: int | None = None
+        self.last_command: Thrust | None = None
+        self.last_t: float | None = None
+        self.complete_t: float | None = None
+        self.target = self.goal_ned
+
+    def _event(self, t: float, text: str) -> None:
+        self.stats.events.append((t, text))
+        self.log(f"autopilot t={t:.2f}s: {text}")
+        if self.telemetry is not None:
+            self.telemetry.statustext(text)
+
+    # -- navigation ----------------------------------------------------------------------------
+    def _fuse(self, f: SensorFrame) -> None:
+        t = f.t
+        if f.heading is not None:
+            self.nav.update_compass(t, f.heading)
+        if f.gps is not None:
+            g = f.gps
+            lat = self.p.gps_latency
+            # The fix is ``gps_latency`` old: carry it forward with its own velocity.
+            self.nav.update_gps_position(t, g.north + g.vn * lat, g.east + g.ve * lat)
+            self.nav.update_gps_velocity(t, g.vn, g.ve)
+        if f.yaw_rate is not None:
+            self.nav.update_gyro(t, f.yaw_rate)
+        if f.dvl is not None:
+            self.nav.update_dvl(t, *f.dvl)
+
+    # -- planning ------------------------------------------------------------------------------
+    def _submit_plan(self, s: NavState) -> None:
+        lead = self.p.planning_deadline
+        north = s.x + (s.u * math.cos(s.psi) - s.v * math.sin(s.psi)) * lead
+        east = s.y + (s.u * math.sin(s.psi) + s.v * math.cos(s.psi)) * lead
+        x, y, heading = ned_to_map(north, east, s.psi)
+        self.cycle += 1
+        request = PlanRequest(
+            cycle=self.cycle,
+            problem=CycleInput(x, y, heading, s.t + lead, self.seed * 100003 + self.cycle),
+            deadline_s=self.p.planning_deadline,
+            iterations=self.p.lockstep_iterations if self.lockstep else None,
+        )
+        if self.worker.submit(request):
+            self.stats.planning_cycles += 1
+            self.pending_since = s.t
+
+    def _collect_plan(self, t: float) -> LocalPlan | None:
+        if self.pending_since is None:
+            return None
+        if self.lockstep:
+            if t + 1e-9 < self.pending_since + self.p.planning_deadline:
+                return None
+            # Simulated time stands still while we wait: bounded by the watchdog's wall limit.
+            reply = self.worker.wait(self.p.planning_deadline + self.p.watchdog_grace)
+            if reply is None and self.worker.watchdog(now=time.monotonic() + 1e9):
+                self._event(t, "planner hung: worker killed and restarted")
+        else:
+            reply = self.worker.poll()
+            if reply is None:
+                if self.worker.watchdog():
+                    self._event(t, "planner overran its deadline: worker killed and restarted")
+                    self.pending_since = None
+                return None
+        self.pending_since = None
+        if reply is None:
+            return None
+        if reply.error:
+            self.stats.plans_rejected["planner_error"] += 1
+            self._event(t, f"planner error: {reply.error}")
+            return None
+        return reply.result
+
+    def _accept(self, plan: LocalPlan, s: NavState) -> bool:
+        if plan.status == "none" or len(plan.path) < 2:
+            self.stats.plans_rejected[f"status_{plan.status}"] += 1
+            return False
+        ned = map_to_ned_path(plan.path)
+        # The path must start where the vessel now is (it was planned from a predicted position).
+        if math.hypot(ned[0, 0] - s.x, ned[0, 1] - s.y) > 3.0 * self.p.lookahead:
+            self.stats.plans_rejected["starts_too_far"] += 1
+            return False
+        for (x0, y0), (x1, y1) in zip(plan.path[:-1], plan.path[1:]):
+            if not self.grid.segment_free(x0, y0, x1, y1):
+                self.stats.plans_rejected["collides"] += 1
+                return False
+        self.los = LineOfSight(ned, self.p.lookahead, acceptance_radius=self.p.goal_tolerance)
+        self.target = (plan.subgoal[1], plan.subgoal[0])
+        self.stats.plans_accepted += 1
+        self.local_paths.append({"t": s.t, "cycle": plan.cycle, "status": plan.status,
+                                 "path_ned": ned[:: max(1, len(ned) // 200)].round(3).tolist()})
+        return True
+
+    # -- one frame -----------------------------------------------------------------------------
+    def on_frame(self, f: SensorFrame, received_at: float) -> None:
+        """Handle one new sensor frame and answer it with a thruster command."""
+        t = f.t
+        if self.last_frame_usec is not None and f.time_usec <= self.last_frame_usec:
+            if (self.last_frame_usec - f.time_usec) * 1e-6 > self.p.sim_restart_gap:
+                self.stats.simulator_restarts += 1
+                self._event(t, "simulator restarted: navigation and planning start over")
+                self._reset()
+            else:
+                self.stats.duplicate_frames += 1
+                if f.time_usec == self.last_frame_usec and self.last_command is not None:
+                    self._send(f.time_usec, self.last_command, received_at)
+                return
+        self.stats.frames += 1
+        dt = 0.0 if self.last_t is None else t - self.last_t
+        self.last_t, self.last_frame_usec = t, f.time_usec
+        self._fuse(f)
+        s = self.nav.state()
+        if s is None:
+            self._send(f.time_usec, allocate(0.0, 0.0, self.prop.B_u, self.prop.T_max, self.prop.T_min), received_at)
+            return
+        if self.mode == WAITING:
+            self.mode = FALLBACK
+            self.next_plan_t = t
+        self.track.append((t, s.x, s.y, s.psi)) if self.stats.frames % 10 == 0 else None
+
+        if self.mode != COMPLETE and math.hypot(self.goal_ned[0] - s.x, self.goal_ned[1] - s.y) <= self.p.goal_tolerance:
+            self.mode = COMPLETE
+            self.complete_t = t
+            self._event(t, "mission complete: final goal reached")
+            if self.telemetry is not None:
+                self.telemetry.mission_item_reached(len(self.world.reference_path) - 1)
+
+        if self.mode == COMPLETE:
+            cmd = allocate(0.0, 0.0, self.prop.B_u, self.prop.T_max, self.prop.T_min)
+        else:
+            plan = self._collect_plan(t)
+            if plan is not None:
+                if self._accept(plan, s):
+                    if self.mode != PLANNED:
+                        self._event(t, f"following local path (cycle {plan.cycle}, {plan.status})")
+                    self.mode = PLANNED
+                elif self.los is None or self._path_done(s):
+                    self._to_fallback(t, f"no valid local path ({plan.reason or plan.status})")
+            if self.pending_since is None and t + 1e-9 >= self.next_plan_t:
+                self.next_plan_t = t + self.p.planning_period
+                self._submit_plan(s)
+            if self.mode == PLANNED and self._path_done(s):
+                self._to_fallback(t, "local path finished before a new one arrived")
+            cmd = self._control(s, dt)
+        self._send(f.time_usec, cmd, received_at)
+        if self.telemetry is not None:
+            self.telemetry.on_frame(t, s, self.mode, cmd)
+
+    def _path_done(self, s: NavState) -> bool:
+        if self.los is None:
+            return True
+        g = self.los.update(s.x, s.y)
+        return g.finished and math.hypot(self.goal_ned[0] - s.x, self.goal_ned[1] - s.y) > self.p.goal_tolerance
+
+    def _to_fallback(self, t: float, why: str) -> None:
+        if self.mode != FALLBACK:
+            self.stats.fallback_activations += 1
+            self._event(t, f"reactive avoidance engaged: {why}")
+        self.mode = FALLBACK
+        self.los = None
+
+    def _control(self, s: NavState, dt: float) -> Thrust:
+        if self.mode == PLANNED and self.los is not None:
+            g = self.los.update(s.x, s.y)
+            psi_ref, u_ref = g.heading, self.p.cruise_speed
+            if g.remaining < 2.0 * self.p.lookahead and self.los.path[-1].tolist() == list(self.goal_ned):
+                u_ref = max(0.5, self.p.cruise_speed * g.remaining / (2.0 * self.p.lookahead))
+        else:
+            a = self.reactive.command(s.x, s.y, s.psi, self.target)
+            psi_ref, u_ref = a.heading, a.speed
+        tau_r = self.heading_pid.update(psi_ref, s.psi, s.r, dt)
+        tau_u = self.speed_ctl.update(u_ref, s.u, s.v, s.r, dt)
+        return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
+
+    def _send(self, time_usec: int, cmd: Thrust, received_at: float) -> None:
+        self.link.send_controls(time_usec, cmd.port_cmd, cmd.stdb_cmd)
+        self.last_command = cmd
+        self.stats.commands += 1
+        self.stats.latency_ms.append((time.perf_counter() - received_at) * 1e3)
+
+    # -- loop ----------------------------------------------------------------------------------
+    def run(self, should_stop: Callable[[], bool], poll_s: float = 0.05) -> None:
+        """Serve sensor frames until ``should_stop()``; the planner is watched between frames too."""
+        while not should_stop():
+            frames = self.link.receive(timeout=poll_s)
+            received_at = time.perf_counter()
+            for f in frames:
+                self.on_frame(f, received_at)
+            if not frames and not self.lockstep and self.worker.watchdog():
+                self._event(self.last_t or 0.0, "planner overran its deadline: worker killed and restarted")
+                self.pending_since = None
+            if self.telemetry is not None:
+                self.telemetry.service()
+
+    def summary(self) -> dict[str, Any]:
+        lat = np.array(self.stats.latency_ms) if self.stats.latency_ms else np.zeros(1)
+        w = self.worker.stats
+        return {
+            "mode": self.mode,
+            "mission_complete": self.complete_t is not None,
+            "complete_time_s": self.complete_t,
+            "frames": self.stats.frames,
+            "duplicate_frames": self.stats.duplicate_frames,
+            "commands_sent": self.stats.commands,
+            "planning_cycles": self.stats.planning_cycles,
+            "plans_accepted": self.stats.plans_accepted,
+            "plans_rejected": dict(self.stats.plans_rejected),
+            "deadline_overruns": w.overruns + w.killed,
+            "worker_kills": w.killed,
+            "worker_restarts": w.restarts,
+            "fallback_activations": self.stats.fallback_activations,
+            "simulator_restarts": self.stats.simulator_restarts,
+            "navigation": {"updates": dict(self.nav.stats.updates), "rejected": dict(self.nav.stats.rejected),
+                           "position_resets": self.nav.stats.position_resets},
+            "link_rejects": dict(self.link.rejects),
+            "truth_messages_ignored": self.link.truth_ignored,
+            "control_latency_ms": {"p50": float(np.percentile(lat, 50)), "p99": float(np.percentile(lat, 99)),
+                                   "max": float(lat.max())},
+            "events": [f"{t:.2f}s {e}" for t, e in self.stats.events],
+        }

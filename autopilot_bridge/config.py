@@ -1,0 +1,36 @@
+"""Typed configuration of the vessel computer (TOML sections [autopilot], [navigation], [control])."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from common.params import param
+
+
+@dataclass(frozen=True)
+class AutopilotParams:
+    """The [autopilot] section: links, mission following, planning schedule, fallback."""
+
+    listen: str = param("HOST:PORT where the simulator's HIL_SENSOR/HIL_GPS frames arrive")
+    actuators_to: tuple[str, ...] = param("HOST:PORT destinations of HIL_ACTUATOR_CONTROLS")
+    telemetry_to: tuple[str, ...] = param("HOST:PORT destinations of telemetry (heartbeat, position, events)")
+    system_id: int = param("MAVLink system id of the vessel", ge=1, le=255)
+    component_id: int = param("MAVLink component id of the autopilot", ge=1, le=255)
+    cruise_speed: float = param("speed set-point along the local path", "m/s", gt=0)
+    lookahead: float = param("line-of-sight look-ahead distance", "m", gt=0)
+    goal_tolerance: float = param("the mission is complete within this distance of the final goal", "m", gt=0)
+    planning_period: float = param("simulated time between local planning cycles", "s", gt=0)
+    planning_deadline: float = param("hard deadline of one local planning cycle (watchdog)", "s", gt=0)
+    watchdog_grace: float = param("a planner this long past its deadline is killed and restarted", "s", gt=0)
+    lockstep_iterations: int = param("lockstep: iteration budget per planning cycle (repeatable runs)", ge=1)
+    gps_latency: float = param("GPS output latency compensated by dead reckoning", "s", ge=0)
+    fallback_speed: float = param("speed of the reactive obstacle-avoidance behaviour", "m/s", gt=0)
+    fallback_range: float = param("look-ahead of the reactive behaviour's free-space rays", "m", gt=0)
+    min_clearance: float = param("the reactive behaviour keeps rays this far from obstacles", "m", ge=0)
+    send_loss: float = param("fault injection: probability of dropping an outgoing HIL datagram", ge=0, le=1)
+    recv_loss: float = param("fault injection: probability of dropping an incoming HIL datagram", ge=0, le=1)
+    sim_restart_gap: float = param("sensor time going back by more than this means the simulator restarted", "s", gt=0)
+
+    def __post_init__(self) -> None:
+        if self.planning_deadline >= self.planning_period:
+            raise ValueError("planning_deadline: must be shorter than planning_period")

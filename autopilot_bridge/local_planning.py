@@ -1,0 +1,95 @@
+"""One local planning cycle of section 2.2, as run inside the planner worker process.
+
+The world the vessel computer knows a priori (the chart's obstacle map, the global reference
+path, the current measured beforehand) is sent to the worker once, as a :class:`World`; every
+cycle then sends only the vessel's state and budget. The cycle itself is
+``planner.online.plan_cycle``: subgoal (section 3.1), local problem in the perceptual domain,
+DDRRT* (or RRT*, Informed RRT*), pruning and Dubins smoothing (section 2.4).
+
+Frames: the planner's map frame (x east, y north, headings counter-clockwise from east). The
+autopilot converts with :func:`ned_to_map` / :func:`map_to_ned`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Any, Callable
+
+import numpy as np
+
+
+def ned_to_map(north: float, east: float, psi: float | None = None) -> tuple[float, ...]:
+    """NED position (and heading clockwise from north) to map x, y (and heading from east)."""
+    if psi is None:
+        return east, north
+    return east, north, math.pi / 2.0 - psi
+
+
+def map_to_ned_path(path: np.ndarray) -> np.ndarray:
+    """(N, 2) map points (x east, y north) to NED (north, east)."""
+    path = np.asarray(path, dtype=float).reshape(-1, 2)
+    return path[:, ::-1].copy()
+
+
+@dataclass(frozen=True)
+class World:
+    """What the planner worker needs once: map, goal, reference path, field, parameters (map frame)."""
+
+    occ: np.ndarray
+    resolution: float
+    goal: tuple[float, float]
+    reference_path: np.ndarray
+    field: Any                   # planner.field.GridField or None
+    params: Any                  # planner.params.PlannerParams
+    online: Any                  # planner.online.OnlineParams
+    algorithm: str
+
+
+@dataclass(frozen=True)
+class CycleInput:
+    """A cycle's start: map-frame position (m), heading (rad from east), time (s), seed."""
+
+    x: float
+    y: float
+    heading: float
+    t: float
+    seed: int
+
+
+@dataclass(frozen=True)
+class LocalPlan:
+    """What the worker answers: the smoothed local path (map frame) and how it was obtained."""
+
+    cycle: int
+    status: str                  # exact | approximate | none
+    path: np.ndarray             # (N, 2) dense smoothed path, map frame; empty if none
+    subgoal: tuple[float, float]
+    subgoal_rule: int
+    iterations: int
+    planning_time_s: float
+    reason: str
+
+
+def online_cycle_handler(world: World) -> Callable[[Any], LocalPlan]:
+    """Worker factory: build the online context once, then plan one cycle per request."""
+    from planner.gridmap import OccupancyGrid
+    from planner.online import VesselState, make_context, plan_cycle
+
+    grid = OccupancyGrid(world.occ, world.resolution)
+    ctx = make_context(grid, world.goal, world.reference_path, world.params, world.online,
+                       world.algorithm, world.field)
+
+    def handle(request: Any) -> LocalPlan:
+        start: CycleInput = request.problem
+        if request.iterations is not None:
+            ctx.online = replace(world.online, local_iterations=int(request.iterations), local_time=0.0)
+        else:
+            ctx.online = replace(world.online, local_iterations=0, local_time=float(request.deadline_s))
+        rec = plan_cycle(ctx, VesselState(start.x, start.y, start.heading, start.t), request.cycle, start.seed)
+        path = rec.smooth_path if len(rec.smooth_path) >= 2 else rec.local_path
+        return LocalPlan(cycle=request.cycle, status=rec.status, path=np.asarray(path, dtype=float).reshape(-1, 2),
+                         subgoal=tuple(rec.subgoal), subgoal_rule=rec.subgoal_rule, iterations=rec.iterations,
+                         planning_time_s=rec.planning_time_s, reason=rec.reason)
+
+    return handle

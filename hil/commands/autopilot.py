@@ -1,0 +1,149 @@
+"""`hil autopilot`: run the vessel computer alone, for HIL against a simulator or hardware."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import tempfile
+from pathlib import Path
+
+from hil import scenario as scenarios
+from hil.commands.sim import _hostport
+from hil.console import emit, load_settings, progress
+from hil.errors import UsageError
+
+
+def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "autopilot", parents=parents,
+        help="run the vessel computer alone: navigation, online DDRRT* planning, control over HIL MAVLink",
+        description="Run the autopilot bridge: it receives HIL_SENSOR/HIL_GPS (and ODOMETRY for a DVL) on "
+                    "--listen, fuses them in an EKF, plans local paths with the configured planner inside "
+                    "the perceptual domain along the scenario's global reference path (a separate worker "
+                    "process under a watchdog deadline), follows them with line-of-sight guidance, a heading "
+                    "PID and pole-placement speed control, and answers every sensor frame with "
+                    "HIL_ACTUATOR_CONTROLS to --actuators-to. Runs until SIGINT/SIGTERM, then prints its "
+                    "summary.",
+        epilog="Options given here override the [autopilot] configuration keys.",
+    )
+    p.add_argument("--scenario", default="harbour",
+                   help="scenario whose map, reference path and current the vessel knows a priori "
+                        "(configs/scenarios/NAME.toml; default: harbour)")
+    p.add_argument("--listen", metavar="HOST:PORT", type=_hostport, default=None,
+                   help="where sensor frames arrive (default: autopilot.listen = 127.0.0.1:14560)")
+    p.add_argument("--actuators-to", metavar="HOST:PORT", type=_hostport, action="append", default=None,
+                   help="where HIL_ACTUATOR_CONTROLS go; repeatable (default: autopilot.actuators_to = 127.0.0.1:14561)")
+    p.add_argument("--telemetry-to", metavar="HOST:PORT", type=_hostport, action="append", default=None,
+                   help="where telemetry goes; repeatable (default: autopilot.telemetry_to = 127.0.0.1:14550)")
+    p.add_argument("--lockstep", action="store_true",
+                   help="the simulator runs in lockstep: plan on an iteration budget "
+                        "(autopilot.lockstep_iterations) so runs are repeatable")
+    p.add_argument("--seed", type=int, default=None, help="seed of the planner's sampling (default: sim.seed)")
+    p.add_argument("--algorithm", choices=("rrt-star", "informed-rrt-star", "ddrrt-star"), default=None,
+                   help="local planner (default: planner.algorithm = ddrrt-star)")
+    p.add_argument("--summary-out", metavar="FILE", default=None,
+                   help="also write the summary JSON to FILE (atomically) when stopping")
+    p.add_argument("--planner-factory", default=None, help=argparse.SUPPRESS)  # tests: a planner double
+    p.set_defaults(func=run)
+
+
+def _overrides(args: argparse.Namespace) -> list[str]:
+    out = []
+    if args.listen is not None:
+        out.append("autopilot.listen=" + json.dumps(args.listen))
+    if args.actuators_to is not None:
+        out.append("autopilot.actuators_to=" + json.dumps(args.actuators_to))
+    if args.telemetry_to is not None:
+        out.append("autopilot.telemetry_to=" + json.dumps(args.telemetry_to))
+    if args.seed is not None:
+        out.append(f"sim.seed={int(args.seed)}")
+    if args.algorithm is not None:
+        out.append("planner.algorithm=" + json.dumps(args.algorithm))
+    return out
+
+
+def write_json_atomic(path: str | Path, data: dict) -> None:
+    """Write JSON to ``path`` via a temporary file and rename: never a half-written file."""
+    from hil.console import to_json
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    with os.fdopen(fd, "w") as fh:
+        fh.write(to_json(data) + "\n")
+    os.replace(tmp, path)
+
+
+def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None = None):
+    """The autopilot and its parts from a configuration and a scenario (used by `hil run` too)."""
+    from autopilot_bridge.autopilot import Autopilot, Propulsion
+    from autopilot_bridge.control import SurgeModel
+    from autopilot_bridge.hil_link import HilLink
+    from autopilot_bridge.local_planning import World
+    from autopilot_bridge.planning_worker import PlannerWorker
+    from autopilot_bridge.telemetry import Telemetry
+    from common.geodesy import LocalFrame
+    from simulator.vessel import Vessel
+
+    scen = scenarios.load(scenario_name, cfg.current)
+    params = scenarios.planner_params(cfg.planner, scen.planner_overrides, f"scenario {scen.name}")
+    online = scenarios.online_params(scen.online_overrides, f"scenario {scen.name}")
+    world = World(occ=scen.occ, resolution=scen.resolution, goal=tuple(scen.goal),
+                  reference_path=scen.reference_path, field=scen.planning_field(),
+                  params=params, online=online, algorithm=params.algorithm)
+    vessel = Vessel(cfg.vessel)  # eq. (5): the vessel computer's nominal model of the same hull
+    propulsion = Propulsion(SurgeModel(vessel.m11, vessel.m22, cfg.vessel.d_u), cfg.vessel.B_u,
+                            cfg.vessel.T_max, cfg.vessel.T_min)
+    ap = cfg.autopilot
+    geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
+    try:
+        link = HilLink(ap.listen, ap.actuators_to, geo, declination=cfg.sensors.compass.declination,
+                       system_id=ap.system_id, component_id=ap.component_id, send_loss=ap.send_loss,
+                       recv_loss=ap.recv_loss, loss_seed=cfg.sim.seed + 7)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    telemetry = Telemetry(ap.telemetry_to, ap.system_id, ap.component_id) if ap.telemetry_to else None
+    if planner_factory:
+        worker = PlannerWorker(planner_factory, (), grace_s=ap.watchdog_grace)
+    else:
+        worker = PlannerWorker("autopilot_bridge.local_planning:online_cycle_handler", (world,),
+                               grace_s=ap.watchdog_grace)
+    autopilot = Autopilot(ap, cfg.navigation, cfg.control, propulsion, world, link, worker, telemetry,
+                          lockstep=lockstep, seed=cfg.sim.seed, log=progress)
+    return autopilot
+
+
+def run(args: argparse.Namespace) -> int:
+    args.overrides = list(args.overrides) + _overrides(args)
+    cfg = load_settings(args)
+    autopilot = build(cfg, args.scenario, args.lockstep, args.planner_factory)
+    stop = {"flag": False}
+
+    def request_stop(*_):
+        stop["flag"] = True
+
+    previous = {sig: signal.signal(sig, request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    host, port = autopilot.link.address
+    progress(f"autopilot: listening on {host}:{port}, actuators to {', '.join(cfg.autopilot.actuators_to)}, "
+             f"scenario {args.scenario}, {'lockstep' if args.lockstep else 'real time'}")
+    try:
+        autopilot.run(lambda: stop["flag"])
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        autopilot.worker.close()
+        autopilot.link.close()
+        if autopilot.telemetry is not None:
+            autopilot.telemetry.close()
+    summary = autopilot.summary()
+    summary["local_paths"] = autopilot.local_paths
+    summary["estimated_track"] = [list(map(lambda v: round(v, 3), row)) for row in autopilot.track]
+    if args.summary_out:
+        write_json_atomic(args.summary_out, summary)
+    if args.json:
+        emit(args, summary)
+    else:
+        emit(args, {k: v for k, v in summary.items() if k not in ("local_paths", "estimated_track")})
+    return 0

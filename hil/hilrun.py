@@ -1,0 +1,389 @@
+"""The whole HIL loop: the simulator and the vessel computer as two OS processes linked by UDP.
+
+`hil run` starts ``python -m hil sim`` and ``python -m hil autopilot`` as subprocesses on loopback
+ports chosen here, and listens on a third port as a *tap*: the simulator sends its frames to the
+autopilot and the tap, the autopilot sends its commands to the simulator and the tap, and its
+telemetry to the tap. The tap writes every MAVLink frame to the run's ``.tlog`` and judges the run
+from the truth (HIL_STATE_QUATERNION): collisions and clearance against the chart, the goal,
+path length, energy, and the navigation error of the autopilot's own estimate
+(LOCAL_POSITION_NED). The run ends when the vessel reaches the goal, collides, or the simulated
+time is up; both processes are then stopped with SIGTERM (their summaries are collected), also
+on Ctrl-C, and never left behind.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+from scipy import ndimage
+
+from common.geodesy import LocalFrame
+from common.mavlink import Codec
+from common.udp import UdpEndpoint
+from hil import scenario as scenarios
+from hil.errors import UsageError
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def free_udp_port() -> int:
+    """A currently free UDP port on 127.0.0.1 (chosen by the kernel)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@dataclass
+class RunOptions:
+    scenario: str = "harbour"
+    lockstep: bool = True
+    speedup: float = 1.0
+    duration: float = 300.0              # s of simulated time at most
+    seed: int = 1
+    config: str | None = None
+    overrides: list[str] = field(default_factory=list)
+    out: Path | None = None              # run folder
+    wall_timeout: float = 900.0          # s, whatever happens
+    actuators: str = "mavlink"
+    extra_autopilot_args: list[str] = field(default_factory=list)
+    extra_sim_overrides: list[str] = field(default_factory=list)
+    on_progress: Callable[[str], None] = lambda _m: None
+    plot: bool = True
+    hooks: list[Callable[["Tap", "HilRun"], None]] = field(default_factory=list)  # tests: fault injection
+
+
+class Tap:
+    """Receives everything both processes send to it; writes the .tlog; keeps the evaluation data."""
+
+    def __init__(self, tlog_path: Path, geo: LocalFrame) -> None:
+        self.ep = UdpEndpoint("127.0.0.1:0", [], recv_buffer=8 << 20)
+        self.codec = Codec(255, 190, accept=("HIL_STATE_QUATERNION", "HIL_ACTUATOR_CONTROLS", "LOCAL_POSITION_NED",
+                                             "STATUSTEXT", "MISSION_ITEM_REACHED", "HIL_SENSOR", "HIL_GPS",
+                                             "HEARTBEAT", "ATTITUDE", "ODOMETRY"))
+        self.tlog = open(tlog_path, "wb")
+        self.geo = geo
+        self.truth: dict[int, tuple[float, float, float, float]] = {}  # time_usec -> (north, east, vn, ve)
+        self.estimate: dict[int, tuple[float, float]] = {}             # time ms -> (north, east)
+        self.commands: list[tuple[int, float, float]] = []             # (time_usec, port, stdb)
+        self.statustext: list[str] = []
+        self.mission_reached = False
+        self.frames = 0
+
+    @property
+    def port(self) -> int:
+        return self.ep.address[1]
+
+    def pump(self, timeout: float) -> int:
+        """Read what is queued (waiting up to ``timeout`` for the first datagram); returns datagrams read."""
+        n = 0
+        data = self.ep.recv(timeout=timeout)
+        while data is not None:
+            n += 1
+            self._handle(data)
+            data = self.ep.recv(timeout=0.0)
+        return n
+
+    def _handle(self, data: bytes) -> None:
+        msgs, _ = self.codec.decode(data)
+        stamp = struct.pack(">Q", int(time.time() * 1e6))
+        for m in msgs:
+            self.tlog.write(stamp + bytes(m.get_msgbuf()))
+            self.frames += 1
+            kind = m.get_type()
+            if kind == "HIL_STATE_QUATERNION":
+                if m.time_usec not in self.truth:
+                    n, e = self.geo.geodetic_to_sea_level(m.lat * 1e-7, m.lon * 1e-7)
+                    self.truth[int(m.time_usec)] = (n, e, m.vx * 0.01, m.vy * 0.01)
+            elif kind == "HIL_ACTUATOR_CONTROLS":
+                self.commands.append((int(m.time_usec), float(m.controls[0]), float(m.controls[1])))
+            elif kind == "LOCAL_POSITION_NED":
+                self.estimate[int(m.time_boot_ms)] = (float(m.x), float(m.y))
+            elif kind == "STATUSTEXT":
+                self.statustext.append(m.text if isinstance(m.text, str) else m.text.decode(errors="replace"))
+            elif kind == "MISSION_ITEM_REACHED":
+                self.mission_reached = True
+
+    def close(self) -> None:
+        self.tlog.flush()
+        self.tlog.close()
+        self.ep.close()
+
+
+class Judge:
+    """Collisions, clearance and goal from the truth against the chart (map frame: x east, y north)."""
+
+    def __init__(self, occ: np.ndarray, resolution: float, hull_radius: float, goal_ned: tuple[float, float],
+                 goal_tolerance: float) -> None:
+        self.occ, self.res = occ, resolution
+        # Distance (m) from each cell centre to the nearest obstacle cell's boundary (approximately).
+        self.edt = ndimage.distance_transform_edt(~occ) * resolution - 0.5 * resolution
+        self.hull_radius = hull_radius
+        self.goal, self.tol = goal_ned, goal_tolerance
+
+    def clearance(self, north: float, east: float) -> float:
+        r, c = int(north / self.res), int(east / self.res)
+        if not (0 <= r < self.occ.shape[0] and 0 <= c < self.occ.shape[1]):
+            return 0.0
+        return float(self.edt[r, c])
+
+    def at_goal(self, north: float, east: float) -> bool:
+        return math.hypot(north - self.goal[0], east - self.goal[1]) <= self.tol
+
+
+class HilRun:
+    """One run: processes, tap, judge; :meth:`execute` returns the summary."""
+
+    def __init__(self, opts: RunOptions, cfg: Any) -> None:
+        self.opts, self.cfg = opts, cfg
+        self.scen = scenarios.load(opts.scenario, cfg.current)
+        self.out = opts.out
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
+        self.tap = Tap(self.out / "run.tlog", self.geo)
+        goal_ned = (self.scen.goal[1], self.scen.goal[0])
+        self.judge = Judge(self.scen.occ, self.scen.resolution, cfg.vessel.L / 2.0, goal_ned,
+                           cfg.autopilot.goal_tolerance)
+        self.ap_port = free_udp_port()
+        self.sim_port = free_udp_port()
+        self.sim: subprocess.Popen | None = None
+        self.ap: subprocess.Popen | None = None
+        self.sim_restarts = 0
+
+    # -- processes ---------------------------------------------------------------------------------
+    def _common_args(self) -> list[str]:
+        args = []
+        if self.opts.config:
+            args += ["--config", self.opts.config]
+        for o in self.opts.overrides:
+            args += ["--set", o]
+        return args
+
+    def sim_command(self, initial: tuple[float, float, float] | None = None) -> list[str]:
+        s = self.scen
+        north, east, psi = (s.start[1], s.start[0], math.pi / 2.0 - s.start_heading) if initial is None else initial
+        cur = self.scen.current
+        args = [sys.executable, "-m", "hil", "sim", *self._common_args(),
+                "--state-to", f"127.0.0.1:{self.ap_port}", "--state-to", f"127.0.0.1:{self.tap.port}",
+                "--commands-on", f"127.0.0.1:{self.sim_port}", "--seed", str(self.opts.seed),
+                "--duration", repr(float(self.opts.duration) + 5.0), "--json",
+                "--set", f"sim.initial.x={north!r}", "--set", f"sim.initial.y={east!r}",
+                "--set", f"sim.initial.psi={psi!r}"]
+        for k in ("enabled", "origin_x", "origin_y"):
+            v = getattr(cur, k)
+            args += ["--set", f"current.{k}={json.dumps(v)}"]
+        for o in self.opts.extra_sim_overrides:
+            args += ["--set", o]
+        if self.opts.lockstep:
+            args.append("--lockstep")
+        else:
+            args += ["--speedup", repr(float(self.opts.speedup))]
+        return args
+
+    def autopilot_command(self) -> list[str]:
+        args = [sys.executable, "-m", "hil", "autopilot", *self._common_args(), "--scenario", self.opts.scenario,
+                "--listen", f"127.0.0.1:{self.ap_port}",
+                "--actuators-to", f"127.0.0.1:{self.sim_port}", "--actuators-to", f"127.0.0.1:{self.tap.port}",
+                "--telemetry-to", f"127.0.0.1:{self.tap.port}",
+                "--seed", str(self.opts.seed), "--summary-out", str(self.out / "autopilot.json"), "--json",
+                *self.opts.extra_autopilot_args]
+        if self.opts.lockstep:
+            args.append("--lockstep")
+        return args
+
+    def _spawn(self, cmd: list[str], name: str) -> subprocess.Popen:
+        log = open(self.out / f"{name}.log", "ab")
+        return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, cwd=REPO, start_new_session=True)
+
+    def start(self) -> None:
+        # The autopilot first, so that it is listening when the simulator's first frame comes.
+        self.ap = self._spawn(self.autopilot_command(), "autopilot")
+        self.sim = self._spawn(self.sim_command(), "sim")
+
+    def restart_simulator(self) -> None:
+        """Kill the simulator and start it again where the truth last was (fault injection)."""
+        last = self.tap.truth[max(self.tap.truth)] if self.tap.truth else None
+        self._stop(self.sim, kill=True)
+        self.sim_restarts += 1
+        initial = None
+        if last is not None:
+            initial = (last[0], last[1], math.atan2(last[3], last[2]) if math.hypot(last[2], last[3]) > 0.2 else 0.0)
+        self.sim = self._spawn(self.sim_command(initial), f"sim-restart{self.sim_restarts}")
+
+    @staticmethod
+    def _stop(proc: subprocess.Popen | None, kill: bool = False) -> dict[str, Any] | None:
+        if proc is None:
+            return None
+        if proc.poll() is None:
+            try:
+                os.killpg(proc.pid, signal.SIGKILL if kill else signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+        try:
+            out, _ = proc.communicate(timeout=20.0)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            out, _ = proc.communicate()
+        if kill:
+            return None
+        lines = (out or b"").decode(errors="replace").strip().splitlines()
+        try:
+            return json.loads(lines[-1]) if lines else None
+        except json.JSONDecodeError:
+            return None
+
+    # -- the run -----------------------------------------------------------------------------------
+    def execute(self) -> dict[str, Any]:
+        opts = self.opts
+        wall0 = time.monotonic()
+        outcome, collision_at = "timeout", None
+        min_clearance, last_report = math.inf, wall0
+        try:
+            self.start()
+            checked = 0
+            while True:
+                self.tap.pump(timeout=0.05)
+                times = sorted(self.tap.truth)
+                for tu in times[checked:]:
+                    n, e, _, _ = self.tap.truth[tu]
+                    c = self.judge.clearance(n, e)
+                    min_clearance = min(min_clearance, c)
+                    if c < self.judge.hull_radius and collision_at is None:
+                        collision_at = tu * 1e-6
+                checked = len(times)
+                t_sim = times[-1] * 1e-6 if times else 0.0
+                if collision_at is not None:
+                    outcome = "collision"
+                    break
+                if times and self.judge.at_goal(*self.tap.truth[times[-1]][:2]):
+                    outcome = "goal"
+                    break
+                if t_sim >= opts.duration:
+                    outcome = "timeout"
+                    break
+                if time.monotonic() - wall0 > opts.wall_timeout:
+                    outcome = "wall_timeout"
+                    break
+                if self.ap.poll() is not None:
+                    outcome = "autopilot_exited"
+                    break
+                if self.sim.poll() is not None:
+                    outcome = "simulator_exited"
+                    break
+                for hook in opts.hooks:
+                    hook(self.tap, self)
+                if time.monotonic() - last_report > 5.0:
+                    last_report = time.monotonic()
+                    opts.on_progress(f"run: t={t_sim:.1f} s simulated, {time.monotonic() - wall0:.1f} s wall, "
+                                     f"clearance min {min_clearance:.2f} m")
+        finally:
+            ap_summary = self._stop(self.ap)
+            sim_summary = self._stop(self.sim)
+            self.tap.pump(timeout=0.0)
+            self.tap.close()
+        wall = time.monotonic() - wall0
+        return self._summary(outcome, collision_at, min_clearance, wall, ap_summary, sim_summary)
+
+    def _summary(self, outcome: str, collision_at: float | None, min_clearance: float, wall: float,
+                 ap: dict | None, sim: dict | None) -> dict[str, Any]:
+        times = sorted(self.tap.truth)
+        track = np.array([self.tap.truth[t][:2] for t in times]) if times else np.zeros((0, 2))
+        speeds = np.array([math.hypot(*self.tap.truth[t][2:]) for t in times]) if times else np.zeros(0)
+        length = float(np.sum(np.hypot(*np.diff(track, axis=0).T))) if len(track) > 1 else 0.0
+        energy = self._energy(times, speeds)
+        rmse = self._nav_rmse()
+        ap = ap or {}
+        reached = outcome == "goal" and collision_at is None
+        summary = {
+            "scenario": self.opts.scenario,
+            "seed": self.opts.seed,
+            "mode": "lockstep" if self.opts.lockstep else f"realtime x{self.opts.speedup:g}",
+            "outcome": outcome,
+            "reached_goal": reached,
+            "collisions": 0 if collision_at is None else 1,
+            "collision_time_s": collision_at,
+            "min_clearance_m": None if not math.isfinite(min_clearance) else round(min_clearance, 3),
+            "sim_time_s": round(times[-1] * 1e-6, 3) if times else 0.0,
+            "wall_time_s": round(wall, 2),
+            "path_length_m": round(length, 2),
+            "energy_J": round(energy, 1),
+            "planning_cycles": ap.get("planning_cycles"),
+            "plans_accepted": ap.get("plans_accepted"),
+            "deadline_overruns": ap.get("deadline_overruns"),
+            "worker_restarts": ap.get("worker_restarts"),
+            "fallback_activations": ap.get("fallback_activations"),
+            "navigation_rmse_m": None if rmse is None else round(rmse, 3),
+            "control_latency_ms": ap.get("control_latency_ms"),
+            "simulator_restarts": self.sim_restarts,
+            "navigation": ap.get("navigation"),
+            "simulator": None if sim is None else {k: sim.get(k) for k in (
+                "steps", "commands_received", "malformed_dropped", "stale_command_events", "lockstep_resends",
+                "jitter_ms")},
+            "tlog": str(self.out / "run.tlog"),
+            "tlog_messages": self.tap.frames,
+            "events": ap.get("events", []),
+        }
+        return summary
+
+    def _energy(self, times: list[int], speeds: np.ndarray) -> float:
+        """Integral of (|T_port| + |T_stdb|) * speed dt, the commands held between truth samples."""
+        if len(times) < 2 or not self.tap.commands:
+            return 0.0
+        v = self.cfg.vessel
+        cmds = sorted(self.tap.commands)
+        cmd_t = np.array([c[0] for c in cmds])
+
+        def thrust(u: float) -> float:
+            return u * v.T_max if u >= 0 else -u * v.T_min
+
+        total = 0.0
+        for i in range(len(times) - 1):
+            j = int(np.searchsorted(cmd_t, times[i], side="right")) - 1
+            if j < 0:
+                continue
+            _, p, s = cmds[j]
+            total += (abs(thrust(p)) + abs(thrust(s))) * speeds[i] * (times[i + 1] - times[i]) * 1e-6
+        return total
+
+    def _nav_rmse(self) -> float | None:
+        errs = []
+        for ms, (n, e) in self.tap.estimate.items():
+            tu = ms * 1000
+            truth = self.tap.truth.get(tu)
+            if truth is not None:
+                errs.append((n - truth[0]) ** 2 + (e - truth[1]) ** 2)
+        return math.sqrt(float(np.mean(errs))) if errs else None
+
+
+def run_loop(opts: RunOptions, cfg: Any) -> dict[str, Any]:
+    """Run the HIL loop and write the run folder (tlog, summary.json, plot.png); returns the summary."""
+    from hil.commands.autopilot import write_json_atomic
+
+    if not scenarios.scenario_path(opts.scenario).exists():
+        raise UsageError(f"unknown scenario {opts.scenario!r} (available: {', '.join(scenarios.available())})")
+    run = HilRun(opts, cfg)
+    summary = run.execute()
+    summary["run_folder"] = str(opts.out)
+    if opts.plot:
+        try:
+            from hil.run_plot import plot_run
+
+            ap_path = opts.out / "autopilot.json"
+            ap = json.loads(ap_path.read_text()) if ap_path.exists() else {}
+            plot_run(opts.out / "plot.png", run.scen, run.tap.truth, ap, cfg)
+            summary["plot"] = str(opts.out / "plot.png")
+        except Exception as exc:  # a plot must never lose the run's data
+            summary["plot_error"] = f"{type(exc).__name__}: {exc}"
+    write_json_atomic(opts.out / "summary.json", summary)
+    return summary

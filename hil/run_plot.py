@@ -1,0 +1,53 @@
+"""The picture of one HIL run: chart, reference path, planned local paths, true and estimated tracks,
+current arrows. Drawn in the map frame (x east, y north) like the paper's Figures 9 and 10."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def plot_run(path: Path, scen: Any, truth: dict[int, tuple], autopilot: dict, cfg: Any) -> None:
+    fig, ax = plt.subplots(figsize=(10, 10 * scen.height / max(scen.width, 1e-9) * 0.9 + 1))
+    ax.imshow(scen.occ, origin="lower", cmap="Greys", extent=(0, scen.width, 0, scen.height),
+              interpolation="nearest", alpha=0.85)
+    field = scen.map_field()
+    if field is not None:
+        xs = np.linspace(0, scen.width, 18)
+        ys = np.linspace(0, scen.height, int(18 * scen.height / scen.width) + 2)
+        X, Y = np.meshgrid(xs, ys)
+        U, V = field(X, Y)
+        ax.quiver(X, Y, U, V, color="tab:blue", alpha=0.35, width=0.002, label="current (planning)")
+    ref = np.asarray(scen.reference_path)
+    ax.plot(ref[:, 0], ref[:, 1], ":", color="green", lw=1.5, label="global reference path")
+    for i, lp in enumerate(autopilot.get("local_paths", [])):
+        p = np.asarray(lp["path_ned"])
+        if len(p):
+            ax.plot(p[:, 1], p[:, 0], "-", color="tab:orange", lw=0.7, alpha=0.6,
+                    label="planned local paths" if i == 0 else None)
+    if truth:
+        tr = np.array([truth[t][:2] for t in sorted(truth)])
+        ax.plot(tr[:, 1], tr[:, 0], "-", color="red", lw=1.8, label="true track")
+    est = np.asarray(autopilot.get("estimated_track", []))
+    if len(est):
+        ax.plot(est[:, 2], est[:, 1], "--", color="black", lw=0.8, label="estimated track")
+    ax.plot(*scen.start, "o", color="red", ms=7)
+    ax.plot(*scen.goal, "*", color="gold", ms=16, mec="k")
+    r = cfg.autopilot.goal_tolerance
+    ax.add_patch(plt.Circle(scen.goal, r, fill=False, ls="--", color="gold"))
+    ax.set_xlim(0, scen.width)
+    ax.set_ylim(0, scen.height)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x east (m)")
+    ax.set_ylabel("y north (m)")
+    ax.set_title(f"HIL run: {scen.name}")
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
