@@ -152,19 +152,25 @@ class TreePlanner:
         ic[_tree.I_CAP] = cap
         ic[_tree.I_PNG] = 1 if png is not None else 0
 
-        X = np.zeros((cap, 2))
-        parent = -np.ones(cap, dtype=np.int64)
-        cost = np.zeros(cap)
-        head = np.full(cap, np.nan)
-        dd = np.full(cap, np.inf)
-        first_child = -np.ones(cap, dtype=np.int64)
-        next_sib = -np.ones(cap, dtype=np.int64)
+        # node arrays are filled as nodes are added (np.empty: no page touching for unused capacity)
+        X = np.empty((cap, 2))
+        parent = np.empty(cap, dtype=np.int64)
+        cost = np.empty(cap)
+        head = np.empty(cap)
+        dd = np.empty(cap)
+        first_child = np.empty(cap, dtype=np.int64)
+        next_sib = np.empty(cap, dtype=np.int64)
         bucket_head = -np.ones(nbx * nby, dtype=np.int64)
-        node_next = -np.ones(cap, dtype=np.int64)
+        node_next = np.empty(cap, dtype=np.int64)
         st = np.zeros(_tree.N_ISTATE, dtype=np.int64)
         fs = np.zeros(_tree.N_FSTATE)
-        stack = np.zeros(cap, dtype=np.int64)
+        stack = np.empty(cap, dtype=np.int64)
         X[0] = (sx, sy)
+        parent[0] = -1
+        cost[0] = 0.0
+        dd[0] = np.inf
+        first_child[0] = -1
+        next_sib[0] = -1
         head[0] = np.nan if problem.start_heading is None else float(problem.start_heading)
         st[_tree.S_N] = 1
         st[_tree.S_GOAL] = -1

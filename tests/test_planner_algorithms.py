@@ -140,8 +140,8 @@ def test_real_deadline_is_not_overrun():
         res = planner.solve(PlanningProblem(grid, (10.0, 30.0), (50.0, 30.0)), Termination.deadline(0.15))
         elapsed = time.monotonic() - t0
         assert res.iterations > 100
-        # generous bound: the deadline is checked before every iteration in compiled code
-        assert elapsed < 0.15 + 0.05, elapsed
+        # loose bound (a loaded CI machine): the one-iteration contract is tested on an injected clock
+        assert elapsed < 0.15 + 0.25, elapsed
 
 
 def test_exact_solution_termination_needs_a_bound():
