@@ -148,7 +148,7 @@ def test_realtime_stale_commands_and_sigterm_summary():
 
 def test_realtime_applies_newest_command():
     client = HilClient()
-    proc = start_sim(client.port, "--speedup", "10", "--duration", "3")
+    proc = start_sim(client.port, "--speedup", "5", "--duration", "3")
     try:
         for _ in range(100_000):  # bounded: 301 frames expected, idle polls end when the process has
             frame = client.next_frame(timeout=0.2)
@@ -161,7 +161,10 @@ def test_realtime_applies_newest_command():
     finally:
         stop_process(proc)
         client.close()
-    assert summary["commands_received"] > 250 and summary["final_state"]["u"] > 1.0
+    # How many commands land before each tick depends on scheduling; that full thrust was applied
+    # does not: from rest, 3 s of full thrust gives u ~ 2.3 m/s, coasting gives 0.
+    assert 0 < summary["commands_received"] <= summary["steps"]
+    assert summary["final_state"]["u"] > 1.0
 
 
 def test_sim_cli_errors_are_one_line(hil):
