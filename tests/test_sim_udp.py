@@ -184,3 +184,32 @@ def test_hil_run_lockstep_demo(hil):
     assert s["distance_travelled_m"] > 5.0 and 0 < s["final_speed_m_s"] < 3.1
     r2 = hil("run", "--duration", "10", "--json", timeout=120)
     assert json.loads(r2.stdout)["final_position"] == s["final_position"]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_hil_run_signal_stops_the_simulator_subprocess(sig):
+    import select
+    import time
+    proc = subprocess.Popen([sys.executable, "-m", "hil", "run", "--duration", "1000", "--speedup", "1"],
+                            cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    sim_pid, lines = None, []
+    try:
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:  # wait (bounded) until the simulator runs its loop
+            ready, _, _ = select.select([proc.stderr], [], [], 1.0)
+            if not ready:
+                continue
+            line = proc.stderr.readline()
+            lines.append(line)
+            if line.startswith("run: simulator pid"):
+                sim_pid = int(line.split()[3].rstrip(","))
+            if line.startswith("sim: commands on"):
+                break
+        assert sim_pid is not None, lines
+        proc.send_signal(sig)
+        proc.wait(timeout=30)
+    finally:
+        stop_process(proc)
+    assert proc.returncode == 130
+    with pytest.raises(ProcessLookupError):
+        os.kill(sim_pid, 0)  # reaped by `hil run`: no orphan

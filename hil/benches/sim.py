@@ -6,7 +6,7 @@ import argparse
 import subprocess
 import time
 
-from hil.commands.run import HilClient, sim_command, stop_process
+from hil.commands.run import HilClient, sim_command, start_simulator, stop_process
 from hil.console import emit, load_settings, progress
 from hil.errors import RunFailed
 from simulator.core import SimulatorCore
@@ -63,8 +63,8 @@ def bench_lockstep(args: argparse.Namespace, cfg, n: int) -> dict:
     """Lockstep steps/s measured by the controller between the first and the last frame."""
     args.duration = n * (1.0 / cfg.sensors.imu.rate_hz)
     client = HilClient()
-    proc = subprocess.Popen(sim_command(args, client.port, lockstep=True),
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = start_simulator(sim_command(args, client.port, lockstep=True),
+                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         first = client.next_frame(timeout=30.0)
         if first is None or first.time_usec is None:

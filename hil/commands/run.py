@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import signal
 import subprocess
 import sys
 import time
@@ -92,6 +93,28 @@ def sim_command(args: argparse.Namespace, client_port: int, lockstep: bool) -> l
     return cmd
 
 
+def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
+    """Linux: the simulator gets SIGTERM if this process dies without cleaning up (e.g. SIGKILL)."""
+    try:
+        import ctypes
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # 1 = PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def start_simulator(cmd: list[str], **kwargs: Any) -> subprocess.Popen:
+    """Start the simulator subprocess; it is stopped if this process dies."""
+    return subprocess.Popen(cmd, preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None, **kwargs)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM received: unwind like Ctrl-C so that `finally` blocks stop the simulator."""
+
+
+def _raise_terminated(signum: int, frame: Any) -> None:
+    raise Terminated()
+
+
 def stop_process(proc: subprocess.Popen, timeout: float = 5.0) -> None:
     """SIGTERM, then SIGKILL if it has not ended within ``timeout`` seconds."""
     if proc.poll() is None:
@@ -129,10 +152,18 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--duration: must be > 0 seconds")
     if args.speedup is not None and not args.speedup > 0:
         raise ConfigError("--speedup: must be > 0")
-    cfg = load_settings(args)  # fail here, with one line, on a bad configuration
+    load_settings(args)  # fail here, with one line, on a bad configuration
     lockstep = args.speedup is None
     client = HilClient(component_id=191)
-    proc = subprocess.Popen(sim_command(args, client.port, lockstep), stdout=subprocess.PIPE, text=True)
+    previous_term = signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        return _run_loop(args, client, lockstep)
+    finally:
+        signal.signal(signal.SIGTERM, previous_term)
+
+
+def _run_loop(args: argparse.Namespace, client: "HilClient", lockstep: bool) -> int:
+    proc = start_simulator(sim_command(args, client.port, lockstep), stdout=subprocess.PIPE, text=True)
     start = time.monotonic()
     end_usec = int(round(args.duration * 1e6))
     last_truth = None
@@ -188,6 +219,5 @@ def run(args: argparse.Namespace) -> int:
         "last_truth_time_s": (last_truth.time_usec / 1e6) if last_truth is not None else None,
         "simulator": sim,
     }
-    _ = cfg
     emit(args, summary)
     return 0

@@ -95,5 +95,8 @@ def run(args: argparse.Namespace) -> int:
             signal.signal(sig, handler)
         endpoint.close()
     summary["commands_on"] = f"{host}:{port}"
-    emit(args, summary)
+    try:
+        emit(args, summary)
+    except BrokenPipeError:  # the reader (e.g. a killed `hil run`) is gone: nothing left to tell
+        pass
     return 0
