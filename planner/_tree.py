@@ -473,29 +473,28 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
             else:
                 nx = sx
                 ny = sy
-            if not _fan_ok(head[q0], nx - X[q0, 0], ny - X[q0, 1], max_turn):
-                continue
-            if not _free(occ, fc, st, X[q0, 0], X[q0, 1], nx, ny):
-                continue
             radius = step
             if n > 1:
                 radius = min(step, fc[C_RGAMMA] * math.sqrt(math.log(n) / n))
             nn = _near(nx, ny, radius, X, fc, ic, bucket_head, node_next, near_i)
-            c0 = cost[q0] + _cost(X[q0, 0], X[q0, 1], nx, ny, fc, ic, fvx, fvy)
-            # choose-parent: candidates cheaper than the nearest, in ascending cost order
+            # choose-parent over the near ball and the nearest node, in ascending cost order; the
+            # nearest is not required to be valid itself (with the fan limit it often is not)
             nc = 0
+            has_q0 = False
             for a in range(nn):
                 j = near_i[a]
                 if j == q0:
-                    continue
-                c = cost[j] + _cost(X[j, 0], X[j, 1], nx, ny, fc, ic, fvx, fvy)
-                if c < c0 - 1e-12:
-                    near_i[nc] = j
-                    near_c[nc] = c
-                    nc += 1
+                    has_q0 = True
+                near_i[nc] = j
+                near_c[nc] = cost[j] + _cost(X[j, 0], X[j, 1], nx, ny, fc, ic, fvx, fvy)
+                nc += 1
+            if not has_q0 and nc < NEAR_CAP:
+                near_i[nc] = q0
+                near_c[nc] = cost[q0] + _cost(X[q0, 0], X[q0, 1], nx, ny, fc, ic, fvx, fvy)
+                nc += 1
             _sort_by(near_c, near_i, nc)
-            p = q0
-            pc = c0
+            p = -1
+            pc = 0.0
             for a in range(nc):
                 j = near_i[a]
                 if _fan_ok(head[j], nx - X[j, 0], ny - X[j, 1], max_turn) and _free(
@@ -503,6 +502,8 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                     p = j
                     pc = near_c[a]
                     break
+            if p < 0:
+                continue
             new = _add_node(nx, ny, p, pc, X, parent, cost, head, dd, first_child, next_sib, fc, ic,
                             bucket_head, node_next, st)
             # rewire: the near set again (the buffer was reordered above)
