@@ -8,6 +8,7 @@ treated as an obstacle.
 from __future__ import annotations
 
 import math
+import numbers
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +32,8 @@ class OccupancyGrid:
             if not np.issubdtype(occ.dtype, np.integer) or not np.isin(occ, (0, 1)).all():
                 raise MapError(f"map must be boolean (True = obstacle) or 0/1 integers, got {occ.dtype}")
             occ = occ.astype(bool)
-        if not (isinstance(resolution, (int, float)) and math.isfinite(resolution) and resolution > 0):
+        if isinstance(resolution, bool) or not (isinstance(resolution, numbers.Real) and math.isfinite(resolution)
+                                                and resolution > 0):
             raise MapError(f"map resolution must be a finite number > 0 m/cell, got {resolution!r}")
         self.occ = np.ascontiguousarray(occ)
         self.resolution = float(resolution)
@@ -58,13 +60,9 @@ class OccupancyGrid:
                 img = mpimg.imread(p)
             except (ValueError, OSError, SyntaxError) as exc:
                 raise MapError(f"{p}: not a readable PNG: {exc}") from None
-            img = np.asarray(img, dtype=np.float64)
-            if img.dtype.kind in "ui":
-                img = img / np.iinfo(img.dtype).max
+            img = np.asarray(img, dtype=np.float64)  # matplotlib scales PNG samples to [0, 1]
             if img.ndim == 3:
                 img = img[..., :3].mean(axis=2) if img.shape[2] >= 3 else img[..., 0]
-            if img.max() > 1.0:
-                img = img / 255.0
             occ = np.flipud(img < 0.5)
         else:
             raise MapError(f"{p}: unsupported map format {suffix or '(none)'} (use .npy or .png)")
