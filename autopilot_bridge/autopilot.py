@@ -38,7 +38,7 @@ from autopilot_bridge.control import (
     Thrust,
     allocate,
 )
-from autopilot_bridge.guidance import LineOfSight
+from autopilot_bridge.guidance import GuidanceOutput, LineOfSight
 from autopilot_bridge.hil_link import HilLink, SensorFrame
 from autopilot_bridge.local_planning import CycleInput, LocalPlan, World, map_to_ned_path, ned_to_map
 from autopilot_bridge.navigation import NavigationFilter, NavigationParams, NavState
@@ -240,23 +240,20 @@ class Autopilot:
                     if self.mode != PLANNED:
                         self._event(t, f"following local path (cycle {plan.cycle}, {plan.status})")
                     self.mode = PLANNED
-                elif self.los is None or self._path_done(s):
+                elif self.los is None:
                     self._to_fallback(t, f"no valid local path ({plan.reason or plan.status})")
             if self.pending_since is None and t + 1e-9 >= self.next_plan_t:
                 self.next_plan_t = t + self.p.planning_period
                 self._submit_plan(s)
-            if self.mode == PLANNED and self._path_done(s):
+            guidance = self.los.update(s.x, s.y) if (self.mode == PLANNED and self.los is not None) else None
+            if guidance is not None and guidance.finished and \
+                    math.hypot(self.goal_ned[0] - s.x, self.goal_ned[1] - s.y) > self.p.goal_tolerance:
                 self._to_fallback(t, "local path finished before a new one arrived")
-            cmd = self._control(s, dt)
+                guidance = None
+            cmd = self._control(s, dt, guidance)
         self._send(f.time_usec, cmd, received_at)
         if self.telemetry is not None:
             self.telemetry.on_frame(t, s, self.mode, cmd)
-
-    def _path_done(self, s: NavState) -> bool:
-        if self.los is None:
-            return True
-        g = self.los.update(s.x, s.y)
-        return g.finished and math.hypot(self.goal_ned[0] - s.x, self.goal_ned[1] - s.y) > self.p.goal_tolerance
 
     def _to_fallback(self, t: float, why: str) -> None:
         if self.mode != FALLBACK:
@@ -265,9 +262,8 @@ class Autopilot:
         self.mode = FALLBACK
         self.los = None
 
-    def _control(self, s: NavState, dt: float) -> Thrust:
-        if self.mode == PLANNED and self.los is not None:
-            g = self.los.update(s.x, s.y)
+    def _control(self, s: NavState, dt: float, g: GuidanceOutput | None) -> Thrust:
+        if g is not None and self.los is not None:
             psi_ref, u_ref = g.heading, self.p.cruise_speed
             if g.remaining < 2.0 * self.p.lookahead and self.los.path[-1].tolist() == list(self.goal_ned):
                 u_ref = max(0.5, self.p.cruise_speed * g.remaining / (2.0 * self.p.lookahead))

@@ -52,15 +52,14 @@ class LineOfSight:
     def update(self, north: float, east: float) -> GuidanceOutput:
         """Desired heading for the vessel at (north, east)."""
         p = np.array([north, east])
-        best = (math.inf, self.index, 0.0)
         # Search a window ahead of the last progress only, so the vessel never skips back.
-        for i in range(self.index, min(self.index + 50, len(self.seg))):
-            a, d, ln = self.path[i], self.seg[i], self.seg_len[i]
-            s = float(np.clip(np.dot(p - a, d) / (ln * ln), 0.0, 1.0))
-            dist = float(np.hypot(*(a + s * d - p)))
-            if dist < best[0] - 1e-9:
-                best = (dist, i, s)
-        _, i, s = best
+        lo, hi = self.index, min(self.index + 50, len(self.seg))
+        a, d, ln = self.path[lo:hi], self.seg[lo:hi], self.seg_len[lo:hi]
+        s_all = np.clip(np.einsum("ij,ij->i", p - a, d) / (ln * ln), 0.0, 1.0)
+        gap = a + s_all[:, None] * d - p
+        dist = np.einsum("ij,ij->i", gap, gap)
+        k = int(np.argmin(dist))  # the first of equally close segments: progress is monotone
+        i, s = lo + k, float(s_all[k])
         self.index = i
         d = self.seg[i]
         pi_p = math.atan2(d[1], d[0])

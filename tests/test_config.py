@@ -81,7 +81,7 @@ def test_unknown_section_is_rejected(tmp_path):
 
 def test_missing_key_is_rejected(tmp_path):
     text = _default_text()
-    p = _write(tmp_path, text.replace("d_r = 43.16", "", 1))
+    p = _write(tmp_path, text.replace("d_r = 100.0", "", 1))
     with pytest.raises(ConfigError, match=r"vessel\.d_r: missing key"):
         settings.load(p)
 
