@@ -42,32 +42,38 @@ def pg_node(usv_pos, usv_heading, target_pos, target_heading, s_t, nav_ratio=3.0
     dq = sign * _acos((c_k * c_k + r * r - s_t * s_t) / (2.0 * c_k * r)) if c_k > 1e-12 else 0.0
     # beta_k: angle at P_{k-1} between P_{k-1}U_{k-1} and the target's motion (eq. (7) line 4)
     beta = _acos((s_t * s_t + r * r - c_k * c_k) / (2.0 * s_t * r))
-    theta = usv_heading
     for _ in range(int(max_iter)):
         theta = usv_heading + nav_ratio * dq              # eq. (7) line 2
         alpha = _wrap(theta - q0)                        # eq. (7) line 3 (signed)
         a = abs(alpha)
         # the triangle U_{k-1} P_{k-1} C exists only if the vessel's ray meets the target's ray
         det = math.sin(theta - target_heading)
-        if abs(det) < 1e-12:
-            break
-        ray_u = (-(px - ux) * math.sin(target_heading) + (py - uy) * math.cos(target_heading)) / det
-        ray_p = (math.cos(theta) * (py - uy) - math.sin(theta) * (px - ux)) / det
-        if ray_u <= 0.0 or ray_p < 0.0 or a + beta >= math.pi - 1e-12:
-            break
-        sab = math.sin(a + beta)
-        c1 = r * math.sin(beta) / sab                    # |U_{k-1} C|
-        c2 = r * math.sin(a) / sab                       # |P_{k-1} C|
-        uc = c1 - u_t
-        sc = c2 - s_t
-        c3 = math.sqrt(max(uc * uc + sc * sc + 2.0 * uc * sc * math.cos(a + beta), 0.0))
-        if abs(uc) < 1e-12 or c3 < 1e-12:
-            break
-        # eq. (8): the corrected sight-line increment
-        new_dq = math.copysign(a - _acos((uc * uc + c3 * c3 - sc * sc) / (2.0 * uc * c3)), alpha)
+        triangle = abs(det) > 1e-12 and a + beta < math.pi - 1e-12
+        if triangle:
+            ray_u = (-(px - ux) * math.sin(target_heading) + (py - uy) * math.cos(target_heading)) / det
+            ray_p = (math.cos(theta) * (py - uy) - math.sin(theta) * (px - ux)) / det
+            triangle = ray_u > 0.0 and ray_p >= 0.0
+        uc = sc = c3 = 0.0
+        if triangle:
+            sab = math.sin(a + beta)
+            c1 = r * math.sin(beta) / sab                # |U_{k-1} C|
+            c2 = r * math.sin(a) / sab                   # |P_{k-1} C|
+            uc = c1 - u_t
+            sc = c2 - s_t
+            c3 = math.sqrt(max(uc * uc + sc * sc + 2.0 * uc * sc * math.cos(a + beta), 0.0))
+        if triangle and uc > 1e-12 and sc >= 0.0 and c3 > 1e-12:
+            # eq. (8): the corrected sight-line increment
+            phi = _acos((uc * uc + c3 * c3 - sc * sc) / (2.0 * uc * c3))  # angle at U_k, C to P_k
+            new_dq = (a - phi) if alpha >= 0.0 else (phi - a)
+        else:
+            # no triangle (the rays do not meet, or U_k / P_k is already past C): the same
+            # sight-line increment measured directly between U_k P_k and U_{k-1} P_{k-1}
+            ukx = ux + u_t * math.cos(theta)
+            uky = uy + u_t * math.sin(theta)
+            new_dq = _wrap(math.atan2(p1y - uky, p1x - ukx) - q0)
         converged = abs(new_dq - dq) < tol
         dq = new_dq
         if converged:
-            theta = usv_heading + nav_ratio * dq
             break
+    theta = usv_heading + nav_ratio * dq
     return ux + u_t * math.cos(theta), uy + u_t * math.sin(theta)

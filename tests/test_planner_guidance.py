@@ -83,3 +83,28 @@ def test_png_mirror_symmetry():
     b = pg_node((0.0, 0.0), 0.0, (10.0, 0.0), -math.pi / 2, 1.0)
     assert a[0] == pytest.approx(b[0]) and a[1] == pytest.approx(-b[1])
     assert math.hypot(*a) == pytest.approx(2.0)
+
+
+def test_png_fixed_point_on_random_geometries():
+    """At convergence the heading change is N times the true sight-line rotation between
+    U_{k-1} P_{k-1} and U_k P_k (what eqs. (7)-(8) iterate towards)."""
+    rng = np.random.default_rng(11)
+    checked = 0
+    for _ in range(200):
+        u = rng.uniform(-5, 5, 2)
+        heading = rng.uniform(-math.pi, math.pi)
+        rng_dist = rng.uniform(20, 40)
+        bearing = heading + rng.uniform(-0.6, 0.6)
+        p = u + rng_dist * np.array([math.cos(bearing), math.sin(bearing)])
+        t_head = rng.uniform(-math.pi, math.pi)
+        s_t = rng.uniform(0.5, 2.0)
+        node = np.array(pg_node(u, heading, p, t_head, s_t, nav_ratio=3.0, tol=1e-12, max_iter=500))
+        assert np.hypot(*(node - u)) == pytest.approx(2 * s_t)
+        dq = ((math.atan2(*(node - u)[::-1]) - heading + math.pi) % (2 * math.pi) - math.pi) / 3.0
+        p1 = p + s_t * np.array([math.cos(t_head), math.sin(t_head)])
+        q0 = math.atan2(*(p - u)[::-1])
+        true = (math.atan2(*(p1 - node)[::-1]) - q0 + math.pi) % (2 * math.pi) - math.pi
+        if abs(3 * true) < math.pi / 2:  # heading changes beyond 90 deg leave the triangle case
+            assert dq == pytest.approx(true, abs=1e-6)
+            checked += 1
+    assert checked > 100
