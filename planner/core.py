@@ -206,9 +206,9 @@ class TreePlanner:
                 why = f"tree full (max_nodes = {cap})"
                 break
         termination.notify(int(st[_tree.S_ITER]), bool(st[_tree.S_GOAL] >= 0))
-        return self._result(problem, t0, X, parent, cost, st, fs, why)
+        return self._result(problem, t0, X, parent, cost, st, fs, why, dd)
 
-    def _result(self, problem, t0, X, parent, cost, st, fs, why) -> PlannerResult:
+    def _result(self, problem, t0, X, parent, cost, st, fs, why, dd) -> PlannerResult:
         n = int(st[_tree.S_N])
         goal = int(st[_tree.S_GOAL])
         if goal >= 0:
@@ -240,5 +240,7 @@ class TreePlanner:
             tree_nodes=X[:n].copy(), tree_parents=parent[:n].copy(), samples_rejected=int(st[_tree.S_REJ]),
             diagnostics={"collision_checks": int(st[_tree.S_CHECKS]), "tree_cost": float(cost[end]) if status != "none" else math.inf,
                          "first_solution_iteration": int(st[_tree.S_FIRST_ITER]) if goal >= 0 else None,
-                         "algorithm": self.name},
+                         "algorithm": self.name,
+                         "dynamic_domains": int(np.sum(np.isfinite(dd[:n]))),  # DDRRT* nodes with DD = DR
+                         },
         )

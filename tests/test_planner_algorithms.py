@@ -216,3 +216,12 @@ def test_perceptual_domain_limits_the_tree():
         Termination.iterations(3000))
     d = np.hypot(res.tree_nodes[:, 0] - 50.0, res.tree_nodes[:, 1] - 50.0)
     assert d.max() <= 33.0 + 1e-9
+
+
+def test_ddrrt_sets_dynamic_domains_after_failed_extensions():
+    grid = wall_map()
+    prob = PlanningProblem(grid, (10.0, 30.0), (50.0, 30.0))
+    dd = make_planner("ddrrt-star", PlannerParams(algorithm="ddrrt-star")).solve(prob, Termination.iterations(3000))
+    rrt = make_planner("rrt-star", PlannerParams(algorithm="rrt-star")).solve(prob, Termination.iterations(3000))
+    assert dd.diagnostics["dynamic_domains"] > 0  # nodes whose extension hit the wall
+    assert rrt.diagnostics["dynamic_domains"] == 0
