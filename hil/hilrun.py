@@ -32,6 +32,7 @@ from scipy import ndimage
 from common.geodesy import LocalFrame
 from common.mavlink import Codec
 from common.udp import UdpEndpoint
+from hil import processes
 from hil import scenario as scenarios
 from hil.errors import UsageError
 
@@ -204,7 +205,7 @@ class HilRun:
 
     def _spawn(self, cmd: list[str], name: str) -> subprocess.Popen:
         log = open(self.out / f"{name}.log", "ab")
-        return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, cwd=REPO, start_new_session=True)
+        return processes.start(cmd, stdout=subprocess.PIPE, stderr=log, cwd=REPO, start_new_session=True)
 
     def start(self) -> None:
         # The autopilot first, so that it is listening when the simulator's first frame comes.

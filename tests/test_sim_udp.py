@@ -176,13 +176,13 @@ def test_sim_cli_errors_are_one_line(hil):
 
 
 def test_hil_run_lockstep_demo(hil):
-    r = hil("run", "--duration", "10", "--json", timeout=120)
+    r = hil("run", "--demo", "--duration", "10", "--json", timeout=120)
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
     assert s["mode"] == "lockstep" and s["sim_time_s"] == 10.0
     assert s["messages"]["commands_sent"] == 1000 == s["messages"]["simulator_commands_received"]
     assert s["distance_travelled_m"] > 5.0 and 0 < s["final_speed_m_s"] < 3.1
-    r2 = hil("run", "--duration", "10", "--json", timeout=120)
+    r2 = hil("run", "--demo", "--duration", "10", "--json", timeout=120)
     assert json.loads(r2.stdout)["final_position"] == s["final_position"]
 
 
@@ -190,7 +190,7 @@ def test_hil_run_lockstep_demo(hil):
 def test_hil_run_signal_stops_the_simulator_subprocess(sig):
     import select
     import time
-    proc = subprocess.Popen([sys.executable, "-m", "hil", "run", "--duration", "1000", "--speedup", "1"],
+    proc = subprocess.Popen([sys.executable, "-m", "hil", "run", "--demo", "--duration", "1000", "--speedup", "1"],
                             cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     sim_pid, lines = None, []
     try:

@@ -1,8 +1,12 @@
-"""`hil run`: the simulator in its own OS process, driven over loopback UDP by a demo controller.
+"""`hil run`: the whole HIL loop, or (``--demo``) the simulator under a constant-thrust controller.
 
-For now the vessel computer is a built-in constant-thrust controller (a steady turn) running in
-this process and speaking MAVLink like the autopilot will: it answers every sensor frame with one
-HIL_ACTUATOR_CONTROLS carrying the frame's ``time_usec``. A later issue replaces it.
+The loop (:mod:`hil.hilrun`): the simulator and the autopilot bridge as two OS processes linked
+only by UDP/MAVLink, on a scenario, until the goal is reached or the time is up; it writes a run
+folder (``run.tlog``, ``summary.json``, ``plot.png``).
+
+The demo: the simulator in its own OS process, driven over loopback UDP by a built-in
+constant-thrust controller (a steady turn) in this process, which answers every sensor frame with
+one HIL_ACTUATOR_CONTROLS carrying the frame's ``time_usec``.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from typing import Any
 
 from common.mavlink import Codec
 from common.udp import UdpEndpoint
+from hil import processes
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, RunFailed
 
@@ -93,18 +98,9 @@ def sim_command(args: argparse.Namespace, client_port: int, lockstep: bool) -> l
     return cmd
 
 
-def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
-    """Linux: the simulator gets SIGTERM if this process dies without cleaning up (e.g. SIGKILL)."""
-    try:
-        import ctypes
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # 1 = PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass
-
-
 def start_simulator(cmd: list[str], **kwargs: Any) -> subprocess.Popen:
     """Start the simulator subprocess; it is stopped if this process dies."""
-    return subprocess.Popen(cmd, preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None, **kwargs)
+    return processes.start(cmd, **kwargs)
 
 
 class Terminated(KeyboardInterrupt):
@@ -115,51 +111,84 @@ def _raise_terminated(signum: int, frame: Any) -> None:
     raise Terminated()
 
 
-def stop_process(proc: subprocess.Popen, timeout: float = 5.0) -> None:
-    """SIGTERM, then SIGKILL if it has not ended within ``timeout`` seconds."""
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout)
+stop_process = processes.stop
 
 
 def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "run", parents=parents,
-        help="run the simulator (separate process) in a closed loop with the vessel computer",
-        description="Start the simulator as a separate process (hil sim) and close the loop over "
-                    "loopback UDP/MAVLink. For now the vessel computer is a built-in demo controller "
-                    f"holding constant thrust (port {DEMO_CONTROLS[0]}, starboard {DEMO_CONTROLS[1]}: "
-                    "a steady starboard turn). Prints distance travelled, final position, heading and "
-                    "speed, messages exchanged and wall time.",
+        help="run the HIL loop: simulator and autopilot as two processes over UDP/MAVLink",
+        description="Start the simulator (hil sim) and the vessel computer (hil autopilot) as two separate "
+                    "OS processes linked only by loopback UDP/MAVLink, on a scenario, until the vessel "
+                    "reaches the final goal (judged from the simulator's truth) or --duration simulated "
+                    "seconds pass. Writes a run folder with the MAVLink traffic (run.tlog, readable by "
+                    "pymavlink's mavlogdump), summary.json, the processes' logs and plot.png, and prints "
+                    "the summary: goal reached, collisions, minimum clearance, simulated and wall time, "
+                    "path length, energy, planning cycles, deadline overruns, worker restarts, fallback "
+                    "activations, navigation RMSE, control-loop latency. Exit 0 only when the goal was "
+                    "reached without collision. With --demo, a constant-thrust controller replaces the "
+                    "autopilot (a steady starboard turn).",
     )
-    p.add_argument("--duration", metavar="SECONDS", type=float, default=60.0,
-                   help="simulated seconds to run (default: 60)")
+    p.add_argument("--scenario", default="harbour",
+                   help="configs/scenarios/NAME.toml: map, start, goal, reference path, current (default: harbour)")
+    p.add_argument("--duration", metavar="SECONDS", type=float, default=None,
+                   help="simulated seconds at most (default: 300; --demo: 60)")
     p.add_argument("--seed", type=int, default=None, help="seed of every random process (default: sim.seed)")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--lockstep", dest="speedup", action="store_const", const=None,
-                      help="advance the simulator one IMU period per command (the default)")
+                      help="advance the simulator one IMU period per command: repeatable runs (the default)")
     mode.add_argument("--speedup", metavar="N", type=float, default=None,
                       help="real-time mode instead: N simulated seconds per wall second")
+    p.add_argument("--algorithm", choices=("rrt-star", "informed-rrt-star", "ddrrt-star"), default=None,
+                   help="local planner (default: planner.algorithm = ddrrt-star)")
+    p.add_argument("--out", metavar="DIR", default=None,
+                   help="run folder (default: runs/SCENARIO-seedN-YYYYmmdd-HHMMSS)")
+    p.add_argument("--no-plot", action="store_true", help="do not draw plot.png")
+    p.add_argument("--demo", action="store_true",
+                   help=f"constant-thrust demo controller (port {DEMO_CONTROLS[0]}, starboard {DEMO_CONTROLS[1]}) "
+                        "instead of the autopilot; prints distance, final state, messages, wall time")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.duration is None:
+        args.duration = 60.0 if args.demo else 300.0
     if not args.duration > 0:
         raise ConfigError("--duration: must be > 0 seconds")
     if args.speedup is not None and not args.speedup > 0:
         raise ConfigError("--speedup: must be > 0")
-    load_settings(args)  # fail here, with one line, on a bad configuration
-    lockstep = args.speedup is None
-    client = HilClient(component_id=191)
+    cfg = load_settings(args)  # fail here, with one line, on a bad configuration
     previous_term = signal.signal(signal.SIGTERM, _raise_terminated)
     try:
-        return _run_loop(args, client, lockstep)
+        if args.demo:
+            client = HilClient(component_id=191)
+            return _run_loop(args, client, args.speedup is None)
+        return _run_hil(args, cfg)
     finally:
         signal.signal(signal.SIGTERM, previous_term)
+
+
+def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
+    from pathlib import Path
+
+    from hil.hilrun import REPO, RunOptions, run_loop
+
+    seed = cfg.sim.seed if args.seed is None else args.seed
+    out = Path(args.out) if args.out else REPO / "runs" / f"{args.scenario}-seed{seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+    overrides = list(args.overrides)
+    if args.algorithm:
+        overrides.append(f"planner.algorithm={json.dumps(args.algorithm)}")
+    opts = RunOptions(scenario=args.scenario, lockstep=args.speedup is None, speedup=args.speedup or 1.0,
+                      duration=args.duration, seed=seed, config=args.config, overrides=overrides, out=out,
+                      on_progress=progress, plot=not args.no_plot)
+    progress(f"run: scenario {args.scenario}, {'lockstep' if opts.lockstep else f'real time x{opts.speedup:g}'}, "
+             f"seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
+    summary = run_loop(opts, cfg)
+    emit(args, summary)
+    if not args.json:
+        progress(f"run: {'goal reached' if summary['reached_goal'] else summary['outcome']}; "
+                 f"plot: {summary.get('plot', 'none')}; folder: {out}")
+    return 0 if summary["reached_goal"] else 1
 
 
 def _run_loop(args: argparse.Namespace, client: "HilClient", lockstep: bool) -> int:
