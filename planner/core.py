@@ -14,6 +14,7 @@ with ValueError: every solve is bounded by an iteration count or a deadline.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -31,6 +32,24 @@ from planner.termination import Termination
 
 FIELD_SAMPLE_RESOLUTION = 1.0  # m; a callable current is sampled this finely for the compiled core
 _BIG = 1 << 62
+
+
+_CLOCK_OK: bool | None = None
+
+
+def compiled_clock_ok() -> bool:
+    """True if the compiled core's CLOCK_MONOTONIC (Linux clock id 1) is time.monotonic's clock;
+    otherwise deadlines are polled from Python after every iteration (same one-iteration bound)."""
+    global _CLOCK_OK
+    if _CLOCK_OK is None:
+        from planner._kernels import monotonic_ns
+
+        buf = np.zeros(2, dtype=np.int64)
+        a = time.monotonic_ns()
+        b = monotonic_ns(buf)
+        c = time.monotonic_ns()
+        _CLOCK_OK = bool(a - 5_000_000 <= b <= c + 5_000_000)
+    return _CLOCK_OK
 
 
 def _none(reason: str, t0: float, start=None) -> PlannerResult:
@@ -184,6 +203,9 @@ class TreePlanner:
 
         bounds = termination.bounds()
         deadline_ns = -1 if bounds.monotonic_deadline is None else int(bounds.monotonic_deadline * 1e9)
+        if deadline_ns >= 0 and not compiled_clock_ok():
+            deadline_ns = -1
+            bounds = dataclasses.replace(bounds, poll_python=True)
         occ = grid._u8
         _tree.seed_rng(self.seed)
         why = "termination condition met"
