@@ -225,3 +225,14 @@ def test_ddrrt_sets_dynamic_domains_after_failed_extensions():
     rrt = make_planner("rrt-star", PlannerParams(algorithm="rrt-star")).solve(prob, Termination.iterations(3000))
     assert dd.diagnostics["dynamic_domains"] > 0  # nodes whose extension hit the wall
     assert rrt.diagnostics["dynamic_domains"] == 0
+
+
+def test_deadline_fallback_when_the_compiled_clock_is_unusable(monkeypatch):
+    import planner.core as core
+
+    monkeypatch.setattr(core, "_CLOCK_OK", False)
+    t0 = time.monotonic()
+    res = make_planner("rrt-star", PlannerParams()).solve(
+        PlanningProblem(wall_map(), (10.0, 30.0), (50.0, 30.0)), Termination.deadline(0.1))
+    assert res.iterations > 10
+    assert time.monotonic() - t0 < 0.1 + 0.25
