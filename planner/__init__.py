@@ -37,5 +37,12 @@ def make_planner(name: str, params: PlannerParams, seed: int | None = None) -> P
     raise ValueError(f"unknown planner {name!r} (expected one of: {', '.join(ALGORITHMS)})")
 
 
-__all__ = ["ALGORITHMS", "Planner", "PlannerParams", "PlannerResult", "PlanningProblem", "Termination",
+def warm_up() -> float:
+    """Load or compile the numba core before time-critical use; returns the seconds spent."""
+    from planner.core import warm_up as _warm_up
+
+    return _warm_up()
+
+
+__all__ = ["warm_up", "ALGORITHMS", "Planner", "PlannerParams", "PlannerResult", "PlanningProblem", "Termination",
            "make_planner"]
