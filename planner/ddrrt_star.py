@@ -10,9 +10,9 @@ way sets DD(q_i) = DR = 10 v sigma_t (the dynamic domain; DD starts at infinity)
 
 The PGNode comes from :func:`planner.png.pg_node`: the virtual target is the reference waypoint
 nearest the start, moving along the reference path; the USV covers twice the target's distance
-per step, and the step is chosen so that the USV covers the reference arc length from that
-waypoint to the goal (s_t = arc / 2). Without a reference path the straight start-goal line is
-the reference.
+per step, and the step is chosen so that the USV covers its straight-line distance to the goal
+(s_t = |goal - start| / 2): the PGNode is never farther than the (sub)goal. Without a reference
+path the straight start-goal line is the reference.
 """
 
 from __future__ import annotations
@@ -53,7 +53,10 @@ class DDRRTStar(TreePlanner):
         if heading is None:
             heading = math.atan2(ref[j, 1] - sy, ref[j, 0] - sx) if math.hypot(ref[j, 0] - sx, ref[j, 1] - sy) > 1e-9 else t_head
         p = self.params
-        x, y = pg_node((sx, sy), heading, ref[j], t_head, 0.5 * arc, p.png_nav_ratio, p.png_tolerance,
+        # the USV (twice the target's speed) covers its straight-line distance to the goal in one
+        # guidance step: the PGNode is never farther away than the (sub)goal
+        s_t = 0.5 * min(arc, math.hypot(gx - sx, gy - sy))
+        x, y = pg_node((sx, sy), heading, ref[j], t_head, s_t, p.png_nav_ratio, p.png_tolerance,
                        p.png_max_iterations)
         bx0, bx1, by0, by1 = problem.sampling_box()
         return min(max(x, bx0), bx1), min(max(y, by0), by1)

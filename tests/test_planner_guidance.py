@@ -108,3 +108,21 @@ def test_png_fixed_point_on_random_geometries():
             assert dq == pytest.approx(true, abs=1e-6)
             checked += 1
     assert checked > 100
+
+
+def test_ddrrt_png_node_is_no_farther_than_the_subgoal_and_in_the_domain():
+    from planner import PlannerParams, PlanningProblem
+    from planner.ddrrt_star import DDRRTStar
+    from planner.gridmap import OccupancyGrid
+
+    grid = OccupancyGrid(np.zeros((200, 200), bool), 0.5)
+    ref = np.array([[10.0, 10.0], [40.0, 10.0], [40.0, 60.0], [90.0, 60.0]])
+    for pos, heading in (((10.0, 12.0), 0.0), ((35.0, 12.0), 1.0), ((42.0, 30.0), 1.6)):
+        sg = select_subgoal(ref, pos, 33.0)
+        prob = PlanningProblem(grid, pos, sg.point, start_heading=heading, reference_path=ref,
+                               domain_center=pos, domain_radius=33.0)
+        node = DDRRTStar(PlannerParams()).png_node(prob)
+        d_goal = math.hypot(sg.point[0] - pos[0], sg.point[1] - pos[1])
+        assert math.hypot(node[0] - pos[0], node[1] - pos[1]) <= d_goal + 1e-9
+        x0, x1, y0, y1 = prob.sampling_box()
+        assert x0 <= node[0] <= x1 and y0 <= node[1] <= y1
