@@ -14,7 +14,7 @@ import math
 import os
 import signal
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
@@ -50,6 +50,7 @@ class Task:
     online_overrides: tuple[tuple[str, Any], ...] = ()
     config: str | None = None
     config_overrides: tuple[str, ...] = ()
+    objective: str | None = None  # override of [planner] objective for this algorithm
     detail: bool = False          # return cycles (trees, local paths) for Figure 10
     path: bool = False            # return the executed path for Figure 11
 
@@ -101,13 +102,15 @@ def _context(task: Task, sc):
     params = scenarios.planner_params(scenarios.base_planner_params(cfg), sc.planner_overrides, f"scenario {sc.name}")
     online = scenarios.online_params(dict(sc.online_overrides), f"scenario {sc.name}")
     online = scenarios.online_params(dict(task.online_overrides), "command line", base=online)
+    if task.objective is not None:
+        params = replace(params, objective=task.objective)
     key = ("ctx", task.scenario, task.config, task.config_overrides, task.online_overrides)
     fixed = scenarios.load_spec(task.scenario).kind == "fixed"
     if fixed and key in _CACHE:
         base = _CACHE[key]
     else:
         from planner.online import OnlineContext
-        field_ = sc.planning_field() if params.objective == "current" else None
+        field_ = sc.planning_field()    # also needed for the metrics when a planner ignores it
         base = OnlineContext(grid=OccupancyGrid(sc.occ, sc.resolution), goal=sc.goal,
                              reference_path=sc.reference_path, params=params, online=online, field=field_)
         if fixed:
@@ -343,9 +346,14 @@ class Campaign:
 
 
 def make_tasks(scenario: str, runs: int, algorithms: Sequence[str], seed: int, online_overrides: dict[str, Any],
-               config: str | None, config_overrides: Sequence[str], figure_runs: int) -> list[Task]:
+               config: str | None, config_overrides: Sequence[str], figure_runs: int,
+               baseline_objective: str | None = None) -> list[Task]:
+    """All (run, algorithm) tasks; ``baseline_objective`` overrides the objective of RRT* and
+    IRRT* (DDRRT* keeps the configured one)."""
     ov = tuple(sorted(online_overrides.items()))
-    return [Task(scenario, i, alg, seed, ov, config, tuple(config_overrides), detail=(i == 0), path=(i < figure_runs))
+    return [Task(scenario, i, alg, seed, ov, config, tuple(config_overrides),
+                 objective=baseline_objective if alg != "ddrrt-star" else None,
+                 detail=(i == 0), path=(i < figure_runs))
             for i in range(runs) for alg in algorithms]
 
 

@@ -283,18 +283,23 @@ def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
         reference_path=ctx.reference_path, bounds=(xmin, xmax, ymin, ymax),
         domain_center=pos, domain_radius=r,
     )
-    conds = []
-    if online.local_iterations > 0:
-        conds.append(Termination.iterations(online.local_iterations))
-    if online.local_time > 0:
-        conds.append(Termination.deadline(online.local_time, clock))
-    termination = conds[0] if len(conds) == 1 else Termination.any_of(*conds)
+    termination = _termination(online, clock)
     planner = make_planner(params.algorithm, replace(params, seed=int(seed)))
     result: PlannerResult = planner.solve(problem, termination)
-
     search = result.time_to_first_solution_s
     if search is None:
         search = result.planning_time_s
+    if result.status == "none" and state.heading is not None:
+        # Boxed in by the turning-radius fan (e.g. heading into a wall): the twin-thruster vessel
+        # can turn on the spot, so plan once more without the heading limit at the root.
+        termination = _termination(online, clock)
+        retry = make_planner(params.algorithm, replace(params, seed=int(seed) ^ 0x5A5A5A5)).solve(
+            replace(problem, start_heading=None), termination)
+        first = retry.time_to_first_solution_s
+        search += first if first is not None else retry.planning_time_s
+        retry.planning_time_s += result.planning_time_s
+        retry.iterations += result.iterations
+        result = retry
     if result.status == "none" or len(result.path) < 2:
         return CycleRecord(index, state, goal, rule, result.status, float(search), result.planning_time_s,
                            result.iterations, empty, empty, False, result.tree_nodes, result.tree_parents,
@@ -353,6 +358,16 @@ def _densify(path: np.ndarray, step: float) -> np.ndarray:
     return np.concatenate(out)
 
 
+def _termination(online: OnlineParams, clock: Callable[[], float]) -> Termination:
+    """The budget of one local planning run: iterations and/or a deadline on ``clock``."""
+    conds = []
+    if online.local_iterations > 0:
+        conds.append(Termination.iterations(online.local_iterations))
+    if online.local_time > 0:
+        conds.append(Termination.deadline(online.local_time, clock))
+    return conds[0] if len(conds) == 1 else Termination.any_of(*conds)
+
+
 def _polyline_free(grid: OccupancyGrid, path: np.ndarray) -> bool:
     return all(grid.segment_free(float(a[0]), float(a[1]), float(b[0]), float(b[1]))
                for a, b in zip(path[:-1], path[1:]))
@@ -405,7 +420,9 @@ def run_online(ctx: OnlineContext, start: VesselState, seed: int,
             reached, reason = True, "goal reached"
     path = np.concatenate(executed)
     sampled = resample(path, online.metric_spacing)
-    metrics = path_metrics(sampled, ctx.field, ctx.grid, params, online.clearance_sigma) if len(sampled) >= 2 else {}
+    # Table 3 measures every path with eq. (12), whatever objective the planner optimised.
+    metrics = (path_metrics(sampled, ctx.field, ctx.grid, replace(params, objective="current"), online.clearance_sigma)
+               if len(sampled) >= 2 else {})
     return OnlineResult(
         reached=reached, reason=reason, cycles=cycles, executed=path, final=state,
         search_time_s=float(sum(c.search_time_s for c in cycles)),
