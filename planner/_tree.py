@@ -33,8 +33,8 @@ DONE_FULL = 3
 # float config indices
 C_STEP, C_MAXTURN, C_GOALTOL, C_GOALBIAS, C_PNGP, C_PNGX, C_PNGY, C_DR, C_DALPHA, C_GAMMA = range(10)
 C_RGAMMA, C_FMIN, C_BUCKET, C_BX0, C_BX1, C_BY0, C_BY1, C_DCX, C_DCY, C_DR_DOM = range(10, 20)
-C_GX, C_GY, C_SX, C_SY, C_RES, C_FRES, C_FOX, C_FOY = range(20, 28)
-N_FCFG = 28
+C_GX, C_GY, C_SX, C_SY, C_RES, C_FRES, C_FOX, C_FOY, C_KGROW = range(20, 29)
+N_FCFG = 29
 # int config indices
 I_ALGO, I_FIELD, I_K, I_NBX, I_NBY, I_CAP, I_PNG = range(7)
 N_ICFG = 7
@@ -46,6 +46,7 @@ F_CLOSEST_D, F_FIRST_NS = range(2)
 N_FSTATE = 4
 
 NEAR_CAP = 1024
+K_CAP = 64  # most nearest neighbours DDRRT* examines per sample
 TWO_PI = 2.0 * math.pi
 
 
@@ -365,11 +366,12 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
          st, fs, stack, max_iter, deadline_ns, stop_on_exact):
     """Run up to max_iter iterations; see the module docstring for the return codes."""
     clockbuf = np.zeros(2, np.int64)
-    k = ic[I_K]
-    kn_i = np.empty(max(k, 1), np.int64)
-    kn_d = np.empty(max(k, 1), np.float64)
-    ext_i = np.empty(max(k, 1), np.int64)
-    ext_k = np.empty(max(k, 1), np.float64)
+    k_min = ic[I_K]
+    k_growth = fc[C_KGROW]
+    kn_i = np.empty(K_CAP, np.int64)
+    kn_d = np.empty(K_CAP, np.float64)
+    ext_i = np.empty(K_CAP, np.int64)
+    ext_k = np.empty(K_CAP, np.float64)
     near_i = np.empty(NEAR_CAP, np.int64)
     near_c = np.empty(NEAR_CAP, np.float64)
     step = fc[C_STEP]
@@ -394,7 +396,12 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
             sx, sy = _uniform(fc)
         n = st[S_N]
         if algo == DDRRT_STAR:
-            # ---- Figure 6 lines 5-11: k nearest sorted by D_C, keep those with D_C <= ESD
+            # ---- Figure 6 lines 5-11: k nearest sorted by D_C, keep those with D_C <= ESD.
+            # k is the paper's constant, or (k_growth > 0) grows as k-nearest RRT* needs for
+            # asymptotic optimality: k(n) = max(k, ceil(k_growth log n)) (Karaman & Frazzoli 2011).
+            k = k_min
+            if k_growth > 0.0 and n > 1:
+                k = max(k_min, min(K_CAP, int(math.ceil(k_growth * math.log(n)))))
             m = _knn(sx, sy, k, X, fc, ic, bucket_head, node_next, kn_i, kn_d)
             ne = 0
             for a in range(m):

@@ -167,6 +167,7 @@ class TreePlanner:
         fc[_tree.C_DALPHA] = p.d_alpha
         fc[_tree.C_GAMMA] = p.gamma_alpha
         fc[_tree.C_RGAMMA] = p.rewire_gamma * gamma_star
+        fc[_tree.C_KGROW] = p.k_growth
         fc[_tree.C_FMIN] = min_cost_factor(p.d_alpha, p.gamma_alpha) if field is not None else 1.0
         fc[_tree.C_BUCKET] = bucket
         fc[_tree.C_BX0], fc[_tree.C_BX1], fc[_tree.C_BY0], fc[_tree.C_BY1] = bx0, bx1, by0, by1

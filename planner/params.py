@@ -37,7 +37,11 @@ class PlannerParams:
                           gt=0, default=10.0)
     d_alpha: float = _p("D_alpha of eqs. (11)-(12)", "", gt=0, default=1.0)
     gamma_alpha: float = _p("gamma_alpha of eqs. (11)-(12)", "", ge=0, default=0.1)
-    k_nearest: int = _p("k nearest tree nodes examined per sample by DDRRT*", "", ge=1, le=64, default=5)
+    k_nearest: int = _p("k nearest tree nodes examined per sample by DDRRT* (the least, with k_growth)", "",
+                        ge=1, le=64, default=5)
+    k_growth: float = _p("DDRRT*: 0 keeps k fixed (the paper); > 0 grows k to ceil(k_growth log n), capped "
+                         "at 64, as k-nearest RRT* needs for asymptotic optimality (OMPL: 1.1 e (1 + 1/d) = 4.48)",
+                         "", ge=0, default=2.0)
     png_probability: float = _p("probability P of sampling the PNG node (section 3.2)", "", ge=0, le=1,
                                 default=0.2)
     png_nav_ratio: float = _p("effective navigation ratio N of theta' = N q' (section 3.2)", "", gt=0,
