@@ -379,6 +379,10 @@ def run_campaign(tasks: Sequence[Task], jobs: int, out_csv: Path | None = None, 
         if progress:
             progress(len(camp.rows), row)
 
+    def on_term(signum, frame):  # SIGTERM (e.g. `kill`): stop like Ctrl-C and keep the finished runs
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, on_term)
     try:
         if jobs <= 1:
             warm_up()
@@ -400,6 +404,7 @@ def run_campaign(tasks: Sequence[Task], jobs: int, out_csv: Path | None = None, 
     except KeyboardInterrupt:
         camp.interrupted = True
     finally:
+        signal.signal(signal.SIGTERM, previous)
         if writer:
             writer.close()
     return camp

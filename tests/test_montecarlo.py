@@ -41,7 +41,8 @@ def test_reproducible_from_the_seed_whatever_the_jobs(hil, tmp_path):
     assert [r["cost"] for r in ra] != [r["cost"] for r in rc]
 
     summary = json.loads(pa.stdout)
-    assert summary["runs_done"] == 6 and not summary["interrupted"]
+    assert summary["tasks_done"] == 6 and not summary["interrupted"]
+    assert summary["runs_done"] == {a: 2 for a in experiment.ALGORITHMS}
     assert [t["algorithm"] for t in summary["table3"]] == list(experiment.ALGORITHMS)
     assert "montecarlo:" in pa.stderr                  # progress on stderr
     for name in ("runs.csv", "table3.csv", "table3.md", "figure10.png", "figure11.png", "summary.json"):
@@ -119,7 +120,8 @@ def test_seeds_depend_on_run_and_algorithm_only():
     assert experiment.planner_seed(1, 7, "ddrrt-star") != experiment.planner_seed(2, 7, "ddrrt-star")
 
 
-def test_ctrl_c_keeps_finished_runs(repo, tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_ctrl_c_keeps_finished_runs(repo, tmp_path, sig):
     out = tmp_path / "mc"
     proc = subprocess.Popen([sys.executable, "-m", "hil", "montecarlo", "--scenario", "labyrinth", "--runs", "300",
                              "--jobs", "2", "--seed", "1", "--out", str(out), *FAST, "--no-plots"],
@@ -134,7 +136,7 @@ def test_ctrl_c_keeps_finished_runs(repo, tmp_path):
                 break
             time.sleep(0.1)
         assert proc.poll() is None, "finished before it could be interrupted"
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(sig)
         _, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:

@@ -34,7 +34,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                     "and DIR/figure11.png (the paths of the first runs), and DIR/summary.json. Every run is seeded "
                     "from --seed and its index only, so results do not depend on --jobs; with the default iteration "
                     "budget per cycle they are reproducible (only the measured times vary). Ctrl-C stops the workers "
-                    "and keeps the finished runs.",
+                    "and keeps the finished runs (so does SIGTERM).",
     )
     p.add_argument("--scenario", metavar="NAME", default="labyrinth",
                    help=f"scenario in configs/scenarios/ (default labyrinth; {', '.join(scenarios.available())})")
@@ -116,7 +116,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_plots:
         figures = _figures(args, spec, camp, out)
     summary = {
-        "scenario": spec.name, "runs_requested": args.runs, "runs_done": len(camp.rows),
+        "scenario": spec.name, "runs_requested": args.runs, "tasks_done": len(camp.rows),
+        "runs_done": {a: sum(1 for r in camp.rows if r["algorithm"] == a) for a in args.algorithms},
         "interrupted": camp.interrupted, "algorithms": list(args.algorithms), "jobs": jobs, "seed": args.seed,
         "baseline_objective": args.baseline_objective,
         "online": {"local_iterations": online.local_iterations, "local_time_s": online.local_time,
