@@ -245,7 +245,8 @@ class Autopilot:
             if self.pending_since is None and t + 1e-9 >= self.next_plan_t:
                 self.next_plan_t = t + self.p.planning_period
                 self._submit_plan(s)
-            guidance = self.los.update(s.x, s.y) if (self.mode == PLANNED and self.los is not None) else None
+            preview = max(self.p.lookahead, 3.0 * self.p.cruise_speed)  # ~3 s of travel
+            guidance = self.los.update(s.x, s.y, preview) if (self.mode == PLANNED and self.los is not None) else None
             if guidance is not None and guidance.finished and \
                     math.hypot(self.goal_ned[0] - s.x, self.goal_ned[1] - s.y) > self.p.goal_tolerance:
                 self._to_fallback(t, "local path finished before a new one arrived")
@@ -265,6 +266,9 @@ class Autopilot:
     def _control(self, s: NavState, dt: float, g: GuidanceOutput | None) -> Thrust:
         if g is not None and self.los is not None:
             psi_ref, u_ref = g.heading, self.p.cruise_speed
+            # Slow down for sharp turns ahead so the yaw rate they need (u kappa) stays within reach.
+            if g.curvature_ahead > 1e-6:
+                u_ref = min(u_ref, max(self.p.min_turn_speed, self.p.max_turn_rate / g.curvature_ahead))
             if g.remaining < 2.0 * self.p.lookahead and self.los.path[-1].tolist() == list(self.goal_ned):
                 u_ref = max(0.5, self.p.cruise_speed * g.remaining / (2.0 * self.p.lookahead))
         else:

@@ -18,6 +18,8 @@ class AutopilotParams:
     component_id: int = param("MAVLink component id of the autopilot", ge=1, le=255)
     cruise_speed: float = param("speed set-point along the local path", "m/s", gt=0)
     lookahead: float = param("line-of-sight look-ahead distance", "m", gt=0)
+    max_turn_rate: float = param("speed is reduced so that sharp turns ahead need at most this yaw rate", "rad/s", gt=0)
+    min_turn_speed: float = param("lowest speed of that reduction (steerage way)", "m/s", gt=0)
     goal_tolerance: float = param("the mission is complete within this distance of the final goal", "m", gt=0)
     planning_period: float = param("simulated time between local planning cycles", "s", gt=0)
     planning_deadline: float = param("hard deadline of one local planning cycle (watchdog)", "s", gt=0)

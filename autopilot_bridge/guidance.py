@@ -24,6 +24,7 @@ class GuidanceOutput:
     cross_track: float      # m, positive when the vessel is to starboard of the path
     remaining: float        # m, path length from the closest point to the end
     finished: bool          # within the acceptance radius of the end point
+    curvature_ahead: float  # 1/m, the sharpest turn of the path within the preview distance
 
 
 class LineOfSight:
@@ -44,13 +45,24 @@ class LineOfSight:
         self.lookahead = lookahead
         self.acceptance_radius = acceptance_radius
         self.index = 0  # segment of the last progress
+        # Discrete curvature at each interior vertex: turning angle over the mean adjacent length.
+        ang = np.arctan2(self.seg[:, 1], self.seg[:, 0])
+        turn = np.abs((np.diff(ang) + np.pi) % (2.0 * np.pi) - np.pi)
+        self.vertex_curvature = turn / np.maximum(0.5 * (self.seg_len[:-1] + self.seg_len[1:]), 1e-6)
 
     @property
     def length(self) -> float:
         return float(self.cum[-1])
 
-    def update(self, north: float, east: float) -> GuidanceOutput:
-        """Desired heading for the vessel at (north, east)."""
+    def curvature_ahead(self, index: int, along: float, preview: float) -> float:
+        """Largest vertex curvature (1/m) between ``along`` metres into segment ``index`` and ``preview`` m on."""
+        start = self.cum[index] + along
+        hi = int(np.searchsorted(self.cum, start + preview, side="right"))
+        k = self.vertex_curvature[index:max(index, hi - 1)]  # vertex j sits at the end of segment j
+        return float(k.max()) if len(k) else 0.0
+
+    def update(self, north: float, east: float, preview: float = 0.0) -> GuidanceOutput:
+        """Desired heading for the vessel at (north, east); ``preview`` m of path are scanned for curvature."""
         p = np.array([north, east])
         # Search a window ahead of the last progress only, so the vessel never skips back.
         lo, hi = self.index, min(self.index + 50, len(self.seg))
@@ -73,4 +85,5 @@ class LineOfSight:
             # Near the end, aim at the end point itself.
             heading = math.atan2(self.path[-1][1] - east, self.path[-1][0] - north) if end_dist > 1e-6 else pi_p
         return GuidanceOutput(heading=heading, cross_track=e, remaining=remaining,
-                              finished=end_dist <= self.acceptance_radius)
+                              finished=end_dist <= self.acceptance_radius,
+                              curvature_ahead=self.curvature_ahead(i, s * self.seg_len[i], preview))

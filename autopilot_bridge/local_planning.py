@@ -71,6 +71,14 @@ class LocalPlan:
     reason: str
 
 
+LOOP_FACTOR = 1.25  # a smoothed path this much longer than its polyline contains a loop
+
+
+def _length(path: np.ndarray) -> float:
+    path = np.asarray(path, dtype=float).reshape(-1, 2)
+    return float(np.sum(np.hypot(*np.diff(path, axis=0).T))) if len(path) > 1 else 0.0
+
+
 def online_cycle_handler(world: World) -> Callable[[Any], LocalPlan]:
     """Worker factory: build the online context once, then plan one cycle per request."""
     from planner.gridmap import OccupancyGrid
@@ -87,7 +95,12 @@ def online_cycle_handler(world: World) -> Callable[[Any], LocalPlan]:
         else:
             ctx.online = replace(world.online, local_iterations=0, local_time=float(request.deadline_s))
         rec = plan_cycle(ctx, VesselState(start.x, start.y, start.heading, start.t), request.cycle, start.seed)
-        path = rec.smooth_path if len(rec.smooth_path) >= 2 else rec.local_path
+        path = rec.local_path
+        if len(rec.smooth_path) >= 2 and rec.smoothed_ok:
+            # Dubins curves between waypoints closer than ~2 R_min can loop; a loop is worse to follow
+            # than the pruned polyline (whose turns the planner's fan limit already bounds).
+            if _length(rec.smooth_path) <= LOOP_FACTOR * _length(rec.local_path) + 1e-9:
+                path = rec.smooth_path
         return LocalPlan(cycle=request.cycle, status=rec.status, path=np.asarray(path, dtype=float).reshape(-1, 2),
                          subgoal=tuple(rec.subgoal), subgoal_rule=rec.subgoal_rule, iterations=rec.iterations,
                          planning_time_s=rec.planning_time_s, reason=rec.reason)

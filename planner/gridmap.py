@@ -113,15 +113,20 @@ class OccupancyGrid:
             return self.is_free(*path[0])
         return all(self.segment_free(*path[i], *path[i + 1]) for i in range(len(path) - 1))
 
+    def _bordered(self) -> np.ndarray:
+        """The grid with one ring of obstacle cells around it: the chart's edge is inflated like
+        any obstacle (outside the map counts as occupied), so paths keep clear of it too."""
+        return np.pad(self.occ, 1, constant_values=True)
+
     def inflate(self, radius: float) -> "OccupancyGrid":
         """Disc dilation: a cell becomes an obstacle if its centre is within ``radius`` metres of
-        the centre of an obstacle cell."""
+        the centre of an obstacle cell or of the ring of cells just outside the map."""
         if radius < 0:
             raise MapError("inflation radius must be >= 0")
-        if radius == 0 or not self.occ.any():
+        if radius == 0:
             return OccupancyGrid(self.occ.copy(), self.resolution)
-        dist = ndimage.distance_transform_edt(~self.occ) * self.resolution
-        return OccupancyGrid(dist <= radius + 1e-12, self.resolution)
+        dist = ndimage.distance_transform_edt(~self._bordered()) * self.resolution
+        return OccupancyGrid(dist[1:-1, 1:-1] <= radius + 1e-12, self.resolution)
 
     def inflate_velocity(self, velocity: tuple[float, float], gain: float, base_radius: float) -> "OccupancyGrid":
         """Section 3.3: inflate by ``base_radius`` plus ``gain`` times the velocity component
@@ -133,10 +138,11 @@ class OccupancyGrid:
             raise MapError("inflation gain and radius must be >= 0")
         reach = base_radius + gain * math.hypot(vx, vy)
         n = int(math.ceil(reach / self.resolution))
-        out = self.occ.copy()
-        if n == 0 or not self.occ.any():
-            return OccupancyGrid(out, self.resolution)
-        rows, cols = self.occ.shape
+        if n == 0:
+            return OccupancyGrid(self.occ.copy(), self.resolution)
+        occ = self._bordered()
+        out = occ.copy()
+        rows, cols = occ.shape
         for dr in range(-n, n + 1):
             for dc in range(-n, n + 1):
                 if dr == 0 and dc == 0:
@@ -151,8 +157,8 @@ class OccupancyGrid:
                 r0, r1 = max(0, -dr), min(rows, rows - dr)
                 c0, c1 = max(0, -dc), min(cols, cols - dc)
                 if r0 < r1 and c0 < c1:
-                    out[r0:r1, c0:c1] |= self.occ[r0 + dr:r1 + dr, c0 + dc:c1 + dc]
-        return OccupancyGrid(out, self.resolution)
+                    out[r0:r1, c0:c1] |= occ[r0 + dr:r1 + dr, c0 + dc:c1 + dc]
+        return OccupancyGrid(out[1:-1, 1:-1], self.resolution)
 
     def clearance(self) -> np.ndarray:
         """Distance (m) from each cell centre to the nearest obstacle cell centre (0 inside

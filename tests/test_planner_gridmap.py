@@ -78,11 +78,22 @@ def test_inflate_disc():
     occ = np.zeros((21, 21), bool)
     occ[10, 10] = True
     g = OccupancyGrid(occ, 0.5).inflate(1.0)
-    # cell centres within 1 m (2 cells) of the obstacle centre
-    rr, cc = np.nonzero(g.occ)
+    # cell centres within 1 m (2 cells) of the obstacle centre (away from the inflated map edge)
+    rr, cc = np.nonzero(g.occ[3:-3, 3:-3])
+    rr, cc = rr + 3, cc + 3
     d = np.hypot(rr - 10, cc - 10) * 0.5
     assert d.max() <= 1.0 + 1e-9
     assert g.occ[10, 12] and g.occ[12, 10] and not g.occ[10, 13] and not g.occ[12, 12]
+
+
+def test_map_edge_is_inflated_like_an_obstacle():
+    g = OccupancyGrid(np.zeros((20, 30), bool), 0.5)
+    for inflated in (g.inflate(1.0), g.inflate_velocity((0.0, 0.0), 1.0, 1.0)):
+        occ = inflated.occ
+        # the ring just outside the map is 0.5 m from the edge cells' centres: 1 m reaches 2 cells in
+        assert occ[:2, :].all() and occ[-2:, :].all() and occ[:, :2].all() and occ[:, -2:].all()
+        assert not occ[2:-2, 2:-2].any()
+    assert not g.inflate(0.0).occ.any()
 
 
 def test_inflate_velocity_grows_towards_the_approach_side():
@@ -91,9 +102,10 @@ def test_inflate_velocity_grows_towards_the_approach_side():
     g = OccupancyGrid(occ, 0.5)
     # vessel moving east (+x): it approaches the obstacle from the west side
     gi = g.inflate_velocity((2.0, 0.0), gain=1.0, base_radius=0.5)
-    west = sum(gi.occ[20, 20 - k] for k in range(1, 20))
-    east = sum(gi.occ[20, 20 + k] for k in range(1, 20))
-    north = sum(gi.occ[20 + k, 20] for k in range(1, 20))
+    # count within 5 m of the obstacle (the map edge, 10 m away, is inflated too)
+    west = sum(gi.occ[20, 20 - k] for k in range(1, 10))
+    east = sum(gi.occ[20, 20 + k] for k in range(1, 10))
+    north = sum(gi.occ[20 + k, 20] for k in range(1, 10))
     assert west == 5 and east == 1 and north == 1  # 0.5 + 1 s * 2 m/s = 2.5 m = 5 cells west
     assert np.array_equal(g.inflate_velocity((0.0, 0.0), 1.0, 0.5).occ, g.inflate(0.5).occ)
 

@@ -25,7 +25,7 @@ from common.mavlink import Codec
 from common.udp import UdpEndpoint
 from hil import processes
 from hil.console import emit, load_settings, progress
-from hil.errors import ConfigError, RunFailed
+from hil.errors import ConfigError, RunFailed, UsageError
 
 FRAME_TIMEOUT_S = 15.0  # wall seconds to wait for the simulator's next frame before giving up
 DEMO_CONTROLS = (0.6, 0.5)  # port, starboard: a gentle starboard turn
@@ -171,8 +171,13 @@ def run(args: argparse.Namespace) -> int:
 def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
     from pathlib import Path
 
+    from hil import scenario as scenarios
     from hil.hilrun import REPO, RunOptions, run_loop
 
+    spec = scenarios.load_spec(args.scenario)  # one-line error on an unknown or bad scenario
+    if spec.kind != "fixed":
+        raise UsageError(f"scenario {args.scenario!r} draws a new map per run; hil run needs a fixed "
+                         f"scenario (random ones are for hil montecarlo)")
     seed = cfg.sim.seed if args.seed is None else args.seed
     out = Path(args.out) if args.out else REPO / "runs" / f"{args.scenario}-seed{seed}-{time.strftime('%Y%m%d-%H%M%S')}"
     overrides = list(args.overrides)

@@ -1,0 +1,63 @@
+"""The whole HIL loop: `hil run` with the simulator and the autopilot as two real processes on UDP."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+# Figures that depend on the wall clock (or on files' paths), not on the simulation.
+WALL_CLOCK_KEYS = {"wall_time_s", "control_latency_ms", "run_folder", "tlog", "plot", "simulator",
+                   "tlog_messages"}  # traffic recorded while the processes are being stopped
+
+
+def _run(hil, tmp_path, *args: str, name: str = "run") -> tuple[int, dict]:
+    out = tmp_path / name
+    r = hil("run", "--json", "--out", str(out), "--no-plot", *args, timeout=600)
+    assert r.stdout.strip(), r.stderr
+    summary = json.loads(r.stdout.strip().splitlines()[-1])
+    assert (out / "summary.json").exists() and (out / "run.tlog").stat().st_size > 0
+    return r.returncode, summary
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario, seed", [("harbour", 1), ("harbour", 2), ("labyrinth", 1), ("labyrinth", 3)])
+def test_lockstep_run_reaches_the_goal_without_collision(hil, tmp_path, scenario, seed):
+    code, s = _run(hil, tmp_path, "--scenario", scenario, "--seed", str(seed))
+    assert s["outcome"] == "goal", s["events"]
+    assert s["reached_goal"] and s["collisions"] == 0
+    assert s["min_clearance_m"] >= 1.0  # the hull's half length
+    assert code == 0
+    # The autopilot navigated on its own estimate, well inside the GPS noise.
+    assert s["navigation_rmse_m"] < 0.5
+    assert s["planning_cycles"] > 10 and s["plans_accepted"] > 0.8 * s["planning_cycles"]
+
+
+@pytest.mark.slow
+def test_same_seed_gives_the_same_summary(hil, tmp_path):
+    _, a = _run(hil, tmp_path, "--scenario", "labyrinth", "--seed", "5", name="a")
+    _, b = _run(hil, tmp_path, "--scenario", "labyrinth", "--seed", "5", name="b")
+    strip = lambda s: {k: v for k, v in s.items() if k not in WALL_CLOCK_KEYS}  # noqa: E731
+    assert strip(a) == strip(b)
+
+
+def test_tlog_is_readable_by_pymavlink(hil, tmp_path):
+    from pymavlink import mavutil
+
+    code, s = _run(hil, tmp_path, "--scenario", "harbour", "--duration", "5")
+    assert s["outcome"] == "timeout" and code == 1  # 5 s is not enough to reach the goal: a failed run
+    log = mavutil.mavlink_connection(s["tlog"])
+    kinds = set()
+    for _ in range(5000):
+        m = log.recv_match()
+        if m is None:
+            break
+        kinds.add(m.get_type())
+    assert {"HIL_SENSOR", "HIL_GPS", "HIL_STATE_QUATERNION", "HIL_ACTUATOR_CONTROLS", "LOCAL_POSITION_NED",
+            "HEARTBEAT"} <= kinds
+
+
+def test_unknown_scenario_is_one_line_exit_2(hil):
+    r = hil("run", "--scenario", "atlantis", timeout=60)
+    assert r.returncode == 2
+    assert len(r.stderr.strip().splitlines()) == 1 and "atlantis" in r.stderr
