@@ -87,7 +87,8 @@ def test_bench_planner_quick_json(hil):
         assert m["iterations_per_s"] > 0
         assert m["first_solution_s"] is not None and m["first_solution_s"] > 0
         for b in ("0.05", "0.2"):
-            assert m["ratio"][b] is None or m["ratio"][b] >= 1.0 - 1e-9
+            r = m["ratio"][b]                            # "inf": unsolved in most seeds at that budget
+            assert r is None or r == "inf" or r >= 1.0 - 1e-9
     assert "disabled" in d["ompl"]
     assert "iter/s" in p.stderr                          # the human table goes to stderr
 

@@ -110,7 +110,8 @@ def test_same_seed_same_path(hil, wall_map):
 
 def test_scenario_plot(hil, tmp_path):
     out = tmp_path / "harbour.png"
-    p = hil("plan", "--scenario", "harbour", "--deadline", "0.5", "--seed", "2", "--plot", str(out), "--json")
+    p = hil("plan", "--scenario", "harbour", "--deadline", "60", "--iterations", "20000", "--seed", "2",
+            "--plot", str(out), "--json")
     assert p.returncode == 0, p.stderr
     d = json.loads(p.stdout)
     assert d["status"] == "exact"
