@@ -69,6 +69,8 @@ class OnlineParams:
         "standard deviation of the vessel's deviation from the path, for cf(π) (eq. 14): GPS 0.5 m per axis "
         "plus path-following error", "m", gt=0))
     smoothing: bool = dc_field(default=True, metadata=_p("Dubins smoothing of each local path"))
+    subgoal_arc_limit: bool = dc_field(default=True, metadata=_p(
+        "accept a subgoal only within one perceptual radius along the reference path (see select_local_subgoal)"))
     velocity_inflation: bool = dc_field(default=True, metadata=_p(
         "extra obstacle inflation from the velocity estimated on the reference path (section 3.3)"))
 
@@ -246,17 +248,48 @@ def _free_subgoal(ctx: OnlineContext, grid: OccupancyGrid, position: tuple[float
     return ctx.nearest_free(grid, point)
 
 
+def _arc_from_nearest(ref: np.ndarray, pos: tuple[float, float]) -> tuple[int, np.ndarray]:
+    """Index j of the reference waypoint nearest ``pos`` and the arc length (m) from q_j to every
+    waypoint (negative before j)."""
+    j = int(np.argmin(np.hypot(ref[:, 0] - pos[0], ref[:, 1] - pos[1])))
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(ref, axis=0).T))]) if len(ref) > 1 else np.zeros(1)
+    return j, s - s[j]
+
+
+def select_local_subgoal(ctx: OnlineContext, pos: tuple[float, float]) -> tuple[tuple[float, float], int, int]:
+    """Section 3.1's subgoal (point, reference index, rule) for a vessel at ``pos``.
+
+    Rule 1 also applies when the reference path ends elsewhere than the goal. With
+    ``OnlineParams.subgoal_arc_limit`` (default on) a candidate is only accepted if it lies at
+    most one perceptual radius *along the reference path* from q_j: where the reference path
+    folds back (a labyrinth wall shorter than the radius), the waypoints behind the wall are
+    inside the domain but not reachable inside it, and the literal rules 1 and 3 would send the
+    vessel into the dead end in front of the wall. The chosen waypoint is then the last one of
+    the rule's chain within that arc length."""
+    params = ctx.params
+    ref = ctx.reference_path
+    radius = params.perceptual_radius
+    limit = radius if ctx.online.subgoal_arc_limit else math.inf
+    j, arc = _arc_from_nearest(ref, pos)
+    goal_arc = arc[-1] if np.allclose(ref[-1], ctx.goal) else 0.0
+    if math.hypot(ctx.goal[0] - pos[0], ctx.goal[1] - pos[1]) <= radius and goal_arc <= limit:
+        return ctx.goal, len(ref) - 1, 1
+    sub = select_subgoal(ref, pos, radius)
+    idx, rule = sub.index, sub.rule
+    if arc[idx] > limit:
+        within = np.nonzero((arc <= limit) & (np.arange(len(ref)) >= j))[0]
+        idx = int(within[-1]) if len(within) else j
+        if rule == 1:       # the goal was rejected: the chain from q_j decides, as in rule 3
+            rule = 3
+    return (float(ref[idx, 0]), float(ref[idx, 1])), idx, rule
+
+
 def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
                clock: Callable[[], float] = time.monotonic) -> CycleRecord:
     """One planning cycle from ``state`` (see the module docstring); does not move the vessel."""
     params, online = ctx.params, ctx.online
     pos = (state.x, state.y)
-    if math.hypot(ctx.goal[0] - pos[0], ctx.goal[1] - pos[1]) <= params.perceptual_radius:
-        # Rule 1 of section 3.1, also when the reference path ends elsewhere.
-        sub_point, sub_index, rule = ctx.goal, len(ctx.reference_path) - 1, 1
-    else:
-        sub = select_subgoal(ctx.reference_path, pos, params.perceptual_radius)
-        sub_point, sub_index, rule = (float(sub.point[0]), float(sub.point[1])), sub.index, sub.rule
+    sub_point, sub_index, rule = select_local_subgoal(ctx, pos)
 
     # Planning map: velocity-inflated, else only safety-inflated, else raw when the vessel
     # itself is inside the inflation (it may have been pushed there; it must still get out).

@@ -95,3 +95,20 @@ def test_online_params_need_a_budget():
     with pytest.raises(ValueError, match="local_iterations"):
         OnlineParams(local_iterations=0, local_time=0.0)
     assert replace(OnlineParams(), local_time=0.1).local_time == 0.1
+
+
+def test_subgoal_does_not_jump_behind_a_folded_reference_path():
+    """Labyrinth: below wall B the reference path folds back within the 33 m domain. The literal
+    rule 3 picks a waypoint behind the wall; the arc-length limit keeps it on the near side."""
+    from planner.online import select_local_subgoal
+    _, ctx = _context("labyrinth", "ddrrt-star")
+    pos = (64.1, 61.5)
+    point, idx, rule = select_local_subgoal(ctx, pos)
+    assert rule == 3
+    assert point[1] < 67.0                              # not across wall B (y 66-68 m, x >= 36 m)
+    _, literal = _context("labyrinth", "ddrrt-star", subgoal_arc_limit=False)
+    point2, idx2, _ = select_local_subgoal(literal, pos)
+    assert idx2 > idx and point2[1] > 68.0
+    # Rule 1 is not applied through the wall either (the goal is 32.8 m away, beyond wall B).
+    point3, _, rule3 = select_local_subgoal(ctx, (75.8, 63.5))
+    assert rule3 != 1 and point3 != ctx.goal
