@@ -70,6 +70,8 @@ class AutopilotStats:
     fallback_activations: int = 0
     simulator_restarts: int = 0
     latency_ms: list[float] = field(default_factory=list)
+    planner_waits: int = 0          # lockstep frames that waited for the planner (by design)
+    planner_wait_ms: list[float] = field(default_factory=list)
     events: list[tuple[float, str]] = field(default_factory=list)
 
 
@@ -92,6 +94,7 @@ class Autopilot:
         self.grid = OccupancyGrid(world.occ, world.resolution)
         self.reactive = ReactiveAvoidance(self.grid, params.fallback_range, params.min_clearance, params.fallback_speed)
         self.stats = AutopilotStats()
+        self._waited = False
         self.local_paths: list[dict[str, Any]] = []
         self.track: list[tuple[float, float, float, float]] = []
         self._reset()
@@ -158,7 +161,12 @@ class Autopilot:
             if t + 1e-9 < self.pending_since + self.p.planning_deadline:
                 return None
             # Simulated time stands still while we wait: bounded by the watchdog's wall limit.
+            # Such a frame measures the planner, not the control loop: reported apart.
+            self._waited = True
+            w0 = time.perf_counter()
             reply = self.worker.wait(self.p.planning_deadline + self.p.watchdog_grace)
+            self.stats.planner_waits += 1
+            self.stats.planner_wait_ms.append((time.perf_counter() - w0) * 1e3)
             if reply is None and self.worker.watchdog(now=time.monotonic() + 1e9):
                 self._event(t, "planner hung: worker killed and restarted")
         else:
@@ -205,6 +213,7 @@ class Autopilot:
             if (self.last_frame_usec - f.time_usec) * 1e-6 > self.p.sim_restart_gap:
                 self.stats.simulator_restarts += 1
                 self._event(t, "simulator restarted: navigation and planning start over")
+                self.worker.cancel("simulator restarted")  # its answer would be for the old world
                 self._reset()
             else:
                 self.stats.duplicate_frames += 1
@@ -282,7 +291,9 @@ class Autopilot:
         self.link.send_controls(time_usec, cmd.port_cmd, cmd.stdb_cmd)
         self.last_command = cmd
         self.stats.commands += 1
-        self.stats.latency_ms.append((time.perf_counter() - received_at) * 1e3)
+        if not self._waited:
+            self.stats.latency_ms.append((time.perf_counter() - received_at) * 1e3)
+        self._waited = False
 
     # -- loop ----------------------------------------------------------------------------------
     def run(self, should_stop: Callable[[], bool], poll_s: float = 0.05) -> None:
@@ -321,6 +332,8 @@ class Autopilot:
             "link_rejects": dict(self.link.rejects),
             "truth_messages_ignored": self.link.truth_ignored,
             "control_latency_ms": {"p50": float(np.percentile(lat, 50)), "p99": float(np.percentile(lat, 99)),
-                                   "max": float(lat.max())},
+                                   "max": float(lat.max()), "frames": len(self.stats.latency_ms)},
+            "lockstep_planner_waits": self.stats.planner_waits,
+            "lockstep_planner_wait_ms_max": max(self.stats.planner_wait_ms, default=0.0),
             "events": [f"{t:.2f}s {e}" for t, e in self.stats.events],
         }

@@ -209,6 +209,14 @@ class PlannerWorker:
             pass
         return self.poll()
 
+    def cancel(self, why: str) -> bool:
+        """Abandon the pending request (a planner cannot be interrupted mid-solve: the worker is
+        restarted). True if there was one."""
+        if self._pending is None:
+            return False
+        self._restart(f"cycle {self._pending.cycle}: cancelled ({why})")
+        return True
+
     def watchdog(self, now: float | None = None) -> bool:
         """Kill and restart a worker that is ``grace_s`` past its request's deadline. True if it did."""
         if self._pending is None:

@@ -35,13 +35,16 @@ class ReactiveAvoidance:
     """Heading and speed away from obstacles and towards a target (NED)."""
 
     def __init__(self, grid: Any, max_range: float, min_clearance: float, cruise_speed: float,
-                 n_rays: int = 72) -> None:
+                 n_rays: int = 72, cone: float = math.radians(20.0)) -> None:
         self.grid = grid
         self.max_range = max_range
         self.min_clearance = min_clearance
         self.cruise_speed = cruise_speed
         self.angles = np.linspace(-math.pi, math.pi, n_rays, endpoint=False)
         self.sample = max(grid.resolution / 2.0, 0.1)
+        # A heading is as free as the worst ray within +-cone of it: a course parallel to a wall
+        # has a long free ray but no room beside it.
+        self.cone_rays = int(round(cone / (2.0 * math.pi / n_rays)))
 
     def free_distances(self, north: float, east: float) -> np.ndarray:
         """Free distance (m) along every ray from (north, east), less the clearance (vectorised)."""
@@ -62,6 +65,7 @@ class ReactiveAvoidance:
         """Best heading and speed now, towards ``target`` (north, east)."""
         to_target = math.atan2(target[1] - east, target[0] - north)
         free = self.free_distances(north, east)
+        free = np.min([np.roll(free, k) for k in range(-self.cone_rays, self.cone_rays + 1)], axis=0)
         progress = np.cos(self.angles - to_target)
         steady = np.cos(self.angles - heading)
         score = progress + 1.5 * (free / self.max_range) + 0.3 * steady - 10.0 * (free < 1.0)

@@ -76,11 +76,24 @@ class Tap:
         self.tlog = open(tlog_path, "wb")
         self.geo = geo
         self.truth: dict[int, tuple[float, float, float, float]] = {}  # time_usec -> (north, east, vn, ve)
-        self.estimate: dict[int, tuple[float, float]] = {}             # time ms -> (north, east)
+        self.estimate: dict[tuple[int, int], tuple[float, float]] = {}  # (segment, ms) -> (north, east)
         self.commands: list[tuple[int, float, float]] = []             # (time_usec, port, stdb)
         self.statustext: list[str] = []
         self.mission_reached = False
         self.frames = 0
+        # A simulator restart starts its clock at 0 again: each stream keeps a running epoch so
+        # that the run's time axis stays monotonic (epoch = the time reached before the restart).
+        self._epoch = {"truth": 0, "estimate": 0, "commands": 0}
+        self._last = {"truth": -1, "estimate": -1, "commands": -1}
+        self._segment = {"truth": 0, "estimate": 0, "commands": 0}
+        self.truth_raw: dict[tuple[int, int], tuple[float, float]] = {}  # (segment, time_usec) -> (n, e)
+
+    def _monotonic(self, stream: str, t: int, back_gap: int) -> int:
+        if t + back_gap < self._last[stream]:
+            self._epoch[stream] += self._last[stream]
+            self._segment[stream] += 1
+        self._last[stream] = t
+        return self._epoch[stream] + t
 
     @property
     def port(self) -> int:
@@ -104,13 +117,17 @@ class Tap:
             self.frames += 1
             kind = m.get_type()
             if kind == "HIL_STATE_QUATERNION":
-                if m.time_usec not in self.truth:
+                t = self._monotonic("truth", int(m.time_usec), 1_000_000)
+                if t not in self.truth:
                     n, e = self.geo.geodetic_to_sea_level(m.lat * 1e-7, m.lon * 1e-7)
-                    self.truth[int(m.time_usec)] = (n, e, m.vx * 0.01, m.vy * 0.01)
+                    self.truth[t] = (n, e, m.vx * 0.01, m.vy * 0.01)
+                    self.truth_raw[(self._segment["truth"], int(m.time_usec))] = (n, e)
             elif kind == "HIL_ACTUATOR_CONTROLS":
-                self.commands.append((int(m.time_usec), float(m.controls[0]), float(m.controls[1])))
+                t = self._monotonic("commands", int(m.time_usec), 1_000_000)
+                self.commands.append((t, float(m.controls[0]), float(m.controls[1])))
             elif kind == "LOCAL_POSITION_NED":
-                self.estimate[int(m.time_boot_ms)] = (float(m.x), float(m.y))
+                self._monotonic("estimate", int(m.time_boot_ms), 1000)
+                self.estimate[(self._segment["estimate"], int(m.time_boot_ms))] = (float(m.x), float(m.y))
             elif kind == "STATUSTEXT":
                 self.statustext.append(m.text if isinstance(m.text, str) else m.text.decode(errors="replace"))
             elif kind == "MISSION_ITEM_REACHED":
@@ -359,9 +376,8 @@ class HilRun:
 
     def _nav_rmse(self) -> float | None:
         errs = []
-        for ms, (n, e) in self.tap.estimate.items():
-            tu = ms * 1000
-            truth = self.tap.truth.get(tu)
+        for (seg, ms), (n, e) in self.tap.estimate.items():
+            truth = self.tap.truth_raw.get((seg, ms * 1000))
             if truth is not None:
                 errs.append((n - truth[0]) ** 2 + (e - truth[1]) ** 2)
         return math.sqrt(float(np.mean(errs))) if errs else None

@@ -59,7 +59,7 @@ class PlannerParams:
     rewire_gamma: float = _p(
         "RRT* near radius = rewire_gamma * gamma*_RRT (log n / n)^(1/2), capped by step (OMPL's rewire factor)",
         "", gt=0, default=1.1)
-    safety_radius: float = _p("obstacle inflation by the vessel's safety radius", "m", ge=0, default=1.5)
+    safety_radius: float = _p("obstacle inflation by the vessel's safety radius", "m", ge=0, default=2.0)
     velocity_inflation_gain: float = _p(
         "extra inflation per m/s of velocity towards an obstacle (section 3.3)", "s", ge=0, default=1.0)
     perceptual_radius: float = _p("radius of the perceptual domain (33 m in section 4.2)", "m", gt=0,

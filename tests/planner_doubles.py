@@ -37,3 +37,14 @@ class ScriptedPlanner:
 
 def scripted_factory() -> ScriptedPlanner:
     return ScriptedPlanner()
+
+
+def hanging_handler():
+    """A local-planning handler that never answers (for the autopilot's worker)."""
+
+    def handle(request):
+        end = time.monotonic() + 3600.0
+        while time.monotonic() < end:
+            time.sleep(0.01)
+
+    return handle

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing
 import os
 import signal
 import tempfile
@@ -105,11 +106,15 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     telemetry = Telemetry(ap.telemetry_to, ap.system_id, ap.component_id) if ap.telemetry_to else None
+    # fork: a restarted worker inherits the world instead of receiving it pickled; with spawn the
+    # parent blocks writing ~100 KB into a 64 KB pipe until the new interpreter has started, which
+    # stalls the control loop on every watchdog restart.
+    start_method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
     if planner_factory:
-        worker = PlannerWorker(planner_factory, (), grace_s=ap.watchdog_grace)
+        worker = PlannerWorker(planner_factory, (), grace_s=ap.watchdog_grace, start_method=start_method)
     else:
         worker = PlannerWorker("autopilot_bridge.local_planning:online_cycle_handler", (world,),
-                               grace_s=ap.watchdog_grace)
+                               grace_s=ap.watchdog_grace, start_method=start_method)
     autopilot = Autopilot(ap, cfg.navigation, cfg.control, propulsion, world, link, worker, telemetry,
                           lockstep=lockstep, seed=cfg.sim.seed, log=progress)
     return autopilot
