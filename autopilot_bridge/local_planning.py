@@ -71,6 +71,7 @@ class LocalPlan:
     reason: str
 
 
+PLANNER_SHARE = 0.7  # of a real-time cycle's deadline; the rest is for post-processing
 LOOP_FACTOR = 1.25  # a smoothed path this much longer than its polyline contains a loop
 
 
@@ -93,7 +94,8 @@ def online_cycle_handler(world: World) -> Callable[[Any], LocalPlan]:
         if request.iterations is not None:
             ctx.online = replace(world.online, local_iterations=int(request.iterations), local_time=0.0)
         else:
-            ctx.online = replace(world.online, local_iterations=0, local_time=float(request.deadline_s))
+            # The planner gets 70% of the deadline: subgoal, pruning and smoothing take the rest.
+            ctx.online = replace(world.online, local_iterations=0, local_time=PLANNER_SHARE * float(request.deadline_s))
         rec = plan_cycle(ctx, VesselState(start.x, start.y, start.heading, start.t), request.cycle, start.seed)
         path = rec.local_path
         if len(rec.smooth_path) >= 2 and rec.smoothed_ok:
