@@ -34,7 +34,7 @@ from common.mavlink import Codec
 from common.udp import UdpEndpoint
 from hil import processes
 from hil import scenario as scenarios
-from hil.errors import UsageError
+from hil.errors import RunFailed, UsageError
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -224,9 +224,18 @@ class HilRun:
         log = open(self.out / f"{name}.log", "ab")
         return processes.start(cmd, stdout=subprocess.PIPE, stderr=log, cwd=REPO, start_new_session=True)
 
-    def start(self) -> None:
-        # The autopilot first, so that it is listening when the simulator's first frame comes.
+    def start(self, ready_timeout: float = 180.0) -> None:
+        """The autopilot first, and the simulator once the autopilot is listening (its start-up may
+        include compiling the planner core), so that no frame is sent into the void."""
         self.ap = self._spawn(self.autopilot_command(), "autopilot")
+        log = self.out / "autopilot.log"
+        deadline = time.monotonic() + ready_timeout
+        while b"autopilot: listening on" not in log.read_bytes():
+            if self.ap.poll() is not None:
+                raise RunFailed(f"the autopilot exited during start-up (see {log})")
+            if time.monotonic() > deadline:
+                raise RunFailed(f"the autopilot was not ready after {ready_timeout:g} s (see {log})")
+            self.tap.pump(timeout=0.05)
         self.sim = self._spawn(self.sim_command(), "sim")
 
     def restart_simulator(self) -> None:

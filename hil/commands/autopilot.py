@@ -106,6 +106,21 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     telemetry = Telemetry(ap.telemetry_to, ap.system_id, ap.component_id) if ap.telemetry_to else None
+    # Compile (first run on a machine: ~7 s) or load the planner's numba core here, once, before
+    # the control loop starts: forked workers inherit it, so no planning cycle pays for it.
+    # One real planning cycle from the start compiles everything a cycle uses (tree core, grid
+    # kernels of pruning and smoothing).
+    import time as _time
+
+    from autopilot_bridge.local_planning import CycleInput, online_cycle_handler
+    from autopilot_bridge.planning_worker import PlanRequest
+
+    t0 = _time.monotonic()
+    online_cycle_handler(world)(PlanRequest(0, CycleInput(scen.start[0], scen.start[1], scen.start_heading, 0.0, 0),
+                                            deadline_s=1.0, iterations=200))
+    spent = _time.monotonic() - t0
+    if spent > 1.0:
+        progress(f"autopilot: planner compiled and warmed up in {spent:.1f} s (cached for next time)")
     # fork: a restarted worker inherits the world instead of receiving it pickled; with spawn the
     # parent blocks writing ~100 KB into a 64 KB pipe until the new interpreter has started, which
     # stalls the control loop on every watchdog restart.
