@@ -26,17 +26,13 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from scipy.stats import chi2
 
+from autopilot_bridge.angles import wrap_angle
 from common.params import param
 
 MeasurementModel = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 X, Y, PSI, U, V, R, BG = range(7)
 DIM = 7
-
-
-def wrap_angle(a: float) -> float:
-    """Wrap an angle to [-pi, pi)."""
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 @dataclass(frozen=True)

@@ -19,9 +19,7 @@ from typing import Any
 
 import numpy as np
 
-
-def wrap_angle(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
+from autopilot_bridge.angles import wrap_angle
 
 
 @dataclass(frozen=True)

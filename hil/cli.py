@@ -54,13 +54,7 @@ def build_parser() -> ArgumentParser:
     sub.required = True
     parents = [common_options()]
     for name in COMMANDS:
-        try:
-            module = importlib.import_module(f"hil.commands.{name}")
-        except ModuleNotFoundError as exc:  # TODO(integration): remove once every command exists
-            if exc.name != f"hil.commands.{name}":
-                raise
-            continue
-        module.add_parser(sub, parents)
+        importlib.import_module(f"hil.commands.{name}").add_parser(sub, parents)
     return parser
 
 

@@ -6,23 +6,17 @@ import argparse
 import importlib
 
 # Targets: modules under hil/benches/.
-TARGETS = ("sim", "planner", "loop", "can")
+TARGETS = ("sim", "planner", "loop")
 
 
 def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "bench",
-        help="speed benchmarks (simulator, planner, control loop, CAN)",
+        help="speed benchmarks (simulator, planner, control loop)",
         description="Speed benchmarks. Each target measures in one run and reports ratios "
                     "measured side by side, since machines here are shared and noisy.",
     )
     targets = p.add_subparsers(dest="target", metavar="TARGET", parser_class=type(p))
     targets.required = True
     for name in TARGETS:
-        try:
-            module = importlib.import_module(f"hil.benches.{name}")
-        except ModuleNotFoundError as exc:  # TODO(integration): remove once every target exists
-            if exc.name != f"hil.benches.{name}":
-                raise
-            continue
-        module.add_parser(targets, parents)
+        importlib.import_module(f"hil.benches.{name}").add_parser(targets, parents)
