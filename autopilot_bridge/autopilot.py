@@ -231,7 +231,8 @@ class Autopilot:
         if self.mode == WAITING:
             self.mode = FALLBACK
             self.next_plan_t = t
-        self.track.append((t, s.x, s.y, s.psi)) if self.stats.frames % 10 == 0 else None
+        if self.stats.frames % 10 == 0:  # the estimated track at 10 Hz, for the run's plot
+            self.track.append((t, s.x, s.y, s.psi))
 
         if self.mode != COMPLETE and math.hypot(self.goal_ned[0] - s.x, self.goal_ned[1] - s.y) <= self.p.goal_tolerance:
             self.mode = COMPLETE

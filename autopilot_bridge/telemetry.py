@@ -8,6 +8,7 @@ STATUSTEXT for events and MISSION_ITEM_REACHED when the final goal is reached.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from common.mavlink import MAV_TYPE, Codec
@@ -37,8 +38,6 @@ class Telemetry:
                        MAV_TYPE.MAV_STATE_ACTIVE)
         if t + 1e-9 >= self.next_position_t:
             self.next_position_t = t + self.position_period
-            import math
-
             vn = s.u * math.cos(s.psi) - s.v * math.sin(s.psi)
             ve = s.u * math.sin(s.psi) + s.v * math.cos(s.psi)
             self._send("local_position_ned", int(round(t * 1000)), s.x, s.y, 0.0, vn, ve, 0.0)

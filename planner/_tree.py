@@ -362,6 +362,24 @@ def _try_goal(i, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, 
 
 
 @njit(cache=True)
+def _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, first_child, next_sib, stack,
+            max_turn):
+    """Make q_new the parent of node j if that is cheaper and the edge is valid (fan limit for the
+    edge and for j's children, collision-free): the rewiring step shared by RRT* and DDRRT*."""
+    dx = X[j, 0] - nx
+    dy = X[j, 1] - ny
+    c = cost[new] + _cost(nx, ny, X[j, 0], X[j, 1], fc, ic, fvx, fvy)
+    if c >= cost[j] - 1e-12:
+        return
+    if not _fan_ok(head[new], dx, dy, max_turn):
+        return
+    if not _children_fan_ok(j, math.atan2(dy, dx), X, first_child, next_sib, max_turn):
+        return
+    if _free(occ, fc, st, nx, ny, X[j, 0], X[j, 1]):
+        _reparent(j, new, c, X, parent, cost, head, first_child, next_sib, stack)
+
+
+@njit(cache=True)
 def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib, bucket_head, node_next,
          st, fs, stack, max_iter, deadline_ns, stop_on_exact):
     """Run up to max_iter iterations; see the module docstring for the return codes."""
@@ -454,19 +472,10 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                 j = ext_i[a]
                 if j == p or j == new:
                     continue
-                dx = X[j, 0] - nx
-                dy = X[j, 1] - ny
-                if math.hypot(dx, dy) > step * (1.0 + 1e-9):
+                if math.hypot(X[j, 0] - nx, X[j, 1] - ny) > step * (1.0 + 1e-9):
                     continue
-                c = cost[new] + _cost(nx, ny, X[j, 0], X[j, 1], fc, ic, fvx, fvy)
-                if c >= cost[j] - 1e-12:
-                    continue
-                if not _fan_ok(head[new], dx, dy, max_turn):
-                    continue
-                if not _children_fan_ok(j, math.atan2(dy, dx), X, first_child, next_sib, max_turn):
-                    continue
-                if _free(occ, fc, st, nx, ny, X[j, 0], X[j, 1]):
-                    _reparent(j, new, c, X, parent, cost, head, first_child, next_sib, stack)
+                _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, first_child, next_sib,
+                        stack, max_turn)
         else:
             # ---- RRT* (Karaman & Frazzoli 2011), radius version
             m = _knn(sx, sy, 1, X, fc, ic, bucket_head, node_next, kn_i, kn_d)
@@ -519,17 +528,8 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                 j = near_i[a]
                 if j == p or j == new:
                     continue
-                dx = X[j, 0] - nx
-                dy = X[j, 1] - ny
-                c = cost[new] + _cost(nx, ny, X[j, 0], X[j, 1], fc, ic, fvx, fvy)
-                if c >= cost[j] - 1e-12:
-                    continue
-                if not _fan_ok(head[new], dx, dy, max_turn):
-                    continue
-                if not _children_fan_ok(j, math.atan2(dy, dx), X, first_child, next_sib, max_turn):
-                    continue
-                if _free(occ, fc, st, nx, ny, X[j, 0], X[j, 1]):
-                    _reparent(j, new, c, X, parent, cost, head, first_child, next_sib, stack)
+                _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, first_child, next_sib,
+                        stack, max_turn)
         _try_goal(new, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head, node_next,
                   st, fs, fvx, fvy, stack, clockbuf)
         if stop_on_exact and st[S_GOAL] >= 0:
