@@ -164,7 +164,7 @@ class Autopilot:
             # Such a frame measures the planner, not the control loop: reported apart.
             self._waited = True
             w0 = time.perf_counter()
-            reply = self.worker.wait(self.p.planning_deadline + self.p.watchdog_grace)
+            reply = self.worker.wait(self.p.lockstep_planner_timeout)
             self.stats.planner_waits += 1
             self.stats.planner_wait_ms.append((time.perf_counter() - w0) * 1e3)
             if reply is None and self.worker.watchdog(now=time.monotonic() + 1e9):

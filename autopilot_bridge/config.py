@@ -25,6 +25,9 @@ class AutopilotParams:
     planning_deadline: float = param("hard deadline of one local planning cycle (watchdog)", "s", gt=0)
     watchdog_grace: float = param("a planner this long past its deadline is killed and restarted", "s", gt=0)
     lockstep_iterations: int = param("lockstep: iteration budget per planning cycle (repeatable runs)", ge=1)
+    lockstep_planner_timeout: float = param(
+        "lockstep: wall time to wait for a cycle's plan before the watchdog kills the worker (simulated time "
+        "stands still meanwhile, so a loaded machine must not change the run)", "s", gt=0)
     gps_latency: float = param("GPS output latency compensated by dead reckoning", "s", ge=0)
     fallback_speed: float = param("speed of the reactive obstacle-avoidance behaviour", "m/s", gt=0)
     fallback_range: float = param("look-ahead of the reactive behaviour's free-space rays", "m", gt=0)
