@@ -7,8 +7,10 @@ import json
 import pytest
 
 # Figures that depend on the wall clock (or on files' paths), not on the simulation.
+# tlog_messages and the autopilot's navigation counters are read when the processes are stopped:
+# after the goal the autopilot keeps answering frames until its SIGTERM arrives, a wall-clock moment.
 WALL_CLOCK_KEYS = {"wall_time_s", "control_latency_ms", "run_folder", "tlog", "plot", "simulator",
-                   "tlog_messages"}  # traffic recorded while the processes are being stopped
+                   "tlog_messages", "navigation"}
 
 
 def _run(hil, tmp_path, *args: str, name: str = "run") -> tuple[int, dict]:
