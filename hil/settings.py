@@ -12,10 +12,12 @@ from pathlib import Path
 from autopilot_bridge.config import AutopilotParams
 from autopilot_bridge.control import ControlParams
 from autopilot_bridge.navigation import NavigationParams
+from common.can_params import CanParams
 from hil import config
 from planner.params import PlannerParams
 from simulator.config import (
     CurrentParams,
+    EscParams,
     GeodesyParams,
     LinkParams,
     SensorParams,
@@ -38,6 +40,8 @@ class HilConfig:
     autopilot: AutopilotParams
     navigation: NavigationParams
     control: ControlParams
+    esc: EscParams
+    can: CanParams
 
 
 def load(path: str | Path | None = None, overrides: list[str] | None = None) -> HilConfig:

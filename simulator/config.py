@@ -136,6 +136,18 @@ class SimParams:
 
 
 @dataclass(frozen=True)
+class EscParams:
+    """The thrusters' electronic speed controllers and propellers (both actuator paths)."""
+
+    time_constant: float = param("first-order lag from thrust set-point to thrust; 0 = instantaneous", "s", ge=0)
+    max_rpm: float = param("propeller speed at full forward thrust (thrust ~ rpm^2)", "rpm", gt=0)
+    max_power: float = param("electrical power at full forward thrust (power ~ rpm^3)", "W", gt=0)
+    voltage: float = param("supply voltage reported in ESC Status", "V", gt=0)
+    ambient_temperature: float = param("ESC temperature at rest", "K", gt=0)
+    heating: float = param("steady temperature rise per watt", "K/W", ge=0)
+
+
+@dataclass(frozen=True)
 class LinkParams:
     """UDP/MAVLink endpoints of the simulator."""
 

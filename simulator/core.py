@@ -82,6 +82,9 @@ class SimulatorCore:
         self.state: tuple[float, ...] = (i.x, i.y, i.psi, i.u, i.v, i.r)
         self.n = 0
         self.controls = (0.0, 0.0)
+        self.thrust = (0.0, 0.0)  # N, port and starboard thrust applied now (after the ESC lag)
+        tau = cfg.esc.time_constant
+        self._lag = math.exp(-self.frame_dt / tau) if tau > 0 else 0.0
         self.last_command_t = 0.0
         self.stale = False
         self.stale_command_events = 0
@@ -130,7 +133,7 @@ class SimulatorCore:
         self.commands_received += 1
 
     def thrusts(self) -> tuple[float, float]:
-        """Port and starboard thrust (N) now, after the stale-command failsafe."""
+        """Port and starboard thrust set-points (N) now, after the stale-command failsafe."""
         if self.t - self.last_command_t > self.cfg.sim.stale_command_timeout + 1e-9:
             if not self.stale:
                 self.stale = True
@@ -146,13 +149,16 @@ class SimulatorCore:
 
     def derivative(self) -> tuple[float, ...]:
         """State derivative now (with the thrust currently applied)."""
-        tau = self.vessel.propulsion(*self.thrusts())
+        tau = self.vessel.propulsion(*self.thrust)
         return self.vessel.dynamics(self.state, tau, *self._env)
 
     def step(self) -> None:
         """Advance the truth by one frame: RK4 substeps with thrust held for the frame and waves and
-        current evaluated at the start of each substep (they vary over tens of seconds)."""
-        tau = self.vessel.propulsion(*self.thrusts())
+        current evaluated at the start of each substep (they vary over tens of seconds). The thrust
+        follows its set-point through the ESC's first-order lag, discretised exactly per frame."""
+        (sp, ss), (tp, ts), a = self.thrusts(), self.thrust, self._lag
+        self.thrust = (sp + (tp - sp) * a, ss + (ts - ss) * a)
+        tau = self.vessel.propulsion(*self.thrust)
         dyn = self.vessel.dynamics
         for k in range(1, self.substeps + 1):
             tau_w, cur = self._env
