@@ -60,6 +60,8 @@ class RunOptions:
     actuators: str = "mavlink"
     extra_autopilot_args: list[str] = field(default_factory=list)
     extra_sim_overrides: list[str] = field(default_factory=list)
+    extra_sim_args: list[str] = field(default_factory=list)
+    stop_at_goal: bool = True            # hil soak: keep running after the goal until the time is up
     on_progress: Callable[[str], None] = lambda _m: None
     plot: bool = True
     hooks: list[Callable[["Tap", "HilRun"], None]] = field(default_factory=list)  # tests: fault injection
@@ -178,6 +180,8 @@ class HilRun:
         self.sim: subprocess.Popen | None = None
         self.ap: subprocess.Popen | None = None
         self.sim_restarts = 0
+        self.can_recorder = None  # hil.can_log.CanRecorder when the thrusters are on CAN
+        self.can_log: dict[str, Any] = {}
 
     # -- processes ---------------------------------------------------------------------------------
     def _common_args(self) -> list[str]:
@@ -203,6 +207,7 @@ class HilRun:
             args += ["--set", f"current.{k}={json.dumps(v)}"]
         for o in self.opts.extra_sim_overrides:
             args += ["--set", o]
+        args += self.opts.extra_sim_args
         if self.opts.lockstep:
             args.append("--lockstep")
         else:
@@ -227,6 +232,13 @@ class HilRun:
     def start(self, ready_timeout: float = 180.0) -> None:
         """The autopilot first, and the simulator once the autopilot is listening (its start-up may
         include compiling the planner core), so that no frame is sent into the void."""
+        if self.cfg.can.actuators == "can" and self.cfg.can.log:
+            from hil.can_log import CanRecorder
+
+            try:
+                self.can_recorder = CanRecorder(self.cfg.can, self.out / "can.log")
+            except ValueError as exc:
+                raise UsageError(str(exc)) from None
         self.ap = self._spawn(self.autopilot_command(), "autopilot")
         log = self.out / "autopilot.log"
         deadline = time.monotonic() + ready_timeout
@@ -293,7 +305,7 @@ class HilRun:
                 if collision_at is not None:
                     outcome = "collision"
                     break
-                if times and self.judge.at_goal(*self.tap.truth[times[-1]][:2]):
+                if opts.stop_at_goal and times and self.judge.at_goal(*self.tap.truth[times[-1]][:2]):
                     outcome = "goal"
                     break
                 if t_sim >= opts.duration:
@@ -319,6 +331,8 @@ class HilRun:
             sim_summary = self._stop(self.sim)
             self.tap.pump(timeout=0.0)
             self.tap.close()
+            if self.can_recorder is not None:
+                self.can_log = self.can_recorder.close()
         wall = time.monotonic() - wall0
         return self._summary(outcome, collision_at, min_clearance, wall, ap_summary, sim_summary)
 
@@ -360,7 +374,14 @@ class HilRun:
             "tlog": str(self.out / "run.tlog"),
             "tlog_messages": self.tap.frames,
             "events": ap.get("events", []),
+            "actuators": self.cfg.can.actuators,
         }
+        if self.cfg.can.actuators == "can":
+            # The CAN path's counters: transport, ESC status, rejects (wall-clock dependent).
+            summary["can"] = {"autopilot": ap.get("can"), "simulator": None if sim is None else sim.get("can"),
+                              **self.can_log}
+            if not self.opts.lockstep:
+                summary["energy_J"] = None  # commands travel only on CAN: the tap cannot see them
         return summary
 
     def _energy(self, times: list[int], speeds: np.ndarray) -> float:

@@ -14,6 +14,7 @@ from collections import Counter
 from typing import Any
 
 from common.current_field import CurrentField
+from common.dronecan_codec import RAW_COMMAND_MAX
 from common.geodesy import LocalFrame
 from common.mavlink import Codec, MAV_TYPE
 from simulator.integrator import rk4_step
@@ -126,8 +127,12 @@ class SimulatorCore:
         return out
 
     def apply(self, cmd: Command) -> None:
-        """Make ``cmd`` the newest command (received at the current simulated time)."""
-        self.controls = (cmd.port, cmd.stdb)
+        """Make ``cmd`` the newest command (received at the current simulated time).
+
+        The simulated ESCs have the int14 resolution of DroneCAN's RawCommand on both actuator
+        paths, so MAVLink (float32) and CAN (integer) commands of the same value drive the same thrust.
+        """
+        self.controls = (_esc_resolution(cmd.port), _esc_resolution(cmd.stdb))
         self.last_command_t = self.t
         self.stale = False
         self.commands_received += 1
@@ -210,6 +215,10 @@ class SimulatorCore:
         x, y, psi, u, v, r = self.state
         lat, lon = self.geo.sea_level_to_geodetic(x, y)
         return dict(t=self.t, x=x, y=y, psi=psi, u=u, v=v, r=r, lat=lat, lon=lon)
+
+
+def _esc_resolution(x: float) -> float:
+    return round(x * RAW_COMMAND_MAX) / RAW_COMMAND_MAX
 
 
 def _i16(v: float) -> int:

@@ -48,6 +48,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--summary-out", metavar="FILE", default=None,
                    help="also write the summary JSON to FILE (atomically) when stopping")
     p.add_argument("--planner-factory", default=None, help=argparse.SUPPRESS)  # tests: a planner double
+    p.add_argument("--can-record", default=None, help=argparse.SUPPRESS)  # hil soak: RawCommand send times (.npz)
     add_can_arguments(p)
     p.set_defaults(func=run)
 
@@ -65,6 +66,12 @@ def _overrides(args: argparse.Namespace) -> list[str]:
     if args.algorithm is not None:
         out.append("planner.algorithm=" + json.dumps(args.algorithm))
     return out + can_overrides(args)
+
+
+def _save_record(path: str, tids, times) -> None:
+    import numpy as np
+
+    np.savez(path, tid=np.frombuffer(tids, dtype=np.int8), at=np.frombuffer(times, dtype=float))
 
 
 def write_json_atomic(path: str | Path, data: dict) -> None:
@@ -152,6 +159,8 @@ def run(args: argparse.Namespace) -> int:
     cfg = load_settings(args)
     autopilot = build(cfg, args.scenario, args.lockstep, args.planner_factory)
     stop = {"flag": False}
+    if args.can_record and autopilot.actuators is not autopilot.link:
+        autopilot.actuators.record = True
 
     def request_stop(*_):
         stop["flag"] = True
@@ -171,6 +180,8 @@ def run(args: argparse.Namespace) -> int:
         autopilot.link.close()
         if autopilot.actuators is not autopilot.link:
             autopilot.actuators.close()
+            if args.can_record:
+                _save_record(args.can_record, autopilot.actuators.sent_tid, autopilot.actuators.sent_at)
         if autopilot.telemetry is not None:
             autopilot.telemetry.close()
     summary = autopilot.summary()

@@ -50,6 +50,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                    help="seed of every random process: sensor noise, GPS events, waves (default: sim.seed = 1)")
     p.add_argument("--speedup", metavar="N", type=float, default=None,
                    help="real-time mode: simulated seconds per wall-clock second (default: sim.speedup = 1)")
+    p.add_argument("--can-record", default=None, help=argparse.SUPPRESS)  # hil soak: RawCommand apply times (.npz)
     add_can_arguments(p)
     p.set_defaults(func=run)
 
@@ -90,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
 
         try:
             esc = EscBank(open_bus(cfg.can), cfg.can, cfg.esc, core.vessel)
+            esc.record = bool(args.can_record)
         except ValueError as exc:
             endpoint.close()
             raise UsageError(str(exc)) from None
@@ -109,6 +111,10 @@ def run(args: argparse.Namespace) -> int:
         endpoint.close()
         if esc is not None:
             esc.bus.shutdown()
+            if args.can_record:
+                from hil.commands.autopilot import _save_record
+
+                _save_record(args.can_record, esc.applied_tid, esc.applied_at)
     summary["commands_on"] = f"{host}:{port}"
     try:
         emit(args, summary)
