@@ -12,9 +12,9 @@ Event-driven by the simulator's sensor frames (one per IMU period). For each new
    failure, overrun with nothing usable, vessel inside an inflated obstacle), the reactive
    avoidance behaviour (:mod:`autopilot_bridge.reactive`) steers until planning succeeds again;
 4. line-of-sight guidance, heading PID and speed pole placement, allocation to the two thrusters
-   (:mod:`autopilot_bridge.control`), quantised to the ESCs' int14 resolution and sent back as
-   HIL_ACTUATOR_CONTROLS answering that frame, or as DroneCAN RawCommand when the actuator
-   back-end is :class:`autopilot_bridge.can_actuators.CanActuators`.
+   (:mod:`autopilot_bridge.control`), sent back as HIL_ACTUATOR_CONTROLS answering that frame,
+   or as DroneCAN RawCommand (int14) when the actuator back-end is
+   :class:`autopilot_bridge.can_actuators.CanActuators`.
 
 A frame that repeats the last one (the simulator re-sends after a lost command) is answered with
 the same command again. Sensor time jumping backwards means the simulator restarted: navigation
@@ -84,11 +84,13 @@ class Autopilot:
     def __init__(self, params: AutopilotParams, nav: NavigationParams, control: ControlParams,
                  propulsion: Propulsion, world: World, link: HilLink, worker: PlannerWorker,
                  telemetry: Telemetry | None = None, *, lockstep: bool, seed: int,
-                 log: Callable[[str], None] | None = None, actuators: Any | None = None) -> None:
+                 log: Callable[[str], None] | None = None, actuators: Any | None = None,
+                 int14_commands: bool = False) -> None:
         self.p, self.nav_params, self.control_params = params, nav, control
         self.prop, self.world, self.link, self.worker = propulsion, world, link, worker
         self.telemetry = telemetry
         self.actuators = actuators if actuators is not None else link  # send_controls(time_usec, port, stdb)
+        self.int14_commands = int14_commands
         self.lockstep, self.seed = lockstep, seed
         self.log = log or (lambda _m: None)
         self.goal_ned = (world.goal[1], world.goal[0])
@@ -293,9 +295,10 @@ class Autopilot:
         return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
 
     def _send(self, time_usec: int, cmd: Thrust, received_at: float) -> None:
-        # Both back-ends carry the ESCs' resolution, so the two paths drive the same thrust.
-        self.actuators.send_controls(time_usec, quantize(cmd.port_cmd) / RAW_COMMAND_MAX,
-                                     quantize(cmd.stdb_cmd) / RAW_COMMAND_MAX)
+        port, stdb = cmd.port_cmd, cmd.stdb_cmd
+        if self.int14_commands:  # the ESCs' resolution on either back-end: both paths drive the same thrust
+            port, stdb = quantize(port) / RAW_COMMAND_MAX, quantize(stdb) / RAW_COMMAND_MAX
+        self.actuators.send_controls(time_usec, port, stdb)
         self.last_command = cmd
         self.stats.commands += 1
         if not self._waited:

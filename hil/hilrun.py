@@ -180,6 +180,7 @@ class HilRun:
         self.sim: subprocess.Popen | None = None
         self.ap: subprocess.Popen | None = None
         self.sim_restarts = 0
+        self.end_usec: int | None = None  # truth time of the sample that ended the run (goal, collision)
         self.can_recorder = None  # hil.can_log.CanRecorder when the thrusters are on CAN
         self.can_log: dict[str, Any] = {}
 
@@ -286,7 +287,7 @@ class HilRun:
     def execute(self) -> dict[str, Any]:
         opts = self.opts
         wall0 = time.monotonic()
-        outcome, collision_at = "timeout", None
+        outcome, collision_at, goal_at = "timeout", None, None
         min_clearance, last_report = math.inf, wall0
         try:
             self.start()
@@ -294,18 +295,26 @@ class HilRun:
             while True:
                 self.tap.pump(timeout=0.05)
                 times = sorted(self.tap.truth)
+                # Judge every new truth sample in order, so that where the run ends (and so its
+                # summary) does not depend on how many samples one pump happened to read.
                 for tu in times[checked:]:
                     n, e, _, _ = self.tap.truth[tu]
                     c = self.judge.clearance(n, e)
                     min_clearance = min(min_clearance, c)
                     if c < self.judge.hull_radius and collision_at is None:
                         collision_at = tu * 1e-6
+                        self.end_usec = tu
+                        break
+                    if opts.stop_at_goal and self.judge.at_goal(n, e):
+                        goal_at = tu
+                        self.end_usec = tu
+                        break
                 checked = len(times)
                 t_sim = times[-1] * 1e-6 if times else 0.0
                 if collision_at is not None:
                     outcome = "collision"
                     break
-                if opts.stop_at_goal and times and self.judge.at_goal(*self.tap.truth[times[-1]][:2]):
+                if goal_at is not None:
                     outcome = "goal"
                     break
                 if t_sim >= opts.duration:
@@ -338,7 +347,7 @@ class HilRun:
 
     def _summary(self, outcome: str, collision_at: float | None, min_clearance: float, wall: float,
                  ap: dict | None, sim: dict | None) -> dict[str, Any]:
-        times = sorted(self.tap.truth)
+        times = sorted(t for t in self.tap.truth if self.end_usec is None or t <= self.end_usec)
         track = np.array([self.tap.truth[t][:2] for t in times]) if times else np.zeros((0, 2))
         speeds = np.array([math.hypot(*self.tap.truth[t][2:]) for t in times]) if times else np.zeros(0)
         length = float(np.sum(np.hypot(*np.diff(track, axis=0).T))) if len(track) > 1 else 0.0

@@ -140,6 +140,8 @@ class EscParams:
     """The thrusters' electronic speed controllers and propellers (both actuator paths)."""
 
     time_constant: float = param("first-order lag from thrust set-point to thrust; 0 = instantaneous", "s", ge=0)
+    int14_resolution: bool = param(
+        "round commands to DroneCAN RawCommand's int14 resolution on the MAVLink path too (always on for CAN)")
     max_rpm: float = param("propeller speed at full forward thrust (thrust ~ rpm^2)", "rpm", gt=0)
     max_power: float = param("electrical power at full forward thrust (power ~ rpm^3)", "W", gt=0)
     voltage: float = param("supply voltage reported in ESC Status", "V", gt=0)

@@ -86,6 +86,7 @@ class SimulatorCore:
         self.thrust = (0.0, 0.0)  # N, port and starboard thrust applied now (after the ESC lag)
         tau = cfg.esc.time_constant
         self._lag = math.exp(-self.frame_dt / tau) if tau > 0 else 0.0
+        self._int14 = cfg.esc.int14_resolution or cfg.can.actuators == "can"
         self.last_command_t = 0.0
         self.stale = False
         self.stale_command_events = 0
@@ -129,10 +130,14 @@ class SimulatorCore:
     def apply(self, cmd: Command) -> None:
         """Make ``cmd`` the newest command (received at the current simulated time).
 
-        The simulated ESCs have the int14 resolution of DroneCAN's RawCommand on both actuator
-        paths, so MAVLink (float32) and CAN (integer) commands of the same value drive the same thrust.
+        With ``esc.int14_resolution`` (always on the CAN path, where commands are int14 anyway) the
+        simulated ESCs round to DroneCAN RawCommand's resolution, so MAVLink (float32) and CAN
+        commands of the same value drive the same thrust.
         """
-        self.controls = (_esc_resolution(cmd.port), _esc_resolution(cmd.stdb))
+        if self._int14:
+            self.controls = (_esc_resolution(cmd.port), _esc_resolution(cmd.stdb))
+        else:
+            self.controls = (cmd.port, cmd.stdb)
         self.last_command_t = self.t
         self.stale = False
         self.commands_received += 1

@@ -105,7 +105,7 @@ def test_autopilot_ignores_its_own_node_id_and_counts_lost_status(rig):
 
 
 def test_esc_lag_is_first_order_and_shared_by_both_paths():
-    cfg = settings.load()
+    cfg = settings.load(None, ["esc.time_constant=0.1"])
     core = SimulatorCore(cfg)
     from simulator.core import Command
     core.apply(Command(0, 1.0, 0.0))
@@ -120,3 +120,14 @@ def test_esc_lag_is_first_order_and_shared_by_both_paths():
     instant.apply(Command(0, 1.0, 0.0))
     instant.step()
     assert instant.thrust[0] == instant.vessel.T_max
+
+
+def test_int14_resolution_rounds_commands_like_raw_command():
+    from simulator.core import Command
+    plain = SimulatorCore(settings.load())
+    plain.apply(Command(0, 0.5, -0.3))
+    assert plain.controls == (0.5, -0.3)  # the MAVLink path as it always was
+    for overrides in (["esc.int14_resolution=true"], ["can.actuators=\"can\""]):
+        core = SimulatorCore(settings.load(None, overrides))
+        core.apply(Command(0, 0.5, -0.3))
+        assert core.controls == (4096 / 8191, -2457 / 8191)

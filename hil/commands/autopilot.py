@@ -150,7 +150,8 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
         worker = PlannerWorker("autopilot_bridge.local_planning:online_cycle_handler", (world,),
                                grace_s=ap.watchdog_grace, start_method=start_method)
     autopilot = Autopilot(ap, cfg.navigation, cfg.control, propulsion, world, link, worker, telemetry,
-                          lockstep=lockstep, seed=cfg.sim.seed, log=progress, actuators=actuators)
+                          lockstep=lockstep, seed=cfg.sim.seed, log=progress, actuators=actuators,
+                          int14_commands=cfg.esc.int14_resolution or cfg.can.actuators == "can")
     return autopilot
 
 
