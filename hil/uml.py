@@ -151,6 +151,13 @@ try:
         os.makedirs(dst, exist_ok=True)
         if libc.mount(src.encode(), dst.encode(), fs.encode(), 0, None) != 0:
             report.setdefault("mount_errors", {{}})[dst] = ctypes.get_errno()
+    # The host's socket buffer limits (the guest's defaults are ~200 KB: a busy UDP tap would drop).
+    for key, value in {sysctls!r}.items():
+        try:
+            with open("/proc/sys/net/core/" + key, "w") as fh:
+                fh.write(value)
+        except OSError as exc:
+            report.setdefault("sysctl_errors", {{}})[key] = str(exc)
     for m in {modules!r}:
         fd = os.open(os.path.join({kernel!r}, m), os.O_RDONLY)
         rc = libc.syscall(313, fd, b"", 0)  # finit_module (x86_64); no kmod in the guest
@@ -218,7 +225,13 @@ def run_in_uml(jobs: list[Job], mem: str = "1536M", boot_timeout: float = 60.0,
         {"name": j.name, "argv": j.argv, "cwd": str(Path(j.cwd).resolve()), "env": {**env_base, **j.env},
          "timeout": j.timeout} for j in jobs]))
     init = work / "init.py"
-    init.write_text(_INIT.format(python=sys.executable, work=str(work.resolve()), modules=list(CAN_MODULES),
+    sysctls = {}
+    for key in ("rmem_max", "wmem_max", "rmem_default", "wmem_default"):
+        try:
+            sysctls[key] = Path(f"/proc/sys/net/core/{key}").read_text().strip()
+        except OSError:
+            pass
+    init.write_text(_INIT.format(python=sys.executable, sysctls=sysctls, work=str(work.resolve()), modules=list(CAN_MODULES),
                                  kernel=str(uml_modules()), ip=shutil.which("ip") or "/usr/sbin/ip"))
     init.chmod(0o755)
     (work / "guest.json").unlink(missing_ok=True)
