@@ -49,6 +49,10 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                    help="seed of every random process: sensor noise, GPS events, waves (default: sim.seed = 1)")
     p.add_argument("--speedup", metavar="N", type=float, default=None,
                    help="real-time mode: simulated seconds per wall-clock second (default: sim.speedup = 1)")
+    p.add_argument("--traffic", metavar="SOURCE", default=None,
+                   help="ship traffic to sail and report by AIS_VESSEL (settings in [traffic]): a scenario "
+                        "name or .toml file with [[traffic]] tables, or a .json list of such tables "
+                        "(default: no traffic)")
     p.set_defaults(func=run)
 
 
@@ -73,8 +77,13 @@ def config_overrides(args: argparse.Namespace) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     args.overrides = list(args.overrides) + config_overrides(args)
     cfg = load_settings(args)
+    traffic = ()
+    if getattr(args, "traffic", None):
+        from hil.scenario import load_traffic
+
+        traffic = load_traffic(args.traffic)
     try:
-        core = SimulatorCore(cfg)
+        core = SimulatorCore(cfg, traffic)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     try:
