@@ -40,6 +40,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from planner.traffic_map import Zone
+
 HEAD_ON = "head-on"
 OVERTAKING = "overtaking"                  # we overtake: we keep clear (rule 13)
 OVERTAKEN = "overtaken"                    # the target overtakes us: we stand on (rules 13, 17)
@@ -138,18 +140,6 @@ def classify(own_pos, own_course: float, own_speed: float, tgt_pos, tgt_course: 
     if b < 180.0:
         return done(CROSSING_GIVE_WAY)
     return done(CROSSING_STAND_ON)
-
-
-@dataclass(frozen=True)
-class Zone:
-    """A rectangle the USV must not be in, in a ship's frame at the time the USV would be there:
-    ``along`` (m ahead of that ship's position along her course) and ``starboard`` (m to her
-    starboard) ranges. ``frame`` is "target" (moves with the target) or "own" (the USV's course
-    line at planning time, fixed)."""
-
-    frame: str
-    along: tuple[float, float]
-    starboard: tuple[float, float]
 
 
 def forbidden_zones(encounter_type: str, radius: float, p: ColregsParams, act_stand_on: bool = False) -> tuple[Zone, ...]:
