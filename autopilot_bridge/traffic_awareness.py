@@ -23,7 +23,7 @@ new risk). Frames: tracks are NED; :meth:`snapshot` converts to the planner's ma
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from autopilot_bridge.ais_tracking import AisReport, AisTracker, Target, TrackerParams
@@ -31,6 +31,7 @@ from planner import colregs as C
 from planner.collision_cone import assess
 from planner.traffic_map import MovingObstacle, TrafficSnapshot
 
+RULE17_PORT_TOLERANCE = 1.0  # m: path-following error allowed to port of the rule-17 course line
 SHORT_ACTION = {C.HEAD_ON: "starboard turn", C.OVERTAKING: "keep clear", C.OVERTAKEN: "stand on",
                 C.CROSSING_GIVE_WAY: "pass astern", C.CROSSING_STAND_ON: "stand on", C.STATIC: "keep clear"}
 
@@ -46,6 +47,7 @@ class EncounterState:
     dcpa: float
     acting: bool = False           # stand-on ship manoeuvring under rule 17
     act_t: float | None = None
+    act_pose: tuple[float, float, float] | None = None   # map x, y, course (rad from east) when it began
     end_t: float | None = None
 
 
@@ -108,6 +110,8 @@ class TrafficAwareness:
             enc.tcpa, enc.dcpa = cone.tcpa, cone.dcpa
             if enc.role == C.STAND_ON and not enc.acting and cone.collision and cone.tcpa <= self.p.rule17_tcpa:
                 enc.acting, enc.act_t = True, t
+                # Rule 17(c) forbids turning to port from the course held until now: anchor it here.
+                enc.act_pose = (s.y, s.x, math.pi / 2.0 - course)
                 events.append(f"COLREG {tg.mmsi} give-way fails: rule 17 act")
                 replan = True
             if not cone.collision and cone.v_r >= 0.0 and not cone.inside:
@@ -131,6 +135,14 @@ class TrafficAwareness:
                 if not C.needs_planning(enc.type, enc.acting):
                     continue   # stand on: keep course and speed, the target is not avoided by planning
                 zones = C.forbidden_zones(enc.type, self.radius(tg), self.p, act_stand_on=enc.acting)
+                if enc.act_pose is not None:
+                    ox, oy, oc = enc.act_pose
+                    # Our offset to starboard of that course line now: the zone never includes
+                    # where we are, it only stops us moving further to port.
+                    lateral = (x - ox) * math.sin(oc) - (y - oy) * math.cos(oc)
+                    top = min(RULE17_PORT_TOLERANCE, lateral) - RULE17_PORT_TOLERANCE
+                    zones = tuple(replace(z, origin=(ox, oy), course=oc, starboard=(z.starboard[0], top))
+                                  if z.frame == "own" else z for z in zones)
             obstacles.append(MovingObstacle(tg.mmsi, tg.east, tg.north, tg.ve, tg.vn, self.radius(tg), zones))
         if not obstacles:
             return None

@@ -336,6 +336,12 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
         traffic_grid = lambda g: paint(g, traffic, pos, params.perceptual_radius, keep_free=pos, keep_radius=keep)  # noqa: E731
         plain_goal = _free_subgoal(ctx, grid, pos, sub_index, sub_point)
         grid = traffic_grid(grid)
+        if plain_goal is not None and not grid.is_free(*plain_goal):
+            # A ship occupies the subgoal when we would get there (e.g. she sails along our
+            # reference path): look beside it, starboard side first, before giving up ground.
+            side = _beside_free(grid, pos, plain_goal, params.perceptual_radius, traffic)
+            if side is not None:
+                sub_point = plain_goal = side
     goal = _free_subgoal(ctx, grid, pos, sub_index, sub_point)
     moved = traffic_grid is not None and goal != plain_goal
     if goal is None:
@@ -403,6 +409,25 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
     return CycleRecord(index, state, goal, rule, result.status, float(search), result.planning_time_s,
                        result.iterations, local, smoothed, ok, result.tree_nodes, result.tree_parents,
                        reason="traffic moved the subgoal" if moved else result.reason)
+
+
+def _beside_free(grid: OccupancyGrid, pos: tuple[float, float], point: tuple[float, float], radius: float,
+                 traffic: Any) -> tuple[float, float] | None:
+    """The free point nearest ``point`` across the direction of travel (starboard offsets first),
+    inside the perceptual domain, or None."""
+    dx, dy = point[0] - pos[0], point[1] - pos[1]
+    d = math.hypot(dx, dy)
+    if d < 1e-9:
+        return None
+    sx, sy = dy / d, -dx / d                      # starboard of the direction of travel (map frame)
+    step = max(grid.resolution, 1.0)
+    reach = max((ob.radius for ob in traffic.obstacles), default=0.0) * 3.0
+    for k in range(1, int(reach / step) + 1):
+        for sign in (1.0, -1.0):
+            q = (point[0] + sign * k * step * sx, point[1] + sign * k * step * sy)
+            if math.hypot(q[0] - pos[0], q[1] - pos[1]) <= radius and grid.is_free(*q):
+                return q
+    return None
 
 
 def drop_short_legs(path: np.ndarray, grid: OccupancyGrid, min_leg: float) -> np.ndarray:

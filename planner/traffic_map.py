@@ -34,9 +34,11 @@ from planner.gridmap import OccupancyGrid
 class Zone:
     """A rectangle in a ship's frame: ``along`` (m ahead along her course) x ``starboard`` (m)."""
 
-    frame: str                       # "target" (moves with the ship) or "own" (USV's course at t = 0)
+    frame: str                       # "target" (moves with the ship) or "own" (the USV's course line)
     along: tuple[float, float]
     starboard: tuple[float, float]
+    origin: tuple[float, float] | None = None   # "own": anchor point (default: the cycle's start)
+    course: float | None = None                 # "own": anchor course, rad from east (default: start heading)
 
 
 @dataclass(frozen=True)
@@ -86,7 +88,9 @@ def occupied(px: np.ndarray, py: np.ndarray, tau: np.ndarray, snap: TrafficSnaps
         sp = math.hypot(ob.vx, ob.vy)
         for z in ob.zones:
             if z.frame == "own":
-                out |= _in_zone(px - snap.start[0], py - snap.start[1], ch, sh, z)
+                ox, oy = z.origin if z.origin is not None else snap.start
+                zc, zs = (ch, sh) if z.course is None else (math.cos(z.course), math.sin(z.course))
+                out |= _in_zone(px - ox, py - oy, zc, zs, z)
             elif sp > 1e-6:
                 out |= _in_zone(dx, dy, ob.vx / sp, ob.vy / sp, z)
     return out
