@@ -63,6 +63,7 @@ class RunOptions:
     on_progress: Callable[[str], None] = lambda _m: None
     plot: bool = True
     hooks: list[Callable[["Tap", "HilRun"], None]] = field(default_factory=list)  # tests: fault injection
+    traffic: tuple | None = None         # ships replacing the scenario's [[traffic]] (Monte Carlo draws)
 
 
 class Tap:
@@ -185,6 +186,8 @@ class HilRun:
     def __init__(self, opts: RunOptions, cfg: Any) -> None:
         self.opts, self.cfg = opts, cfg
         self.scen = scenarios.load(opts.scenario, cfg.current)
+        if opts.traffic is not None:
+            self.scen.traffic = tuple(opts.traffic)
         self.out = opts.out
         self.out.mkdir(parents=True, exist_ok=True)
         self.geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
