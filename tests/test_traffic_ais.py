@@ -48,7 +48,7 @@ def test_class_a_reporting_intervals():
 
 def _core(*ships: ShipSpec, overrides=()):
     cfg = settings.load(None, ["sensors.gps.glitch_probability=0.0", *overrides])
-    return SimulatorCore(cfg, ships), cfg
+    return SimulatorCore(cfg, traffic=ships), cfg
 
 
 def _link(cfg) -> HilLink:
