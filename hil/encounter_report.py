@@ -18,7 +18,8 @@ has an own-ship sample at the same instant. From those:
   radius), and the rule's manoeuvre: head-on, the ship passes on our port side (port to port);
   crossing give-way, we pass astern of her (at the CPA we are abaft her beam); stand-on (crossing
   from the left, being overtaken), no manoeuvre before she clearly failed (on a collision course
-  with TCPA <= rule17_tcpa, see docs) and never a turn to port.
+  with TCPA <= rule17_tcpa, R widened by ``DCPA_TOLERANCE`` for what AIS lets the vessel know)
+  and never a turn to port.
 """
 
 from __future__ import annotations
@@ -36,6 +37,8 @@ TURN_DEG = 10.0      # deg of course change that counts as a turn
 SLOW_RATIO = 0.75    # speed below this fraction of the initial speed counts as slowing down
 ACTION_GRACE = 1.0   # s: a stand-on manoeuvre this early before the rule-17 instant is still compliant
 MOVING = 0.3         # m/s: below this the own ship has no course to classify from
+DCPA_TOLERANCE = 3.0 # m: the vessel computer knows her CPA only to the AIS position noise it assumes
+                     # (tracking.pos_std); rule 17's instant is judged with R widened by this much
 
 
 def _corners(x: float, y: float, heading: float, ahead: float, behind: float, left: float, right: float) -> np.ndarray:
@@ -127,7 +130,7 @@ class EncounterJudge:
                 break
         if risk is not None:
             for i in range(risk, k + 1):
-                cone = assess((on[i], oe[i]), (ovn[i], ove[i]), (sn[i], se[i]), (svn[i], sve[i]), R)
+                cone = assess((on[i], oe[i]), (ovn[i], ove[i]), (sn[i], se[i]), (svn[i], sve[i]), R + DCPA_TOLERANCE)
                 if cone.collision and cone.tcpa <= p.rule17_tcpa:
                     rule17 = i
                     break
