@@ -457,7 +457,9 @@ def run_loop(opts: RunOptions, cfg: Any) -> dict[str, Any]:
 
             ap_path = opts.out / "autopilot.json"
             ap = json.loads(ap_path.read_text()) if ap_path.exists() else {}
-            plot_run(opts.out / "plot.png", run.scen, run.tap.truth, ap, cfg)
+            plot_run(opts.out / "plot.png", run.scen, run.tap.truth, ap, cfg,
+                     ships=run.encounter_judge.ships if run.encounter_judge is not None else None,
+                     encounters=summary.get("encounters"))
             summary["plot"] = str(opts.out / "plot.png")
         except Exception as exc:  # a plot must never lose the run's data
             summary["plot_error"] = f"{type(exc).__name__}: {exc}"
