@@ -2,7 +2,9 @@
 
 Event-driven by the simulator's sensor frames (one per IMU period). For each new frame:
 
-1. navigation fusion (:mod:`autopilot_bridge.navigation`) of gyro, compass, GPS and DVL;
+1. navigation fusion (:mod:`autopilot_bridge.navigation`) of gyro, compass, GPS and DVL; range
+   scans add the obstacles the chart lacks (:mod:`autopilot_bridge.obstacle_map`), and a local
+   path that a newly sensed obstacle blocks is replanned at once;
 2. every ``planning_period`` of simulated time, a local planning cycle is handed to the planner
    worker process (:mod:`autopilot_bridge.planning_worker`) from the position predicted at the
    end of the cycle's deadline; its answer is collected without blocking (real time), or at
@@ -44,6 +46,7 @@ from autopilot_bridge.guidance import GuidanceOutput, LineOfSight
 from autopilot_bridge.hil_link import HilLink, SensorFrame
 from autopilot_bridge.local_planning import CycleInput, LocalPlan, World, map_to_ned_path, ned_to_map
 from autopilot_bridge.navigation import NavigationFilter, NavigationParams, NavState
+from autopilot_bridge.obstacle_map import SensedObstacles, path_blocked
 from autopilot_bridge.planning_worker import PlannerWorker, PlanRequest
 from autopilot_bridge.reactive import ReactiveAvoidance
 from autopilot_bridge.telemetry import Telemetry
@@ -75,6 +78,7 @@ class AutopilotStats:
     latency_ms: list[float] = field(default_factory=list)
     planner_waits: int = 0          # lockstep frames that waited for the planner (by design)
     planner_wait_ms: list[float] = field(default_factory=list)
+    sensed_replans: int = 0         # local paths found blocked by newly sensed obstacles
     events: list[tuple[float, str]] = field(default_factory=list)
 
 
@@ -84,11 +88,12 @@ class Autopilot:
     def __init__(self, params: AutopilotParams, nav: NavigationParams, control: ControlParams,
                  propulsion: Propulsion, world: World, link: HilLink, worker: PlannerWorker,
                  telemetry: Telemetry | None = None, *, lockstep: bool, seed: int,
-                 log: Callable[[str], None] | None = None, actuators: Any | None = None,
+                 log: Callable[[str], None] | None = None, traffic: Any = None, actuators: Any | None = None,
                  int14_commands: bool = False) -> None:
         self.p, self.nav_params, self.control_params = params, nav, control
         self.prop, self.world, self.link, self.worker = propulsion, world, link, worker
         self.telemetry = telemetry
+        self.traffic = traffic  # autopilot_bridge.traffic_awareness.TrafficAwareness, or None
         self.actuators = actuators if actuators is not None else link  # send_controls(time_usec, port, stdb)
         self.int14_commands = int14_commands
         self.lockstep, self.seed = lockstep, seed
@@ -97,7 +102,12 @@ class Autopilot:
         self.reference_ned = map_to_ned_path(world.reference_path)
         from planner.gridmap import OccupancyGrid
 
-        self.grid = OccupancyGrid(world.occ, world.resolution)
+        # The chart plus the obstacles sensed on the way (kept across simulator restarts: the
+        # world did not change).
+        self.grid = OccupancyGrid(world.occ.copy(), world.resolution)
+        self.sensed = SensedObstacles(world.occ, world.resolution, params.sensed_confirm_hits,
+                                      params.sensed_explain_radius)
+        self._sensed_at_submit = 0
         self.reactive = ReactiveAvoidance(self.grid, params.fallback_range, params.min_clearance, params.fallback_speed)
         self.stats = AutopilotStats()
         self._waited = False
@@ -120,6 +130,9 @@ class Autopilot:
         self.last_t: float | None = None
         self.complete_t: float | None = None
         self.target = self.goal_ned
+        self.speed_factor = 1.0
+        if self.traffic is not None:
+            self.traffic.reset()
 
     def _event(self, t: float, text: str) -> None:
         self.stats.events.append((t, text))
@@ -150,9 +163,13 @@ class Autopilot:
         east = s.y + (s.u * math.sin(s.psi) + s.v * math.cos(s.psi)) * lead
         x, y, heading = ned_to_map(north, east, s.psi)
         self.cycle += 1
+        self._sensed_at_submit = len(self.sensed.cells())
+        snap = None if self.traffic is None else self.traffic.snapshot(s.t + lead, x, y, heading, self.p.cruise_speed)
         request = PlanRequest(
             cycle=self.cycle,
-            problem=CycleInput(x, y, heading, s.t + lead, self.seed * 100003 + self.cycle),
+            problem=CycleInput(x, y, heading, s.t + lead, self.seed * 100003 + self.cycle,
+                               self.sensed.cells() if self._sensed_at_submit else None, self.sensed.version,
+                               traffic=snap),
             deadline_s=self.p.planning_deadline,
             iterations=self.p.lockstep_iterations if self.lockstep else None,
         )
@@ -204,8 +221,15 @@ class Autopilot:
             if not self.grid.segment_free(x0, y0, x1, y1):
                 self.stats.plans_rejected["collides"] += 1
                 return False
+        since = self.sensed.cells()[self._sensed_at_submit:]
+        if path_blocked(ned, since, self.grid.resolution, self.p.sensed_path_clearance):
+            # Planned before these obstacles were seen: plan again at once.
+            self.stats.plans_rejected["sensed_since_planning"] += 1
+            self.next_plan_t = s.t
+            return False
         self.los = LineOfSight(ned, self.p.lookahead, acceptance_radius=self.p.goal_tolerance)
         self.target = (plan.subgoal[1], plan.subgoal[0])
+        self.speed_factor = plan.speed_factor
         self.stats.plans_accepted += 1
         self.local_paths.append({"t": s.t, "cycle": plan.cycle, "status": plan.status,
                                  "path_ned": ned[:: max(1, len(ned) // 200)].round(3).tolist()})
@@ -237,6 +261,14 @@ class Autopilot:
         if self.mode == WAITING:
             self.mode = FALLBACK
             self.next_plan_t = t
+        if f.scan is not None and self.p.sensed_obstacles:
+            self._sense(t, f, s)
+        if self.traffic is not None:
+            texts, replan = self.traffic.on_frame(t, s, self.link.take_ais(), self.telemetry)
+            for text in texts:
+                self._event(t, text)
+            if replan and self.mode != COMPLETE:
+                self.next_plan_t = t  # a new encounter: plan now, not at the next period
         if self.stats.frames % 10 == 0:  # the estimated track at 10 Hz, for the run's plot
             self.track.append((t, s.x, s.y, s.psi))
 
@@ -272,6 +304,20 @@ class Autopilot:
         if self.telemetry is not None:
             self.telemetry.on_frame(t, s, self.mode, cmd)
 
+    def _sense(self, t: float, f: SensorFrame, s: NavState) -> None:
+        """Add a range scan's new obstacles to the map; replan at once if they are near the path ahead."""
+        scan = f.scan
+        new = self.sensed.add_scan(scan.bearings, scan.ranges, s.x, s.y, s.psi, scan.sector_width)
+        if len(new) == 0:
+            return
+        self.grid.mark(new)
+        if self.mode == PLANNED and self.los is not None:
+            ahead = self.los.path[self.los.index:]
+            if path_blocked(ahead, new, self.grid.resolution, self.p.sensed_path_clearance):
+                self.stats.sensed_replans += 1
+                self._event(t, "sensed obstacle near the local path: replanning")
+                self.next_plan_t = t
+
     def _to_fallback(self, t: float, why: str) -> None:
         if self.mode != FALLBACK:
             self.stats.fallback_activations += 1
@@ -281,7 +327,7 @@ class Autopilot:
 
     def _control(self, s: NavState, dt: float, g: GuidanceOutput | None) -> Thrust:
         if g is not None and self.los is not None:
-            psi_ref, u_ref = g.heading, self.p.cruise_speed
+            psi_ref, u_ref = g.heading, self.p.cruise_speed * self.speed_factor
             # Slow down for sharp turns ahead so the yaw rate they need (u kappa) stays within reach.
             if g.curvature_ahead > 1e-6:
                 u_ref = min(u_ref, max(self.p.min_turn_speed, self.p.max_turn_rate / g.curvature_ahead))
@@ -341,6 +387,7 @@ class Autopilot:
             "simulator_restarts": self.stats.simulator_restarts,
             "navigation": {"updates": dict(self.nav.stats.updates), "rejected": dict(self.nav.stats.rejected),
                            "position_resets": self.nav.stats.position_resets},
+            "sensed_obstacles": {**self.sensed.summary(), "replans": self.stats.sensed_replans},
             "link_rejects": dict(self.link.rejects),
             "truth_messages_ignored": self.link.truth_ignored,
             "control_latency_ms": {"p50": float(np.percentile(lat, 50)), "p99": float(np.percentile(lat, 99)),
@@ -349,4 +396,5 @@ class Autopilot:
             "lockstep_planner_wait_ms_max": max(self.stats.planner_wait_ms, default=0.0),
             "events": [f"{t:.2f}s {e}" for t, e in self.stats.events],
             **({"can": self.actuators.summary()} if self.actuators is not self.link else {}),
+            "traffic": None if self.traffic is None else self.traffic.summary(),
         }

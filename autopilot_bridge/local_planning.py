@@ -2,7 +2,8 @@
 
 The world the vessel computer knows a priori (the chart's obstacle map, the global reference
 path, the current measured beforehand) is sent to the worker once, as a :class:`World`; every
-cycle then sends only the vessel's state and budget. The cycle itself is
+cycle then sends the vessel's state, budget and the obstacles sensed so far (which the worker
+adds to the chart). The cycle itself is
 ``planner.online.plan_cycle``: subgoal (section 3.1), local problem in the perceptual domain,
 DDRRT* (or RRT*, Informed RRT*), pruning and Dubins smoothing (section 2.4).
 
@@ -48,13 +49,18 @@ class World:
 
 @dataclass(frozen=True)
 class CycleInput:
-    """A cycle's start: map-frame position (m), heading (rad from east), time (s), seed."""
+    """A cycle's start: map-frame position (m), heading (rad from east), time (s), seed, and the
+    obstacles sensed so far (``(K, 2)`` [row, col] cells of the chart's grid; ``sensed_version``
+    changes whenever they do). Sent whole each cycle: a restarted worker must know them too."""
 
     x: float
     y: float
     heading: float
     t: float
     seed: int
+    sensed: np.ndarray | None = None
+    sensed_version: int = 0
+    traffic: Any = None          # planner.traffic_map.TrafficSnapshot of the ships, or None
 
 
 @dataclass(frozen=True)
@@ -69,6 +75,7 @@ class LocalPlan:
     iterations: int
     planning_time_s: float
     reason: str
+    speed_factor: float = 1.0    # sail the path at this fraction of the cruise speed (traffic)
 
 
 PLANNER_SHARE = 0.7  # of a real-time cycle's deadline; the rest is for post-processing
@@ -85,18 +92,29 @@ def online_cycle_handler(world: World) -> Callable[[Any], LocalPlan]:
     from planner.gridmap import OccupancyGrid
     from planner.online import VesselState, make_context, plan_cycle
 
-    grid = OccupancyGrid(world.occ, world.resolution)
-    ctx = make_context(grid, world.goal, world.reference_path, world.params, world.online,
-                       world.algorithm, world.field)
+    def context(sensed: np.ndarray | None) -> Any:
+        grid = OccupancyGrid(world.occ.copy(), world.resolution)
+        if sensed is not None:
+            grid.mark(sensed)
+        return make_context(grid, world.goal, world.reference_path, world.params, world.online,
+                            world.algorithm, world.field)
+
+    ctx = context(None)
+    version = 0
 
     def handle(request: Any) -> LocalPlan:
+        nonlocal ctx, version
         start: CycleInput = request.problem
+        if start.sensed_version != version:
+            # The map known a priori plus what is sensed: inflated maps are rebuilt only when it grows.
+            ctx, version = context(start.sensed), start.sensed_version
         if request.iterations is not None:
             ctx.online = replace(world.online, local_iterations=int(request.iterations), local_time=0.0)
         else:
             # The planner gets 70% of the deadline: subgoal, pruning and smoothing take the rest.
             ctx.online = replace(world.online, local_iterations=0, local_time=PLANNER_SHARE * float(request.deadline_s))
-        rec = plan_cycle(ctx, VesselState(start.x, start.y, start.heading, start.t), request.cycle, start.seed)
+        rec = plan_cycle(ctx, VesselState(start.x, start.y, start.heading, start.t), request.cycle, start.seed,
+                         traffic=start.traffic)
         path = rec.local_path
         if len(rec.smooth_path) >= 2 and rec.smoothed_ok:
             # Dubins curves between waypoints closer than ~2 R_min can loop; a loop is worse to follow
@@ -105,6 +123,6 @@ def online_cycle_handler(world: World) -> Callable[[Any], LocalPlan]:
                 path = rec.smooth_path
         return LocalPlan(cycle=request.cycle, status=rec.status, path=np.asarray(path, dtype=float).reshape(-1, 2),
                          subgoal=tuple(rec.subgoal), subgoal_rule=rec.subgoal_rule, iterations=rec.iterations,
-                         planning_time_s=rec.planning_time_s, reason=rec.reason)
+                         planning_time_s=rec.planning_time_s, reason=rec.reason, speed_factor=rec.speed_factor)
 
     return handle

@@ -43,6 +43,11 @@ class Telemetry:
             self._send("local_position_ned", int(round(t * 1000)), s.x, s.y, 0.0, vn, ve, 0.0)
             self._send("attitude", int(round(t * 1000)), 0.0, 0.0, s.psi, 0.0, 0.0, s.r)
 
+    def forward(self, name: str, *fields: Any) -> None:
+        """Send message ``name`` (e.g. ``"ais_vessel"``) built from its encode() ``fields``, with the
+        vessel's ids, to the telemetry destinations (e.g. AIS traffic for the ground station)."""
+        self._send(name, *fields)
+
     def statustext(self, text: str, severity: int = MAV_TYPE.MAV_SEVERITY_INFO) -> None:
         self._send("statustext", severity, text[:50].encode())
 

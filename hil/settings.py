@@ -6,14 +6,16 @@ A configuration file is complete: every section and key must be present (copy
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
+from autopilot_bridge.ais_tracking import TrackerParams
 from autopilot_bridge.config import AutopilotParams
 from autopilot_bridge.control import ControlParams
 from autopilot_bridge.navigation import NavigationParams
 from common.can_params import CanParams
 from hil import config
+from planner.colregs import ColregsParams
 from planner.params import PlannerParams
 from simulator.config import (
     CurrentParams,
@@ -25,6 +27,7 @@ from simulator.config import (
     VesselParams,
     WaveParams,
 )
+from simulator.traffic import AisParams
 
 
 @dataclass(frozen=True)
@@ -40,8 +43,13 @@ class HilConfig:
     autopilot: AutopilotParams
     navigation: NavigationParams
     control: ControlParams
-    esc: EscParams
-    can: CanParams
+    # Ship traffic (issue 7); defaults let configuration files from before it load unchanged.
+    traffic: AisParams = field(default_factory=AisParams)
+    tracking: TrackerParams = field(default_factory=TrackerParams)
+    colregs: ColregsParams = field(default_factory=ColregsParams)
+    # The CAN actuator path (issue 5); optional like the sections above.
+    esc: EscParams = field(default_factory=EscParams)
+    can: CanParams = field(default_factory=CanParams)
 
 
 def load(path: str | Path | None = None, overrides: list[str] | None = None) -> HilConfig:

@@ -101,11 +101,31 @@ class DvlParams:
 
 
 @dataclass(frozen=True)
+class RangefinderParams:
+    """A 2-D scanning range sensor (lidar/radar class) reported as MAVLink OBSTACLE_DISTANCE.
+
+    Each of ``sectors`` sectors reports the nearest return of ``rays_per_sector`` rays spread
+    over it, as PX4/ArduPilot bin a scanning lidar. It needs the true world map (``hil sim
+    --world``); without one it is silent.
+    """
+
+    enabled: bool = param("scan the true map (chart plus uncharted obstacles) and send OBSTACLE_DISTANCE")
+    rate_hz: float = param("scan rate", "Hz", gt=0, le=50)
+    sectors: int = param("sectors around the vessel (OBSTACLE_DISTANCE holds at most 72)", "", ge=4, le=72)
+    rays_per_sector: int = param("rays cast per sector; a sector reports the nearest", "", ge=1, le=16)
+    min_range: float = param("nearest measurable distance", "m", ge=0)
+    max_range: float = param("farthest measurable distance", "m", gt=0, le=600)
+    range_std: float = param("range noise", "m", ge=0)
+    miss_probability: float = param("probability that a sector returns nothing in a scan", "", ge=0, le=1)
+
+
+@dataclass(frozen=True)
 class SensorParams:
     gps: GpsParams
     imu: ImuParams
     compass: CompassParams
     dvl: DvlParams
+    rangefinder: RangefinderParams
 
 
 @dataclass(frozen=True)
@@ -137,16 +157,17 @@ class SimParams:
 
 @dataclass(frozen=True)
 class EscParams:
-    """The thrusters' electronic speed controllers and propellers (both actuator paths)."""
+    """The thrusters' electronic speed controllers and propellers (both actuator paths; defaults as in
+    configs/default.toml)."""
 
-    time_constant: float = param("first-order lag from thrust set-point to thrust; 0 = instantaneous", "s", ge=0)
+    time_constant: float = param("first-order lag from thrust set-point to thrust; 0 = instantaneous", "s", ge=0, default=0.0)
     int14_resolution: bool = param(
-        "round commands to DroneCAN RawCommand's int14 resolution on the MAVLink path too (always on for CAN)")
-    max_rpm: float = param("propeller speed at full forward thrust (thrust ~ rpm^2)", "rpm", gt=0)
-    max_power: float = param("electrical power at full forward thrust (power ~ rpm^3)", "W", gt=0)
-    voltage: float = param("supply voltage reported in ESC Status", "V", gt=0)
-    ambient_temperature: float = param("ESC temperature at rest", "K", gt=0)
-    heating: float = param("steady temperature rise per watt", "K/W", ge=0)
+        "round commands to DroneCAN RawCommand's int14 resolution on the MAVLink path too (always on for CAN)", default=False)
+    max_rpm: float = param("propeller speed at full forward thrust (thrust ~ rpm^2)", "rpm", gt=0, default=992.0)
+    max_power: float = param("electrical power at full forward thrust (power ~ rpm^3)", "W", gt=0, default=500.0)
+    voltage: float = param("supply voltage reported in ESC Status", "V", gt=0, default=24.0)
+    ambient_temperature: float = param("ESC temperature at rest", "K", gt=0, default=298.15)
+    heating: float = param("steady temperature rise per watt", "K/W", ge=0, default=0.02)
 
 
 @dataclass(frozen=True)

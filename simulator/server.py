@@ -182,6 +182,8 @@ class SimulatorServer:
             "jitter_ms": self.jitter_ms(),
             "gps": {"fixes": c.gps.fixes, "dropout_fixes": c.gps.dropout_fixes, "glitches": c.gps.glitches},
             "distance_m": c.distance,
+            "ais": None if c.traffic is None else {"ships": len(c.traffic.ships), "reports": c.traffic.reports_sent,
+                                                   "lost": c.traffic.reports_lost},
             "final_state": c.truth(),
             **({"can": {**self.esc.summary(), "lockstep_commands_missing": self.can_commands_missing,
                         "mavlink_commands_ignored": self.mavlink_commands_ignored}} if self.esc is not None else {}),

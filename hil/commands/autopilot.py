@@ -111,7 +111,8 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     try:
         link = HilLink(ap.listen, ap.actuators_to, geo, declination=cfg.sensors.compass.declination,
                        system_id=ap.system_id, component_id=ap.component_id, send_loss=ap.send_loss,
-                       recv_loss=ap.recv_loss, loss_seed=cfg.sim.seed + 7)
+                       recv_loss=ap.recv_loss, loss_seed=cfg.sim.seed + 7,
+                       truth_component_id=cfg.traffic.truth_component_id)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     actuators = None
@@ -149,8 +150,11 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     else:
         worker = PlannerWorker("autopilot_bridge.local_planning:online_cycle_handler", (world,),
                                grace_s=ap.watchdog_grace, start_method=start_method)
+    from autopilot_bridge.traffic_awareness import TrafficAwareness
+
+    traffic = TrafficAwareness(cfg.tracking, cfg.colregs, geo)  # AIS targets, COLREGs encounters
     autopilot = Autopilot(ap, cfg.navigation, cfg.control, propulsion, world, link, worker, telemetry,
-                          lockstep=lockstep, seed=cfg.sim.seed, log=progress, actuators=actuators,
+                          lockstep=lockstep, seed=cfg.sim.seed, log=progress, traffic=traffic, actuators=actuators,
                           int14_commands=cfg.esc.int14_resolution or cfg.can.actuators == "can")
     return autopilot
 
@@ -188,10 +192,11 @@ def run(args: argparse.Namespace) -> int:
     summary = autopilot.summary()
     summary["local_paths"] = autopilot.local_paths
     summary["estimated_track"] = [list(map(lambda v: round(v, 3), row)) for row in autopilot.track]
+    summary["sensed_cells"] = autopilot.sensed.cells().tolist()
     if args.summary_out:
         write_json_atomic(args.summary_out, summary)
     if args.json:
         emit(args, summary)
     else:
-        emit(args, {k: v for k, v in summary.items() if k not in ("local_paths", "estimated_track")})
+        emit(args, {k: v for k, v in summary.items() if k not in ("local_paths", "estimated_track", "sensed_cells")})
     return 0

@@ -11,6 +11,7 @@ from hil.commands.can_options import add_can_arguments, can_overrides
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, UsageError
 from simulator.core import SimulatorCore
+from simulator.rangefinder import WorldMap
 from simulator.server import SimulatorServer
 
 
@@ -50,6 +51,14 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                    help="seed of every random process: sensor noise, GPS events, waves (default: sim.seed = 1)")
     p.add_argument("--speedup", metavar="N", type=float, default=None,
                    help="real-time mode: simulated seconds per wall-clock second (default: sim.speedup = 1)")
+    p.add_argument("--world", metavar="FILE.npz", default=None,
+                   help="the true obstacle map the range sensor scans: an .npz with 'occ' (bool rows x cols, "
+                        "row = north / resolution, column = east / resolution) and 'resolution' (m), as "
+                        "`hil run` writes it to the run folder as world.npz; without it no OBSTACLE_DISTANCE is sent")
+    p.add_argument("--traffic", metavar="SOURCE", default=None,
+                   help="ship traffic to sail and report by AIS_VESSEL (settings in [traffic]): a scenario "
+                        "name or .toml file with [[traffic]] tables, or a .json list of such tables "
+                        "(default: no traffic)")
     p.add_argument("--can-record", default=None, help=argparse.SUPPRESS)  # hil soak: RawCommand apply times (.npz)
     add_can_arguments(p)
     p.set_defaults(func=run)
@@ -76,8 +85,19 @@ def config_overrides(args: argparse.Namespace) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     args.overrides = list(args.overrides) + config_overrides(args)
     cfg = load_settings(args)
+    world = None
+    if args.world is not None:
+        try:
+            world = WorldMap.load(args.world)
+        except (OSError, KeyError, ValueError) as exc:
+            raise UsageError(f"--world {args.world}: not a world map ({exc})") from None
+    traffic = ()
+    if getattr(args, "traffic", None):
+        from hil.scenario import load_traffic
+
+        traffic = load_traffic(args.traffic)
     try:
-        core = SimulatorCore(cfg)
+        core = SimulatorCore(cfg, world, traffic)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     try:
