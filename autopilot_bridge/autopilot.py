@@ -14,7 +14,9 @@ Event-driven by the simulator's sensor frames (one per IMU period). For each new
    failure, overrun with nothing usable, vessel inside an inflated obstacle), the reactive
    avoidance behaviour (:mod:`autopilot_bridge.reactive`) steers until planning succeeds again;
 4. line-of-sight guidance, heading PID and speed pole placement, allocation to the two thrusters
-   (:mod:`autopilot_bridge.control`), sent back as HIL_ACTUATOR_CONTROLS answering that frame.
+   (:mod:`autopilot_bridge.control`), sent back as HIL_ACTUATOR_CONTROLS answering that frame,
+   or as DroneCAN RawCommand (int14) when the actuator back-end is
+   :class:`autopilot_bridge.can_actuators.CanActuators`.
 
 A frame that repeats the last one (the simulator re-sends after a lost command) is answered with
 the same command again. Sensor time jumping backwards means the simulator restarted: navigation
@@ -48,6 +50,7 @@ from autopilot_bridge.obstacle_map import SensedObstacles, path_blocked
 from autopilot_bridge.planning_worker import PlannerWorker, PlanRequest
 from autopilot_bridge.reactive import ReactiveAvoidance
 from autopilot_bridge.telemetry import Telemetry
+from common.dronecan_codec import RAW_COMMAND_MAX, quantize
 
 PLANNED, FALLBACK, COMPLETE, WAITING = "planned", "fallback", "complete", "waiting_for_navigation"
 
@@ -85,11 +88,14 @@ class Autopilot:
     def __init__(self, params: AutopilotParams, nav: NavigationParams, control: ControlParams,
                  propulsion: Propulsion, world: World, link: HilLink, worker: PlannerWorker,
                  telemetry: Telemetry | None = None, *, lockstep: bool, seed: int,
-                 log: Callable[[str], None] | None = None, traffic: Any = None) -> None:
+                 log: Callable[[str], None] | None = None, traffic: Any = None, actuators: Any | None = None,
+                 int14_commands: bool = False) -> None:
         self.p, self.nav_params, self.control_params = params, nav, control
         self.prop, self.world, self.link, self.worker = propulsion, world, link, worker
         self.telemetry = telemetry
         self.traffic = traffic  # autopilot_bridge.traffic_awareness.TrafficAwareness, or None
+        self.actuators = actuators if actuators is not None else link  # send_controls(time_usec, port, stdb)
+        self.int14_commands = int14_commands
         self.lockstep, self.seed = lockstep, seed
         self.log = log or (lambda _m: None)
         self.goal_ned = (world.goal[1], world.goal[0])
@@ -335,7 +341,10 @@ class Autopilot:
         return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
 
     def _send(self, time_usec: int, cmd: Thrust, received_at: float) -> None:
-        self.link.send_controls(time_usec, cmd.port_cmd, cmd.stdb_cmd)
+        port, stdb = cmd.port_cmd, cmd.stdb_cmd
+        if self.int14_commands:  # the ESCs' resolution on either back-end: both paths drive the same thrust
+            port, stdb = quantize(port) / RAW_COMMAND_MAX, quantize(stdb) / RAW_COMMAND_MAX
+        self.actuators.send_controls(time_usec, port, stdb)
         self.last_command = cmd
         self.stats.commands += 1
         if not self._waited:
@@ -355,6 +364,8 @@ class Autopilot:
                 self.pending_since = None
             if self.telemetry is not None:
                 self.telemetry.service()
+            if self.actuators is not self.link:
+                self.actuators.service()
 
     def summary(self) -> dict[str, Any]:
         lat = np.array(self.stats.latency_ms) if self.stats.latency_ms else np.zeros(1)
@@ -384,5 +395,6 @@ class Autopilot:
             "lockstep_planner_waits": self.stats.planner_waits,
             "lockstep_planner_wait_ms_max": max(self.stats.planner_wait_ms, default=0.0),
             "events": [f"{t:.2f}s {e}" for t, e in self.stats.events],
+            **({"can": self.actuators.summary()} if self.actuators is not self.link else {}),
             "traffic": None if self.traffic is None else self.traffic.summary(),
         }

@@ -60,6 +60,8 @@ class RunOptions:
     actuators: str = "mavlink"
     extra_autopilot_args: list[str] = field(default_factory=list)
     extra_sim_overrides: list[str] = field(default_factory=list)
+    extra_sim_args: list[str] = field(default_factory=list)
+    stop_at_goal: bool = True            # hil soak: keep running after the goal until the time is up
     on_progress: Callable[[str], None] = lambda _m: None
     plot: bool = True
     hooks: list[Callable[["Tap", "HilRun"], None]] = field(default_factory=list)  # tests: fault injection
@@ -214,6 +216,9 @@ class HilRun:
         self.sim: subprocess.Popen | None = None
         self.ap: subprocess.Popen | None = None
         self.sim_restarts = 0
+        self.end_usec: int | None = None  # truth time of the sample that ended the run (goal, collision)
+        self.can_recorder = None  # hil.can_log.CanRecorder when the thrusters are on CAN
+        self.can_log: dict[str, Any] = {}
 
     # -- processes ---------------------------------------------------------------------------------
     def _common_args(self) -> list[str]:
@@ -241,6 +246,7 @@ class HilRun:
             args += ["--traffic", str(self.traffic_file)]
         for o in self.opts.extra_sim_overrides:
             args += ["--set", o]
+        args += self.opts.extra_sim_args
         if self.opts.lockstep:
             args.append("--lockstep")
         else:
@@ -265,6 +271,13 @@ class HilRun:
     def start(self, ready_timeout: float = 180.0) -> None:
         """The autopilot first, and the simulator once the autopilot is listening (its start-up may
         include compiling the planner core), so that no frame is sent into the void."""
+        if self.cfg.can.actuators == "can" and self.cfg.can.log:
+            from hil.can_log import CanRecorder
+
+            try:
+                self.can_recorder = CanRecorder(self.cfg.can, self.out / "can.log")
+            except ValueError as exc:
+                raise UsageError(str(exc)) from None
         self.ap = self._spawn(self.autopilot_command(), "autopilot")
         log = self.out / "autopilot.log"
         deadline = time.monotonic() + ready_timeout
@@ -312,7 +325,7 @@ class HilRun:
     def execute(self) -> dict[str, Any]:
         opts = self.opts
         wall0 = time.monotonic()
-        outcome, collision_at = "timeout", None
+        outcome, collision_at, goal_at = "timeout", None, None
         min_clearance, last_report = math.inf, wall0
         try:
             self.start()
@@ -320,12 +333,20 @@ class HilRun:
             while True:
                 self.tap.pump(timeout=0.05)
                 times = sorted(self.tap.truth)
+                # Judge every new truth sample in order, so that where the run ends (and so its
+                # summary) does not depend on how many samples one pump happened to read.
                 for tu in times[checked:]:
                     n, e, _, _ = self.tap.truth[tu]
                     c = self.judge.clearance(n, e)
                     min_clearance = min(min_clearance, c)
                     if c < self.judge.hull_radius and collision_at is None:
                         collision_at = tu * 1e-6
+                        self.end_usec = tu
+                        break
+                    if opts.stop_at_goal and self.judge.at_goal(n, e):
+                        goal_at = tu
+                        self.end_usec = tu
+                        break
                 checked = len(times)
                 t_sim = times[-1] * 1e-6 if times else 0.0
                 if collision_at is None and self.encounter_judge is not None and self.encounter_judge.collision:
@@ -333,7 +354,7 @@ class HilRun:
                 if collision_at is not None:
                     outcome = "collision"
                     break
-                if times and self.judge.at_goal(*self.tap.truth[times[-1]][:2]):
+                if goal_at is not None:
                     outcome = "goal"
                     break
                 if t_sim >= opts.duration:
@@ -359,12 +380,14 @@ class HilRun:
             sim_summary = self._stop(self.sim)
             self.tap.pump(timeout=0.0)
             self.tap.close()
+            if self.can_recorder is not None:
+                self.can_log = self.can_recorder.close()
         wall = time.monotonic() - wall0
         return self._summary(outcome, collision_at, min_clearance, wall, ap_summary, sim_summary)
 
     def _summary(self, outcome: str, collision_at: float | None, min_clearance: float, wall: float,
                  ap: dict | None, sim: dict | None) -> dict[str, Any]:
-        times = sorted(self.tap.truth)
+        times = sorted(t for t in self.tap.truth if self.end_usec is None or t <= self.end_usec)
         track = np.array([self.tap.truth[t][:2] for t in times]) if times else np.zeros((0, 2))
         speeds = np.array([math.hypot(*self.tap.truth[t][2:]) for t in times]) if times else np.zeros(0)
         length = float(np.sum(np.hypot(*np.diff(track, axis=0).T))) if len(track) > 1 else 0.0
@@ -401,6 +424,7 @@ class HilRun:
             "tlog": str(self.out / "run.tlog"),
             "tlog_messages": self.tap.frames,
             "events": ap.get("events", []),
+            "actuators": self.cfg.can.actuators,
         }
         if self.encounter_judge is not None:
             from hil.encounter_report import totals
@@ -411,6 +435,12 @@ class HilRun:
                                   "ais_forwarded_to_gcs": self.tap.ais_forwarded,
                                   "ship_collision": None if self.encounter_judge.collision is None else
                                   {"time_s": self.encounter_judge.collision[0], "mmsi": self.encounter_judge.collision[1]}}
+        if self.cfg.can.actuators == "can":
+            # The CAN path's counters: transport, ESC status, rejects (wall-clock dependent).
+            summary["can"] = {"autopilot": ap.get("can"), "simulator": None if sim is None else sim.get("can"),
+                              **self.can_log}
+            if not self.opts.lockstep:
+                summary["energy_J"] = None  # commands travel only on CAN: the tap cannot see them
         return summary
 
     def _energy(self, times: list[int], speeds: np.ndarray) -> float:

@@ -13,11 +13,13 @@ from autopilot_bridge.ais_tracking import TrackerParams
 from autopilot_bridge.config import AutopilotParams
 from autopilot_bridge.control import ControlParams
 from autopilot_bridge.navigation import NavigationParams
+from common.can_params import CanParams
 from hil import config
 from planner.colregs import ColregsParams
 from planner.params import PlannerParams
 from simulator.config import (
     CurrentParams,
+    EscParams,
     GeodesyParams,
     LinkParams,
     SensorParams,
@@ -45,6 +47,9 @@ class HilConfig:
     traffic: AisParams = field(default_factory=AisParams)
     tracking: TrackerParams = field(default_factory=TrackerParams)
     colregs: ColregsParams = field(default_factory=ColregsParams)
+    # The CAN actuator path (issue 5); optional like the sections above.
+    esc: EscParams = field(default_factory=EscParams)
+    can: CanParams = field(default_factory=CanParams)
 
 
 def load(path: str | Path | None = None, overrides: list[str] | None = None) -> HilConfig:

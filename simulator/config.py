@@ -156,6 +156,21 @@ class SimParams:
 
 
 @dataclass(frozen=True)
+class EscParams:
+    """The thrusters' electronic speed controllers and propellers (both actuator paths; defaults as in
+    configs/default.toml)."""
+
+    time_constant: float = param("first-order lag from thrust set-point to thrust; 0 = instantaneous", "s", ge=0, default=0.0)
+    int14_resolution: bool = param(
+        "round commands to DroneCAN RawCommand's int14 resolution on the MAVLink path too (always on for CAN)", default=False)
+    max_rpm: float = param("propeller speed at full forward thrust (thrust ~ rpm^2)", "rpm", gt=0, default=992.0)
+    max_power: float = param("electrical power at full forward thrust (power ~ rpm^3)", "W", gt=0, default=500.0)
+    voltage: float = param("supply voltage reported in ESC Status", "V", gt=0, default=24.0)
+    ambient_temperature: float = param("ESC temperature at rest", "K", gt=0, default=298.15)
+    heating: float = param("steady temperature rise per watt", "K/W", ge=0, default=0.02)
+
+
+@dataclass(frozen=True)
 class LinkParams:
     """UDP/MAVLink endpoints of the simulator."""
 

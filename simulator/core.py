@@ -14,6 +14,7 @@ from collections import Counter
 from typing import Any
 
 from common.current_field import CurrentField
+from common.dronecan_codec import RAW_COMMAND_MAX
 from common.geodesy import LocalFrame
 from common.mavlink import Codec, MAV_TYPE
 from simulator.integrator import rk4_step
@@ -87,6 +88,10 @@ class SimulatorCore:
         self.state: tuple[float, ...] = (i.x, i.y, i.psi, i.u, i.v, i.r)
         self.n = 0
         self.controls = (0.0, 0.0)
+        self.thrust = (0.0, 0.0)  # N, port and starboard thrust applied now (after the ESC lag)
+        tau = cfg.esc.time_constant
+        self._lag = math.exp(-self.frame_dt / tau) if tau > 0 else 0.0
+        self._int14 = cfg.esc.int14_resolution or cfg.can.actuators == "can"
         self.last_command_t = 0.0
         self.stale = False
         self.stale_command_events = 0
@@ -135,14 +140,22 @@ class SimulatorCore:
         return out
 
     def apply(self, cmd: Command) -> None:
-        """Make ``cmd`` the newest command (received at the current simulated time)."""
-        self.controls = (cmd.port, cmd.stdb)
+        """Make ``cmd`` the newest command (received at the current simulated time).
+
+        With ``esc.int14_resolution`` (always on the CAN path, where commands are int14 anyway) the
+        simulated ESCs round to DroneCAN RawCommand's resolution, so MAVLink (float32) and CAN
+        commands of the same value drive the same thrust.
+        """
+        if self._int14:
+            self.controls = (_esc_resolution(cmd.port), _esc_resolution(cmd.stdb))
+        else:
+            self.controls = (cmd.port, cmd.stdb)
         self.last_command_t = self.t
         self.stale = False
         self.commands_received += 1
 
     def thrusts(self) -> tuple[float, float]:
-        """Port and starboard thrust (N) now, after the stale-command failsafe."""
+        """Port and starboard thrust set-points (N) now, after the stale-command failsafe."""
         if self.t - self.last_command_t > self.cfg.sim.stale_command_timeout + 1e-9:
             if not self.stale:
                 self.stale = True
@@ -158,13 +171,16 @@ class SimulatorCore:
 
     def derivative(self) -> tuple[float, ...]:
         """State derivative now (with the thrust currently applied)."""
-        tau = self.vessel.propulsion(*self.thrusts())
+        tau = self.vessel.propulsion(*self.thrust)
         return self.vessel.dynamics(self.state, tau, *self._env)
 
     def step(self) -> None:
         """Advance the truth by one frame: RK4 substeps with thrust held for the frame and waves and
-        current evaluated at the start of each substep (they vary over tens of seconds)."""
-        tau = self.vessel.propulsion(*self.thrusts())
+        current evaluated at the start of each substep (they vary over tens of seconds). The thrust
+        follows its set-point through the ESC's first-order lag, discretised exactly per frame."""
+        (sp, ss), (tp, ts), a = self.thrusts(), self.thrust, self._lag
+        self.thrust = (sp + (tp - sp) * a, ss + (ts - ss) * a)
+        tau = self.vessel.propulsion(*self.thrust)
         dyn = self.vessel.dynamics
         for k in range(1, self.substeps + 1):
             tau_w, cur = self._env
@@ -230,6 +246,10 @@ class SimulatorCore:
         x, y, psi, u, v, r = self.state
         lat, lon = self.geo.sea_level_to_geodetic(x, y)
         return dict(t=self.t, x=x, y=y, psi=psi, u=u, v=v, r=r, lat=lat, lon=lon)
+
+
+def _esc_resolution(x: float) -> float:
+    return round(x * RAW_COMMAND_MAX) / RAW_COMMAND_MAX
 
 
 def _i16(v: float) -> int:

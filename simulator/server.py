@@ -14,7 +14,7 @@ from typing import Any, Callable
 import numpy as np
 
 from common.udp import UdpEndpoint
-from simulator.core import OUT_OF_STEP, SimulatorCore
+from simulator.core import OUT_OF_STEP, Command, SimulatorCore
 
 POLL_S = 0.05  # longest wait before the stop flag is looked at again (wall seconds)
 
@@ -24,8 +24,14 @@ class SimulatorServer:
 
     def __init__(self, core: SimulatorCore, endpoint: UdpEndpoint, *, lockstep: bool, duration: float,
                  speedup: float = 1.0, lockstep_resend: float = 1.0,
-                 progress: Callable[[str], None] | None = None, progress_every_s: float = 5.0) -> None:
+                 progress: Callable[[str], None] | None = None, progress_every_s: float = 5.0,
+                 esc: Any | None = None, can_lockstep_wait: float = 1.0) -> None:
         self.core, self.ep = core, endpoint
+        # CAN actuators (a simulator.esc.EscBank): thrust comes from the ESC nodes' RawCommands;
+        # in lockstep the HIL_ACTUATOR_CONTROLS answer is only the clock (docs/can.md).
+        self.esc, self.can_lockstep_wait = esc, can_lockstep_wait
+        self.can_commands_missing = 0
+        self.mavlink_commands_ignored = 0
         self.lockstep, self.duration, self.speedup = lockstep, duration, speedup
         self.lockstep_resend = lockstep_resend
         self.progress, self.progress_every_s = progress, progress_every_s
@@ -44,6 +50,8 @@ class SimulatorServer:
         return self._stop or (self.end_frame is not None and self.core.n >= self.end_frame)
 
     def _publish(self, datagram: bytes) -> None:
+        if self.esc is not None:
+            self.esc.publish(self.core.t, self.core.thrust)
         self.ep.send(datagram)
         self.datagrams_sent += 1
 
@@ -84,7 +92,10 @@ class SimulatorServer:
             stepped = False
             for cmd in core.receive(data):
                 if not stepped and cmd.time_usec == core.time_usec:
-                    core.apply(cmd)
+                    if self.esc is None:
+                        core.apply(cmd)
+                    else:
+                        self._apply_can(cmd)
                     core.step()
                     stepped = True
                 else:
@@ -95,6 +106,21 @@ class SimulatorServer:
                 last_send = time.monotonic()
                 if core.n % 1000 == 0:
                     self._maybe_progress(start, last_progress)
+
+    def _apply_can(self, token: Command) -> None:
+        """Lockstep over CAN: apply the ESCs' RawCommand that ``token`` announces (bounded wait)."""
+        from common.dronecan_codec import quantize
+
+        want = (quantize(token.port), quantize(token.stdb))
+        deadline = time.monotonic() + self.can_lockstep_wait
+        self.esc.poll(0.0)
+        while self.esc.raw != want and (left := deadline - time.monotonic()) > 0:
+            self.esc.poll(min(left, POLL_S))
+        if self.esc.raw != want:
+            self.can_commands_missing += 1  # thrust stays as it was; the stale failsafe still runs
+            return
+        self.esc.commands_seen = 0
+        self.core.apply(Command(token.time_usec, *self.esc.controls()))
 
     # -- real time -------------------------------------------------------------------------
     def _run_realtime(self, start: float) -> None:
@@ -116,6 +142,13 @@ class SimulatorServer:
                 cmds = core.receive(data)
                 if cmds:
                     newest = cmds[-1]
+            if self.esc is not None:
+                self.mavlink_commands_ignored += newest is not None
+                newest = None
+                self.esc.poll(0.0)
+                if self.esc.commands_seen:
+                    self.esc.commands_seen = 0
+                    newest = Command(core.time_usec, *self.esc.controls())
             if newest is not None:
                 core.apply(newest)
             core.step()
@@ -152,4 +185,6 @@ class SimulatorServer:
             "ais": None if c.traffic is None else {"ships": len(c.traffic.ships), "reports": c.traffic.reports_sent,
                                                    "lost": c.traffic.reports_lost},
             "final_state": c.truth(),
+            **({"can": {**self.esc.summary(), "lockstep_commands_missing": self.can_commands_missing,
+                        "mavlink_commands_ignored": self.mavlink_commands_ignored}} if self.esc is not None else {}),
         }

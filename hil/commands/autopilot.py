@@ -11,6 +11,7 @@ import tempfile
 from pathlib import Path
 
 from hil import scenario as scenarios
+from hil.commands.can_options import add_can_arguments, can_overrides
 from hil.commands.sim import _hostport
 from hil.console import emit, load_settings, progress
 from hil.errors import UsageError
@@ -47,6 +48,8 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--summary-out", metavar="FILE", default=None,
                    help="also write the summary JSON to FILE (atomically) when stopping")
     p.add_argument("--planner-factory", default=None, help=argparse.SUPPRESS)  # tests: a planner double
+    p.add_argument("--can-record", default=None, help=argparse.SUPPRESS)  # hil soak: RawCommand send times (.npz)
+    add_can_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -62,7 +65,13 @@ def _overrides(args: argparse.Namespace) -> list[str]:
         out.append(f"sim.seed={int(args.seed)}")
     if args.algorithm is not None:
         out.append("planner.algorithm=" + json.dumps(args.algorithm))
-    return out
+    return out + can_overrides(args)
+
+
+def _save_record(path: str, tids, times) -> None:
+    import numpy as np
+
+    np.savez(path, tid=np.frombuffer(tids, dtype=np.int8), at=np.frombuffer(times, dtype=float))
 
 
 def write_json_atomic(path: str | Path, data: dict) -> None:
@@ -106,6 +115,16 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
                        truth_component_id=cfg.traffic.truth_component_id)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    actuators = None
+    if cfg.can.actuators == "can":
+        from autopilot_bridge.can_actuators import CanActuators
+        from common.can_params import open_bus
+
+        try:
+            actuators = CanActuators(open_bus(cfg.can), cfg.can, lockstep_token=link if lockstep else None)
+        except ValueError as exc:
+            link.close()
+            raise UsageError(str(exc)) from None
     telemetry = Telemetry(ap.telemetry_to, ap.system_id, ap.component_id) if ap.telemetry_to else None
     # Compile (first run on a machine: ~7 s) or load the planner's numba core here, once, before
     # the control loop starts: forked workers inherit it, so no planning cycle pays for it.
@@ -135,7 +154,8 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
 
     traffic = TrafficAwareness(cfg.tracking, cfg.colregs, geo)  # AIS targets, COLREGs encounters
     autopilot = Autopilot(ap, cfg.navigation, cfg.control, propulsion, world, link, worker, telemetry,
-                          lockstep=lockstep, seed=cfg.sim.seed, log=progress, traffic=traffic)
+                          lockstep=lockstep, seed=cfg.sim.seed, log=progress, traffic=traffic, actuators=actuators,
+                          int14_commands=cfg.esc.int14_resolution or cfg.can.actuators == "can")
     return autopilot
 
 
@@ -144,13 +164,17 @@ def run(args: argparse.Namespace) -> int:
     cfg = load_settings(args)
     autopilot = build(cfg, args.scenario, args.lockstep, args.planner_factory)
     stop = {"flag": False}
+    if args.can_record and autopilot.actuators is not autopilot.link:
+        autopilot.actuators.record = True
 
     def request_stop(*_):
         stop["flag"] = True
 
     previous = {sig: signal.signal(sig, request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
     host, port = autopilot.link.address
-    progress(f"autopilot: listening on {host}:{port}, actuators to {', '.join(cfg.autopilot.actuators_to)}, "
+    acts = (f"DroneCAN RawCommand on {cfg.can.interface}:{cfg.can.channel}" if cfg.can.actuators == "can"
+            else "actuators to " + ", ".join(cfg.autopilot.actuators_to))
+    progress(f"autopilot: listening on {host}:{port}, {acts}, "
              f"scenario {args.scenario}, {'lockstep' if args.lockstep else 'real time'}")
     try:
         autopilot.run(lambda: stop["flag"])
@@ -159,6 +183,10 @@ def run(args: argparse.Namespace) -> int:
             signal.signal(sig, handler)
         autopilot.worker.close()
         autopilot.link.close()
+        if autopilot.actuators is not autopilot.link:
+            autopilot.actuators.close()
+            if args.can_record:
+                _save_record(args.can_record, autopilot.actuators.sent_tid, autopilot.actuators.sent_at)
         if autopilot.telemetry is not None:
             autopilot.telemetry.close()
     summary = autopilot.summary()

@@ -24,6 +24,7 @@ from typing import Any
 from common.mavlink import Codec
 from common.udp import UdpEndpoint
 from hil import processes
+from hil.commands.can_options import add_can_arguments, can_overrides
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, RunFailed, UsageError
 
@@ -144,6 +145,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--out", metavar="DIR", default=None,
                    help="run folder (default: runs/SCENARIO-seedN-YYYYmmdd-HHMMSS)")
     p.add_argument("--no-plot", action="store_true", help="do not draw plot.png")
+    add_can_arguments(p)
     p.add_argument("--demo", action="store_true",
                    help=f"constant-thrust demo controller (port {DEMO_CONTROLS[0]}, starboard {DEMO_CONTROLS[1]}) "
                         "instead of the autopilot; prints distance, final state, messages, wall time")
@@ -157,8 +159,11 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--duration: must be > 0 seconds")
     if args.speedup is not None and not args.speedup > 0:
         raise ConfigError("--speedup: must be > 0")
+    args.overrides = list(args.overrides) + can_overrides(args)
     cfg = load_settings(args)  # fail here, with one line, on a bad configuration
     previous_term = signal.signal(signal.SIGTERM, _raise_terminated)
+    if args.demo and cfg.can.actuators == "can":
+        raise UsageError("--demo drives the simulator over MAVLink; --actuators can needs the autopilot (drop --demo)")
     try:
         if args.demo:
             client = HilClient(component_id=191)
@@ -186,8 +191,9 @@ def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
     opts = RunOptions(scenario=args.scenario, lockstep=args.speedup is None, speedup=args.speedup or 1.0,
                       duration=args.duration, seed=seed, config=args.config, overrides=overrides, out=out,
                       on_progress=progress, plot=not args.no_plot)
+    opts.actuators = cfg.can.actuators
     progress(f"run: scenario {args.scenario}, {'lockstep' if opts.lockstep else f'real time x{opts.speedup:g}'}, "
-             f"seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
+             f"actuators {cfg.can.actuators}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
     summary = run_loop(opts, cfg)
     emit(args, summary)
     if not args.json:

@@ -7,6 +7,7 @@ import json
 import signal
 
 from common.udp import UdpEndpoint, parse_hostport
+from hil.commands.can_options import add_can_arguments, can_overrides
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, UsageError
 from simulator.core import SimulatorCore
@@ -58,6 +59,8 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                    help="ship traffic to sail and report by AIS_VESSEL (settings in [traffic]): a scenario "
                         "name or .toml file with [[traffic]] tables, or a .json list of such tables "
                         "(default: no traffic)")
+    p.add_argument("--can-record", default=None, help=argparse.SUPPRESS)  # hil soak: RawCommand apply times (.npz)
+    add_can_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -76,7 +79,7 @@ def config_overrides(args: argparse.Namespace) -> list[str]:
         out.append(f"sim.seed={int(args.seed)}")
     if args.speedup is not None:
         out.append(f"sim.speedup={float(args.speedup)!r}")
-    return out
+    return out + can_overrides(args)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -101,8 +104,20 @@ def run(args: argparse.Namespace) -> int:
         endpoint = UdpEndpoint(cfg.link.commands_on, cfg.link.state_to)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    esc = None
+    if cfg.can.actuators == "can":
+        from common.can_params import open_bus
+        from simulator.esc import EscBank
+
+        try:
+            esc = EscBank(open_bus(cfg.can), cfg.can, cfg.esc, core.vessel)
+            esc.record = bool(args.can_record)
+        except ValueError as exc:
+            endpoint.close()
+            raise UsageError(str(exc)) from None
     server = SimulatorServer(core, endpoint, lockstep=cfg.sim.lockstep, duration=cfg.sim.duration,
-                             speedup=cfg.sim.speedup, lockstep_resend=cfg.sim.lockstep_resend, progress=progress)
+                             speedup=cfg.sim.speedup, lockstep_resend=cfg.sim.lockstep_resend, progress=progress,
+                             esc=esc, can_lockstep_wait=cfg.can.lockstep_wait)
     previous = {sig: signal.signal(sig, lambda *_: server.stop()) for sig in (signal.SIGINT, signal.SIGTERM)}
     host, port = endpoint.address
     mode = "lockstep" if cfg.sim.lockstep else f"real time x{cfg.sim.speedup:g}"
@@ -114,6 +129,12 @@ def run(args: argparse.Namespace) -> int:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
         endpoint.close()
+        if esc is not None:
+            esc.bus.shutdown()
+            if args.can_record:
+                from hil.commands.autopilot import _save_record
+
+                _save_record(args.can_record, esc.applied_tid, esc.applied_at)
     summary["commands_on"] = f"{host}:{port}"
     try:
         emit(args, summary)

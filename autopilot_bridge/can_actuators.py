@@ -1,0 +1,128 @@
+"""The autopilot's DroneCAN actuator back-end: thruster set-points as ESC RawCommand over CAN.
+
+Same small interface as the MAVLink back-end (:class:`autopilot_bridge.hil_link.HilLink`):
+``send_controls(time_usec, port, stdb)`` with normalised commands in [-1, 1], plus
+``service()`` (read the bus), ``summary()`` and ``close()``. Any python-can bus works.
+
+Every command is one ``uavcan.equipment.esc.RawCommand`` transfer from the autopilot's node
+(cmd[0] port, cmd[1] starboard, int14 in [-8191, 8191], negative = reverse), at high priority.
+The node also sends ``uavcan.protocol.NodeStatus`` at ``node_status_rate_hz`` of frame time, and
+reads ``uavcan.equipment.esc.Status`` and NodeStatus back from the ESC nodes; everything else,
+and anything malformed, is dropped and counted. Frames of its own node ID are ignored.
+
+Lockstep: the simulator advances one frame per answer, and a RawCommand carries no frame time,
+so each answer is also sent as HIL_ACTUATOR_CONTROLS (``lockstep_token``) holding exactly the
+values of the RawCommand sent just before it; the simulator steps on the token once its ESC
+nodes hold that RawCommand (docs/can.md).
+"""
+
+from __future__ import annotations
+
+import time
+from array import array
+from collections import Counter
+from typing import Any, Callable
+
+import can
+
+from common import dronecan_codec as dc
+from common.can_params import CanParams
+
+
+class CanActuators:
+    """Thruster commands over DroneCAN on ``bus``; ESC Status read back."""
+
+    def __init__(self, bus: can.BusABC, params: CanParams, lockstep_token: Any | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.bus, self.p, self.token, self.clock = bus, params, lockstep_token, clock
+        self.node_id = params.autopilot_node_id
+        self.esc_ids = tuple(params.esc_node_ids)
+        self.receiver = dc.TransferReceiver([dc.ESC_STATUS, dc.NODE_STATUS], nodes=self.esc_ids,
+                                            own_nodes=[self.node_id])
+        self.tracker = dc.TransferIdTracker()
+        self.tids = dc.TransferIds()
+        self.rejects: Counter = Counter()
+        self.sent: Counter = Counter()
+        self.send_errors = 0
+        self.commands_sent = 0
+        self.esc_status: dict[int, dict[str, float]] = {}
+        self.esc_health: dict[int, int] = {}
+        self.next_node_status_t = 0.0
+        self.started = clock()
+        self.record = False                 # latency records: transfer ID and wall time commanded
+        self.sent_tid = array("b")
+        self.sent_at = array("d")
+
+    def _send(self, full_name: str, payload: bytes, priority: int) -> int:
+        tid = self.tids.take(full_name)
+        for frame in dc.to_frames(full_name, payload, self.node_id, tid, priority, time.time()):
+            try:
+                self.bus.send(frame, timeout=0.1)
+            except can.CanError:
+                self.send_errors += 1
+                return tid
+        self.sent[dc.short_name(full_name)] += 1
+        return tid
+
+    def send_controls(self, time_usec: int, port: float, stdb: float, armed: bool = True) -> None:
+        """RawCommand for normalised ``port`` and ``stdb`` in [-1, 1] answering the frame at ``time_usec``."""
+        t0 = self.clock()
+        values = (dc.quantize(port), dc.quantize(stdb)) if armed else (0, 0)
+        tid = self._send(dc.RAW_COMMAND, dc.raw_command(values), dc.PRIORITY_HIGH)
+        self.commands_sent += 1
+        if self.record:
+            self.sent_tid.append(tid)
+            self.sent_at.append(t0)
+        if self.token is not None:
+            self.token.send_controls(time_usec, values[0] / dc.RAW_COMMAND_MAX, values[1] / dc.RAW_COMMAND_MAX, armed)
+        t = time_usec * 1e-6
+        if t + 1e-9 >= self.next_node_status_t:
+            self.next_node_status_t = t + 1.0 / self.p.node_status_rate_hz
+            self._send(dc.NODE_STATUS, dc.node_status(int(t)), dc.PRIORITY_LOW)
+
+    def service(self, timeout: float = 0.0) -> None:
+        """Read every frame queued now: ESC Status and NodeStatus of the ESC nodes."""
+        msg = self.bus.recv(timeout)
+        while msg is not None:
+            tr = self.receiver.feed(msg)
+            if tr is not None:
+                self._on_transfer(tr)
+            msg = self.bus.recv(0.0)
+
+    def _on_transfer(self, tr: dc.Transfer) -> None:
+        self.tracker.observe(tr)
+        m = tr.msg
+        if tr.full_name == dc.NODE_STATUS:
+            self.esc_health[tr.source_node] = int(m.health)
+            return
+        index = int(m.esc_index)
+        if index >= len(self.esc_ids) or self.esc_ids[index] != tr.source_node:
+            self.rejects["esc_index_mismatch"] += 1
+            return
+        self.esc_status[index] = {"node_id": tr.source_node, "rpm": int(m.rpm), "voltage": float(m.voltage),
+                                  "current": float(m.current), "temperature": float(m.temperature),
+                                  "power_rating_pct": int(m.power_rating_pct), "error_count": int(m.error_count)}
+
+    def summary(self) -> dict[str, Any]:
+        """Counters of the CAN path (the ``can`` key of the autopilot summary)."""
+        names = ("port", "starboard")
+        return {
+            "interface": self.p.interface,
+            "channel": self.p.channel,
+            "node_id": self.node_id,
+            "raw_commands_sent": self.commands_sent,
+            "transfers_sent": dict(sorted(self.sent.items())),
+            "send_errors": self.send_errors,
+            "frames_received": self.receiver.frames,
+            "own_frames_ignored": self.receiver.own_frames,
+            "transfers_received": dict(sorted(self.tracker.received.items())),
+            "transfers_lost": dict(sorted(self.tracker.lost.items())),
+            "transfers_duplicated": dict(sorted(self.tracker.duplicated.items())),
+            "rejects": dict(sorted((self.receiver.rejects + self.rejects).items())),
+            "esc_status": {names[i]: s for i, s in sorted(self.esc_status.items())},
+            "esc_health": {str(k): v for k, v in sorted(self.esc_health.items())},
+        }
+
+    def close(self) -> None:
+        self.bus.shutdown()
+

@@ -1,0 +1,301 @@
+"""`hil soak`: run the HIL loop (or the CAN actuator path alone) for a long time and check it stays clean."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hil.commands.can_options import add_can_arguments, can_overrides
+from hil.console import emit, load_settings, progress
+from hil.errors import ConfigError, RunFailed, UsageError
+
+LOOP_RATE_HZ = 100.0  # the HIL loop commands the thrusters once per IMU frame (sensors.imu.rate_hz)
+
+
+def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "soak", parents=parents,
+        help="soak test: the HIL loop (or the CAN actuator path alone) for a long time, leak and loss checks",
+        description="Runs the HIL loop in real time (x1) for --duration seconds, on CAN actuators by default, "
+                    "without stopping at the goal; or, with --rate above the loop's command rate "
+                    f"({LOOP_RATE_HZ:g} Hz), only the CAN actuator path: this process commanding the ESC "
+                    "nodes (a separate process) at --rate. Reports frames/transfers sent and received per data "
+                    "type and node, transfers lost (gaps in transfer IDs) and duplicated, command->applied "
+                    "latency p50/p99/max, stale-command failsafe events, rejected frames per reason, planner "
+                    "deadline overruns, resident memory and open file descriptors of each process at start and "
+                    "end, and memory growth per hour. Shows progress every 5 s.",
+        epilog="Exit 0 when clean; 1 when a transfer was lost, a frame was rejected, memory grew faster than "
+               "--max-rss-growth (and by more than --rss-noise), or the deadline overruns exceeded "
+               "--max-overruns; 2 on a usage error.",
+    )
+    p.add_argument("--duration", type=float, default=60.0, metavar="S", help="seconds to run (default: 60)")
+    p.add_argument("--rate", type=float, default=None, metavar="HZ",
+                   help=f"command rate of the CAN path alone; at or below {LOOP_RATE_HZ:g} Hz the HIL loop runs")
+    p.add_argument("--scenario", default="harbour", help="HIL loop scenario (default: harbour)")
+    p.add_argument("--seed", type=int, default=1, help="seed (default: 1)")
+    p.add_argument("--max-rss-growth", type=float, default=64.0, metavar="MB_PER_H",
+                   help="fail when a process's resident memory grows faster than this (default: 64 MB/h)")
+    p.add_argument("--rss-noise", type=float, default=4.0, metavar="MB",
+                   help="growth below this many MB is allocator noise, never a failure (default: 4)")
+    p.add_argument("--max-overruns", type=int, default=0, help="planner deadline overruns allowed (default: 0)")
+    p.add_argument("--warmup", type=float, default=None, metavar="S",
+                   help="memory baseline taken this long after start (default: 10%% of --duration, 5-60 s)")
+    p.add_argument("--out", metavar="DIR", default=None, help="keep the run folder here (default: temporary)")
+    add_can_arguments(p)
+    p.set_defaults(func=run, actuators="can")
+
+
+def proc_resources(pid: int) -> dict[str, float] | None:
+    """Resident memory (MB) and open file descriptors of a live process, from /proc."""
+    try:
+        rss_kb = next(int(line.split()[1]) for line in open(f"/proc/{pid}/status") if line.startswith("VmRSS:"))
+        return {"rss_mb": round(rss_kb / 1024.0, 2), "fds": len(os.listdir(f"/proc/{pid}/fd"))}
+    except (OSError, StopIteration, ValueError):
+        return None
+
+
+class ResourceWatch:
+    """Baseline after the warm-up and the last sample before the end, for each named process."""
+
+    def __init__(self, warmup: float) -> None:
+        self.warmup = warmup
+        self.start: dict[str, dict] = {}
+        self.end: dict[str, dict] = {}
+        self.t_start: float | None = None
+        self.t_end: float | None = None
+        self.t0: float | None = None  # the first sample: the processes are up and working
+
+    def sample(self, pids: dict[str, int]) -> None:
+        now = time.monotonic()
+        if self.t0 is None:
+            self.t0 = now
+        got = {k: r for k, pid in pids.items() if (r := proc_resources(pid)) is not None}
+        if self.t_start is None:
+            if now - self.t0 >= self.warmup and len(got) == len(pids):
+                self.start, self.t_start = got, now
+            return
+        if len(got) == len(pids):
+            self.end, self.t_end = got, now
+
+    def report(self, max_growth: float, noise: float) -> tuple[dict, list[str]]:
+        out, problems = {}, []
+        hours = ((self.t_end or 0) - (self.t_start or 0)) / 3600.0
+        for name, s in self.start.items():
+            e = self.end.get(name)
+            if e is None or hours <= 0:
+                continue
+            growth = e["rss_mb"] - s["rss_mb"]
+            per_h = growth / hours
+            out[name] = {"rss_mb_start": s["rss_mb"], "rss_mb_end": e["rss_mb"], "rss_growth_mb_per_h": round(per_h, 2),
+                         "fds_start": s["fds"], "fds_end": e["fds"]}
+            if growth > noise and per_h > max_growth:
+                problems.append(f"{name}: resident memory grew {growth:.1f} MB ({per_h:.0f} MB/h > {max_growth:g})")
+            if e["fds"] > s["fds"]:
+                problems.append(f"{name}: open file descriptors {s['fds']} -> {e['fds']}")
+        if not out:
+            problems.append("resources: no baseline and end sample (run too short for the warm-up?)")
+        return {"processes": out, "measured_over_s": round(hours * 3600.0, 1)}, problems
+
+
+def _warmup(args: argparse.Namespace) -> float:
+    return args.warmup if args.warmup is not None else min(60.0, max(5.0, 0.1 * args.duration))
+
+
+def _load_record(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    if not path.exists():
+        return np.zeros(0), np.zeros(0)
+    z = np.load(path)
+    return z["tid"], z["at"]
+
+
+def run(args: argparse.Namespace) -> int:
+    if not args.duration > 0:
+        raise ConfigError("--duration: must be > 0 seconds")
+    if args.rate is not None and not args.rate > 0:
+        raise ConfigError("--rate: must be > 0 Hz")
+    args.overrides = list(args.overrides) + can_overrides(args)
+    cfg = load_settings(args)
+    with tempfile.TemporaryDirectory(prefix="hil-soak-") as tmp:
+        out = Path(args.out) if args.out else Path(tmp)
+        out.mkdir(parents=True, exist_ok=True)
+        if args.rate is not None and args.rate > LOOP_RATE_HZ:
+            if cfg.can.actuators != "can":
+                raise UsageError("--rate above the loop's rate soaks the CAN path: it needs --actuators can")
+            result = _soak_can_path(args, cfg, out)
+        else:
+            result = _soak_loop(args, cfg, out)
+    problems = result["problems"]
+    result["clean"] = not problems
+    emit(args, result)
+    progress("soak: clean" if not problems else "soak: NOT clean: " + "; ".join(problems))
+    return 0 if not problems else 1
+
+
+def _can_checks(sides: dict[str, dict | None], problems: list[str]) -> dict[str, Any]:
+    """Per-node transfer counters of both sides; a loss or a reject is a problem."""
+    out: dict[str, Any] = {}
+    for side, s in sides.items():
+        if not s:
+            problems.append(f"{side}: no CAN summary")
+            continue
+        out[side] = {k: s.get(k) for k in ("transfers_sent", "transfers_received", "transfers_lost",
+                                           "transfers_duplicated", "rejects", "send_errors", "frames_received")}
+        lost = sum((s.get("transfers_lost") or {}).values())
+        if lost:
+            problems.append(f"{side}: {lost} transfers lost")
+        if s.get("rejects"):
+            problems.append(f"{side}: rejected frames {s['rejects']}")
+        if s.get("send_errors"):
+            problems.append(f"{side}: {s['send_errors']} send errors")
+    return out
+
+
+def _soak_loop(args: argparse.Namespace, cfg: Any, out: Path) -> dict[str, Any]:
+    from hil.hilrun import RunOptions, run_loop
+
+    watch = ResourceWatch(_warmup(args))
+    on_can = cfg.can.actuators == "can"
+    ap_rec, sim_rec = out / "autopilot-can.npz", out / "sim-can.npz"
+
+    def sample(tap, run) -> None:
+        if tap.truth and run.ap is not None and run.sim is not None and run.ap.poll() is None \
+                and run.sim.poll() is None:
+            watch.sample({"autopilot": run.ap.pid, "simulator": run.sim.pid})
+
+    progress(f"soak: HIL loop in real time for {args.duration:g} s on {args.scenario}, actuators {cfg.can.actuators}"
+             + (f" ({cfg.can.interface}:{cfg.can.channel})" if on_can else ""))
+    opts = RunOptions(scenario=args.scenario, lockstep=False, speedup=1.0, duration=args.duration, seed=args.seed,
+                      config=args.config, overrides=list(args.overrides), out=out / "run", plot=False,
+                      on_progress=progress, hooks=[sample], stop_at_goal=False,
+                      wall_timeout=args.duration * 1.5 + 300.0,
+                      extra_autopilot_args=["--can-record", str(ap_rec)] if on_can else [],
+                      extra_sim_args=["--can-record", str(sim_rec)] if on_can else [])
+    summary = run_loop(opts, cfg)
+    problems: list[str] = []
+    if summary["outcome"] not in ("timeout", "goal"):
+        problems.append(f"run ended early: {summary['outcome']}")
+    sim = summary.get("simulator") or {}
+    result: dict[str, Any] = {
+        "mode": "hil_loop", "actuators": cfg.can.actuators, "duration_s": args.duration,
+        "outcome": summary["outcome"], "sim_time_s": summary["sim_time_s"],
+        "stale_failsafe_events": sim.get("stale_command_events"),
+        "deadline_overruns": summary.get("deadline_overruns"),
+        "events": summary.get("events"),
+    }
+    if (summary.get("deadline_overruns") or 0) > args.max_overruns:
+        problems.append(f"planner deadline overruns {summary['deadline_overruns']} > {args.max_overruns}")
+    if on_can:
+        can = summary.get("can") or {}
+        result["can"] = _can_checks({"autopilot": can.get("autopilot"), "simulator": can.get("simulator")}, problems)
+        result["can_log"] = can.get("can_log")
+        lat = _latency(ap_rec, sim_rec)
+        result["command_to_applied_ms"] = lat
+    else:
+        result["control_latency_ms"] = summary.get("control_latency_ms")
+    res, res_problems = watch.report(args.max_rss_growth, args.rss_noise)
+    result["resources"] = res
+    result["problems"] = problems + res_problems
+    return result
+
+
+def _latency(sent_path: Path, applied_path: Path) -> dict[str, Any]:
+    from hil.can_path import pair_latency, stats_ms
+
+    st, sa = _load_record(sent_path)
+    at, aa = _load_record(applied_path)
+    return stats_ms(pair_latency(st, sa, at, aa))
+
+
+def _soak_can_path(args: argparse.Namespace, cfg: Any, out: Path) -> dict[str, Any]:
+    from autopilot_bridge.can_actuators import CanActuators
+    from common.can_params import open_bus
+    from hil import processes
+    from hil.can_path import pair_latency, stats_ms
+
+    rec = out / "esc.npz"
+    cmd = [sys.executable, "-m", "hil.can_path", "esc", "--duration", repr(args.duration + 30.0), "--record", str(rec)]
+    if args.config:
+        cmd += ["--config", args.config]
+    for o in args.overrides:
+        cmd += ["--set", o]
+    try:
+        acts = CanActuators(open_bus(cfg.can), cfg.can)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    acts.record = True
+    watch = ResourceWatch(_warmup(args))
+    esc = processes.start(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    problems: list[str] = []
+    try:
+        _wait_ready(esc, b"esc: ready")
+        progress(f"soak: CAN path at {args.rate:g} Hz for {args.duration:g} s on {cfg.can.interface}:{cfg.can.channel}")
+        period = 1.0 / args.rate
+        t0 = time.monotonic()
+        k, next_report = 0, t0 + 5.0
+        while (now := time.monotonic()) - t0 < args.duration:
+            target = t0 + k * period
+            if now < target:
+                acts.service(min(target - now, 0.01))
+                continue
+            x = 0.8 * np.sin(2 * np.pi * 0.05 * k * period)  # a slow sweep through forward and reverse
+            acts.send_controls(int(round(k * period * 1e6)), x, -x)
+            k += 1
+            if k % 50 == 0:
+                watch.sample({"commander": os.getpid(), "esc_nodes": esc.pid})
+            if now >= next_report:
+                next_report += 5.0
+                progress(f"soak: {now - t0:.0f}/{args.duration:g} s, {acts.commands_sent} commands, "
+                         f"{sum(acts.tracker.received.values())} transfers back")
+        deadline = time.monotonic() + 0.5
+        while time.monotonic() < deadline:
+            acts.service(0.05)
+    finally:
+        processes.stop(esc)
+        acts.close()
+    try:
+        o, e = esc.communicate(timeout=30)
+        esc_summary = json.loads(o.decode().strip().splitlines()[-1])
+    except (ValueError, IndexError, subprocess.TimeoutExpired):
+        raise RunFailed("the ESC node process printed no summary") from None
+    behind = k - int(args.duration * args.rate)
+    result: dict[str, Any] = {"mode": "can_path", "rate_hz": args.rate, "duration_s": args.duration,
+                              "commands_sent": acts.commands_sent, "commands_behind_schedule": -behind if behind < 0 else 0}
+    result["can"] = _can_checks({"autopilot": acts.summary(), "esc_nodes": esc_summary}, problems)
+    st, sa = np.frombuffer(acts.sent_tid, dtype=np.int8), np.frombuffer(acts.sent_at, dtype=float)
+    at, aa = _load_record(rec)
+    result["command_to_applied_ms"] = stats_ms(pair_latency(st, sa, at, aa))
+    result["stale_failsafe_events"] = None  # no simulator clock on the bare path
+    result["deadline_overruns"] = None
+    res, res_problems = watch.report(args.max_rss_growth, args.rss_noise)
+    result["resources"] = res
+    result["problems"] = problems + res_problems
+    return result
+
+
+def _wait_ready(proc: subprocess.Popen, marker: bytes, timeout: float = 60.0) -> None:
+    """Read the child's stderr until ``marker`` (bounded)."""
+    import selectors
+
+    sel = selectors.DefaultSelector()
+    sel.register(proc.stderr, selectors.EVENT_READ)
+    seen = b""
+    deadline = time.monotonic() + timeout
+    while marker not in seen:
+        left = deadline - time.monotonic()
+        if left <= 0 or proc.poll() is not None:
+            raise RunFailed(f"child not ready: {seen.decode(errors='replace').strip()[-300:]}")
+        if sel.select(min(left, 0.2)):
+            chunk = os.read(proc.stderr.fileno(), 4096)
+            if not chunk:
+                continue
+            seen += chunk
+    sel.close()

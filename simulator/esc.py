@@ -1,0 +1,151 @@
+"""The two simulated DroneCAN ESC nodes of the thrusters, on one python-can bus.
+
+Each ESC node has its own static node ID ([can] esc_node_ids: port, starboard), takes its
+``esc_index`` (0 port, 1 starboard) from ``uavcan.equipment.esc.RawCommand`` transfers of the
+autopilot's node, publishes ``uavcan.equipment.esc.Status`` at ``status_rate_hz`` and
+``uavcan.protocol.NodeStatus`` at ``node_status_rate_hz`` (simulated time). The command turns
+into thrust in :class:`simulator.core.SimulatorCore`, which holds the first-order lag and the
+stale-command failsafe shared with the MAVLink path; Status reports the propeller state that
+results (rpm from thrust ~ rpm^2, power ~ rpm^3).
+
+Bad input never reaches the thrusters: frames and transfers rejected by the transport layer are
+counted by :class:`common.dronecan_codec.TransferReceiver`, and RawCommands that lack an ESC's
+index or hold a value outside [-8191, 8191] are rejected whole and counted here.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from array import array
+from collections import Counter
+from typing import Any, Callable
+
+import can
+
+from common import dronecan_codec as dc
+from common.can_params import CanParams
+
+RAW_COMMAND_OUT_OF_RANGE = "raw_command_out_of_range"
+RAW_COMMAND_MISSING_INDEX = "raw_command_missing_index"
+
+
+class EscBank:
+    """Both ESC nodes: receive RawCommand, publish Status and NodeStatus.
+
+    ``clock`` gives the wall time stamped on applied commands (``time.monotonic``; latency
+    records only). Simulated time ``t`` (s) is passed to :meth:`publish`.
+    """
+
+    def __init__(self, bus: can.BusABC, params: CanParams, esc: Any, vessel: Any,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.bus, self.p, self.esc, self.vessel, self.clock = bus, params, esc, vessel, clock
+        self.node_ids = tuple(params.esc_node_ids)
+        self.receiver = dc.TransferReceiver([dc.RAW_COMMAND, dc.NODE_STATUS], nodes=[params.autopilot_node_id],
+                                            own_nodes=self.node_ids)
+        self.tracker = dc.TransferIdTracker()
+        self.tids = [dc.TransferIds() for _ in self.node_ids]
+        self.rejects: Counter = Counter()
+        self.raw: tuple[int, int] | None = None     # newest valid RawCommand for index 0 and 1
+        self.commands = 0                           # valid RawCommands applied
+        self.commands_seen = 0                      # RawCommands since the caller last looked (lockstep)
+        self.autopilot_health: int | None = None
+        self.sent: Counter = Counter()
+        self.send_errors = 0
+        self.next_status_t = 0.0
+        self.next_node_status_t = 0.0
+        self.applied_tid = array("b")               # latency records: transfer ID and wall time applied
+        self.applied_at = array("d")
+        self.record = False
+
+    # -- receive ---------------------------------------------------------------------------
+    def poll(self, timeout: float = 0.0) -> int:
+        """Take every frame queued now (waiting up to ``timeout`` s for the first); returns the
+        number of valid RawCommands applied."""
+        applied = 0
+        msg = self.bus.recv(timeout)
+        while msg is not None:
+            tr = self.receiver.feed(msg)
+            if tr is not None:
+                applied += self._on_transfer(tr)
+            msg = self.bus.recv(0.0)
+        return applied
+
+    def _on_transfer(self, tr: dc.Transfer) -> int:
+        self.tracker.observe(tr)
+        if tr.full_name == dc.NODE_STATUS:
+            self.autopilot_health = int(tr.msg.health)
+            return 0
+        cmd = [int(v) for v in tr.msg.cmd]
+        if len(cmd) < 2:
+            self.rejects[RAW_COMMAND_MISSING_INDEX] += 1
+            return 0
+        if any(abs(v) > dc.RAW_COMMAND_MAX for v in cmd[:2]):
+            self.rejects[RAW_COMMAND_OUT_OF_RANGE] += 1
+            return 0
+        self.raw = (cmd[0], cmd[1])
+        self.commands += 1
+        self.commands_seen += 1
+        if self.record:
+            self.applied_tid.append(tr.transfer_id)
+            self.applied_at.append(self.clock())
+        return 1
+
+    def controls(self) -> tuple[float, float] | None:
+        """The newest command as normalised (port, starboard) in [-1, 1], or None before any."""
+        if self.raw is None:
+            return None
+        return self.raw[0] / dc.RAW_COMMAND_MAX, self.raw[1] / dc.RAW_COMMAND_MAX
+
+    # -- publish ---------------------------------------------------------------------------
+    def propeller(self, thrust: float) -> dict[str, float]:
+        """Propeller speed (rpm), electrical power (W), current (A), temperature (K) at ``thrust`` N."""
+        e, v = self.esc, self.vessel
+        if thrust >= 0:
+            rpm = e.max_rpm * math.sqrt(thrust / v.T_max)
+        else:
+            rpm = -e.max_rpm * math.sqrt(thrust / v.T_min)
+        power = e.max_power * (abs(rpm) / e.max_rpm) ** 3
+        return {"rpm": rpm, "power": power, "current": power / e.voltage,
+                "temperature": e.ambient_temperature + e.heating * power}
+
+    def _send(self, k: int, full_name: str, payload: bytes, priority: int, stamp: float) -> None:
+        for frame in dc.to_frames(full_name, payload, self.node_ids[k], self.tids[k].take(full_name), priority, stamp):
+            try:
+                self.bus.send(frame, timeout=0.1)
+            except can.CanError:
+                self.send_errors += 1
+                return
+        self.sent[f"{dc.short_name(full_name)}@{self.node_ids[k]}"] += 1
+
+    def publish(self, t: float, thrust: tuple[float, float]) -> None:
+        """Send whatever is due at simulated time ``t`` (s) given the applied ``thrust`` (N)."""
+        stamp = time.time()
+        if t + 1e-9 >= self.next_status_t:
+            self.next_status_t = t + 1.0 / self.p.status_rate_hz
+            for k, th in enumerate(thrust):
+                s = self.propeller(th)
+                msg = dc.make(dc.ESC_STATUS, error_count=0, voltage=self.esc.voltage, current=s["current"],
+                              temperature=s["temperature"], rpm=int(round(s["rpm"])),
+                              power_rating_pct=min(127, int(round(100.0 * s["power"] / self.esc.max_power))),
+                              esc_index=k)
+                self._send(k, dc.ESC_STATUS, dc.serialize(msg), dc.PRIORITY_MEDIUM, stamp)
+        if t + 1e-9 >= self.next_node_status_t:
+            self.next_node_status_t = t + 1.0 / self.p.node_status_rate_hz
+            for k in range(len(self.node_ids)):
+                self._send(k, dc.NODE_STATUS, dc.node_status(int(t)), dc.PRIORITY_LOW, stamp)
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            "node_ids": list(self.node_ids),
+            "raw_commands_applied": self.commands,
+            "last_raw_command": list(self.raw) if self.raw else None,
+            "frames_received": self.receiver.frames,
+            "transfers_received": dict(sorted(self.tracker.received.items())),
+            "transfers_lost": dict(sorted(self.tracker.lost.items())),
+            "transfers_duplicated": dict(sorted(self.tracker.duplicated.items())),
+            "transfers_sent": dict(sorted(self.sent.items())),
+            "send_errors": self.send_errors,
+            "rejects": dict(sorted((self.receiver.rejects + self.rejects).items())),
+            "autopilot_health": self.autopilot_health,
+        }

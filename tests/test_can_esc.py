@@ -1,0 +1,133 @@
+"""ESC nodes and the autopilot's CAN back-end on python-can's in-process `virtual` bus."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import can
+import pytest
+
+from autopilot_bridge.can_actuators import CanActuators
+from common import dronecan_codec as dc
+from hil import settings
+from simulator.core import SimulatorCore
+from simulator.esc import RAW_COMMAND_MISSING_INDEX, RAW_COMMAND_OUT_OF_RANGE, EscBank
+
+_channels = itertools.count()
+
+
+@pytest.fixture
+def rig():
+    cfg = settings.load(None, ["can.interface=\"virtual\""])
+    channel = f"esc-test-{next(_channels)}"
+    buses = [can.Bus(interface="virtual", channel=channel) for _ in range(3)]
+    core = SimulatorCore(cfg)
+    esc = EscBank(buses[0], cfg.can, cfg.esc, core.vessel)
+    acts = CanActuators(buses[1], cfg.can)
+    yield cfg, core, esc, acts, buses[2]
+    for b in buses:
+        b.shutdown()
+
+
+def test_command_reaches_the_escs_and_status_comes_back(rig):
+    cfg, core, esc, acts, _ = rig
+    acts.send_controls(10_000, 0.5, -0.25)
+    assert esc.poll(1.0) == 1
+    assert esc.raw == (4096, -2048)
+    port, stdb = esc.controls()
+    assert port == pytest.approx(0.5, abs=1e-4) and stdb == pytest.approx(-0.25, abs=1e-4)
+    esc.publish(0.0, (core.vessel.thrust(port), core.vessel.thrust(stdb)))
+    acts.service(1.0)
+    for _ in range(5):  # the three frames of each Status may arrive over several polls
+        acts.service(0.05)
+    s = acts.summary()
+    assert set(s["esc_status"]) == {"port", "starboard"}
+    # thrust ~ rpm^2: half forward thrust -> max_rpm / sqrt(2); a quarter reverse -> max_rpm / 2
+    assert s["esc_status"]["port"]["rpm"] == round(cfg.esc.max_rpm * math.sqrt(0.5))
+    assert s["esc_status"]["starboard"]["rpm"] == round(-cfg.esc.max_rpm * math.sqrt(0.25))
+    assert s["esc_status"]["port"]["voltage"] == pytest.approx(cfg.esc.voltage, rel=1e-3)
+    assert s["transfers_received"] == {"NodeStatus@20": 1, "NodeStatus@21": 1, "Status@20": 1, "Status@21": 1}
+    assert s["rejects"] == {} and s["transfers_lost"] == {}
+    assert esc.summary()["transfers_received"] == {"NodeStatus@10": 1, "RawCommand@10": 1}
+
+
+def test_status_and_node_status_rates_follow_simulated_time(rig):
+    cfg, core, esc, acts, _ = rig
+    for n in range(100):  # 1 s of 100 Hz frames
+        esc.publish(n * 0.01, (0.0, 0.0))
+    assert esc.sent["Status@20"] == 10 and esc.sent["NodeStatus@21"] == 1
+
+
+def test_bad_raw_commands_are_counted_and_never_applied(rig):
+    cfg, core, esc, acts, intruder = rig
+    acts.send_controls(0, 0.1, 0.1)
+    esc.poll(1.0)
+    good = esc.raw
+    bad = [
+        # -8192 fits the int14 but lies outside the DroneCAN range [-8191, 8191]
+        dc.to_frames(dc.RAW_COMMAND, dc.serialize(dc.make(dc.RAW_COMMAND, cmd=[-8192, 0])), 10, 5),
+        dc.to_frames(dc.RAW_COMMAND, dc.raw_command([100]), 10, 6),            # no starboard index
+        dc.to_frames(dc.RAW_COMMAND, dc.raw_command([100, 100]), 99, 0),      # unknown node
+        [can.Message(arbitration_id=dc.message_id(8, 1030, 10), data=b"\x00\x11\x22\x33\x44\x55\x66\x77\x88",
+                     is_extended_id=True, check=False)],                          # 9 bytes: wrong DLC
+        dc.to_frames("uavcan.equipment.esc.RPMCommand",
+                     dc.serialize(dc.make("uavcan.equipment.esc.RPMCommand", rpm=[5000, 5000])), 10, 0),
+    ]
+    for frames in bad:
+        for f in frames:
+            intruder.send(f)
+    assert esc.poll(1.0) == 0
+    for _ in range(3):
+        esc.poll(0.05)
+    assert esc.raw == good and esc.commands == 1
+    rejects = esc.summary()["rejects"]
+    assert rejects[RAW_COMMAND_OUT_OF_RANGE] == 1 and rejects[RAW_COMMAND_MISSING_INDEX] == 1
+    assert rejects[dc.UNKNOWN_NODE] == 1 and rejects[dc.UNKNOWN_DATA_TYPE] == 1 and rejects[dc.WRONG_DLC] == 1
+
+
+def test_autopilot_ignores_its_own_node_id_and_counts_lost_status(rig):
+    cfg, core, esc, acts, intruder = rig
+    # a frame claiming the autopilot's own node ID (e.g. echoed by an interface) is ignored
+    for f in dc.to_frames(dc.NODE_STATUS, dc.node_status(1), cfg.can.autopilot_node_id, 0):
+        intruder.send(f)
+    # ESC 20's Status transfers 0, 1 and 4: 2 and 3 lost
+    for tid in (0, 1, 4):
+        for f in dc.to_frames(dc.ESC_STATUS, dc.serialize(dc.make(dc.ESC_STATUS, esc_index=0, rpm=tid)), 20, tid):
+            intruder.send(f)
+    acts.service(1.0)
+    for _ in range(5):
+        acts.service(0.05)
+    s = acts.summary()
+    assert s["own_frames_ignored"] == 1
+    assert s["transfers_received"] == {"Status@20": 3} and s["transfers_lost"] == {"Status@20": 2}
+    assert s["esc_status"]["port"]["rpm"] == 4
+
+
+def test_esc_lag_is_first_order_and_shared_by_both_paths():
+    cfg = settings.load(None, ["esc.time_constant=0.1"])
+    core = SimulatorCore(cfg)
+    from simulator.core import Command
+    core.apply(Command(0, 1.0, 0.0))
+    core.step()
+    a = 1.0 - math.exp(-core.frame_dt / cfg.esc.time_constant)
+    assert core.thrust[0] == pytest.approx(core.vessel.T_max * a)
+    for _ in range(int(5 * cfg.esc.time_constant / core.frame_dt)):
+        core.apply(Command(core.time_usec, 1.0, 0.0))
+        core.step()
+    assert core.thrust[0] == pytest.approx(core.vessel.T_max, rel=0.01)
+    instant = SimulatorCore(settings.load(None, ["esc.time_constant=0.0"]))
+    instant.apply(Command(0, 1.0, 0.0))
+    instant.step()
+    assert instant.thrust[0] == instant.vessel.T_max
+
+
+def test_int14_resolution_rounds_commands_like_raw_command():
+    from simulator.core import Command
+    plain = SimulatorCore(settings.load())
+    plain.apply(Command(0, 0.5, -0.3))
+    assert plain.controls == (0.5, -0.3)  # the MAVLink path as it always was
+    for overrides in (["esc.int14_resolution=true"], ["can.actuators=\"can\""]):
+        core = SimulatorCore(settings.load(None, overrides))
+        core.apply(Command(0, 0.5, -0.3))
+        assert core.controls == (4096 / 8191, -2457 / 8191)

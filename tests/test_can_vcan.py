@@ -1,0 +1,123 @@
+"""The CAN actuator path on a real vcan0: natively where the kernel has SocketCAN, else inside
+User-Mode Linux (hil/uml.py), booted once for this module; skipped only when neither exists,
+with the exact reason.
+
+One batch of jobs runs on the bus: a lockstep `hil run --actuators can`, malformed frames against
+the ESC nodes, a 60 s `hil soak` and a short `hil bench can`. The MAVLink twin of the run needs
+no CAN and runs here natively.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import can
+import pytest
+
+from hil import uml
+
+REPO = Path(__file__).resolve().parent.parent
+PY = sys.executable
+# Both runs: the modelled thruster lag and the int14 command resolution (inherent on CAN).
+PHYSICS = ["--set", "esc.time_constant=0.1", "--set", "esc.int14_resolution=true"]
+RUN = ["-m", "hil", "run", "--json", "--no-plot", "--scenario", "harbour", "--seed", "2", *PHYSICS]
+WALL_CLOCK_KEYS = {"wall_time_s", "control_latency_ms", "run_folder", "tlog", "plot", "simulator",
+                   "tlog_messages", "navigation", "can", "actuators"}
+
+
+@pytest.fixture(scope="module")
+def vcan_batch(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("vcan")
+    try:
+        kind, why = uml.detect("vcan0")
+    except uml.VcanUnavailable as exc:
+        print(f"\nCAN-vcan tests skipped: {exc}")
+        pytest.skip(str(exc))
+    print(f"\nCAN-vcan tests: {why}")
+    jobs = [
+        uml.Job("run_can", [PY, *RUN, "--actuators", "can", "--out", str(tmp / "run-can")], cwd=str(REPO), timeout=600),
+        uml.Job("bad_frames", [PY, str(REPO / "tests" / "vcan_checks.py")], cwd=str(REPO), timeout=60),
+        # The planner may overrun its 0.3 s real-time deadline now and then inside User-Mode Linux
+        # (every syscall and fork is slower there): a budget of 3 a minute, not a free pass.
+        uml.Job("soak", [PY, "-m", "hil", "soak", "--json", "--duration", "60", "--max-overruns", "3",
+                         "--out", str(tmp / "soak")],
+                cwd=str(REPO), timeout=400),
+        uml.Job("bench", [PY, "-m", "hil", "bench", "can", "--json", "--duration", "5"], cwd=str(REPO), timeout=120),
+    ]
+    if kind == "native":
+        results = uml.run_native(jobs)
+        boot = None
+    else:
+        r = uml.run_in_uml(jobs, workdir=tmp / "uml")
+        results, boot = r.results, r.boot_s
+        print(f"User-Mode Linux: vcan0 up {boot:.2f} s after boot, whole batch {r.wall_s:.0f} s")
+    return {"kind": kind, "tmp": tmp, "boot_s": boot, **{j.name: j for j in results}}
+
+
+def _json(job):
+    assert job.returncode is not None, f"{job.name} timed out: {job.stderr[-2000:]}"
+    assert job.stdout.strip(), f"{job.name}: no output (exit {job.returncode}): {job.stderr[-2000:]}"
+    return job.json()
+
+
+def test_lockstep_can_run_gives_the_same_summary_as_mavlink(vcan_batch):
+    can_run = _json(vcan_batch["run_can"])
+    out = vcan_batch["tmp"] / "run-mav"
+    r = subprocess.run([PY, *RUN, "--actuators", "mavlink", "--out", str(out)], cwd=REPO, capture_output=True,
+                       text=True, timeout=600)
+    mav = json.loads(r.stdout.strip().splitlines()[-1])
+    assert can_run["actuators"] == "can" and mav["actuators"] == "mavlink"
+    strip = lambda s: {k: v for k, v in s.items() if k not in WALL_CLOCK_KEYS}  # noqa: E731
+    assert strip(can_run) == strip(mav)
+    assert can_run["outcome"] == "goal", can_run["events"]
+    # The thrust really came over CAN: every frame's command was a RawCommand the ESCs applied.
+    c = can_run["can"]
+    sim, ap = c["simulator"], c["autopilot"]
+    assert sim["lockstep_commands_missing"] == 0
+    assert sim["raw_commands_applied"] >= can_run["simulator"]["steps"]
+    assert ap["raw_commands_sent"] == sim["transfers_received"]["RawCommand@10"]
+    assert sim["transfers_lost"] == {"NodeStatus@10": 0, "RawCommand@10": 0} and sim["rejects"] == {}
+    assert ap["rejects"] == {} and sum(ap["transfers_lost"].values()) == 0
+    assert ap["transfers_received"]["Status@20"] > 0 and ap["transfers_received"]["Status@21"] > 0
+    assert set(ap["esc_status"]) == {"port", "starboard"}
+
+
+def test_can_log_is_readable_by_python_can(vcan_batch):
+    s = _json(vcan_batch["run_can"])
+    log = Path(s["can"]["can_log"])
+    assert log.name == "can.log" and log.parent == Path(s["run_folder"])
+    frames = list(can.LogReader(str(log)))
+    assert len(frames) == s["can"]["can_log_frames"] > 0
+    ids = {(f.arbitration_id >> 8) & 0xFFFF for f in frames}
+    assert {1030, 1034, 341} <= ids  # RawCommand, ESC Status, NodeStatus
+
+
+def test_bad_frames_on_vcan_are_counted_never_applied(vcan_batch):
+    r = _json(vcan_batch["bad_frames"])
+    assert r["applied"] == 1 and r["raw"] == [1000, -1000]
+    assert r["rejects"] == {"not_dronecan": 1, "raw_command_out_of_range": 1, "unknown_node": 1, "wrong_dlc": 1}
+
+
+def test_soak_60s_is_clean(vcan_batch):
+    job = vcan_batch["soak"]
+    s = _json(job)
+    assert s["mode"] == "hil_loop" and s["actuators"] == "can"
+    assert s["clean"], s["problems"]
+    assert job.returncode == 0
+    assert "soak:" in job.stderr and "run: t=" in job.stderr  # progress while running
+    lat = s["command_to_applied_ms"]
+    assert lat["samples"] > 50 * 60 and lat["p50"] is not None
+    for side in ("autopilot", "simulator"):
+        assert sum(s["can"][side]["transfers_lost"].values()) == 0
+    res = s["resources"]["processes"]
+    assert set(res) == {"autopilot", "simulator"} and all(v["fds_end"] <= v["fds_start"] for v in res.values())
+
+
+def test_bench_can_reports_both_legs_and_the_ratio(vcan_batch):
+    b = _json(vcan_batch["bench"])
+    assert b["ours_lost"] == 0
+    assert b["ours_command_to_applied_ms"]["samples"] >= 400 and b["bare_one_way_ms"]["samples"] >= 400
+    assert b["overhead_p50"] > 0 and b["bare_round_trip_ms"]["p50"] > b["bare_one_way_ms"]["p50"] * 0.5
