@@ -45,6 +45,7 @@ from autopilot_bridge.navigation import NavigationFilter, NavigationParams, NavS
 from autopilot_bridge.planning_worker import PlannerWorker, PlanRequest
 from autopilot_bridge.reactive import ReactiveAvoidance
 from autopilot_bridge.telemetry import Telemetry
+from autopilot_bridge.vehicle import Mode, Vehicle, Waypoint
 
 PLANNED, FALLBACK, COMPLETE, WAITING = "planned", "fallback", "complete", "waiting_for_navigation"
 
@@ -81,7 +82,7 @@ class Autopilot:
     def __init__(self, params: AutopilotParams, nav: NavigationParams, control: ControlParams,
                  propulsion: Propulsion, world: World, link: HilLink, worker: PlannerWorker,
                  telemetry: Telemetry | None = None, *, lockstep: bool, seed: int,
-                 log: Callable[[str], None] | None = None) -> None:
+                 log: Callable[[str], None] | None = None, wait_for_arm: bool = False) -> None:
         self.p, self.nav_params, self.control_params = params, nav, control
         self.prop, self.world, self.link, self.worker = propulsion, world, link, worker
         self.telemetry = telemetry
@@ -97,6 +98,17 @@ class Autopilot:
         self._waited = False
         self.local_paths: list[dict[str, Any]] = []
         self.track: list[tuple[float, float, float, float]] = []
+        # What a ground station commands (autopilot_bridge.vehicle). Without one the scenario's
+        # reference path is the mission and the boat starts armed in AUTO, as it always did.
+        self.vehicle = Vehicle([Waypoint(float(n), float(e), params.goal_tolerance) for n, e in self.reference_ned],
+                               armed=not wait_for_arm, mode=Mode.HOLD if wait_for_arm else Mode.AUTO,
+                               scenario_route=self.reference_ned, default_radius=params.goal_tolerance)
+        self.goal_radius = params.goal_tolerance
+        self.planner_overrides: dict[str, float] = {}   # PlannerParams changed by a GCS (parameters)
+        self._route_version = 0
+        self._world_version = 0
+        self._stale_cycle = 0        # plans of cycles up to this one were for an older route
+        self._idle = False
         self._reset()
 
     # -- state ---------------------------------------------------------------------------------
@@ -108,6 +120,7 @@ class Autopilot:
         self.los: LineOfSight | None = None
         self.next_plan_t = 0.0
         self.cycle = 0
+        self._stale_cycle = 0
         self.pending_since: float | None = None  # simulated time of the pending request
         self.last_frame_usec: int | None = None
         self.last_command: Thrust | None = None
@@ -146,7 +159,7 @@ class Autopilot:
         self.cycle += 1
         request = PlanRequest(
             cycle=self.cycle,
-            problem=CycleInput(x, y, heading, s.t + lead, self.seed * 100003 + self.cycle),
+            problem=CycleInput(x, y, heading, s.t + lead, self.seed * 100003 + self.cycle, self.world_update()),
             deadline_s=self.p.planning_deadline,
             iterations=self.p.lockstep_iterations if self.lockstep else None,
         )
@@ -182,6 +195,9 @@ class Autopilot:
         if reply.error:
             self.stats.plans_rejected["planner_error"] += 1
             self._event(t, f"planner error: {reply.error}")
+            return None
+        if reply.cycle <= self._stale_cycle:
+            self.stats.plans_rejected["for_an_older_route"] += 1
             return None
         return reply.result
 
@@ -234,16 +250,31 @@ class Autopilot:
         if self.stats.frames % 10 == 0:  # the estimated track at 10 Hz, for the run's plot
             self.track.append((t, s.x, s.y, s.psi))
 
-        if self.mode != COMPLETE and math.hypot(self.goal_ned[0] - s.x, self.goal_ned[1] - s.y) <= self.p.goal_tolerance:
+        self.vehicle.update(s.x, s.y)
+        self._apply_route(t)
+        active = self.vehicle.wants_thrust()
+        if active and self.mode != COMPLETE and \
+                math.hypot(self.goal_ned[0] - s.x, self.goal_ned[1] - s.y) <= self.goal_radius:
             self.mode = COMPLETE
             self.complete_t = t
-            self._event(t, "mission complete: final goal reached")
-            if self.telemetry is not None:
-                self.telemetry.mission_item_reached(len(self.world.reference_path) - 1)
+            if self.vehicle.mode == Mode.AUTO:
+                self.vehicle.finish()
+                self._event(t, "mission complete: final goal reached")
+            else:
+                self._event(t, f"{self.vehicle.mode.name}: destination reached, holding")
 
-        if self.mode == COMPLETE:
+        if not active:
+            # Disarmed, HOLD (drift), MANUAL, GUIDED without a target, AUTO without a mission.
+            self._idle = True
+            cmd = self._manual_command() if (self.vehicle.armed and self.vehicle.mode == Mode.MANUAL) else \
+                allocate(0.0, 0.0, self.prop.B_u, self.prop.T_max, self.prop.T_min)
+        elif self.mode == COMPLETE:
             cmd = allocate(0.0, 0.0, self.prop.B_u, self.prop.T_max, self.prop.T_min)
         else:
+            if self._idle:  # back under control: the controllers start from the present state
+                self._idle = False
+                self.heading_pid.reset()
+                self.speed_ctl.reset(s.u)
             plan = self._collect_plan(t)
             if plan is not None:
                 if self._accept(plan, s):
@@ -265,6 +296,50 @@ class Autopilot:
         self._send(f.time_usec, cmd, received_at)
         if self.telemetry is not None:
             self.telemetry.on_frame(t, s, self.mode, cmd)
+        elif self.vehicle.reached:
+            self.vehicle.take_reached()
+
+    # -- ground-station hooks ---------------------------------------------------------------------
+    def _apply_route(self, t: float) -> None:
+        """Follow a new global reference path (mission upload, AUTO/RTL/GUIDED entered), atomically."""
+        r = self.vehicle.route
+        if r is None or r.version == self._route_version:
+            return
+        self._route_version = r.version
+        self.reference_ned = r.path
+        self.goal_ned = (float(r.path[-1][0]), float(r.path[-1][1]))
+        self.goal_radius = r.goal_radius
+        self.target = self.goal_ned
+        self.los = None
+        if self.mode in (PLANNED, COMPLETE):
+            self.mode = FALLBACK
+        self.complete_t = None
+        self._stale_cycle = self.cycle   # whatever the worker is planning now is for the old route
+        self.next_plan_t = t
+        self._world_version += 1
+
+    def world_update(self) -> Any:
+        """What the planner worker must use instead of the World it started with (None: nothing changed)."""
+        if self._route_version == 0 and not self.planner_overrides:
+            return None
+        from autopilot_bridge.local_planning import WorldUpdate
+
+        ref = self.reference_ned[:, ::-1].copy()          # NED -> map (x east, y north)
+        return WorldUpdate(self._world_version, (float(ref[-1][0]), float(ref[-1][1])), ref,
+                           dict(self.planner_overrides))
+
+    def set_planner_override(self, name: str, value: float) -> None:
+        self.planner_overrides[name] = value
+        self._world_version += 1
+
+    def _manual_command(self) -> Thrust:
+        m = self.vehicle.manual
+        if m is None or time.monotonic() - m[2] > 1.0:
+            return allocate(0.0, 0.0, self.prop.B_u, self.prop.T_max, self.prop.T_min)
+        x, r = m[0], m[1]
+        tau_u = x * 2.0 * (self.prop.T_max if x >= 0 else -self.prop.T_min)
+        tau_r = r * 0.5 * (self.prop.T_max - self.prop.T_min) * self.prop.B_u
+        return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
 
     def _to_fallback(self, t: float, why: str) -> None:
         if self.mode != FALLBACK:

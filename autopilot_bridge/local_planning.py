@@ -47,6 +47,19 @@ class World:
 
 
 @dataclass(frozen=True)
+class WorldUpdate:
+    """A change of the World since the worker started (map frame): a ground station uploaded a mission
+    (new goal and reference path) or changed planner parameters. Sent with every cycle once there is
+    one, so a restarted worker (the watchdog) picks it up too; ``version`` tells the worker whether
+    it has it already."""
+
+    version: int
+    goal: tuple[float, float]
+    reference_path: np.ndarray
+    planner_overrides: dict
+
+
+@dataclass(frozen=True)
 class CycleInput:
     """A cycle's start: map-frame position (m), heading (rad from east), time (s), seed."""
 
@@ -55,6 +68,7 @@ class CycleInput:
     heading: float
     t: float
     seed: int
+    world: WorldUpdate | None = None
 
 
 @dataclass(frozen=True)
@@ -89,8 +103,17 @@ def online_cycle_handler(world: World) -> Callable[[Any], LocalPlan]:
     ctx = make_context(grid, world.goal, world.reference_path, world.params, world.online,
                        world.algorithm, world.field)
 
+    applied = {"version": None}
+
     def handle(request: Any) -> LocalPlan:
         start: CycleInput = request.problem
+        update = getattr(start, "world", None)
+        if update is not None and update.version != applied["version"]:
+            # Same maps (and their inflation caches); new route and planner parameters.
+            ctx.goal = (float(update.goal[0]), float(update.goal[1]))
+            ctx.reference_path = np.asarray(update.reference_path, dtype=float).reshape(-1, 2)
+            ctx.params = replace(ctx.params, **update.planner_overrides)
+            applied["version"] = update.version
         if request.iterations is not None:
             ctx.online = replace(world.online, local_iterations=int(request.iterations), local_time=0.0)
         else:

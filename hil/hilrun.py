@@ -30,7 +30,7 @@ import numpy as np
 from scipy import ndimage
 
 from common.geodesy import LocalFrame
-from common.mavlink import Codec
+from common.mavlink import Codec, mavlink2
 from common.udp import UdpEndpoint
 from hil import processes
 from hil import scenario as scenarios
@@ -70,9 +70,8 @@ class Tap:
 
     def __init__(self, tlog_path: Path, geo: LocalFrame) -> None:
         self.ep = UdpEndpoint("127.0.0.1:0", [], recv_buffer=8 << 20)
-        self.codec = Codec(255, 190, accept=("HIL_STATE_QUATERNION", "HIL_ACTUATOR_CONTROLS", "LOCAL_POSITION_NED",
-                                             "STATUSTEXT", "MISSION_ITEM_REACHED", "HIL_SENSOR", "HIL_GPS",
-                                             "HEARTBEAT", "ATTITUDE", "ODOMETRY"))
+        # Every message of the dialect: the autopilot copies all ground-station traffic here too.
+        self.codec = Codec(255, 190, accept=[c.msgname for c in mavlink2.mavlink_map.values()])
         self.tlog = open(tlog_path, "wb")
         self.geo = geo
         self.truth: dict[int, tuple[float, float, float, float]] = {}  # time_usec -> (north, east, vn, ve)

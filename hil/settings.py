@@ -11,6 +11,7 @@ from pathlib import Path
 
 from autopilot_bridge.config import AutopilotParams
 from autopilot_bridge.control import ControlParams
+from autopilot_bridge.gcs.config import GcsParams
 from autopilot_bridge.navigation import NavigationParams
 from hil import config
 from planner.params import PlannerParams
@@ -38,6 +39,7 @@ class HilConfig:
     autopilot: AutopilotParams
     navigation: NavigationParams
     control: ControlParams
+    gcs: GcsParams
 
 
 def load(path: str | Path | None = None, overrides: list[str] | None = None) -> HilConfig:
