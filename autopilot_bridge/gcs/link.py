@@ -149,6 +149,7 @@ class GcsLink:
         except ValueError:
             self.close()
             raise
+        self.addresses = [t.address for t in self.transports]
         self.mirror = UdpEndpoint("127.0.0.1:0", list(mirror_to)) if mirror_to else None
         self.codec = Codec(system_id, component_id)
         if self.key is not None:
@@ -201,10 +202,6 @@ class GcsLink:
         if not 0.0 <= e <= self.chart_size[1]:
             return M.MAV_MISSION_INVALID_PARAM6_Y, f"waypoint {e:.0f} m east is off the chart (0-{self.chart_size[1]:.0f})"
         return None
-
-    @property
-    def addresses(self) -> list[tuple[str, int]]:
-        return [t.address for t in self.transports]
 
     # -- sending --------------------------------------------------------------------------------
     def _send_frame(self, data: bytes) -> None:
