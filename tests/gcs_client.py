@@ -65,8 +65,10 @@ class Gcs:
     # -- commands ------------------------------------------------------------------------------
     def command(self, cmd: int, *params: float, timeout: float = 10.0) -> Any:
         p = list(params) + [0.0] * (7 - len(params))
+        self.drain()  # acks the boat sent to other ground stations earlier
         self.mav.command_long_send(self.target[0], self.target[1], cmd, 0, *p)
-        return self.recv("COMMAND_ACK", timeout, lambda a: a.command == cmd)
+        me = (self.mav.srcSystem, self.mav.srcComponent)
+        return self.recv("COMMAND_ACK", timeout, lambda a: a.command == cmd and (a.target_system, a.target_component) == me)
 
     def arm(self, on: bool = True) -> Any:
         return self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0 if on else 0.0, float("nan"))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 
 import pytest
 
@@ -156,3 +157,47 @@ def test_gcs_session_mission_commands_params_failsafe(live_run):
     assert {"HEARTBEAT", "MISSION_COUNT", "MISSION_ITEM_INT", "COMMAND_LONG", "PARAM_SET"} <= from_gcs
     assert {"COMMAND_ACK", "MISSION_ACK", "MISSION_REQUEST_INT", "PARAM_VALUE"} <= to_gcs
     assert {0, 1, 2} <= reached  # each item reached was announced
+
+
+def test_signing_rejects_unsigned_and_forged_writes_and_the_allow_list_holds(live_run, tmp_path):
+    key = bytes(range(32))
+    key_file = tmp_path / "gcs.key"
+    key_file.write_text(key.hex())
+    proc, gcs, out = live_run("--set", f"gcs.signing_key_file={json.dumps(str(key_file))}",
+                              "--set", "gcs.allowed_sysids=[255]")
+    # Telemetry stays readable without the key.
+    hb = gcs.connect()
+    assert hb is not None and hb.custom_mode == 4
+    assert gcs.recv("GLOBAL_POSITION_INT", 30) is not None
+    # Unsigned arm: denied, still disarmed.
+    ack = gcs.arm(True)
+    assert ack is not None and ack.result == M.MAV_RESULT_DENIED
+    assert gcs.recv("HEARTBEAT", 5, lambda h: not h.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED) is not None
+    # Signed with the wrong key (a second GCS, same ids, a later timestamp): denied too.
+    port = gcs.conn.destination_addr[1]
+    forger = Gcs(f"udpout:127.0.0.1:{port}")
+    # (it reads the boat's frames although their signatures do not match its key)
+    # Its timestamps are an hour ahead: were they recorded, the real GCS would fail the replay check.
+    ahead = int((time.time() - 1420070400 + 3600) * 1e5)
+    forger.conn.setup_signing(bytes(32 * [7]), sign_outgoing=True, allow_unsigned_callback=lambda *_: True,
+                              initial_timestamp=ahead, link_id=0)
+    assert forger.connect(30) is not None
+    ack = forger.arm(True)
+    assert ack is not None and ack.result == M.MAV_RESULT_DENIED
+    # Signed with the key: accepted (the forged frame did not poison the replay check).
+    gcs.conn.setup_signing(key, sign_outgoing=True, link_id=0)
+    ack = gcs.arm(True)
+    assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
+    assert gcs.recv("HEARTBEAT", 10, lambda h: h.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED) is not None
+    # Signed, but not on the allow-list: denied.
+    other = Gcs(f"udpout:127.0.0.1:{port}", sysid=200)
+    other.conn.setup_signing(key, sign_outgoing=True)
+    assert other.connect(30) is not None
+    ack = other.arm(False)
+    assert ack is not None and ack.result == M.MAV_RESULT_DENIED
+    for c in (forger, other):
+        c.close()
+    gcs.close()
+    stop_run(proc)
+    sec = json.loads((out / "autopilot.json").read_text())["gcs"]["security_rejects"]
+    assert sec.get("unsigned", 0) >= 1 and sec.get("bad_signature", 0) >= 1 and sec.get("not_allowed_sysid", 0) >= 1

@@ -101,6 +101,23 @@ class _Stream:
             self.mav.signing.timestamp = int((time.time() - SIGNING_EPOCH) * 1e5)
             # Decode everything; whether a write was signed is decided per message (m._signed).
             self.mav.signing.allow_unsigned_callback = lambda _mav, _msgid: True
+            # pymavlink records a frame's timestamp before checking its signature, so one forged frame
+            # with a future timestamp would lock the real GCS out (replay check). Undo that on failure.
+            check = self.mav.check_signature
+
+            def checked(msgbuf: bytearray, src_system: int, src_component: int) -> bool:
+                stamps = self.mav.signing.stream_timestamps
+                key = (msgbuf[-13], src_system, src_component)
+                before = stamps.get(key)
+                ok = check(msgbuf, src_system, src_component)
+                if not ok:
+                    if before is None:
+                        stamps.pop(key, None)
+                    else:
+                        stamps[key] = before
+                return ok
+
+            self.mav.check_signature = checked
 
     def parse(self, data: bytes, keep: bool) -> tuple[list[Any], list[str]]:
         mav = self.mav
