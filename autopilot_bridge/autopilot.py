@@ -109,6 +109,7 @@ class Autopilot:
         self._world_version = 0
         self._stale_cycle = 0        # plans of cycles up to this one were for an older route
         self._idle = False
+        self._pace_anchor: tuple[float, float] | None = None
         self._reset()
 
     # -- state ---------------------------------------------------------------------------------
@@ -293,6 +294,10 @@ class Autopilot:
                 self._to_fallback(t, "local path finished before a new one arrived")
                 guidance = None
             cmd = self._control(s, dt, guidance)
+        if self.lockstep and not self.vehicle.armed:
+            self._pace(t)
+        else:
+            self._pace_anchor = None
         self._send(f.time_usec, cmd, received_at)
         if self.telemetry is not None:
             self.telemetry.on_frame(t, s, self.mode, cmd)
@@ -331,6 +336,20 @@ class Autopilot:
     def set_planner_override(self, name: str, value: float) -> None:
         self.planner_overrides[name] = value
         self._world_version += 1
+
+    def _pace(self, t: float) -> None:
+        """Lockstep while disarmed: let simulated time pass no faster than wall time.
+
+        A boat waiting for its operator (``--wait-for-arm``) drifts with the current; at lockstep
+        speed (~15x) a minute at the ground station would be a quarter of an hour adrift."""
+        now = time.monotonic()
+        if self._pace_anchor is None:
+            self._pace_anchor = (t, now)
+            return
+        ahead = (t - self._pace_anchor[0]) - (now - self._pace_anchor[1])
+        if ahead > 0.0:
+            time.sleep(min(ahead, 0.1))
+            self._waited = True  # a paced frame measures the pacing, not the control loop
 
     def _manual_command(self) -> Thrust:
         m = self.vehicle.manual
