@@ -2,7 +2,9 @@
 
 Event-driven by the simulator's sensor frames (one per IMU period). For each new frame:
 
-1. navigation fusion (:mod:`autopilot_bridge.navigation`) of gyro, compass, GPS and DVL;
+1. navigation fusion (:mod:`autopilot_bridge.navigation`) of gyro, compass, GPS and DVL; range
+   scans add the obstacles the chart lacks (:mod:`autopilot_bridge.obstacle_map`), and a local
+   path that a newly sensed obstacle blocks is replanned at once;
 2. every ``planning_period`` of simulated time, a local planning cycle is handed to the planner
    worker process (:mod:`autopilot_bridge.planning_worker`) from the position predicted at the
    end of the cycle's deadline; its answer is collected without blocking (real time), or at
@@ -42,6 +44,7 @@ from autopilot_bridge.guidance import GuidanceOutput, LineOfSight
 from autopilot_bridge.hil_link import HilLink, SensorFrame
 from autopilot_bridge.local_planning import CycleInput, LocalPlan, World, map_to_ned_path, ned_to_map
 from autopilot_bridge.navigation import NavigationFilter, NavigationParams, NavState
+from autopilot_bridge.obstacle_map import SensedObstacles, path_blocked
 from autopilot_bridge.planning_worker import PlannerWorker, PlanRequest
 from autopilot_bridge.reactive import ReactiveAvoidance
 from autopilot_bridge.telemetry import Telemetry
@@ -73,6 +76,7 @@ class AutopilotStats:
     latency_ms: list[float] = field(default_factory=list)
     planner_waits: int = 0          # lockstep frames that waited for the planner (by design)
     planner_wait_ms: list[float] = field(default_factory=list)
+    sensed_replans: int = 0         # local paths found blocked by newly sensed obstacles
     events: list[tuple[float, str]] = field(default_factory=list)
 
 
@@ -92,7 +96,12 @@ class Autopilot:
         self.reference_ned = map_to_ned_path(world.reference_path)
         from planner.gridmap import OccupancyGrid
 
-        self.grid = OccupancyGrid(world.occ, world.resolution)
+        # The chart plus the obstacles sensed on the way (kept across simulator restarts: the
+        # world did not change).
+        self.grid = OccupancyGrid(world.occ.copy(), world.resolution)
+        self.sensed = SensedObstacles(world.occ, world.resolution, params.sensed_confirm_hits,
+                                      params.sensed_explain_radius)
+        self._sensed_at_submit = 0
         self.reactive = ReactiveAvoidance(self.grid, params.fallback_range, params.min_clearance, params.fallback_speed)
         self.stats = AutopilotStats()
         self._waited = False
@@ -158,9 +167,12 @@ class Autopilot:
         east = s.y + (s.u * math.sin(s.psi) + s.v * math.cos(s.psi)) * lead
         x, y, heading = ned_to_map(north, east, s.psi)
         self.cycle += 1
+        self._sensed_at_submit = len(self.sensed.cells())
         request = PlanRequest(
             cycle=self.cycle,
-            problem=CycleInput(x, y, heading, s.t + lead, self.seed * 100003 + self.cycle, self.world_update()),
+            problem=CycleInput(x, y, heading, s.t + lead, self.seed * 100003 + self.cycle,
+                               self.sensed.cells() if self._sensed_at_submit else None, self.sensed.version,
+                               world=self.world_update()),
             deadline_s=self.p.planning_deadline,
             iterations=self.p.lockstep_iterations if self.lockstep else None,
         )
@@ -215,6 +227,12 @@ class Autopilot:
             if not self.grid.segment_free(x0, y0, x1, y1):
                 self.stats.plans_rejected["collides"] += 1
                 return False
+        since = self.sensed.cells()[self._sensed_at_submit:]
+        if path_blocked(ned, since, self.grid.resolution, self.p.sensed_path_clearance):
+            # Planned before these obstacles were seen: plan again at once.
+            self.stats.plans_rejected["sensed_since_planning"] += 1
+            self.next_plan_t = s.t
+            return False
         self.los = LineOfSight(ned, self.p.lookahead, acceptance_radius=self.p.goal_tolerance)
         self.target = (plan.subgoal[1], plan.subgoal[0])
         self.stats.plans_accepted += 1
@@ -248,6 +266,8 @@ class Autopilot:
         if self.mode == WAITING:
             self.mode = FALLBACK
             self.next_plan_t = t
+        if f.scan is not None and self.p.sensed_obstacles:
+            self._sense(t, f, s)
         if self.stats.frames % 10 == 0:  # the estimated track at 10 Hz, for the run's plot
             self.track.append((t, s.x, s.y, s.psi))
 
@@ -360,6 +380,20 @@ class Autopilot:
         tau_r = r * 0.5 * (self.prop.T_max - self.prop.T_min) * self.prop.B_u
         return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
 
+    def _sense(self, t: float, f: SensorFrame, s: NavState) -> None:
+        """Add a range scan's new obstacles to the map; replan at once if they are near the path ahead."""
+        scan = f.scan
+        new = self.sensed.add_scan(scan.bearings, scan.ranges, s.x, s.y, s.psi, scan.sector_width)
+        if len(new) == 0:
+            return
+        self.grid.mark(new)
+        if self.mode == PLANNED and self.los is not None:
+            ahead = self.los.path[self.los.index:]
+            if path_blocked(ahead, new, self.grid.resolution, self.p.sensed_path_clearance):
+                self.stats.sensed_replans += 1
+                self._event(t, "sensed obstacle near the local path: replanning")
+                self.next_plan_t = t
+
     def _to_fallback(self, t: float, why: str) -> None:
         if self.mode != FALLBACK:
             self.stats.fallback_activations += 1
@@ -424,6 +458,7 @@ class Autopilot:
             "simulator_restarts": self.stats.simulator_restarts,
             "navigation": {"updates": dict(self.nav.stats.updates), "rejected": dict(self.nav.stats.rejected),
                            "position_resets": self.nav.stats.position_resets},
+            "sensed_obstacles": {**self.sensed.summary(), "replans": self.stats.sensed_replans},
             "link_rejects": dict(self.link.rejects),
             "truth_messages_ignored": self.link.truth_ignored,
             "control_latency_ms": {"p50": float(np.percentile(lat, 50)), "p99": float(np.percentile(lat, 99)),

@@ -33,6 +33,11 @@ class AutopilotParams:
     fallback_speed: float = param("speed of the reactive obstacle-avoidance behaviour", "m/s", gt=0)
     fallback_range: float = param("look-ahead of the reactive behaviour's free-space rays", "m", gt=0)
     min_clearance: float = param("the reactive behaviour keeps rays this far from obstacles", "m", ge=0)
+    sensed_obstacles: bool = param("add obstacles seen by the range sensor (OBSTACLE_DISTANCE) to the chart")
+    sensed_confirm_hits: int = param("returns in one grid cell before it counts as a sensed obstacle", ge=1)
+    sensed_explain_radius: float = param("returns this close to a charted obstacle are the chart's", "m", ge=0)
+    sensed_path_clearance: float = param(
+        "a new sensed obstacle this close to the local path ahead triggers an immediate replan", "m", ge=0)
     send_loss: float = param("fault injection: probability of dropping an outgoing HIL datagram", ge=0, le=1)
     recv_loss: float = param("fault injection: probability of dropping an incoming HIL datagram", ge=0, le=1)
     sim_restart_gap: float = param("sensor time going back by more than this means the simulator restarted", "s", gt=0)

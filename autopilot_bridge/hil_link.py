@@ -1,7 +1,7 @@
 """The vessel computer's end of the HIL MAVLink link: sensor frames in, thruster commands out.
 
 The simulator sends one datagram per IMU period holding HIL_SENSOR and, when due, HIL_GPS,
-HIL_STATE_QUATERNION and ODOMETRY (DVL). This end decodes it into a :class:`SensorFrame` in SI
+HIL_STATE_QUATERNION, ODOMETRY (DVL) and OBSTACLE_DISTANCE (range sensor). This end decodes it into a :class:`SensorFrame` in SI
 units and NED, converting GPS latitude/longitude with the shared geodesy. HIL_STATE_QUATERNION is
 the truth: it is dropped here and counted, never used for control. Commands go back as
 HIL_ACTUATOR_CONTROLS whose ``time_usec`` echoes the sensor frame they answer (the lockstep
@@ -18,7 +18,8 @@ from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE, Codec
 from common.udp import UdpEndpoint
 
-TAKEN = ("HIL_SENSOR", "HIL_GPS", "ODOMETRY", "HIL_STATE_QUATERNION")
+TAKEN = ("HIL_SENSOR", "HIL_GPS", "ODOMETRY", "OBSTACLE_DISTANCE", "HIL_STATE_QUATERNION")
+UINT16_MAX = 65535
 
 
 @dataclass(frozen=True)
@@ -27,6 +28,16 @@ class GpsFix:
     east: float         # m
     vn: float           # m/s over ground
     ve: float           # m/s
+
+
+@dataclass(frozen=True)
+class RangeScan:
+    """One OBSTACLE_DISTANCE scan in SI units, body frame (bearings clockwise from the bow)."""
+
+    bearings: tuple[float, ...]   # rad, centre of each sector that reported an obstacle
+    ranges: tuple[float, ...]     # m, nearest return in that sector
+    max_range: float              # m; sectors with nothing within it are not listed
+    sector_width: float = 0.0     # rad; the return lies somewhere across its sector
 
 
 @dataclass(frozen=True)
@@ -39,6 +50,7 @@ class SensorFrame:
     gps: GpsFix | None           # None when no fix was due; see gps_dropout
     gps_dropout: bool            # a HIL_GPS arrived with fix_type < 3
     dvl: tuple[float, float] | None  # body velocity over ground (u, v), m/s
+    scan: RangeScan | None = None    # range sensor, when a scan was due
 
     @property
     def t(self) -> float:
@@ -70,7 +82,7 @@ class HilLink:
         msgs, rejects = self.codec.decode(datagram)
         for r in rejects:
             self.rejects[r] += 1
-        sensor = gps = odo = None
+        sensor = gps = odo = obstacles = None
         for m in msgs:
             kind = m.get_type()
             if kind == "HIL_SENSOR":
@@ -79,6 +91,8 @@ class HilLink:
                 gps = m
             elif kind == "ODOMETRY":
                 odo = m
+            elif kind == "OBSTACLE_DISTANCE":
+                obstacles = m
             else:  # HIL_STATE_QUATERNION: the truth is for evaluation only
                 self.truth_ignored += 1
         if sensor is None:
@@ -100,8 +114,26 @@ class HilLink:
         if odo is not None and odo.child_frame_id == MAV_TYPE.MAV_FRAME_BODY_FRD:
             if math.isfinite(odo.vx) and math.isfinite(odo.vy):
                 dvl = (float(odo.vx), float(odo.vy))
+        scan = self._scan(obstacles) if obstacles is not None else None
         self.frames += 1
-        return SensorFrame(int(sensor.time_usec), yaw_rate, heading, fix, dropout, dvl)
+        return SensorFrame(int(sensor.time_usec), yaw_rate, heading, fix, dropout, dvl, scan)
+
+    def _scan(self, m) -> RangeScan | None:
+        """OBSTACLE_DISTANCE per the MAVLink spec: cm; max_distance + 1 = nothing; UINT16_MAX = unused."""
+        if m.frame != MAV_TYPE.MAV_FRAME_BODY_FRD or m.max_distance <= m.min_distance:
+            self.rejects["obstacle_distance_unsupported"] += 1
+            return None
+        inc = m.increment_f if m.increment_f > 0 else float(m.increment)
+        if inc <= 0:
+            self.rejects["obstacle_distance_unsupported"] += 1
+            return None
+        bearings, ranges = [], []
+        for i, d in enumerate(m.distances):
+            if d == UINT16_MAX or d > m.max_distance or d < m.min_distance:
+                continue
+            bearings.append(math.radians(m.angle_offset + i * inc))
+            ranges.append(d * 0.01)
+        return RangeScan(tuple(bearings), tuple(ranges), m.max_distance * 0.01, math.radians(inc))
 
     def receive(self, timeout: float) -> list[SensorFrame]:
         """Every sensor frame queued now (waiting up to ``timeout`` s for the first), oldest first."""

@@ -2,7 +2,8 @@
 
 The world the vessel computer knows a priori (the chart's obstacle map, the global reference
 path, the current measured beforehand) is sent to the worker once, as a :class:`World`; every
-cycle then sends only the vessel's state and budget. The cycle itself is
+cycle then sends the vessel's state, budget and the obstacles sensed so far (which the worker
+adds to the chart). The cycle itself is
 ``planner.online.plan_cycle``: subgoal (section 3.1), local problem in the perceptual domain,
 DDRRT* (or RRT*, Informed RRT*), pruning and Dubins smoothing (section 2.4).
 
@@ -61,13 +62,17 @@ class WorldUpdate:
 
 @dataclass(frozen=True)
 class CycleInput:
-    """A cycle's start: map-frame position (m), heading (rad from east), time (s), seed."""
+    """A cycle's start: map-frame position (m), heading (rad from east), time (s), seed, and the
+    obstacles sensed so far (``(K, 2)`` [row, col] cells of the chart's grid; ``sensed_version``
+    changes whenever they do). Sent whole each cycle: a restarted worker must know them too."""
 
     x: float
     y: float
     heading: float
     t: float
     seed: int
+    sensed: np.ndarray | None = None
+    sensed_version: int = 0
     world: WorldUpdate | None = None
 
 
@@ -99,16 +104,28 @@ def online_cycle_handler(world: World) -> Callable[[Any], LocalPlan]:
     from planner.gridmap import OccupancyGrid
     from planner.online import VesselState, make_context, plan_cycle
 
-    grid = OccupancyGrid(world.occ, world.resolution)
-    ctx = make_context(grid, world.goal, world.reference_path, world.params, world.online,
-                       world.algorithm, world.field)
+    def context(sensed: np.ndarray | None) -> Any:
+        grid = OccupancyGrid(world.occ.copy(), world.resolution)
+        if sensed is not None:
+            grid.mark(sensed)
+        return make_context(grid, world.goal, world.reference_path, world.params, world.online,
+                            world.algorithm, world.field)
+
+    ctx = context(None)
+    version = 0
 
     applied = {"version": None}
 
     def handle(request: Any) -> LocalPlan:
+        nonlocal ctx, version
         start: CycleInput = request.problem
+        rebuilt = False
+        if start.sensed_version != version:
+            # The map known a priori plus what is sensed: inflated maps are rebuilt only when it grows.
+            ctx, version = context(start.sensed), start.sensed_version
+            rebuilt = True
         update = getattr(start, "world", None)
-        if update is not None and update.version != applied["version"]:
+        if update is not None and (rebuilt or update.version != applied["version"]):
             # Same maps (and their inflation caches); new route and planner parameters.
             ctx.goal = (float(update.goal[0]), float(update.goal[1]))
             ctx.reference_path = np.asarray(update.reference_path, dtype=float).reshape(-1, 2)

@@ -170,7 +170,11 @@ class HilRun:
         self.geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
         self.tap = Tap(self.out / "run.tlog", self.geo)
         goal_ned = (self.scen.goal[1], self.scen.goal[0])
-        self.judge = Judge(self.scen.occ, self.scen.resolution, cfg.vessel.L / 2.0, goal_ned,
+        # The truth: the chart plus the obstacles it lacks; the simulator's range sensor scans it.
+        truth_occ = self.scen.truth_occ()
+        self.world_file = self.out / "world.npz"
+        np.savez_compressed(self.world_file, occ=truth_occ, resolution=self.scen.resolution)
+        self.judge = Judge(truth_occ, self.scen.resolution, cfg.vessel.L / 2.0, goal_ned,
                            cfg.autopilot.goal_tolerance)
         self.ap_port = free_udp_port()
         self.sim_port = free_udp_port()
@@ -194,7 +198,7 @@ class HilRun:
         args = [sys.executable, "-m", "hil", "sim", *self._common_args(),
                 "--state-to", f"127.0.0.1:{self.ap_port}", "--state-to", f"127.0.0.1:{self.tap.port}",
                 "--commands-on", f"127.0.0.1:{self.sim_port}", "--seed", str(self.opts.seed),
-                "--duration", repr(float(self.opts.duration) + 5.0), "--json",
+                "--duration", repr(float(self.opts.duration) + 5.0), "--json", "--world", str(self.world_file),
                 "--set", f"sim.initial.x={north!r}", "--set", f"sim.initial.y={east!r}",
                 "--set", f"sim.initial.psi={psi!r}"]
         for k in ("enabled", "origin_x", "origin_y"):
@@ -353,6 +357,7 @@ class HilRun:
             "control_latency_ms": ap.get("control_latency_ms"),
             "simulator_restarts": self.sim_restarts,
             "navigation": ap.get("navigation"),
+            "sensed_obstacles": ap.get("sensed_obstacles"),
             "simulator": None if sim is None else {k: sim.get(k) for k in (
                 "steps", "commands_received", "malformed_dropped", "stale_command_events", "lockstep_resends",
                 "jitter_ms")},

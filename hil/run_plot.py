@@ -1,5 +1,5 @@
-"""The picture of one HIL run: chart, reference path, planned local paths, true and estimated tracks,
-current arrows. Drawn in the map frame (x east, y north) like the paper's Figures 9 and 10."""
+"""The picture of one HIL run: chart, uncharted and sensed obstacles, reference path, planned local
+paths, true and estimated tracks, current arrows. Drawn in the map frame (x east, y north) like the paper's Figures 9 and 10."""
 
 from __future__ import annotations
 
@@ -24,6 +24,14 @@ def plot_run(path: Path, scen: Any, truth: dict[int, tuple], autopilot: dict, cf
         X, Y = np.meshgrid(xs, ys)
         U, V = field(X, Y)
         ax.quiver(X, Y, U, V, color="tab:blue", alpha=0.35, width=0.002, label="current (planning)")
+    for i, (x, y, r) in enumerate(getattr(scen, "uncharted", ())):
+        ax.add_patch(plt.Circle((x, y), r, color="tab:purple", alpha=0.35,
+                                label="uncharted obstacles (truth)" if i == 0 else None))
+    sensed = np.asarray(autopilot.get("sensed_cells", []), dtype=float).reshape(-1, 2)
+    if len(sensed):
+        res = scen.resolution
+        ax.plot((sensed[:, 1] + 0.5) * res, (sensed[:, 0] + 0.5) * res, "s", color="tab:purple", ms=2,
+                label="sensed obstacles (range sensor)")
     ref = np.asarray(scen.reference_path)
     ax.plot(ref[:, 0], ref[:, 1], ":", color="green", lw=1.5, label="global reference path")
     for i, lp in enumerate(autopilot.get("local_paths", [])):

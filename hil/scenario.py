@@ -13,6 +13,9 @@ are one-line errors). Its optional tables override keys of other sections:
   ``field_time`` (s) is the instant at which the quasi-static field is frozen for planning.
 * ``[planner]``  keys of ``planner.params.PlannerParams``.
 * ``[online]``   keys of ``planner.online.OnlineParams`` (cycle time, local budget ...).
+* ``uncharted``  obstacles that exist in the simulated world but not on the vessel's chart
+  (discs ``[[x, y, radius], ...]``, metres, map frame): the simulator's range sensor sees them,
+  the autopilot learns them only from it, and collisions are judged against them.
 * ``[random]``   for ``kind = "random"`` (Figure 11): each Monte Carlo run draws its own map,
   start and goal from the run's seed; the reference path is then the straight line between
   them, which may cross obstacles.
@@ -74,6 +77,9 @@ class ScenarioSpec:
     goal: tuple[float, float] = param("final goal [x east, y north]", "m", default=(0.0, 0.0))
     reference_path: tuple[tuple[float, float], ...] = param(
         "global reference path [[x, y], ...], start to goal; may cross obstacles (Figure 9)", "m", default=())
+    uncharted: tuple[tuple[float, float, float], ...] = param(
+        "obstacles missing from the chart: discs [[x, y, radius], ...]; only the range sensor reveals them",
+        "m", default=())
     current: dict[str, Any] = field(default_factory=dict, metadata={"help": "overrides of [current]"})
     planner: dict[str, Any] = field(default_factory=dict, metadata={"help": "overrides of [planner]"})
     online: dict[str, Any] = field(default_factory=dict, metadata={"help": "overrides of the online process"})
@@ -87,6 +93,9 @@ class ScenarioSpec:
                 raise ValueError("reference_path: needs at least two points (start ... goal)")
         elif self.random is None:
             raise ValueError("random: a random scenario needs a [random] table")
+        for x, y, r in self.uncharted:
+            if r <= 0:
+                raise ValueError(f"uncharted: disc at ({x:g}, {y:g}) needs a positive radius, got {r:g}")
 
 
 @dataclass
@@ -105,6 +114,18 @@ class Scenario:
     field_time: float               # s, instant of the frozen planning field
     planner_overrides: dict[str, Any]
     online_overrides: dict[str, Any]
+    uncharted: tuple[tuple[float, float, float], ...] = ()   # discs (x, y, radius), m, map frame
+
+    def truth_occ(self) -> np.ndarray:
+        """The simulated world's obstacles: the chart (``occ``) plus the uncharted discs."""
+        if not self.uncharted:
+            return self.occ
+        rows, cols = self.occ.shape
+        y, x = (np.mgrid[0:rows, 0:cols] + 0.5) * self.resolution
+        occ = self.occ.copy()
+        for cx, cy, r in self.uncharted:
+            occ |= (x - cx) ** 2 + (y - cy) ** 2 <= r * r
+        return occ
 
     @property
     def width(self) -> float:
@@ -224,8 +245,14 @@ def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: 
         for what, p in (("start", spec.start), ("goal", spec.goal)):
             _check_point(what, p, occ, spec.resolution, source)
         ref = np.asarray(spec.reference_path, dtype=float)
-        return Scenario(spec.name, spec.description, occ, spec.resolution, spec.start, spec.start_heading,
-                        spec.goal, ref, current, field_time, dict(spec.planner), dict(spec.online))
+        scen = Scenario(spec.name, spec.description, occ, spec.resolution, spec.start, spec.start_heading,
+                        spec.goal, ref, current, field_time, dict(spec.planner), dict(spec.online),
+                        tuple(tuple(map(float, d)) for d in spec.uncharted))
+        truth = scen.truth_occ()
+        for what, p in (("start", spec.start), ("goal", spec.goal)):
+            if truth[int(p[1] / spec.resolution), int(p[0] / spec.resolution)]:
+                raise ConfigError(f"{source}: uncharted: an obstacle covers the {what}")
+        return scen
     if rng is None:
         raise UsageError(f"scenario {spec.name!r} is random: it needs a run seed (use hil montecarlo)")
     return _random_instance(spec, rng, current, field_time)

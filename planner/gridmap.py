@@ -160,6 +160,13 @@ class OccupancyGrid:
                     out[r0:r1, c0:c1] |= occ[r0 + dr:r1 + dr, c0 + dc:c1 + dc]
         return OccupancyGrid(out[1:-1, 1:-1], self.resolution)
 
+    def mark(self, cells: np.ndarray) -> None:
+        """Make the cells ``(K, 2)`` [row, col] obstacles, in place (e.g. obstacles sensed on the way)."""
+        cells = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
+        if len(cells):
+            self.occ[cells[:, 0], cells[:, 1]] = True
+            self._clearance = None
+
     def clearance(self) -> np.ndarray:
         """Distance (m) from each cell centre to the nearest obstacle cell centre (0 inside
         obstacles); the map border counts as far away (outside is not an obstacle here)."""

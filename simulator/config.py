@@ -101,11 +101,31 @@ class DvlParams:
 
 
 @dataclass(frozen=True)
+class RangefinderParams:
+    """A 2-D scanning range sensor (lidar/radar class) reported as MAVLink OBSTACLE_DISTANCE.
+
+    Each of ``sectors`` sectors reports the nearest return of ``rays_per_sector`` rays spread
+    over it, as PX4/ArduPilot bin a scanning lidar. It needs the true world map (``hil sim
+    --world``); without one it is silent.
+    """
+
+    enabled: bool = param("scan the true map (chart plus uncharted obstacles) and send OBSTACLE_DISTANCE")
+    rate_hz: float = param("scan rate", "Hz", gt=0, le=50)
+    sectors: int = param("sectors around the vessel (OBSTACLE_DISTANCE holds at most 72)", "", ge=4, le=72)
+    rays_per_sector: int = param("rays cast per sector; a sector reports the nearest", "", ge=1, le=16)
+    min_range: float = param("nearest measurable distance", "m", ge=0)
+    max_range: float = param("farthest measurable distance", "m", gt=0, le=600)
+    range_std: float = param("range noise", "m", ge=0)
+    miss_probability: float = param("probability that a sector returns nothing in a scan", "", ge=0, le=1)
+
+
+@dataclass(frozen=True)
 class SensorParams:
     gps: GpsParams
     imu: ImuParams
     compass: CompassParams
     dvl: DvlParams
+    rangefinder: RangefinderParams
 
 
 @dataclass(frozen=True)

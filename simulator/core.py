@@ -2,8 +2,8 @@
 
 One *frame* is the period of the IMU (``1 / sensors.imu.rate_hz``), an integer number of RK4
 steps of ``sim.dt``. :meth:`SimulatorCore.frame` encodes everything due at the current time as
-one datagram (HIL_SENSOR always; HIL_GPS, HIL_STATE_QUATERNION and the DVL's ODOMETRY when their
-rate says so); :meth:`SimulatorCore.step` advances the truth by one frame with the newest
+one datagram (HIL_SENSOR always; HIL_GPS, HIL_STATE_QUATERNION, the DVL's ODOMETRY and the
+range sensor's OBSTACLE_DISTANCE when their rate says so); :meth:`SimulatorCore.step` advances the truth by one frame with the newest
 command. The socket loops live in :mod:`simulator.server`.
 """
 
@@ -17,6 +17,7 @@ from common.current_field import CurrentField
 from common.geodesy import LocalFrame
 from common.mavlink import Codec, MAV_TYPE
 from simulator.integrator import rk4_step
+from simulator.rangefinder import Rangefinder, WorldMap
 from simulator.sensors import G, Compass, Dvl, Gps, Imu, sensor_rngs
 from simulator.vessel import Vessel
 from simulator.waves import WaveModel
@@ -60,7 +61,7 @@ def frame_layout(dt: float, imu_rate_hz: float) -> tuple[float, int]:
 class SimulatorCore:
     """Truth + sensors + MAVLink encoding for one run (``cfg`` is a ``hil.settings.HilConfig``)."""
 
-    def __init__(self, cfg: Any) -> None:
+    def __init__(self, cfg: Any, world: WorldMap | None = None) -> None:
         self.cfg = cfg
         self.frame_dt, self.substeps = frame_layout(cfg.sim.dt, cfg.sensors.imu.rate_hz)
         self.dt = self.frame_dt / self.substeps
@@ -77,6 +78,9 @@ class SimulatorCore:
         self.gps_due = _Schedule(s.gps.rate_hz, self.frame_dt)
         self.truth_due = _Schedule(cfg.sim.truth_rate_hz, self.frame_dt)
         self.dvl_due = _Schedule(s.dvl.rate_hz, self.frame_dt)
+        self.rangefinder = (Rangefinder(s.rangefinder, world, rngs["rangefinder"])
+                            if world is not None and s.rangefinder.enabled else None)
+        self.rangefinder_due = _Schedule(s.rangefinder.rate_hz, self.frame_dt)
         self.codec = Codec(cfg.link.system_id, cfg.link.component_id, accept=("HIL_ACTUATOR_CONTROLS",))
         i = cfg.sim.initial
         self.state: tuple[float, ...] = (i.x, i.y, i.psi, i.u, i.v, i.r)
@@ -198,6 +202,13 @@ class SimulatorCore:
                 [nan, nan, nan, nan], bu, bv, bw, nan, nan, nan, [nan] + [0.0] * 20,
                 [var, 0, 0, 0, 0, 0, var, 0, 0, 0, 0, var] + [0.0] * 9, 0, 0, 100))
             self.messages_sent["ODOMETRY"] += 1
+        if self.rangefinder is not None and self.rangefinder_due.due(self.n):
+            rf = self.rangefinder
+            parts.append(self.codec.encode(
+                "obstacle_distance", tu, MAV_TYPE.MAV_DISTANCE_SENSOR_LASER, rf.scan(x, y, psi),
+                int(round(rf.increment_deg)), rf.min_cm, rf.max_cm, rf.increment_deg, 0.0,
+                MAV_TYPE.MAV_FRAME_BODY_FRD))
+            self.messages_sent["OBSTACLE_DISTANCE"] += 1
         return b"".join(parts)
 
     def truth(self) -> dict[str, float]:

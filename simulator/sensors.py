@@ -19,7 +19,7 @@ G = 9.80665  # m/s^2, standard gravity
 UINT16_UNKNOWN = 65535
 
 # Order of the spawned streams: append new ones at the end (keeps the earlier streams unchanged).
-STREAMS = ("gps", "imu", "compass", "dvl", "waves", "gps_events")
+STREAMS = ("gps", "imu", "compass", "dvl", "waves", "gps_events", "rangefinder")  # append only: keeps the others
 
 
 def sensor_rngs(seed: int) -> dict[str, np.random.Generator]:

@@ -10,7 +10,7 @@ import pytest
 # tlog_messages and the autopilot's navigation counters are read when the processes are stopped:
 # after the goal the autopilot keeps answering frames until its SIGTERM arrives, a wall-clock moment.
 WALL_CLOCK_KEYS = {"wall_time_s", "control_latency_ms", "run_folder", "tlog", "plot", "simulator",
-                   "tlog_messages", "navigation"}
+                   "tlog_messages", "navigation", "sensed_obstacles"}
 
 
 def _run(hil, tmp_path, *args: str, name: str = "run") -> tuple[int, dict]:
@@ -33,6 +33,27 @@ def test_lockstep_run_reaches_the_goal_without_collision(hil, tmp_path, scenario
     # The autopilot navigated on its own estimate, well inside the GPS noise.
     assert s["navigation_rmse_m"] < 0.5
     assert s["planning_cycles"] > 10 and s["plans_accepted"] > 0.8 * s["planning_cycles"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 3])
+def test_obstacles_missing_from_the_chart_are_sensed_and_avoided(hil, tmp_path, seed):
+    """harbour-uncharted: three obstacles on the chart-only track that only the range sensor shows."""
+    code, s = _run(hil, tmp_path, "--scenario", "harbour-uncharted", "--seed", str(seed))
+    assert s["outcome"] == "goal" and s["collisions"] == 0 and code == 0, s["events"]
+    assert s["min_clearance_m"] >= 1.0
+    sensed = s["sensed_obstacles"]
+    assert sensed["cells"] > 50                     # all three are found (each is tens of cells)
+    assert sensed["explained_by_chart"] < sensed["returns"]
+
+
+@pytest.mark.slow
+def test_without_sensing_the_uncharted_obstacle_is_hit(hil, tmp_path):
+    """The same run planning on the chart alone: collisions are judged on the truth, so it fails."""
+    code, s = _run(hil, tmp_path, "--scenario", "harbour-uncharted", "--seed", "1",
+                   "--set", "autopilot.sensed_obstacles=false")
+    assert s["outcome"] == "collision" and s["collisions"] == 1 and code == 1
+    assert s["sensed_obstacles"]["cells"] == 0
 
 
 @pytest.mark.slow

@@ -146,6 +146,28 @@ def test_start_inside_obstacle(tmp_path):
         scenarios.instance(scenarios.load_spec(str(path)), None)
 
 
+@pytest.mark.parametrize("uncharted, message", [
+    ("[[8.0, 8.0, 1.0]]", "an obstacle covers the start"),
+    ("[[50.0, 50.0, -1.0]]", "positive radius"),
+    ("[[50.0, 50.0]]", "uncharted"),
+])
+def test_uncharted_obstacles_are_validated(tmp_path, uncharted, message):
+    path = tmp_path / "t.toml"
+    path.write_text(BASE.replace('kind = "fixed"', f'kind = "fixed"\nuncharted = {uncharted}'))
+    with pytest.raises(ConfigError, match=message) as err:
+        scenarios.instance(scenarios.load_spec(str(path)), None)
+    assert "\n" not in str(err.value)
+
+
+def test_uncharted_obstacles_are_in_the_truth_not_on_the_chart():
+    sc = scenarios.load("harbour-uncharted")
+    truth = sc.truth_occ()
+    assert (truth | sc.occ).sum() == truth.sum() and truth.sum() > sc.occ.sum()
+    for x, y, r in sc.uncharted:
+        row, col = int(y / sc.resolution), int(x / sc.resolution)
+        assert truth[row, col] and not sc.occ[row, col]
+
+
 def test_unknown_scenario_name():
     with pytest.raises(UsageError, match="unknown scenario"):
         scenarios.load_spec("atlantis")

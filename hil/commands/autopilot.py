@@ -209,10 +209,11 @@ def run(args: argparse.Namespace) -> int:
         summary["gcs"] = autopilot.telemetry.summary()
     summary["local_paths"] = autopilot.local_paths
     summary["estimated_track"] = [list(map(lambda v: round(v, 3), row)) for row in autopilot.track]
+    summary["sensed_cells"] = autopilot.sensed.cells().tolist()
     if args.summary_out:
         write_json_atomic(args.summary_out, summary)
     if args.json:
         emit(args, summary)
     else:
-        emit(args, {k: v for k, v in summary.items() if k not in ("local_paths", "estimated_track")})
+        emit(args, {k: v for k, v in summary.items() if k not in ("local_paths", "estimated_track", "sensed_cells")})
     return 0

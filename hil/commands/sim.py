@@ -10,6 +10,7 @@ from common.udp import UdpEndpoint, parse_hostport
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, UsageError
 from simulator.core import SimulatorCore
+from simulator.rangefinder import WorldMap
 from simulator.server import SimulatorServer
 
 
@@ -49,6 +50,10 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                    help="seed of every random process: sensor noise, GPS events, waves (default: sim.seed = 1)")
     p.add_argument("--speedup", metavar="N", type=float, default=None,
                    help="real-time mode: simulated seconds per wall-clock second (default: sim.speedup = 1)")
+    p.add_argument("--world", metavar="FILE.npz", default=None,
+                   help="the true obstacle map the range sensor scans: an .npz with 'occ' (bool rows x cols, "
+                        "row = north / resolution, column = east / resolution) and 'resolution' (m), as "
+                        "`hil run` writes it to the run folder as world.npz; without it no OBSTACLE_DISTANCE is sent")
     p.set_defaults(func=run)
 
 
@@ -73,8 +78,14 @@ def config_overrides(args: argparse.Namespace) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     args.overrides = list(args.overrides) + config_overrides(args)
     cfg = load_settings(args)
+    world = None
+    if args.world is not None:
+        try:
+            world = WorldMap.load(args.world)
+        except (OSError, KeyError, ValueError) as exc:
+            raise UsageError(f"--world {args.world}: not a world map ({exc})") from None
     try:
-        core = SimulatorCore(cfg)
+        core = SimulatorCore(cfg, world)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     try:

@@ -1,0 +1,116 @@
+"""Obstacles the vessel learns on the way: range-sensor returns placed on the chart's grid.
+
+The chart (the map known a priori) is the planner's map; what it lacks, the range sensor shows.
+Each return of an OBSTACLE_DISTANCE scan is placed in the map frame from the navigation
+estimate. Returns that the chart already explains (within ``explain_radius`` of a charted
+obstacle: the estimate and the sensor both have errors) are not new. Any other cell becomes a
+*sensed obstacle* once returns of ``confirm_hits`` scans have fallen in it, so that one stray return does
+not close a channel. Sensed obstacles are kept for the rest of the run (a moored boat does not
+leave while we pass it).
+
+Frames: scans in the body frame (bearing clockwise from the bow), navigation in NED, the grid in
+the planner's map frame (row = north / resolution, column = east / resolution).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+
+@dataclass
+class SensingStats:
+    scans: int = 0
+    returns: int = 0
+    explained_by_chart: int = 0
+    outside_map: int = 0
+
+
+class SensedObstacles:
+    def __init__(self, chart: np.ndarray, resolution: float, confirm_hits: int = 2,
+                 explain_radius: float = 1.0) -> None:
+        self.chart = np.asarray(chart, dtype=bool)
+        self.resolution = float(resolution)
+        self.confirm_hits = int(confirm_hits)
+        clearance = ndimage.distance_transform_edt(~self.chart) * self.resolution if self.chart.any() \
+            else np.full(self.chart.shape, np.inf)
+        self.explained = clearance <= explain_radius
+        self.hits = np.zeros(self.chart.shape, dtype=np.uint16)
+        self.confirmed = np.zeros(self.chart.shape, dtype=bool)
+        self._cells: list[tuple[int, int]] = []
+        self.version = 0
+        self.stats = SensingStats()
+
+    def add_scan(self, bearings, ranges, north: float, east: float, psi: float,
+                 sector_width: float = 0.0) -> np.ndarray:
+        """Place one scan (sector bearings rad from the bow, ranges m, sectors ``sector_width`` rad
+        wide) seen from NED ``north, east``, heading ``psi``; returns the newly confirmed cells
+        ``(K, 2)`` [row, col].
+
+        A sector's return lies somewhere on the arc of its range across the sector (OBSTACLE_DISTANCE
+        keeps only the nearest range per sector), so the whole arc is considered: the chart explains
+        the return if it explains any point of the arc; otherwise every cell of the arc is hit (a
+        conservative obstacle, at most ``range x width`` wide).
+        """
+        self.stats.scans += 1
+        rows, cols = self.chart.shape
+        res = self.resolution
+        d = np.asarray(ranges, dtype=float)
+        if len(d) == 0:
+            return np.zeros((0, 2), dtype=np.int32)
+        self.stats.returns += len(d)
+        # Every arc sampled at <= half a cell (one sample count for the scan: vectorised).
+        n_arc = int(math.ceil(d.max() * sector_width / (0.5 * res))) + 1 if sector_width > 0 else 1
+        spread = np.linspace(-0.5, 0.5, n_arc) * sector_width if n_arc > 1 else np.zeros(1)
+        a = psi + np.asarray(bearings, dtype=float)[:, None] + spread[None, :]      # (R, n_arc)
+        r = np.floor((north + d[:, None] * np.cos(a)) / res).astype(np.int64)
+        c = np.floor((east + d[:, None] * np.sin(a)) / res).astype(np.int64)
+        inside = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
+        rc_r, rc_c = np.where(inside, r, 0), np.where(inside, c, 0)
+        explained = (self.explained[rc_r, rc_c] & inside).any(axis=1)
+        outside = ~inside.any(axis=1)
+        self.stats.outside_map += int(outside.sum())
+        self.stats.explained_by_chart += int((explained & ~outside).sum())
+        keep = (~explained & ~outside)[:, None] & inside
+        # A cell counts once per scan (neighbouring sectors' arcs share their edge cells).
+        lin = np.unique(r[keep] * cols + c[keep])
+        hr, hc = lin // cols, lin % cols
+        fresh = ~self.confirmed[hr, hc]
+        hr, hc = hr[fresh], hc[fresh]
+        self.hits[hr, hc] += 1
+        done = self.hits[hr, hc] >= self.confirm_hits
+        new = np.column_stack([hr[done], hc[done]]).astype(np.int32).reshape(-1, 2)
+        if len(new):
+            self.confirmed[new[:, 0], new[:, 1]] = True
+            self._cells.extend(map(tuple, new.tolist()))
+            self.version += 1
+        return new
+
+    def cells(self) -> np.ndarray:
+        """All sensed obstacle cells so far, ``(K, 2)`` int32 [row, col], in the order found."""
+        return np.array(self._cells, dtype=np.int32).reshape(-1, 2)
+
+    def summary(self) -> dict[str, int]:
+        s = self.stats
+        return {"scans": s.scans, "returns": s.returns, "explained_by_chart": s.explained_by_chart,
+                "outside_map": s.outside_map, "cells": len(self._cells), "versions": self.version}
+
+
+def path_blocked(path_ned: np.ndarray, cells: np.ndarray, resolution: float, clearance: float) -> bool:
+    """Does any cell centre (``(K, 2)`` [row, col], map grid) lie within ``clearance`` (m) of the
+    NED polyline ``path_ned`` ``(N, 2)``?"""
+    if len(cells) == 0 or len(path_ned) == 0:
+        return False
+    p = (cells.astype(float) + 0.5) * resolution            # (K, 2) north, east: row ~ north, col ~ east
+    a = np.asarray(path_ned, dtype=float)[:-1] if len(path_ned) > 1 else np.asarray(path_ned, dtype=float)
+    b = np.asarray(path_ned, dtype=float)[1:] if len(path_ned) > 1 else a
+    ab = b - a                                               # (N, 2)
+    ap = p[:, None, :] - a[None, :, :]                      # (K, N, 2)
+    denom = np.maximum((ab * ab).sum(axis=1), 1e-12)
+    t = np.clip((ap * ab[None]).sum(axis=2) / denom, 0.0, 1.0)
+    closest = a[None] + t[..., None] * ab[None]
+    d = np.hypot(*(p[:, None, :] - closest).transpose(2, 0, 1))
+    return bool((d <= clearance).any())

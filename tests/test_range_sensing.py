@@ -1,0 +1,167 @@
+"""Obstacles the chart lacks: the simulator's range sensor (OBSTACLE_DISTANCE) and the autopilot's
+sensed-obstacle map, through real MAVLink bytes, and the planner worker planning around them."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from autopilot_bridge.hil_link import HilLink
+from autopilot_bridge.obstacle_map import SensedObstacles, path_blocked
+from common.geodesy import LocalFrame
+from common.mavlink import Codec
+from hil.settings import load
+from simulator.core import Command, SimulatorCore
+from simulator.rangefinder import Rangefinder, WorldMap
+
+QUIET = ["waves.enabled=false", "current.enabled=false", "sensors.gps.glitch_probability=0.0"]
+RES = 0.5
+
+
+def wall_world(rows=200, cols=200, wall_north=20.0):
+    """Open water with an east-west wall whose south face is at ``wall_north`` m."""
+    occ = np.zeros((rows, cols), dtype=bool)
+    occ[int(wall_north / RES):int(wall_north / RES) + 4, :] = True
+    return occ
+
+
+def quiet_rangefinder(occ, **kw):
+    cfg = load(None, QUIET + [f"sensors.rangefinder.{k}={v}" for k, v in
+                              {"range_std": 0.0, "miss_probability": 0.0, **kw}.items()])
+    return Rangefinder(cfg.sensors.rangefinder, WorldMap(occ, RES), np.random.default_rng(0))
+
+
+def test_ranges_match_hand_geometry_in_the_body_frame():
+    rf = quiet_rangefinder(wall_world(), rays_per_sector=1)
+    # 10 m south of the wall's face, heading north: the bow (sector 0) sees it at 10 m.
+    d = rf.true_ranges(10.0, 50.0, 0.0)
+    assert d[0] == pytest.approx(10.0, abs=RES / 2)
+    # Sectors go clockwise from the bow: heading east, the wall is on the port beam (270 deg).
+    d = rf.true_ranges(10.0, 50.0, math.pi / 2)
+    k = round(270 / rf.increment_deg)
+    assert d[k] == pytest.approx(10.0, abs=RES / 2)
+    assert math.isinf(d[round(90 / rf.increment_deg)])   # open water to starboard: no return
+    # 45 deg off the bow the wall is sqrt(2) x farther.
+    d = rf.true_ranges(10.0, 50.0, 0.0)
+    assert d[round(45 / rf.increment_deg)] == pytest.approx(10.0 * math.sqrt(2), abs=RES)
+
+
+def test_a_sector_reports_its_nearest_ray_and_nothing_beyond_max_range():
+    occ = np.zeros((200, 200), dtype=bool)
+    occ[60:62, 100:102] = True               # a 1 m post at north 30 m, east 50 m
+    rf = quiet_rangefinder(occ, rays_per_sector=5, max_range=40.0)
+    d = rf.true_ranges(0.0, 50.0, 0.0)
+    assert d[0] == pytest.approx(30.0, abs=RES / 2)
+    assert np.isinf(d[1:]).all()
+    far = quiet_rangefinder(occ, max_range=20.0)
+    assert math.isinf(far.true_ranges(0.0, 50.0, 0.0)[0])
+    scan = far.scan(0.0, 50.0, 0.0)
+    assert len(scan) == 72 and scan[0] == far.max_cm + 1     # MAVLink: max_distance + 1 = no obstacle
+
+
+def test_simulator_sends_obstacle_distance_at_its_rate_only_with_a_world():
+    cfg = load(None, QUIET + ["sim.initial.x=10.0", "sim.initial.y=50.0"])
+    dec = Codec(255, 0, accept=("HIL_SENSOR", "HIL_GPS", "HIL_STATE_QUATERNION", "OBSTACLE_DISTANCE"))
+    for world, expected in ((WorldMap(wall_world(), RES), 5), (None, 0)):
+        core = SimulatorCore(cfg, world)
+        scans = []
+        for _ in range(100):                 # 1 s of IMU frames
+            msgs, rejects = dec.decode(core.frame())
+            assert not rejects
+            scans += [m for m in msgs if m.get_type() == "OBSTACLE_DISTANCE"]
+            core.apply(Command(core.time_usec, 0.0, 0.0))
+            core.step()
+        assert len(scans) == expected
+        for m in scans:
+            assert m.increment_f == pytest.approx(5.0) and m.max_distance == 4000
+            assert abs(m.distances[0] - 1000) <= 30     # the wall 10 m ahead, in cm
+
+
+def test_chart_explains_returns_from_charted_obstacles():
+    occ = wall_world()
+    sensed = SensedObstacles(occ, RES, confirm_hits=2, explain_radius=1.0)
+    rf = Rangefinder(load(None, QUIET).sensors.rangefinder, WorldMap(occ, RES), np.random.default_rng(3))
+    width = math.radians(rf.increment_deg)
+    for i in range(20):
+        d = np.array(rf.scan(10.0 + 0.1 * i, 50.0, 0.3 * i), dtype=float)
+        valid = d <= rf.max_cm
+        bearings = np.deg2rad(np.arange(72) * rf.increment_deg)[valid]
+        sensed.add_scan(bearings, d[valid] / 100.0, 10.0 + 0.1 * i, 50.0, 0.3 * i, width)
+    s = sensed.summary()
+    assert s["returns"] > 100 and s["explained_by_chart"] == s["returns"] and s["cells"] == 0
+
+
+def test_uncharted_obstacle_is_confirmed_after_two_scans_through_the_link():
+    """Simulator bytes -> HilLink.decode -> SensedObstacles: the sensed cells lie on the true disc."""
+    chart = np.zeros((200, 200), dtype=bool)
+    truth = chart.copy()
+    rr, cc = np.mgrid[0:200, 0:200]
+    cx, cy, radius = 50.0, 30.0, 2.0         # map x east, y north
+    truth |= ((cc + 0.5) * RES - cx) ** 2 + ((rr + 0.5) * RES - cy) ** 2 <= radius ** 2
+    cfg = load(None, QUIET + ["sim.initial.x=10.0", "sim.initial.y=50.0"])
+    core = SimulatorCore(cfg, WorldMap(truth, RES))
+    geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
+    link = HilLink("127.0.0.1:0", (), geo)
+    sensed = SensedObstacles(chart, RES, confirm_hits=2)
+    confirmed_after = []
+    try:
+        for _ in range(60):
+            f = link.decode(core.frame())
+            if f.scan is not None:
+                new = sensed.add_scan(f.scan.bearings, f.scan.ranges, 10.0, 50.0, 0.0, f.scan.sector_width)
+                confirmed_after.append(len(new))
+            core.apply(Command(core.time_usec, 0.0, 0.0))
+            core.step()
+    finally:
+        link.close()
+    assert confirmed_after[0] == 0 and confirmed_after[1] > 0      # one scan is not enough, two are
+    cells = sensed.cells()
+    centres = (cells + 0.5) * RES                                  # (north, east)
+    dist = np.hypot(centres[:, 0] - cy, centres[:, 1] - cx)
+    # On the near face, widened by at most half a sector's arc (at ~18 m) and one cell's diagonal.
+    half_arc = 0.5 * math.hypot(cy - 10.0, cx - 50.0) * math.radians(5.0)
+    assert (dist <= radius + half_arc + RES * math.sqrt(2)).all()
+    assert (centres[:, 0] < cy).all()       # all seen from the south side
+    assert link.rejects == {}
+
+
+def test_path_blocked_by_distance_to_the_polyline():
+    path = np.array([[0.0, 0.0], [20.0, 0.0]])          # NED: north along east = 0
+    cell_at = lambda n, e: np.array([[int(n / RES), int(e / RES)]])  # noqa: E731
+    assert path_blocked(path, cell_at(10.0, 1.0), RES, 2.0)      # 1.25 m from the path
+    assert not path_blocked(path, cell_at(10.0, 3.0), RES, 2.0)  # 3.25 m
+    assert not path_blocked(path, cell_at(23.0, 0.0), RES, 2.0)  # beyond the end
+    assert not path_blocked(path, np.zeros((0, 2), dtype=int), RES, 2.0)
+
+
+def test_planner_worker_plans_around_sensed_obstacles():
+    """The cycle handler adds the sensed cells to the chart: the straight line is no longer taken."""
+    from autopilot_bridge.local_planning import CycleInput, World, online_cycle_handler
+    from autopilot_bridge.planning_worker import PlanRequest
+    from planner.online import OnlineParams
+    from planner.params import PlannerParams
+
+    occ = np.zeros((120, 200), dtype=bool)              # 100 m x 60 m of open water
+    ref = np.column_stack([np.linspace(10.0, 90.0, 17), np.full(17, 30.0)])   # every 5 m
+    world = World(occ, RES, (90.0, 30.0), ref, None, PlannerParams(), OnlineParams(), "ddrrt-star")
+    handle = online_cycle_handler(world)
+    rr, cc = np.mgrid[0:120, 0:200]
+    block = np.argwhere(((cc + 0.5) * RES - 30.0) ** 2 + ((rr + 0.5) * RES - 30.0) ** 2 <= 3.0 ** 2)
+    grid_with = occ.copy()
+    grid_with[block[:, 0], block[:, 1]] = True
+    from planner.gridmap import OccupancyGrid
+    safe = OccupancyGrid(grid_with, RES).inflate(1.9)
+
+    def plan(sensed, version):
+        req = PlanRequest(cycle=1, problem=CycleInput(10.0, 30.0, 0.0, 0.0, 7, sensed, version),
+                          deadline_s=0.3, iterations=1500)
+        return handle(req)
+
+    without = plan(None, 0)
+    assert without.status != "none" and not safe.path_free(without.path)   # straight through the disc
+    with_ = plan(block.astype(np.int32), 1)
+    assert with_.status != "none" and safe.path_free(with_.path)
+    again = plan(None, 0)                                # a restarted autopilot: back to the chart
+    assert not safe.path_free(again.path)
