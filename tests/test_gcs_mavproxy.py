@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
-from gcs_client import start_run, stop_run
+from gcs_client import Gcs, start_run, stop_run
 
 from common.geodesy import LocalFrame
 from hil.hilrun import free_udp_port
@@ -44,7 +44,8 @@ class Console:
         self.proc.stdin.write(line + "\n")
         self.proc.stdin.flush()
 
-    def expect(self, text: str, timeout: float = 60.0) -> str:
+    def expect(self, *texts: str, timeout: float = 60.0) -> str:
+        """The first line holding one of ``texts`` (AssertionError after ``timeout`` s)."""
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             try:
@@ -52,9 +53,9 @@ class Console:
             except queue.Empty:
                 continue
             self.seen.append(line)
-            if text in line:
+            if any(t in line for t in texts):
                 return line
-        raise AssertionError(f"MAVProxy never printed {text!r}; last lines:\n" + "\n".join(self.seen[-30:]))
+        raise AssertionError(f"MAVProxy never printed {texts!r}; last lines:\n" + "\n".join(self.seen[-30:]))
 
     def close(self) -> None:
         if self.proc.poll() is None:
@@ -80,7 +81,7 @@ def test_mavproxy_session(tmp_path):
     mp = Console([MAVPROXY, f"--master=udpout:127.0.0.1:{port}", "--source-system=255",
                   "--default-modules=wp,param,mode,arm,cmdlong,log", f"--state-basedir={state}"], tmp_path)
     try:
-        mp.expect("Detected vehicle 1:1", 240)
+        mp.expect("Detected vehicle 1:1", timeout=240)
         mp.expect("Mode HOLD")
         mp.send(f"wp load {wp}")
         mp.expect("Got MISSION_ACK: TYPE_MISSION: ACCEPTED")
@@ -92,11 +93,18 @@ def test_mavproxy_session(tmp_path):
             lat, lon = GEO.sea_level_to_geodetic(y, x)
             # MAVProxy writes its file with 6 decimals (0.1 m); the exact comparison is test_gcs_session's.
             assert abs(float(row[8]) - lat) <= 6e-7 and abs(float(row[9]) - lon) <= 6e-7 and row[3] == "16"
+        # The boat refuses to arm before its navigation has a fix; a second ground station (a pymavlink
+        # script, beside MAVProxy on the same port) watches for the first position.
+        watcher = Gcs(f"udpout:127.0.0.1:{port}", sysid=254)
+        try:
+            assert watcher.connect(60) is not None and watcher.recv("GLOBAL_POSITION_INT", 60) is not None
+        finally:
+            watcher.close()
         mp.send("arm throttle")
         mp.expect("COMPONENT_ARM_DISARM: ACCEPTED")
         mp.send("mode AUTO")
         mp.expect("DO_SET_MODE: ACCEPTED")
-        mp.expect("waypoint 3", 120)       # MISSION_CURRENT advancing, as MAVProxy reports it
+        mp.expect("waypoint 3", timeout=120)       # MISSION_CURRENT advancing, as MAVProxy reports it
         mp.send("disarm")
         mp.expect("DISARMED")
     finally:
