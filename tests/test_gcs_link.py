@@ -150,3 +150,11 @@ def test_endpoint_strings_and_signing_keys(tmp_path):
     assert load_signing_key(str(tmp_path / "pass")) == hashlib.sha256(b"correct horse").digest()
     with pytest.raises(ValueError):
         load_signing_key(str(tmp_path / "missing"))
+
+
+def test_a_field_out_of_its_wire_range_costs_one_message_not_the_caller(closing):
+    link = GcsLink(params(), 1, 1, GEO)
+    closing(link)
+    link.forward("VFR_HUD", 0.0, 1.0, 90, -40, 0.0, 0.0)   # throttle is uint16 on the wire
+    link.forward("VFR_HUD", 0.0, 1.0, 90, 40, 0.0, 0.0)
+    assert link.encode_errors["vfr_hud"] == 1 and link.sent == 1

@@ -194,6 +194,7 @@ class GcsLink:
         self.rejects: Counter = Counter()
         self.security: Counter = Counter()
         self.commands: Counter = Counter()
+        self.encode_errors: Counter = Counter()
 
     # -- wiring ---------------------------------------------------------------------------------
     def attach(self, autopilot: Any) -> None:
@@ -229,7 +230,14 @@ class GcsLink:
         self.sent += 1
 
     def _send(self, name: str, *args: Any) -> None:
-        self._send_frame(self.codec.encode(name, *args))
+        try:
+            frame = self.codec.encode(name, *args)
+        except Exception as exc:  # a field out of its wire range must cost a message, never the control loop
+            self.encode_errors[name] += 1
+            if self.encode_errors[name] == 1:
+                self.log(f"gcs: {name} not sent: {type(exc).__name__}: {exc}")
+            return
+        self._send_frame(frame)
 
     def forward(self, name: str, *fields: Any) -> None:
         """Encode message ``name`` (e.g. "ais_vessel") with the vessel's ids and send it to every GCS."""
@@ -300,11 +308,11 @@ class GcsLink:
                 self._send("gps_raw_int", int(round(self.t * 1e6)), 3, int(round(lat * 1e7)), int(round(lon * 1e7)),
                            int(round(self.geo.alt0 * 1000)), eph, 65535, int(round(math.hypot(vn, ve) * 100)), cog, 255)
         elif name == "VFR_HUD":
-            thr = 0
+            thr = 0  # VFR_HUD's throttle is 0-100 %: the mean of the two thrusters' magnitudes
             if self.cmd is not None:
-                thr = int(round(50.0 * (self.cmd.port_cmd + self.cmd.stdb_cmd)))
+                thr = int(round(50.0 * (abs(self.cmd.port_cmd) + abs(self.cmd.stdb_cmd))))
             self._send("vfr_hud", 0.0, math.hypot(vn, ve), int(round(math.degrees(s.psi) % 360.0)) % 360,
-                       max(-100, min(100, thr)), 0.0, 0.0)
+                       max(0, min(100, thr)), 0.0, 0.0)
         elif name == "ACTUATOR_OUTPUT_STATUS":
             if self.cmd is not None:
                 act = [float(self.cmd.port_cmd), float(self.cmd.stdb_cmd)] + [0.0] * 30
@@ -365,6 +373,17 @@ class GcsLink:
 
     def on_frame(self, t: float, s: Any, mode: str, cmd: Any) -> None:
         """Per control frame: the streams that are due at simulated time ``t``, progress events."""
+        try:
+            self._on_frame(t, s, mode, cmd)
+        except Exception as exc:  # telemetry must never stop the control loop
+            self._internal_error("on_frame", exc)
+
+    def _internal_error(self, where: str, exc: Exception) -> None:
+        self.encode_errors[where] += 1
+        if self.encode_errors[where] == 1:
+            self.log(f"gcs: {where}: {type(exc).__name__}: {exc}")
+
+    def _on_frame(self, t: float, s: Any, mode: str, cmd: Any) -> None:
         self.t, self.state, self.cmd = t, s, cmd
         v = self.ap.vehicle if self.ap is not None else None
         if v is not None:
@@ -387,6 +406,12 @@ class GcsLink:
     # -- receiving ------------------------------------------------------------------------------
     def service(self) -> None:
         """Between frames: read every transport, answer, run timeouts and the failsafe."""
+        try:
+            self._service()
+        except Exception as exc:  # e.g. a socket error: the control loop goes on
+            self._internal_error("service", exc)
+
+    def _service(self) -> None:
         now = self.clock()
         for tr in self.transports:
             for peer, data in tr.receive():
@@ -679,6 +704,7 @@ class GcsLink:
             "security_rejects": dict(self.security),
             "mission": dict(self.mission.stats) if self.mission is not None else {},
             "param_rejects": self.params_table.rejected if self.params_table is not None else 0,
+            "encode_errors": dict(self.encode_errors),
             "failsafe_active": self.failsafe_active,
         }
 
