@@ -85,7 +85,8 @@ class Tap:
         self._epoch = {"truth": 0, "estimate": 0, "commands": 0}
         self._last = {"truth": -1, "estimate": -1, "commands": -1}
         self._segment = {"truth": 0, "estimate": 0, "commands": 0}
-        self.truth_raw: dict[tuple[int, int], tuple[float, float]] = {}  # (segment, time_usec) -> (n, e)
+        # (segment, time_usec) -> (n, e, run time usec)
+        self.truth_raw: dict[tuple[int, int], tuple[float, float, int]] = {}
 
     def _monotonic(self, stream: str, t: int, back_gap: int) -> int:
         if t + back_gap < self._last[stream]:
@@ -120,7 +121,7 @@ class Tap:
                 if t not in self.truth:
                     n, e = self.geo.geodetic_to_sea_level(m.lat * 1e-7, m.lon * 1e-7)
                     self.truth[t] = (n, e, m.vx * 0.01, m.vy * 0.01)
-                    self.truth_raw[(self._segment["truth"], int(m.time_usec))] = (n, e)
+                    self.truth_raw[(self._segment["truth"], int(m.time_usec))] = (n, e, t)
             elif kind == "HIL_ACTUATOR_CONTROLS":
                 t = self._monotonic("commands", int(m.time_usec), 1_000_000)
                 self.commands.append((t, float(m.controls[0]), float(m.controls[1])))
@@ -279,28 +280,29 @@ class HilRun:
         wall0 = time.monotonic()
         outcome, collision_at = "timeout", None
         min_clearance, last_report = math.inf, wall0
+        decided: int | None = None  # truth time (usec) of the sample that decided the outcome
         try:
             self.start()
             checked = 0
             while True:
                 self.tap.pump(timeout=0.05)
                 times = sorted(self.tap.truth)
+                # Sample by sample, so the deciding sample does not depend on how datagrams were batched.
                 for tu in times[checked:]:
                     n, e, _, _ = self.tap.truth[tu]
                     c = self.judge.clearance(n, e)
                     min_clearance = min(min_clearance, c)
-                    if c < self.judge.hull_radius and collision_at is None:
-                        collision_at = tu * 1e-6
+                    if c < self.judge.hull_radius:
+                        outcome, collision_at, decided = "collision", tu * 1e-6, tu
+                    elif self.judge.at_goal(n, e):
+                        outcome, decided = "goal", tu
+                    elif tu * 1e-6 >= opts.duration:
+                        outcome, decided = "timeout", tu
+                    if decided is not None:
+                        break
                 checked = len(times)
                 t_sim = times[-1] * 1e-6 if times else 0.0
-                if collision_at is not None:
-                    outcome = "collision"
-                    break
-                if times and self.judge.at_goal(*self.tap.truth[times[-1]][:2]):
-                    outcome = "goal"
-                    break
-                if t_sim >= opts.duration:
-                    outcome = "timeout"
+                if decided is not None:
                     break
                 if time.monotonic() - wall0 > opts.wall_timeout:
                     outcome = "wall_timeout"
@@ -323,16 +325,18 @@ class HilRun:
             self.tap.pump(timeout=0.0)
             self.tap.close()
         wall = time.monotonic() - wall0
-        return self._summary(outcome, collision_at, min_clearance, wall, ap_summary, sim_summary)
+        return self._summary(outcome, collision_at, min_clearance, wall, ap_summary, sim_summary, decided)
 
     def _summary(self, outcome: str, collision_at: float | None, min_clearance: float, wall: float,
-                 ap: dict | None, sim: dict | None) -> dict[str, Any]:
-        times = sorted(self.tap.truth)
+                 ap: dict | None, sim: dict | None, decided: int | None = None) -> dict[str, Any]:
+        # The run is judged up to the deciding sample: what arrived while the processes were being
+        # stopped depends on the wall clock.
+        times = [t for t in sorted(self.tap.truth) if decided is None or t <= decided]
         track = np.array([self.tap.truth[t][:2] for t in times]) if times else np.zeros((0, 2))
         speeds = np.array([math.hypot(*self.tap.truth[t][2:]) for t in times]) if times else np.zeros(0)
         length = float(np.sum(np.hypot(*np.diff(track, axis=0).T))) if len(track) > 1 else 0.0
         energy = self._energy(times, speeds)
-        rmse = self._nav_rmse()
+        rmse = self._nav_rmse(decided)
         ap = ap or {}
         reached = outcome == "goal" and collision_at is None
         summary = {
@@ -387,11 +391,11 @@ class HilRun:
             total += (abs(thrust(p)) + abs(thrust(s))) * speeds[i] * (times[i + 1] - times[i]) * 1e-6
         return total
 
-    def _nav_rmse(self) -> float | None:
+    def _nav_rmse(self, decided: int | None = None) -> float | None:
         errs = []
         for (seg, ms), (n, e) in self.tap.estimate.items():
             truth = self.tap.truth_raw.get((seg, ms * 1000))
-            if truth is not None:
+            if truth is not None and (decided is None or truth[2] <= decided):
                 errs.append((n - truth[0]) ** 2 + (e - truth[1]) ** 2)
         return math.sqrt(float(np.mean(errs))) if errs else None
 

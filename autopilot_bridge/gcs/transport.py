@@ -15,7 +15,6 @@ fans a frame out to every peer, :meth:`heard` records a peer as a talker.
 
 from __future__ import annotations
 
-import select
 import socket
 from collections import OrderedDict
 from typing import Any
@@ -178,14 +177,3 @@ def open_endpoint(spec: str, max_peers: int = 8) -> UdpTransport | TcpServerTran
     except socket.gaierror as exc:
         raise ValueError(f"{spec!r}: unknown host ({exc})") from None
 
-
-def wait_readable(transports: list, timeout: float) -> bool:
-    """Block up to ``timeout`` s until one transport has something to read."""
-    fds = [t.fileno() for t in transports]
-    for t in transports:
-        if isinstance(t, TcpServerTransport):
-            fds += [c.fileno() for c in t.conns.values()]
-    if not fds:
-        return False
-    ready, _, _ = select.select(fds, [], [], timeout)
-    return bool(ready)
