@@ -86,10 +86,12 @@ class Autopilot:
     def __init__(self, params: AutopilotParams, nav: NavigationParams, control: ControlParams,
                  propulsion: Propulsion, world: World, link: HilLink, worker: PlannerWorker,
                  telemetry: Telemetry | None = None, *, lockstep: bool, seed: int,
-                 log: Callable[[str], None] | None = None, wait_for_arm: bool = False) -> None:
+                 log: Callable[[str], None] | None = None, traffic: Any = None,
+                 wait_for_arm: bool = False) -> None:
         self.p, self.nav_params, self.control_params = params, nav, control
         self.prop, self.world, self.link, self.worker = propulsion, world, link, worker
         self.telemetry = telemetry
+        self.traffic = traffic  # autopilot_bridge.traffic_awareness.TrafficAwareness, or None
         self.lockstep, self.seed = lockstep, seed
         self.log = log or (lambda _m: None)
         self.goal_ned = (world.goal[1], world.goal[0])
@@ -137,6 +139,9 @@ class Autopilot:
         self.last_t: float | None = None
         self.complete_t: float | None = None
         self.target = self.goal_ned
+        self.speed_factor = 1.0
+        if self.traffic is not None:
+            self.traffic.reset()
 
     def _event(self, t: float, text: str) -> None:
         self.stats.events.append((t, text))
@@ -168,11 +173,12 @@ class Autopilot:
         x, y, heading = ned_to_map(north, east, s.psi)
         self.cycle += 1
         self._sensed_at_submit = len(self.sensed.cells())
+        snap = None if self.traffic is None else self.traffic.snapshot(s.t + lead, x, y, heading, self.p.cruise_speed)
         request = PlanRequest(
             cycle=self.cycle,
             problem=CycleInput(x, y, heading, s.t + lead, self.seed * 100003 + self.cycle,
                                self.sensed.cells() if self._sensed_at_submit else None, self.sensed.version,
-                               world=self.world_update()),
+                               traffic=snap, world=self.world_update()),
             deadline_s=self.p.planning_deadline,
             iterations=self.p.lockstep_iterations if self.lockstep else None,
         )
@@ -235,6 +241,7 @@ class Autopilot:
             return False
         self.los = LineOfSight(ned, self.p.lookahead, acceptance_radius=self.p.goal_tolerance)
         self.target = (plan.subgoal[1], plan.subgoal[0])
+        self.speed_factor = plan.speed_factor
         self.stats.plans_accepted += 1
         self.local_paths.append({"t": s.t, "cycle": plan.cycle, "status": plan.status,
                                  "path_ned": ned[:: max(1, len(ned) // 200)].round(3).tolist()})
@@ -268,6 +275,12 @@ class Autopilot:
             self.next_plan_t = t
         if f.scan is not None and self.p.sensed_obstacles:
             self._sense(t, f, s)
+        if self.traffic is not None:
+            texts, replan = self.traffic.on_frame(t, s, self.link.take_ais(), self.telemetry)
+            for text in texts:
+                self._event(t, text)
+            if replan and self.mode != COMPLETE:
+                self.next_plan_t = t  # a new encounter: plan now, not at the next period
         if self.stats.frames % 10 == 0:  # the estimated track at 10 Hz, for the run's plot
             self.track.append((t, s.x, s.y, s.psi))
 
@@ -403,7 +416,7 @@ class Autopilot:
 
     def _control(self, s: NavState, dt: float, g: GuidanceOutput | None) -> Thrust:
         if g is not None and self.los is not None:
-            psi_ref, u_ref = g.heading, self.p.cruise_speed
+            psi_ref, u_ref = g.heading, self.p.cruise_speed * self.speed_factor
             # Slow down for sharp turns ahead so the yaw rate they need (u kappa) stays within reach.
             if g.curvature_ahead > 1e-6:
                 u_ref = min(u_ref, max(self.p.min_turn_speed, self.p.max_turn_rate / g.curvature_ahead))
@@ -466,4 +479,5 @@ class Autopilot:
             "lockstep_planner_waits": self.stats.planner_waits,
             "lockstep_planner_wait_ms_max": max(self.stats.planner_wait_ms, default=0.0),
             "events": [f"{t:.2f}s {e}" for t, e in self.stats.events],
+            "traffic": None if self.traffic is None else self.traffic.summary(),
         }

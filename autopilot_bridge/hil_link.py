@@ -6,6 +6,11 @@ units and NED, converting GPS latitude/longitude with the shared geodesy. HIL_ST
 the truth: it is dropped here and counted, never used for control. Commands go back as
 HIL_ACTUATOR_CONTROLS whose ``time_usec`` echoes the sensor frame they answer (the lockstep
 protocol of docs/simulator.md).
+
+AIS_VESSEL reports of other ships (from the simulator's AIS stand-in, or any other source on the
+link) are decoded into :class:`~autopilot_bridge.ais_tracking.AisReport` and queued for the
+tracker (:meth:`HilLink.take_ais`), stamped with the newest sensor time. AIS_VESSEL from the
+simulator's truth component is the traffic truth: dropped and counted like HIL_STATE_QUATERNION.
 """
 
 from __future__ import annotations
@@ -14,11 +19,12 @@ import math
 from collections import Counter
 from dataclasses import dataclass
 
+from autopilot_bridge.ais_tracking import AisReport
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE, Codec
 from common.udp import UdpEndpoint
 
-TAKEN = ("HIL_SENSOR", "HIL_GPS", "ODOMETRY", "OBSTACLE_DISTANCE", "HIL_STATE_QUATERNION")
+TAKEN = ("HIL_SENSOR", "HIL_GPS", "ODOMETRY", "OBSTACLE_DISTANCE", "HIL_STATE_QUATERNION", "AIS_VESSEL")
 UINT16_MAX = 65535
 
 
@@ -62,7 +68,7 @@ class HilLink:
 
     def __init__(self, listen: str, actuators_to: tuple[str, ...], geo: LocalFrame, *, declination: float = 0.0,
                  system_id: int = 1, component_id: int = 1, send_loss: float = 0.0, recv_loss: float = 0.0,
-                 loss_seed: int = 0, extra_destinations: tuple[str, ...] = ()) -> None:
+                 loss_seed: int = 0, extra_destinations: tuple[str, ...] = (), truth_component_id: int = 52) -> None:
         self.ep = UdpEndpoint(listen, list(actuators_to) + list(extra_destinations),
                               send_loss=send_loss, recv_loss=recv_loss, loss_seed=loss_seed)
         self.codec = Codec(system_id, component_id, accept=TAKEN)
@@ -72,6 +78,10 @@ class HilLink:
         self.truth_ignored = 0
         self.frames = 0
         self.commands_sent = 0
+        self.truth_component_id = truth_component_id
+        self.ais: list[AisReport] = []
+        self.ais_received = 0
+        self.last_t = 0.0
 
     @property
     def address(self) -> tuple[str, int]:
@@ -83,9 +93,15 @@ class HilLink:
         for r in rejects:
             self.rejects[r] += 1
         sensor = gps = odo = obstacles = None
+        ais = []
         for m in msgs:
             kind = m.get_type()
-            if kind == "HIL_SENSOR":
+            if kind == "AIS_VESSEL":
+                if m.get_srcComponent() == self.truth_component_id:
+                    self.truth_ignored += 1
+                else:
+                    ais.append(m)
+            elif kind == "HIL_SENSOR":
                 sensor = m
             elif kind == "HIL_GPS":
                 gps = m
@@ -95,6 +111,11 @@ class HilLink:
                 obstacles = m
             else:  # HIL_STATE_QUATERNION: the truth is for evaluation only
                 self.truth_ignored += 1
+        if sensor is not None:
+            self.last_t = sensor.time_usec * 1e-6
+        for m in ais:
+            self.ais.append(_ais_report(m, self.last_t))
+            self.ais_received += 1
         if sensor is None:
             if gps is not None or odo is not None:
                 self.rejects["frame_without_hil_sensor"] += 1
@@ -147,6 +168,11 @@ class HilLink:
                 out.append(frame)
         return out
 
+    def take_ais(self) -> list[AisReport]:
+        """The AIS reports decoded since the last call, oldest first."""
+        out, self.ais = self.ais, []
+        return out
+
     def send_controls(self, time_usec: int, port: float, stdb: float, armed: bool = True) -> None:
         """HIL_ACTUATOR_CONTROLS answering the frame at ``time_usec``: controls[0] port, [1] starboard."""
         controls = [float(port), float(stdb)] + [0.0] * 14
@@ -159,3 +185,17 @@ class HilLink:
 
     def close(self) -> None:
         self.ep.close()
+
+
+def _ais_report(m, t: float) -> AisReport:
+    """AIS_VESSEL in SI units; course/speed None when AIS marks them unavailable (36000, 65535) or
+    the flags say they are not valid."""
+    flags = int(m.flags)
+    cog_ok = m.COG < 36000 and (flags & MAV_TYPE.AIS_FLAGS_VALID_COG or not flags)
+    sog_ok = m.velocity < 65535 and (flags & MAV_TYPE.AIS_FLAGS_VALID_VELOCITY or not flags)
+    course = math.radians(m.COG * 0.01) if cog_ok else None
+    speed = m.velocity * 0.01 if sog_ok else None
+    name = m.name if isinstance(m.name, str) else m.name.decode("ascii", "replace")
+    return AisReport(t, int(m.MMSI), m.lat * 1e-7, m.lon * 1e-7, course, speed, float(m.dimension_bow),
+                     float(m.dimension_stern), float(m.dimension_port), float(m.dimension_starboard),
+                     name.rstrip("\x00 "))

@@ -73,6 +73,7 @@ class CycleInput:
     seed: int
     sensed: np.ndarray | None = None
     sensed_version: int = 0
+    traffic: Any = None          # planner.traffic_map.TrafficSnapshot of the ships, or None
     world: WorldUpdate | None = None
 
 
@@ -88,6 +89,7 @@ class LocalPlan:
     iterations: int
     planning_time_s: float
     reason: str
+    speed_factor: float = 1.0    # sail the path at this fraction of the cruise speed (traffic)
 
 
 PLANNER_SHARE = 0.7  # of a real-time cycle's deadline; the rest is for post-processing
@@ -136,7 +138,8 @@ def online_cycle_handler(world: World) -> Callable[[Any], LocalPlan]:
         else:
             # The planner gets 70% of the deadline: subgoal, pruning and smoothing take the rest.
             ctx.online = replace(world.online, local_iterations=0, local_time=PLANNER_SHARE * float(request.deadline_s))
-        rec = plan_cycle(ctx, VesselState(start.x, start.y, start.heading, start.t), request.cycle, start.seed)
+        rec = plan_cycle(ctx, VesselState(start.x, start.y, start.heading, start.t), request.cycle, start.seed,
+                         traffic=start.traffic)
         path = rec.local_path
         if len(rec.smooth_path) >= 2 and rec.smoothed_ok:
             # Dubins curves between waypoints closer than ~2 R_min can loop; a loop is worse to follow
@@ -145,6 +148,6 @@ def online_cycle_handler(world: World) -> Callable[[Any], LocalPlan]:
                 path = rec.smooth_path
         return LocalPlan(cycle=request.cycle, status=rec.status, path=np.asarray(path, dtype=float).reshape(-1, 2),
                          subgoal=tuple(rec.subgoal), subgoal_rule=rec.subgoal_rule, iterations=rec.iterations,
-                         planning_time_s=rec.planning_time_s, reason=rec.reason)
+                         planning_time_s=rec.planning_time_s, reason=rec.reason, speed_factor=rec.speed_factor)
 
     return handle

@@ -63,15 +63,22 @@ class RunOptions:
     on_progress: Callable[[str], None] = lambda _m: None
     plot: bool = True
     hooks: list[Callable[["Tap", "HilRun"], None]] = field(default_factory=list)  # tests: fault injection
+    traffic: tuple | None = None         # ships replacing the scenario's [[traffic]] (Monte Carlo draws)
 
 
 class Tap:
     """Receives everything both processes send to it; writes the .tlog; keeps the evaluation data."""
 
-    def __init__(self, tlog_path: Path, geo: LocalFrame) -> None:
+    def __init__(self, tlog_path: Path, geo: LocalFrame, encounters: Any = None, truth_component_id: int = 52,
+                 sim_component_id: int = 51) -> None:
         self.ep = UdpEndpoint("127.0.0.1:0", [], recv_buffer=8 << 20)
         # Every message of the dialect: the autopilot copies all ground-station traffic here too.
         self.codec = Codec(255, 190, accept=[c.msgname for c in mavlink2.mavlink_map.values()])
+        # Ship traffic (hil.encounter_report.EncounterJudge): the truth AIS_VESSEL of each datagram
+        # belongs to the HIL_STATE_QUATERNION before it in the same datagram.
+        self.encounters = encounters
+        self.truth_component_id, self.sim_component_id = truth_component_id, sim_component_id
+        self.ais_forwarded = 0  # AIS_VESSEL from the vessel computer's telemetry (forwarded to ground stations)
         self.tlog = open(tlog_path, "wb")
         self.geo = geo
         self.truth: dict[int, tuple[float, float, float, float]] = {}  # time_usec -> (north, east, vn, ve)
@@ -112,6 +119,7 @@ class Tap:
     def _handle(self, data: bytes) -> None:
         msgs, _ = self.codec.decode(data)
         stamp = struct.pack(">Q", int(time.time() * 1e6))
+        own = None
         for m in msgs:
             self.tlog.write(stamp + bytes(m.get_msgbuf()))
             self.frames += 1
@@ -122,6 +130,18 @@ class Tap:
                     n, e = self.geo.geodetic_to_sea_level(m.lat * 1e-7, m.lon * 1e-7)
                     self.truth[t] = (n, e, m.vx * 0.01, m.vy * 0.01)
                     self.truth_raw[(self._segment["truth"], int(m.time_usec))] = (n, e, t)
+                    q = m.attitude_quaternion
+                    own = (t, n, e, 2.0 * math.atan2(q[3], q[0]))
+            elif kind == "AIS_VESSEL":
+                if m.get_srcComponent() != self.truth_component_id:
+                    self.ais_forwarded += m.get_srcComponent() != self.sim_component_id
+                elif own is not None and self.encounters is not None:
+                    n, e = self.geo.geodetic_to_sea_level(m.lat * 1e-7, m.lon * 1e-7)
+                    name = m.name if isinstance(m.name, str) else m.name.decode(errors="replace")
+                    self.encounters.add(own[0], own[1:], int(m.MMSI), name.rstrip("\x00 "),
+                                        (float(m.dimension_bow), float(m.dimension_stern), float(m.dimension_port),
+                                         float(m.dimension_starboard)),
+                                        n, e, math.radians(m.COG * 0.01), m.velocity * 0.01)
             elif kind == "HIL_ACTUATOR_CONTROLS":
                 t = self._monotonic("commands", int(m.time_usec), 1_000_000)
                 self.commands.append((t, float(m.controls[0]), float(m.controls[1])))
@@ -166,10 +186,16 @@ class HilRun:
     def __init__(self, opts: RunOptions, cfg: Any) -> None:
         self.opts, self.cfg = opts, cfg
         self.scen = scenarios.load(opts.scenario, cfg.current)
+        if opts.traffic is not None:
+            self.scen.traffic = tuple(opts.traffic)
         self.out = opts.out
         self.out.mkdir(parents=True, exist_ok=True)
         self.geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
-        self.tap = Tap(self.out / "run.tlog", self.geo)
+        from hil.encounter_report import EncounterJudge
+
+        self.encounter_judge = EncounterJudge(cfg.vessel.L, cfg.vessel.W, cfg.colregs) if self.scen.traffic else None
+        self.tap = Tap(self.out / "run.tlog", self.geo, self.encounter_judge, cfg.traffic.truth_component_id,
+                       cfg.link.component_id)
         goal_ned = (self.scen.goal[1], self.scen.goal[0])
         # The truth: the chart plus the obstacles it lacks; the simulator's range sensor scans it.
         truth_occ = self.scen.truth_occ()
@@ -177,6 +203,12 @@ class HilRun:
         np.savez_compressed(self.world_file, occ=truth_occ, resolution=self.scen.resolution)
         self.judge = Judge(truth_occ, self.scen.resolution, cfg.vessel.L / 2.0, goal_ned,
                            cfg.autopilot.goal_tolerance)
+        self.traffic_file: Path | None = None
+        if self.scen.traffic:  # the simulator sails the scenario's ships (or a Monte Carlo draw of them)
+            from hil.config import to_table
+
+            self.traffic_file = self.out / "traffic.json"
+            self.traffic_file.write_text(json.dumps([to_table(s) for s in self.scen.traffic], indent=1))
         self.ap_port = free_udp_port()
         self.sim_port = free_udp_port()
         self.sim: subprocess.Popen | None = None
@@ -205,6 +237,8 @@ class HilRun:
         for k in ("enabled", "origin_x", "origin_y"):
             v = getattr(cur, k)
             args += ["--set", f"current.{k}={json.dumps(v)}"]
+        if self.traffic_file is not None:
+            args += ["--traffic", str(self.traffic_file)]
         for o in self.opts.extra_sim_overrides:
             args += ["--set", o]
         if self.opts.lockstep:
@@ -302,6 +336,9 @@ class HilRun:
                         break
                 checked = len(times)
                 t_sim = times[-1] * 1e-6 if times else 0.0
+                if decided is None and self.encounter_judge is not None and self.encounter_judge.collision:
+                    collision_at = self.encounter_judge.collision[0]
+                    outcome, decided = "collision", int(round(collision_at * 1e6))
                 if decided is not None:
                     break
                 if time.monotonic() - wall0 > opts.wall_timeout:
@@ -369,6 +406,15 @@ class HilRun:
             "tlog_messages": self.tap.frames,
             "events": ap.get("events", []),
         }
+        if self.encounter_judge is not None:
+            from hil.encounter_report import totals
+
+            enc = self.encounter_judge.report(self.tap.truth)
+            summary["encounters"] = enc
+            summary["traffic"] = {**totals(enc), "ais": (ap.get("traffic") or {}).get("ais"),
+                                  "ais_forwarded_to_gcs": self.tap.ais_forwarded,
+                                  "ship_collision": None if self.encounter_judge.collision is None else
+                                  {"time_s": self.encounter_judge.collision[0], "mmsi": self.encounter_judge.collision[1]}}
         return summary
 
     def _energy(self, times: list[int], speeds: np.ndarray) -> float:
@@ -415,7 +461,9 @@ def run_loop(opts: RunOptions, cfg: Any) -> dict[str, Any]:
 
             ap_path = opts.out / "autopilot.json"
             ap = json.loads(ap_path.read_text()) if ap_path.exists() else {}
-            plot_run(opts.out / "plot.png", run.scen, run.tap.truth, ap, cfg)
+            plot_run(opts.out / "plot.png", run.scen, run.tap.truth, ap, cfg,
+                     ships=run.encounter_judge.ships if run.encounter_judge is not None else None,
+                     encounters=summary.get("encounters"))
             summary["plot"] = str(opts.out / "plot.png")
         except Exception as exc:  # a plot must never lose the run's data
             summary["plot_error"] = f"{type(exc).__name__}: {exc}"

@@ -147,6 +147,11 @@ def bench_maze() -> np.ndarray:
     return c.occ
 
 
+def open_water() -> np.ndarray:
+    """Figure 12's encounters: 200 m x 120 m of open water (the map edge is the only obstacle)."""
+    return Canvas(200.0, 120.0).occ
+
+
 def random_map(rng: np.random.Generator, width: float = 100.0, height: float = 100.0,
                n_discs: tuple[int, int] = (6, 14), n_rects: tuple[int, int] = (2, 6),
                radius: tuple[float, float] = (2.0, 7.0), resolution: float = RESOLUTION) -> np.ndarray:
@@ -163,6 +168,7 @@ def random_map(rng: np.random.Generator, width: float = 100.0, height: float = 1
 MAPS = {
     "harbour": harbour,
     "labyrinth": labyrinth,
+    "open_water": open_water,
     "bench_discs": bench_discs,
     "bench_bugtrap": bench_bugtrap,
     "bench_maze": bench_maze,

@@ -13,7 +13,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 
-def plot_run(path: Path, scen: Any, truth: dict[int, tuple], autopilot: dict, cfg: Any) -> None:
+def plot_run(path: Path, scen: Any, truth: dict[int, tuple], autopilot: dict, cfg: Any,
+             ships: dict | None = None, encounters: list | None = None) -> None:
+    """``ships``: MMSI -> ``hil.encounter_report.ShipTrack`` (their truth); ``encounters``: the
+    summary's per-ship report (CPA time and distance, type, compliance)."""
     fig, ax = plt.subplots(figsize=(10, 10 * scen.height / max(scen.width, 1e-9) * 0.9 + 1))
     ax.imshow(scen.occ, origin="lower", cmap="Greys", extent=(0, scen.width, 0, scen.height),
               interpolation="nearest", alpha=0.85)
@@ -45,6 +48,7 @@ def plot_run(path: Path, scen: Any, truth: dict[int, tuple], autopilot: dict, cf
     est = np.asarray(autopilot.get("estimated_track", []))
     if len(est):
         ax.plot(est[:, 2], est[:, 1], "--", color="black", lw=0.8, label="estimated track")
+    _plot_ships(ax, ships or {}, encounters or [], truth)
     ax.plot(*scen.start, "o", color="red", ms=7)
     ax.plot(*scen.goal, "*", color="gold", ms=16, mec="k")
     r = cfg.autopilot.goal_tolerance
@@ -59,3 +63,30 @@ def plot_run(path: Path, scen: Any, truth: dict[int, tuple], autopilot: dict, cf
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _plot_ships(ax: Any, ships: dict, encounters: list, truth: dict[int, tuple]) -> None:
+    """Each ship's true track, and both vessels where they were at the closest point of approach."""
+    by_mmsi = {e.get("mmsi"): e for e in encounters}
+    times = np.array(sorted(truth)) if truth else np.zeros(0, dtype=np.int64)
+    for i, (mmsi, tr) in enumerate(sorted(ships.items())):
+        if not tr.samples:
+            continue
+        smp = np.array([(t, n, e) for t, n, e, _, _ in tr.samples], dtype=float)
+        ax.plot(smp[:, 2], smp[:, 1], "-", color="tab:blue", lw=1.4, label="ship tracks (truth)" if i == 0 else None)
+        if len(smp) > 1:   # where she was heading at the end
+            ax.annotate("", xy=(smp[-1, 2], smp[-1, 1]), xytext=(smp[-2, 2], smp[-2, 1]),
+                        arrowprops=dict(arrowstyle="->", color="tab:blue"))
+        enc = by_mmsi.get(mmsi, {})
+        t_cpa = enc.get("cpa_time_s")
+        if t_cpa is None or len(times) == 0:
+            continue
+        k = int(np.argmin(np.abs(smp[:, 0] * 1e-6 - t_cpa)))
+        j = int(np.argmin(np.abs(times * 1e-6 - t_cpa)))
+        own = truth[int(times[j])]
+        ax.plot([smp[k, 2], own[1]], [smp[k, 1], own[0]], ":", color="tab:blue", lw=1)
+        ax.plot(smp[k, 2], smp[k, 1], "s", color="tab:blue", ms=6)
+        ok = enc.get("compliant")
+        verdict = "complied" if ok else ("did not comply" if ok is False else "")
+        ax.annotate(f"{mmsi} {enc.get('type', '')}\nCPA {enc.get('cpa_m', float('nan')):.1f} m {verdict}",
+                    (smp[k, 2], smp[k, 1]), textcoords="offset points", xytext=(6, 6), fontsize=7, color="tab:blue")

@@ -16,6 +16,8 @@ are one-line errors). Its optional tables override keys of other sections:
 * ``uncharted``  obstacles that exist in the simulated world but not on the vessel's chart
   (discs ``[[x, y, radius], ...]``, metres, map frame): the simulator's range sensor sees them,
   the autopilot learns them only from it, and collisions are judged against them.
+* ``[[traffic]]`` ship traffic (``simulator.traffic.ShipSpec``: MMSI, start, speed, course or
+  waypoints with per-leg speeds, AIS dimensions), sailed by the simulator and reported by AIS.
 * ``[random]``   for ``kind = "random"`` (Figure 11): each Monte Carlo run draws its own map,
   start and goal from the run's seed; the reference path is then the straight line between
   them, which may cross obstacles.
@@ -35,6 +37,7 @@ from common.params import param
 from hil import config
 from hil.config import CONFIG_DIR
 from hil.errors import ConfigError, UsageError
+from simulator.traffic import ShipSpec
 
 SCENARIO_DIR = CONFIG_DIR / "scenarios"
 
@@ -84,6 +87,7 @@ class ScenarioSpec:
     planner: dict[str, Any] = field(default_factory=dict, metadata={"help": "overrides of [planner]"})
     online: dict[str, Any] = field(default_factory=dict, metadata={"help": "overrides of the online process"})
     random: RandomSpec | None = field(default=None, metadata={"help": "random map generator (kind = 'random')"})
+    traffic: tuple[ShipSpec, ...] = field(default=(), metadata={"help": "ship traffic ([[traffic]] tables)"})
 
     def __post_init__(self) -> None:
         if self.kind == "fixed":
@@ -115,6 +119,7 @@ class Scenario:
     planner_overrides: dict[str, Any]
     online_overrides: dict[str, Any]
     uncharted: tuple[tuple[float, float, float], ...] = ()   # discs (x, y, radius), m, map frame
+    traffic: tuple[ShipSpec, ...] = ()                        # ships sailed by the simulator ([[traffic]])
 
     def truth_occ(self) -> np.ndarray:
         """The simulated world's obstacles: the chart (``occ``) plus the uncharted discs."""
@@ -247,7 +252,7 @@ def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: 
         ref = np.asarray(spec.reference_path, dtype=float)
         scen = Scenario(spec.name, spec.description, occ, spec.resolution, spec.start, spec.start_heading,
                         spec.goal, ref, current, field_time, dict(spec.planner), dict(spec.online),
-                        tuple(tuple(map(float, d)) for d in spec.uncharted))
+                        tuple(tuple(map(float, d)) for d in spec.uncharted), traffic=spec.traffic)
         truth = scen.truth_occ()
         for what, p in (("start", spec.start), ("goal", spec.goal)):
             if truth[int(p[1] / spec.resolution), int(p[0] / spec.resolution)]:
@@ -277,7 +282,7 @@ def _random_instance(spec: ScenarioSpec, rng: np.random.Generator, current: Any,
     heading = math.atan2(goal[1] - start[1], goal[0] - start[0])
     return Scenario(spec.name, spec.description, canvas.occ, r.resolution, (float(start[0]), float(start[1])),
                     heading, (float(goal[0]), float(goal[1])), ref, current, field_time,
-                    dict(spec.planner), dict(spec.online))
+                    dict(spec.planner), dict(spec.online), traffic=spec.traffic)
 
 
 def planner_params(base: Any, overrides: dict[str, Any], source: str = "scenario") -> Any:
@@ -310,3 +315,20 @@ def base_planner_params(settings_obj: Any) -> Any:
 def with_overrides(obj: Any, **kw: Any) -> Any:
     """``dataclasses.replace`` that ignores ``None`` values (CLI options not given)."""
     return dataclasses.replace(obj, **{k: v for k, v in kw.items() if v is not None})
+
+
+def load_traffic(source: str) -> tuple[ShipSpec, ...]:
+    """Ships from a JSON file (a list of ``[[traffic]]`` tables, as ``hil run`` writes) or from a
+    scenario's ``[[traffic]]`` (a name or a .toml path); one-line errors."""
+    import json
+
+    p = Path(source)
+    if p.suffix == ".json":
+        try:
+            rows = json.loads(p.read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise UsageError(f"--traffic {source}: cannot read ships: {exc}") from None
+        if not isinstance(rows, list):
+            raise UsageError(f"--traffic {source}: expected a JSON list of ship tables")
+        return tuple(config.from_table(ShipSpec, r, source, prefix=f"traffic[{i}]") for i, r in enumerate(rows))
+    return load_spec(source).traffic

@@ -6,14 +6,16 @@ A configuration file is complete: every section and key must be present (copy
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
+from autopilot_bridge.ais_tracking import TrackerParams
 from autopilot_bridge.config import AutopilotParams
 from autopilot_bridge.control import ControlParams
 from autopilot_bridge.gcs.config import GcsParams
 from autopilot_bridge.navigation import NavigationParams
 from hil import config
+from planner.colregs import ColregsParams
 from planner.params import PlannerParams
 from simulator.config import (
     CurrentParams,
@@ -24,6 +26,7 @@ from simulator.config import (
     VesselParams,
     WaveParams,
 )
+from simulator.traffic import AisParams
 
 
 @dataclass(frozen=True)
@@ -39,7 +42,12 @@ class HilConfig:
     autopilot: AutopilotParams
     navigation: NavigationParams
     control: ControlParams
-    gcs: GcsParams
+    # Ship traffic (issue 7); defaults let configuration files from before it load unchanged.
+    traffic: AisParams = field(default_factory=AisParams)
+    tracking: TrackerParams = field(default_factory=TrackerParams)
+    colregs: ColregsParams = field(default_factory=ColregsParams)
+    # The ground-station link (issue 6); defaults as configs/default.toml's [gcs].
+    gcs: GcsParams = field(default_factory=GcsParams)
 
 
 def load(path: str | Path | None = None, overrides: list[str] | None = None) -> HilConfig:

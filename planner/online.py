@@ -108,6 +108,7 @@ class CycleRecord:
     tree_parents: np.ndarray
     travelled: np.ndarray = dc_field(default_factory=lambda: np.zeros((0, 2)))
     reason: str = ""
+    speed_factor: float = 1.0      # traffic: sail this path at this fraction of the planned speed
 
 
 @dataclass
@@ -285,8 +286,31 @@ def select_local_subgoal(ctx: OnlineContext, pos: tuple[float, float]) -> tuple[
 
 
 def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
-               clock: Callable[[], float] = time.monotonic) -> CycleRecord:
-    """One planning cycle from ``state`` (see the module docstring); does not move the vessel."""
+               clock: Callable[[], float] = time.monotonic, traffic: Any = None) -> CycleRecord:
+    """One planning cycle from ``state`` (see the module docstring); does not move the vessel.
+
+    ``traffic`` (a :class:`planner.traffic_map.TrafficSnapshot`): moving ships, painted into the
+    planning map at the time the vessel would reach each cell, with their COLREGs zones; the
+    chosen path is then checked with its own arrival times (section 3.3). Arrival times depend
+    on the speed, so the cycle tries the speed factors of ``traffic.speed_factors`` in turn (full
+    speed first) and keeps the first that reaches the subgoal where it lies without traffic: a
+    give-way ship that cannot turn away in time slows down instead."""
+    if traffic is None or not traffic.obstacles:
+        return _plan_cycle_once(ctx, state, index, seed, clock, None)
+    fallback = None
+    for k, factor in enumerate(traffic.speed_factors):
+        snap = replace(traffic, speed=traffic.speed * factor)
+        rec = _plan_cycle_once(ctx, state, index, seed + k, clock, snap)
+        rec.speed_factor = factor
+        if rec.status == "exact" and len(rec.smooth_path) >= 2 and rec.reason != "traffic moved the subgoal":
+            return rec
+        if fallback is None or (len(fallback.smooth_path) < 2 and len(rec.smooth_path) >= 2):
+            fallback = rec
+    return fallback
+
+
+def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: int,
+                     clock: Callable[[], float], traffic: Any) -> CycleRecord:
     params, online = ctx.params, ctx.online
     pos = (state.x, state.y)
     sub_point, sub_index, rule = select_local_subgoal(ctx, pos)
@@ -303,7 +327,23 @@ def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
     if grid is None:
         return CycleRecord(index, state, sub_point, rule, "none", 0.0, 0.0, 0, empty, empty, False,
                            empty, np.zeros(0, dtype=int), reason="vessel inside an obstacle")
+    traffic_grid = None
+    if traffic is not None and traffic.obstacles:
+        from planner.traffic_map import paint, relax_for_start
+
+        traffic = relax_for_start(traffic)
+        keep = 2.0 * grid.resolution
+        traffic_grid = lambda g: paint(g, traffic, pos, params.perceptual_radius, keep_free=pos, keep_radius=keep)  # noqa: E731
+        plain_goal = _free_subgoal(ctx, grid, pos, sub_index, sub_point)
+        grid = traffic_grid(grid)
+        if plain_goal is not None and not grid.is_free(*plain_goal):
+            # A ship occupies the subgoal when we would get there (e.g. she sails along our
+            # reference path): look beside it, starboard side first, before giving up ground.
+            side = _beside_free(grid, pos, plain_goal, params.perceptual_radius, traffic)
+            if side is not None:
+                sub_point = plain_goal = side
     goal = _free_subgoal(ctx, grid, pos, sub_index, sub_point)
+    moved = traffic_grid is not None and goal != plain_goal
     if goal is None:
         return CycleRecord(index, state, sub_point, rule, "none", 0.0, 0.0, 0, empty, empty, False,
                            empty, np.zeros(0, dtype=int), reason="no free subgoal")
@@ -344,6 +384,8 @@ def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
     # The bypass of a short leg must be clear of the safety-inflated map (the velocity
     # inflation is a planning margin; the smoothed path is checked against the same map).
     check_grid = ctx.safe_grid if ctx.safe_grid.is_free(*pos) else ctx.grid
+    if traffic_grid is not None:
+        check_grid = traffic_grid(check_grid)
     local = drop_short_legs(local, check_grid, radius)
     smoothed, ok = _densify(local, 0.5), False
     if online.smoothing and len(local) >= 2:
@@ -354,9 +396,38 @@ def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
                               start_heading=state.heading, step=0.5)
         if sm.ok:
             smoothed, ok = sm.dense, True
+    if traffic_grid is not None:
+        from planner.traffic_map import first_conflict
+
+        if ok and first_conflict(smoothed, traffic, ignore_within=keep) is not None:
+            smoothed, ok = _densify(local, 0.5), False
+        when = first_conflict(local, traffic, ignore_within=keep)
+        if when is not None:
+            return CycleRecord(index, state, goal, rule, "none", float(search), result.planning_time_s,
+                               result.iterations, empty, empty, False, result.tree_nodes, result.tree_parents,
+                               reason=f"traffic conflict {when:.1f} s along the path")
     return CycleRecord(index, state, goal, rule, result.status, float(search), result.planning_time_s,
                        result.iterations, local, smoothed, ok, result.tree_nodes, result.tree_parents,
-                       reason=result.reason)
+                       reason="traffic moved the subgoal" if moved else result.reason)
+
+
+def _beside_free(grid: OccupancyGrid, pos: tuple[float, float], point: tuple[float, float], radius: float,
+                 traffic: Any) -> tuple[float, float] | None:
+    """The free point nearest ``point`` across the direction of travel (starboard offsets first),
+    inside the perceptual domain, or None."""
+    dx, dy = point[0] - pos[0], point[1] - pos[1]
+    d = math.hypot(dx, dy)
+    if d < 1e-9:
+        return None
+    sx, sy = dy / d, -dx / d                      # starboard of the direction of travel (map frame)
+    step = max(grid.resolution, 1.0)
+    reach = max((ob.radius for ob in traffic.obstacles), default=0.0) * 3.0
+    for k in range(1, int(reach / step) + 1):
+        for sign in (1.0, -1.0):
+            q = (point[0] + sign * k * step * sx, point[1] + sign * k * step * sy)
+            if math.hypot(q[0] - pos[0], q[1] - pos[1]) <= radius and grid.is_free(*q):
+                return q
+    return None
 
 
 def drop_short_legs(path: np.ndarray, grid: OccupancyGrid, min_leg: float) -> np.ndarray:

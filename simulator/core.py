@@ -61,7 +61,8 @@ def frame_layout(dt: float, imu_rate_hz: float) -> tuple[float, int]:
 class SimulatorCore:
     """Truth + sensors + MAVLink encoding for one run (``cfg`` is a ``hil.settings.HilConfig``)."""
 
-    def __init__(self, cfg: Any, world: WorldMap | None = None) -> None:
+    def __init__(self, cfg: Any, world: WorldMap | None = None, traffic: tuple[Any, ...] = ()) -> None:
+        """``traffic``: the ships (``simulator.traffic.ShipSpec``) reported by AIS on the link."""
         self.cfg = cfg
         self.frame_dt, self.substeps = frame_layout(cfg.sim.dt, cfg.sensors.imu.rate_hz)
         self.dt = self.frame_dt / self.substeps
@@ -95,6 +96,13 @@ class SimulatorCore:
         self.rejects: Counter = Counter()
         self.distance = 0.0
         self._env = self._environment(0.0)
+        self.traffic = None
+        if traffic:
+            from simulator.traffic import AisParams, Traffic
+
+            ais = getattr(cfg, "traffic", None) or AisParams()
+            self.traffic = Traffic(tuple(traffic), ais, cfg.sim.seed, self.geo)
+            self.truth_codec = Codec(cfg.link.system_id, ais.truth_component_id)
 
     # -- time ------------------------------------------------------------------------------
     @property
@@ -209,6 +217,13 @@ class SimulatorCore:
                 int(round(rf.increment_deg)), rf.min_cm, rf.max_cm, rf.increment_deg, 0.0,
                 MAV_TYPE.MAV_FRAME_BODY_FRD))
             self.messages_sent["OBSTACLE_DISTANCE"] += 1
+        if self.traffic is not None:
+            reports = self.traffic.ais_messages(t, self.codec)
+            parts += reports
+            self.messages_sent["AIS_VESSEL"] += len(reports)
+            if self.truth_due.due(self.n):
+                parts += self.traffic.truth_messages(t, self.truth_codec)
+                self.messages_sent["AIS_VESSEL_TRUTH"] += len(self.traffic.ships)
         return b"".join(parts)
 
     def truth(self) -> dict[str, float]:

@@ -149,5 +149,7 @@ class SimulatorServer:
             "jitter_ms": self.jitter_ms(),
             "gps": {"fixes": c.gps.fixes, "dropout_fixes": c.gps.dropout_fixes, "glitches": c.gps.glitches},
             "distance_m": c.distance,
+            "ais": None if c.traffic is None else {"ships": len(c.traffic.ships), "reports": c.traffic.reports_sent,
+                                                   "lost": c.traffic.reports_lost},
             "final_state": c.truth(),
         }

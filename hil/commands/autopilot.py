@@ -138,7 +138,8 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     try:
         link = HilLink(ap.listen, ap.actuators_to, geo, declination=cfg.sensors.compass.declination,
                        system_id=ap.system_id, component_id=ap.component_id, send_loss=ap.send_loss,
-                       recv_loss=ap.recv_loss, loss_seed=cfg.sim.seed + 7)
+                       recv_loss=ap.recv_loss, loss_seed=cfg.sim.seed + 7,
+                       truth_component_id=cfg.traffic.truth_component_id)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     try:
@@ -171,8 +172,12 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     else:
         worker = PlannerWorker("autopilot_bridge.local_planning:online_cycle_handler", (world,),
                                grace_s=ap.watchdog_grace, start_method=start_method)
+    from autopilot_bridge.traffic_awareness import TrafficAwareness
+
+    traffic = TrafficAwareness(cfg.tracking, cfg.colregs, geo)  # AIS targets, COLREGs encounters
     autopilot = Autopilot(ap, cfg.navigation, cfg.control, propulsion, world, link, worker, telemetry,
-                          lockstep=lockstep, seed=cfg.sim.seed, log=progress, wait_for_arm=cfg.gcs.wait_for_arm)
+                          lockstep=lockstep, seed=cfg.sim.seed, log=progress, traffic=traffic,
+                          wait_for_arm=cfg.gcs.wait_for_arm)
     telemetry.attach(autopilot)
     return autopilot
 

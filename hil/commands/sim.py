@@ -54,6 +54,10 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                    help="the true obstacle map the range sensor scans: an .npz with 'occ' (bool rows x cols, "
                         "row = north / resolution, column = east / resolution) and 'resolution' (m), as "
                         "`hil run` writes it to the run folder as world.npz; without it no OBSTACLE_DISTANCE is sent")
+    p.add_argument("--traffic", metavar="SOURCE", default=None,
+                   help="ship traffic to sail and report by AIS_VESSEL (settings in [traffic]): a scenario "
+                        "name or .toml file with [[traffic]] tables, or a .json list of such tables "
+                        "(default: no traffic)")
     p.set_defaults(func=run)
 
 
@@ -84,8 +88,13 @@ def run(args: argparse.Namespace) -> int:
             world = WorldMap.load(args.world)
         except (OSError, KeyError, ValueError) as exc:
             raise UsageError(f"--world {args.world}: not a world map ({exc})") from None
+    traffic = ()
+    if getattr(args, "traffic", None):
+        from hil.scenario import load_traffic
+
+        traffic = load_traffic(args.traffic)
     try:
-        core = SimulatorCore(cfg, world)
+        core = SimulatorCore(cfg, world, traffic)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     try:
