@@ -51,6 +51,7 @@ from autopilot_bridge.planning_worker import PlannerWorker, PlanRequest
 from autopilot_bridge.reactive import ReactiveAvoidance
 from autopilot_bridge.telemetry import Telemetry
 from common.dronecan_codec import RAW_COMMAND_MAX, quantize
+from autopilot_bridge.vehicle import Mode, Vehicle, Waypoint
 
 PLANNED, FALLBACK, COMPLETE, WAITING = "planned", "fallback", "complete", "waiting_for_navigation"
 
@@ -89,7 +90,7 @@ class Autopilot:
                  propulsion: Propulsion, world: World, link: HilLink, worker: PlannerWorker,
                  telemetry: Telemetry | None = None, *, lockstep: bool, seed: int,
                  log: Callable[[str], None] | None = None, traffic: Any = None, actuators: Any | None = None,
-                 int14_commands: bool = False) -> None:
+                 int14_commands: bool = False, wait_for_arm: bool = False) -> None:
         self.p, self.nav_params, self.control_params = params, nav, control
         self.prop, self.world, self.link, self.worker = propulsion, world, link, worker
         self.telemetry = telemetry
@@ -113,6 +114,18 @@ class Autopilot:
         self._waited = False
         self.local_paths: list[dict[str, Any]] = []
         self.track: list[tuple[float, float, float, float]] = []
+        # What a ground station commands (autopilot_bridge.vehicle). Without one the scenario's
+        # reference path is the mission and the boat starts armed in AUTO, as it always did.
+        self.vehicle = Vehicle([Waypoint(float(n), float(e), params.goal_tolerance) for n, e in self.reference_ned],
+                               armed=not wait_for_arm, mode=Mode.HOLD if wait_for_arm else Mode.AUTO,
+                               scenario_route=self.reference_ned, default_radius=params.goal_tolerance)
+        self.goal_radius = params.goal_tolerance
+        self.planner_overrides: dict[str, float] = {}   # PlannerParams changed by a GCS (parameters)
+        self._route_version = 0
+        self._world_version = 0
+        self._stale_cycle = 0        # plans of cycles up to this one were for an older route
+        self._idle = False
+        self._pace_anchor: tuple[float, float] | None = None
         self._reset()
 
     # -- state ---------------------------------------------------------------------------------
@@ -124,6 +137,7 @@ class Autopilot:
         self.los: LineOfSight | None = None
         self.next_plan_t = 0.0
         self.cycle = 0
+        self._stale_cycle = 0
         self.pending_since: float | None = None  # simulated time of the pending request
         self.last_frame_usec: int | None = None
         self.last_command: Thrust | None = None
@@ -169,7 +183,7 @@ class Autopilot:
             cycle=self.cycle,
             problem=CycleInput(x, y, heading, s.t + lead, self.seed * 100003 + self.cycle,
                                self.sensed.cells() if self._sensed_at_submit else None, self.sensed.version,
-                               traffic=snap),
+                               traffic=snap, world=self.world_update()),
             deadline_s=self.p.planning_deadline,
             iterations=self.p.lockstep_iterations if self.lockstep else None,
         )
@@ -205,6 +219,9 @@ class Autopilot:
         if reply.error:
             self.stats.plans_rejected["planner_error"] += 1
             self._event(t, f"planner error: {reply.error}")
+            return None
+        if reply.cycle <= self._stale_cycle:
+            self.stats.plans_rejected["for_an_older_route"] += 1
             return None
         return reply.result
 
@@ -272,16 +289,31 @@ class Autopilot:
         if self.stats.frames % 10 == 0:  # the estimated track at 10 Hz, for the run's plot
             self.track.append((t, s.x, s.y, s.psi))
 
-        if self.mode != COMPLETE and math.hypot(self.goal_ned[0] - s.x, self.goal_ned[1] - s.y) <= self.p.goal_tolerance:
+        self.vehicle.update(s.x, s.y)
+        self._apply_route(t)
+        active = self.vehicle.wants_thrust()
+        if active and self.mode != COMPLETE and \
+                math.hypot(self.goal_ned[0] - s.x, self.goal_ned[1] - s.y) <= self.goal_radius:
             self.mode = COMPLETE
             self.complete_t = t
-            self._event(t, "mission complete: final goal reached")
-            if self.telemetry is not None:
-                self.telemetry.mission_item_reached(len(self.world.reference_path) - 1)
+            if self.vehicle.mode == Mode.AUTO:
+                self.vehicle.finish()
+                self._event(t, "mission complete: final goal reached")
+            else:
+                self._event(t, f"{self.vehicle.mode.name}: destination reached, holding")
 
-        if self.mode == COMPLETE:
+        if not active:
+            # Disarmed, HOLD (drift), MANUAL, GUIDED without a target, AUTO without a mission.
+            self._idle = True
+            cmd = self._manual_command() if (self.vehicle.armed and self.vehicle.mode == Mode.MANUAL) else \
+                allocate(0.0, 0.0, self.prop.B_u, self.prop.T_max, self.prop.T_min)
+        elif self.mode == COMPLETE:
             cmd = allocate(0.0, 0.0, self.prop.B_u, self.prop.T_max, self.prop.T_min)
         else:
+            if self._idle:  # back under control: the controllers start from the present state
+                self._idle = False
+                self.heading_pid.reset()
+                self.speed_ctl.reset(s.u)
             plan = self._collect_plan(t)
             if plan is not None:
                 if self._accept(plan, s):
@@ -300,9 +332,71 @@ class Autopilot:
                 self._to_fallback(t, "local path finished before a new one arrived")
                 guidance = None
             cmd = self._control(s, dt, guidance)
+        if self.lockstep and not self.vehicle.armed:
+            self._pace(t)
+        else:
+            self._pace_anchor = None
         self._send(f.time_usec, cmd, received_at)
         if self.telemetry is not None:
             self.telemetry.on_frame(t, s, self.mode, cmd)
+        elif self.vehicle.reached:
+            self.vehicle.take_reached()
+
+    # -- ground-station hooks ---------------------------------------------------------------------
+    def _apply_route(self, t: float) -> None:
+        """Follow a new global reference path (mission upload, AUTO/RTL/GUIDED entered), atomically."""
+        r = self.vehicle.route
+        if r is None or r.version == self._route_version:
+            return
+        self._route_version = r.version
+        self.reference_ned = r.path
+        self.goal_ned = (float(r.path[-1][0]), float(r.path[-1][1]))
+        self.goal_radius = r.goal_radius
+        self.target = self.goal_ned
+        self.los = None
+        if self.mode in (PLANNED, COMPLETE):
+            self.mode = FALLBACK
+        self.complete_t = None
+        self._stale_cycle = self.cycle   # whatever the worker is planning now is for the old route
+        self.next_plan_t = t
+        self._world_version += 1
+
+    def world_update(self) -> Any:
+        """What the planner worker must use instead of the World it started with (None: nothing changed)."""
+        if self._route_version == 0 and not self.planner_overrides:
+            return None
+        from autopilot_bridge.local_planning import WorldUpdate
+
+        ref = self.reference_ned[:, ::-1].copy()          # NED -> map (x east, y north)
+        return WorldUpdate(self._world_version, (float(ref[-1][0]), float(ref[-1][1])), ref,
+                           dict(self.planner_overrides))
+
+    def set_planner_override(self, name: str, value: float) -> None:
+        self.planner_overrides[name] = value
+        self._world_version += 1
+
+    def _pace(self, t: float) -> None:
+        """Lockstep while disarmed: let simulated time pass no faster than wall time.
+
+        A boat waiting for its operator (``--wait-for-arm``) drifts with the current; at lockstep
+        speed (~15x) a minute at the ground station would be a quarter of an hour adrift."""
+        now = time.monotonic()
+        if self._pace_anchor is None:
+            self._pace_anchor = (t, now)
+            return
+        ahead = (t - self._pace_anchor[0]) - (now - self._pace_anchor[1])
+        if ahead > 0.0:
+            time.sleep(min(ahead, 0.1))
+            self._waited = True  # a paced frame measures the pacing, not the control loop
+
+    def _manual_command(self) -> Thrust:
+        m = self.vehicle.manual
+        if m is None or time.monotonic() - m[2] > 1.0:
+            return allocate(0.0, 0.0, self.prop.B_u, self.prop.T_max, self.prop.T_min)
+        x, r = m[0], m[1]
+        tau_u = x * 2.0 * (self.prop.T_max if x >= 0 else -self.prop.T_min)
+        tau_r = r * 0.5 * (self.prop.T_max - self.prop.T_min) * self.prop.B_u
+        return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
 
     def _sense(self, t: float, f: SensorFrame, s: NavState) -> None:
         """Add a range scan's new obstacles to the map; replan at once if they are near the path ahead."""

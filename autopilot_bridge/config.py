@@ -13,7 +13,8 @@ class AutopilotParams:
 
     listen: str = param("HOST:PORT where the simulator's HIL_SENSOR/HIL_GPS frames arrive")
     actuators_to: tuple[str, ...] = param("HOST:PORT destinations of HIL_ACTUATOR_CONTROLS")
-    telemetry_to: tuple[str, ...] = param("HOST:PORT destinations of telemetry (heartbeat, position, events)")
+    telemetry_to: tuple[str, ...] = param(
+        "HOST:PORT destinations of a copy of every ground-station frame in and out (hil run's tap records them)")
     system_id: int = param("MAVLink system id of the vessel", ge=1, le=255)
     component_id: int = param("MAVLink component id of the autopilot", ge=1, le=255)
     cruise_speed: float = param("speed set-point along the local path", "m/s", gt=0)

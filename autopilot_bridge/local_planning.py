@@ -48,6 +48,19 @@ class World:
 
 
 @dataclass(frozen=True)
+class WorldUpdate:
+    """A change of the World since the worker started (map frame): a ground station uploaded a mission
+    (new goal and reference path) or changed planner parameters. Sent with every cycle once there is
+    one, so a restarted worker (the watchdog) picks it up too; ``version`` tells the worker whether
+    it has it already."""
+
+    version: int
+    goal: tuple[float, float]
+    reference_path: np.ndarray
+    planner_overrides: dict
+
+
+@dataclass(frozen=True)
 class CycleInput:
     """A cycle's start: map-frame position (m), heading (rad from east), time (s), seed, and the
     obstacles sensed so far (``(K, 2)`` [row, col] cells of the chart's grid; ``sensed_version``
@@ -61,6 +74,7 @@ class CycleInput:
     sensed: np.ndarray | None = None
     sensed_version: int = 0
     traffic: Any = None          # planner.traffic_map.TrafficSnapshot of the ships, or None
+    world: WorldUpdate | None = None
 
 
 @dataclass(frozen=True)
@@ -102,12 +116,23 @@ def online_cycle_handler(world: World) -> Callable[[Any], LocalPlan]:
     ctx = context(None)
     version = 0
 
+    applied = {"version": None}
+
     def handle(request: Any) -> LocalPlan:
         nonlocal ctx, version
         start: CycleInput = request.problem
+        rebuilt = False
         if start.sensed_version != version:
             # The map known a priori plus what is sensed: inflated maps are rebuilt only when it grows.
             ctx, version = context(start.sensed), start.sensed_version
+            rebuilt = True
+        update = getattr(start, "world", None)
+        if update is not None and (rebuilt or update.version != applied["version"]):
+            # Same maps (and their inflation caches); new route and planner parameters.
+            ctx.goal = (float(update.goal[0]), float(update.goal[1]))
+            ctx.reference_path = np.asarray(update.reference_path, dtype=float).reshape(-1, 2)
+            ctx.params = replace(ctx.params, **update.planner_overrides)
+            applied["version"] = update.version
         if request.iterations is not None:
             ctx.online = replace(world.online, local_iterations=int(request.iterations), local_time=0.0)
         else:

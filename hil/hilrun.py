@@ -30,7 +30,7 @@ import numpy as np
 from scipy import ndimage
 
 from common.geodesy import LocalFrame
-from common.mavlink import Codec
+from common.mavlink import Codec, mavlink2
 from common.udp import UdpEndpoint
 from hil import processes
 from hil import scenario as scenarios
@@ -74,9 +74,8 @@ class Tap:
     def __init__(self, tlog_path: Path, geo: LocalFrame, encounters: Any = None, truth_component_id: int = 52,
                  sim_component_id: int = 51) -> None:
         self.ep = UdpEndpoint("127.0.0.1:0", [], recv_buffer=8 << 20)
-        self.codec = Codec(255, 190, accept=("HIL_STATE_QUATERNION", "HIL_ACTUATOR_CONTROLS", "LOCAL_POSITION_NED",
-                                             "STATUSTEXT", "MISSION_ITEM_REACHED", "HIL_SENSOR", "HIL_GPS",
-                                             "HEARTBEAT", "ATTITUDE", "ODOMETRY", "AIS_VESSEL"))
+        # Every message of the dialect: the autopilot copies all ground-station traffic here too.
+        self.codec = Codec(255, 190, accept=[c.msgname for c in mavlink2.mavlink_map.values()])
         # Ship traffic (hil.encounter_report.EncounterJudge): the truth AIS_VESSEL of each datagram
         # belongs to the HIL_STATE_QUATERNION before it in the same datagram.
         self.encounters = encounters
@@ -95,7 +94,8 @@ class Tap:
         self._epoch = {"truth": 0, "estimate": 0, "commands": 0}
         self._last = {"truth": -1, "estimate": -1, "commands": -1}
         self._segment = {"truth": 0, "estimate": 0, "commands": 0}
-        self.truth_raw: dict[tuple[int, int], tuple[float, float]] = {}  # (segment, time_usec) -> (n, e)
+        # (segment, time_usec) -> (n, e, run time usec)
+        self.truth_raw: dict[tuple[int, int], tuple[float, float, int]] = {}
 
     def _monotonic(self, stream: str, t: int, back_gap: int) -> int:
         if t + back_gap < self._last[stream]:
@@ -131,7 +131,7 @@ class Tap:
                 if t not in self.truth:
                     n, e = self.geo.geodetic_to_sea_level(m.lat * 1e-7, m.lon * 1e-7)
                     self.truth[t] = (n, e, m.vx * 0.01, m.vy * 0.01)
-                    self.truth_raw[(self._segment["truth"], int(m.time_usec))] = (n, e)
+                    self.truth_raw[(self._segment["truth"], int(m.time_usec))] = (n, e, t)
                     q = m.attitude_quaternion
                     own = (t, n, e, 2.0 * math.atan2(q[3], q[0]))
             elif kind == "AIS_VESSEL":
@@ -216,7 +216,6 @@ class HilRun:
         self.sim: subprocess.Popen | None = None
         self.ap: subprocess.Popen | None = None
         self.sim_restarts = 0
-        self.end_usec: int | None = None  # truth time of the sample that ended the run (goal, collision)
         self.can_recorder = None  # hil.can_log.CanRecorder when the thrusters are on CAN
         self.can_log: dict[str, Any] = {}
 
@@ -325,40 +324,34 @@ class HilRun:
     def execute(self) -> dict[str, Any]:
         opts = self.opts
         wall0 = time.monotonic()
-        outcome, collision_at, goal_at = "timeout", None, None
+        outcome, collision_at = "timeout", None
         min_clearance, last_report = math.inf, wall0
+        decided: int | None = None  # truth time (usec) of the sample that decided the outcome
         try:
             self.start()
             checked = 0
             while True:
                 self.tap.pump(timeout=0.05)
                 times = sorted(self.tap.truth)
-                # Judge every new truth sample in order, so that where the run ends (and so its
-                # summary) does not depend on how many samples one pump happened to read.
+                # Sample by sample, so the deciding sample does not depend on how datagrams were batched.
                 for tu in times[checked:]:
                     n, e, _, _ = self.tap.truth[tu]
                     c = self.judge.clearance(n, e)
                     min_clearance = min(min_clearance, c)
-                    if c < self.judge.hull_radius and collision_at is None:
-                        collision_at = tu * 1e-6
-                        self.end_usec = tu
-                        break
-                    if opts.stop_at_goal and self.judge.at_goal(n, e):
-                        goal_at = tu
-                        self.end_usec = tu
+                    if c < self.judge.hull_radius:
+                        outcome, collision_at, decided = "collision", tu * 1e-6, tu
+                    elif opts.stop_at_goal and self.judge.at_goal(n, e):
+                        outcome, decided = "goal", tu
+                    elif tu * 1e-6 >= opts.duration:
+                        outcome, decided = "timeout", tu
+                    if decided is not None:
                         break
                 checked = len(times)
                 t_sim = times[-1] * 1e-6 if times else 0.0
-                if collision_at is None and self.encounter_judge is not None and self.encounter_judge.collision:
+                if decided is None and self.encounter_judge is not None and self.encounter_judge.collision:
                     collision_at = self.encounter_judge.collision[0]
-                if collision_at is not None:
-                    outcome = "collision"
-                    break
-                if goal_at is not None:
-                    outcome = "goal"
-                    break
-                if t_sim >= opts.duration:
-                    outcome = "timeout"
+                    outcome, decided = "collision", int(round(collision_at * 1e6))
+                if decided is not None:
                     break
                 if time.monotonic() - wall0 > opts.wall_timeout:
                     outcome = "wall_timeout"
@@ -383,16 +376,18 @@ class HilRun:
             if self.can_recorder is not None:
                 self.can_log = self.can_recorder.close()
         wall = time.monotonic() - wall0
-        return self._summary(outcome, collision_at, min_clearance, wall, ap_summary, sim_summary)
+        return self._summary(outcome, collision_at, min_clearance, wall, ap_summary, sim_summary, decided)
 
     def _summary(self, outcome: str, collision_at: float | None, min_clearance: float, wall: float,
-                 ap: dict | None, sim: dict | None) -> dict[str, Any]:
-        times = sorted(t for t in self.tap.truth if self.end_usec is None or t <= self.end_usec)
+                 ap: dict | None, sim: dict | None, decided: int | None = None) -> dict[str, Any]:
+        # The run is judged up to the deciding sample: what arrived while the processes were being
+        # stopped depends on the wall clock.
+        times = [t for t in sorted(self.tap.truth) if decided is None or t <= decided]
         track = np.array([self.tap.truth[t][:2] for t in times]) if times else np.zeros((0, 2))
         speeds = np.array([math.hypot(*self.tap.truth[t][2:]) for t in times]) if times else np.zeros(0)
         length = float(np.sum(np.hypot(*np.diff(track, axis=0).T))) if len(track) > 1 else 0.0
         energy = self._energy(times, speeds)
-        rmse = self._nav_rmse()
+        rmse = self._nav_rmse(decided)
         ap = ap or {}
         reached = outcome == "goal" and collision_at is None
         summary = {
@@ -463,11 +458,11 @@ class HilRun:
             total += (abs(thrust(p)) + abs(thrust(s))) * speeds[i] * (times[i + 1] - times[i]) * 1e-6
         return total
 
-    def _nav_rmse(self) -> float | None:
+    def _nav_rmse(self, decided: int | None = None) -> float | None:
         errs = []
         for (seg, ms), (n, e) in self.tap.estimate.items():
             truth = self.tap.truth_raw.get((seg, ms * 1000))
-            if truth is not None:
+            if truth is not None and (decided is None or truth[2] <= decided):
                 errs.append((n - truth[0]) ** 2 + (e - truth[1]) ** 2)
         return math.sqrt(float(np.mean(errs))) if errs else None
 

@@ -12,6 +12,7 @@ from pathlib import Path
 from autopilot_bridge.ais_tracking import TrackerParams
 from autopilot_bridge.config import AutopilotParams
 from autopilot_bridge.control import ControlParams
+from autopilot_bridge.gcs.config import GcsParams
 from autopilot_bridge.navigation import NavigationParams
 from common.can_params import CanParams
 from hil import config
@@ -50,6 +51,8 @@ class HilConfig:
     # The CAN actuator path (issue 5); optional like the sections above.
     esc: EscParams = field(default_factory=EscParams)
     can: CanParams = field(default_factory=CanParams)
+    # The ground-station link (issue 6); defaults as configs/default.toml's [gcs].
+    gcs: GcsParams = field(default_factory=GcsParams)
 
 
 def load(path: str | Path | None = None, overrides: list[str] | None = None) -> HilConfig:

@@ -17,6 +17,39 @@ from hil.console import emit, load_settings, progress
 from hil.errors import UsageError
 
 
+def _gcs_endpoint(text: str) -> str:
+    from autopilot_bridge.gcs.transport import parse_endpoint
+
+    if text == "none":
+        return text
+    try:
+        parse_endpoint(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+def add_gcs_arguments(p: argparse.ArgumentParser) -> None:
+    """--gcs and --wait-for-arm (shared by `hil autopilot` and `hil run`)."""
+    p.add_argument("--gcs", metavar="KIND:HOST:PORT", type=_gcs_endpoint, action="append", default=None,
+                   help="ground-station endpoint, repeatable: udpout:HOST:PORT sends to a GCS listening there "
+                        "(default: gcs.endpoints = udpout:127.0.0.1:14550, as SITL), udpin:HOST:PORT and "
+                        "tcpin:HOST:PORT listen; every GCS that talks is answered. 'none' turns the link off")
+    p.add_argument("--wait-for-arm", action="store_true",
+                   help="start disarmed in HOLD: a ground station uploads a mission (or keeps the scenario's), "
+                        "arms and sets AUTO (custom mode 10) or sends MISSION_START")
+
+
+def gcs_overrides(args: argparse.Namespace) -> list[str]:
+    out = []
+    if getattr(args, "gcs", None) is not None:
+        eps = [] if args.gcs == ["none"] else [e for e in args.gcs if e != "none"]
+        out.append("gcs.endpoints=" + json.dumps(eps))
+    if getattr(args, "wait_for_arm", False):
+        out.append("gcs.wait_for_arm=true")
+    return out
+
+
 def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "autopilot", parents=parents,
@@ -38,7 +71,9 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--actuators-to", metavar="HOST:PORT", type=_hostport, action="append", default=None,
                    help="where HIL_ACTUATOR_CONTROLS go; repeatable (default: autopilot.actuators_to = 127.0.0.1:14561)")
     p.add_argument("--telemetry-to", metavar="HOST:PORT", type=_hostport, action="append", default=None,
-                   help="where telemetry goes; repeatable (default: autopilot.telemetry_to = 127.0.0.1:14550)")
+                   help="where a copy of all ground-station traffic in and out goes (a recorder); repeatable "
+                        "(default: autopilot.telemetry_to, none)")
+    add_gcs_arguments(p)
     p.add_argument("--lockstep", action="store_true",
                    help="the simulator runs in lockstep: plan on an iteration budget "
                         "(autopilot.lockstep_iterations) so runs are repeatable")
@@ -61,6 +96,7 @@ def _overrides(args: argparse.Namespace) -> list[str]:
         out.append("autopilot.actuators_to=" + json.dumps(args.actuators_to))
     if args.telemetry_to is not None:
         out.append("autopilot.telemetry_to=" + json.dumps(args.telemetry_to))
+    out += gcs_overrides(args)
     if args.seed is not None:
         out.append(f"sim.seed={int(args.seed)}")
     if args.algorithm is not None:
@@ -93,7 +129,7 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     from autopilot_bridge.hil_link import HilLink
     from autopilot_bridge.local_planning import World
     from autopilot_bridge.planning_worker import PlannerWorker
-    from autopilot_bridge.telemetry import Telemetry
+    from autopilot_bridge.gcs.link import GcsLink
     from common.geodesy import LocalFrame
     from simulator.vessel import Vessel
 
@@ -125,7 +161,14 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
         except ValueError as exc:
             link.close()
             raise UsageError(str(exc)) from None
-    telemetry = Telemetry(ap.telemetry_to, ap.system_id, ap.component_id) if ap.telemetry_to else None
+    try:
+        telemetry = GcsLink(cfg.gcs, ap.system_id, ap.component_id, geo, mirror_to=ap.telemetry_to,
+                            chart_size=(scen.height, scen.width), log=progress)
+    except ValueError as exc:
+        link.close()
+        if actuators is not None:
+            actuators.close()
+        raise UsageError(str(exc)) from None
     # Compile (first run on a machine: ~7 s) or load the planner's numba core here, once, before
     # the control loop starts: forked workers inherit it, so no planning cycle pays for it.
     # One real planning cycle from the start compiles everything a cycle uses (tree core, grid
@@ -155,7 +198,9 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     traffic = TrafficAwareness(cfg.tracking, cfg.colregs, geo)  # AIS targets, COLREGs encounters
     autopilot = Autopilot(ap, cfg.navigation, cfg.control, propulsion, world, link, worker, telemetry,
                           lockstep=lockstep, seed=cfg.sim.seed, log=progress, traffic=traffic, actuators=actuators,
-                          int14_commands=cfg.esc.int14_resolution or cfg.can.actuators == "can")
+                          int14_commands=cfg.esc.int14_resolution or cfg.can.actuators == "can",
+                          wait_for_arm=cfg.gcs.wait_for_arm)
+    telemetry.attach(autopilot)
     return autopilot
 
 
@@ -174,8 +219,13 @@ def run(args: argparse.Namespace) -> int:
     host, port = autopilot.link.address
     acts = (f"DroneCAN RawCommand on {cfg.can.interface}:{cfg.can.channel}" if cfg.can.actuators == "can"
             else "actuators to " + ", ".join(cfg.autopilot.actuators_to))
+    gcs = autopilot.telemetry
+    if gcs is not None and gcs.addresses:
+        progress("autopilot: ground stations on " + ", ".join(
+            f"{spec} (local {h}:{p})" for spec, (h, p) in zip(cfg.gcs.endpoints, gcs.addresses)))
     progress(f"autopilot: listening on {host}:{port}, {acts}, "
-             f"scenario {args.scenario}, {'lockstep' if args.lockstep else 'real time'}")
+             f"scenario {args.scenario}, {'lockstep' if args.lockstep else 'real time'}"
+             f"{', waiting for a GCS to arm' if cfg.gcs.wait_for_arm else ''}")
     try:
         autopilot.run(lambda: stop["flag"])
     finally:
@@ -190,6 +240,8 @@ def run(args: argparse.Namespace) -> int:
         if autopilot.telemetry is not None:
             autopilot.telemetry.close()
     summary = autopilot.summary()
+    if autopilot.telemetry is not None:
+        summary["gcs"] = autopilot.telemetry.summary()
     summary["local_paths"] = autopilot.local_paths
     summary["estimated_track"] = [list(map(lambda v: round(v, 3), row)) for row in autopilot.track]
     summary["sensed_cells"] = autopilot.sensed.cells().tolist()

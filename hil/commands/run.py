@@ -146,6 +146,9 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                    help="run folder (default: runs/SCENARIO-seedN-YYYYmmdd-HHMMSS)")
     p.add_argument("--no-plot", action="store_true", help="do not draw plot.png")
     add_can_arguments(p)
+    from hil.commands.autopilot import add_gcs_arguments
+
+    add_gcs_arguments(p)
     p.add_argument("--demo", action="store_true",
                    help=f"constant-thrust demo controller (port {DEMO_CONTROLS[0]}, starboard {DEMO_CONTROLS[1]}) "
                         "instead of the autopilot; prints distance, final state, messages, wall time")
@@ -190,7 +193,8 @@ def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
         overrides.append(f"planner.algorithm={json.dumps(args.algorithm)}")
     opts = RunOptions(scenario=args.scenario, lockstep=args.speedup is None, speedup=args.speedup or 1.0,
                       duration=args.duration, seed=seed, config=args.config, overrides=overrides, out=out,
-                      on_progress=progress, plot=not args.no_plot)
+                      on_progress=progress, plot=not args.no_plot,
+                      extra_autopilot_args=_gcs_args(args))
     opts.actuators = cfg.can.actuators
     progress(f"run: scenario {args.scenario}, {'lockstep' if opts.lockstep else f'real time x{opts.speedup:g}'}, "
              f"actuators {cfg.can.actuators}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
@@ -200,6 +204,11 @@ def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
         progress(f"run: {'goal reached' if summary['reached_goal'] else summary['outcome']}; "
                  f"plot: {summary.get('plot', 'none')}; folder: {out}")
     return 0 if summary["reached_goal"] else 1
+
+
+def _gcs_args(args: argparse.Namespace) -> list[str]:
+    out = [a for spec in (args.gcs or []) for a in ("--gcs", spec)]
+    return out + (["--wait-for-arm"] if args.wait_for_arm else [])
 
 
 def _run_loop(args: argparse.Namespace, client: "HilClient", lockstep: bool) -> int:

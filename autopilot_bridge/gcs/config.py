@@ -1,0 +1,45 @@
+"""Typed configuration of the ground-station link (the TOML section [gcs])."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+from common.params import param
+
+
+@dataclass(frozen=True)
+class GcsParams:
+    """The [gcs] section: endpoints, failsafe, mission protocol timing, security."""
+
+    endpoints: tuple[str, ...] = param(
+        "ground-station endpoints: udpout:HOST:PORT (send there, answer whoever talks back), udpin:HOST:PORT "
+        "(listen, answer every peer heard), tcpin:HOST:PORT (accept TCP connections)",
+        default=("udpout:127.0.0.1:14550",))
+    wait_for_arm: bool = param("start disarmed in HOLD and wait for a GCS to arm and start the mission",
+                               default=False)
+    failsafe_timeout: float = param("in AUTO, no GCS heartbeat for this long (wall time) triggers the failsafe", "s",
+                                    gt=0, default=5.0)
+    failsafe_action: Literal["hold", "rtl", "none"] = param("what the GCS failsafe does: hold, rtl or none",
+                                                            default="hold")
+    mission_timeout: float = param("mission upload: re-request an item not received within this time (wall)", "s",
+                                   gt=0, default=0.25)
+    mission_retries: int = param("mission upload: re-requests of one item before the upload is cancelled", ge=0,
+                                 default=5)
+    max_mission_items: int = param("largest mission accepted (MAV_MISSION_NO_SPACE above)", ge=1, le=65535,
+                                   default=200)
+    signing_key_file: str = param("MAVLink 2 signing key file (32 raw bytes, 64 hex digits, or a passphrase "
+                                  "hashed with SHA-256 as MAVProxy does); empty = signing off", default="")
+    allowed_sysids: tuple[int, ...] = param("system ids allowed to command the boat (empty = any)", ge=1, le=255,
+                                            default=())
+    max_peers: int = param("ground stations answered at once per endpoint (least recently heard dropped)", ge=1,
+                           default=8)
+
+    def __post_init__(self) -> None:
+        from autopilot_bridge.gcs.transport import parse_endpoint
+
+        for e in self.endpoints:
+            try:
+                parse_endpoint(e)
+            except ValueError as exc:
+                raise ValueError(f"endpoints: {exc}") from None

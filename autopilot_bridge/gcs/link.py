@@ -1,0 +1,717 @@
+"""The vessel's ground-station link: MAVLink 2 to any number of ground stations (Figure 2's console).
+
+One :class:`GcsLink` per vessel computer. It
+
+* sends the telemetry set on a schedule in the vessel's (simulated) time, at rates a GCS may change
+  with MAV_CMD_SET_MESSAGE_INTERVAL or REQUEST_DATA_STREAM: HEARTBEAT (MAV_TYPE_SURFACE_BOAT, armed
+  flag, ArduPilot Rover custom mode; also at least once per wall second so a GCS keeps the link
+  while the simulator is paused), SYS_STATUS, GLOBAL_POSITION_INT, GPS_RAW_INT, LOCAL_POSITION_NED,
+  ATTITUDE, VFR_HUD, HOME_POSITION, MISSION_CURRENT, ACTUATOR_OUTPUT_STATUS, the planned local path as
+  TRAJECTORY_REPRESENTATION_WAYPOINTS, MISSION_ITEM_REACHED and STATUSTEXT events;
+* answers commands (COMMAND_LONG / COMMAND_INT -> COMMAND_ACK), the mission microservice
+  (:mod:`autopilot_bridge.gcs.mission`) and the parameter microservice (:mod:`.params`);
+* runs the GCS-heartbeat failsafe (wall time: it watches a real link);
+* optionally checks MAVLink 2 signatures (pymavlink's implementation) on everything that changes the
+  vessel, and a system-id allow-list;
+* copies every valid frame in and out to ``mirror_to`` (the `hil run` tap, which writes the run's
+  .tlog), and counts every reject by reason.
+
+Whatever arrives, nothing here raises into the control loop: bad input is counted and dropped.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any, Callable
+
+from autopilot_bridge.gcs.config import GcsParams
+from autopilot_bridge.gcs.mission import MissionItem, MissionServer
+from autopilot_bridge.gcs.params import ParamTable, autopilot_params
+from autopilot_bridge.gcs.transport import open_endpoint
+from autopilot_bridge.vehicle import Mode, Waypoint
+from common.geodesy import LocalFrame
+from common.mavlink import MAV_TYPE as M
+from common.mavlink import Codec, mavlink2
+from common.udp import UdpEndpoint
+
+# Default stream intervals (s of vessel time); a GCS changes them per message.
+DEFAULT_INTERVALS = {
+    "HEARTBEAT": 1.0, "SYS_STATUS": 1.0, "GPS_RAW_INT": 0.5, "GLOBAL_POSITION_INT": 0.2,
+    "LOCAL_POSITION_NED": 0.1, "ATTITUDE": 0.1, "VFR_HUD": 0.25, "MISSION_CURRENT": 1.0,
+    "ACTUATOR_OUTPUT_STATUS": 0.5, "HOME_POSITION": 5.0,
+}
+# REQUEST_DATA_STREAM groups (ArduPilot's grouping of the same messages).
+STREAM_GROUPS = {
+    M.MAV_DATA_STREAM_EXTENDED_STATUS: ("SYS_STATUS", "GPS_RAW_INT", "MISSION_CURRENT"),
+    M.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"),
+    M.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
+    M.MAV_DATA_STREAM_EXTRA2: ("VFR_HUD",),
+    M.MAV_DATA_STREAM_RAW_CONTROLLER: ("ACTUATOR_OUTPUT_STATUS",),
+    M.MAV_DATA_STREAM_RC_CHANNELS: ("ACTUATOR_OUTPUT_STATUS",),
+}
+MSG_IDS = {name: getattr(mavlink2, f"MAVLINK_MSG_ID_{name}") for name in DEFAULT_INTERVALS}
+ID_NAMES = {v: k for k, v in MSG_IDS.items()}
+ON_REQUEST = {getattr(mavlink2, "MAVLINK_MSG_ID_AUTOPILOT_VERSION"): "AUTOPILOT_VERSION", **ID_NAMES}
+
+# Messages that change the vessel: signing and the allow-list apply to these.
+WRITES = frozenset({"COMMAND_LONG", "COMMAND_INT", "SET_MODE", "MISSION_COUNT", "MISSION_ITEM", "MISSION_ITEM_INT",
+                    "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT", "PARAM_SET", "MANUAL_CONTROL"})
+MISSION_WRITES = frozenset({"MISSION_COUNT", "MISSION_ITEM", "MISSION_ITEM_INT", "MISSION_CLEAR_ALL"})
+SIGNING_EPOCH = 1420070400  # 2015-01-01 00:00:00 UTC, the MAVLink 2 signing timestamp origin
+FIRMWARE_VERSION = (0 << 24) | (6 << 16) | (0 << 8) | 255  # 0.6.0 official
+
+MODE_FLAGS = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | M.MAV_MODE_FLAG_HIL_ENABLED
+
+
+def load_signing_key(path: str) -> bytes:
+    """32-byte key from a file: raw 32 bytes, 64 hex digits, or a passphrase (SHA-256 of it, as MAVProxy)."""
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as exc:
+        raise ValueError(f"signing key file {path}: {exc.strerror or exc}") from None
+    if len(raw) == 32:
+        return raw
+    text = raw.decode(errors="replace").strip()
+    if not text:
+        raise ValueError(f"signing key file {path}: empty")
+    if len(text) == 64:
+        try:
+            return bytes.fromhex(text)
+        except ValueError:
+            pass
+    return hashlib.sha256(text.encode()).digest()
+
+
+def _text(v: Any) -> str:
+    return (v.decode(errors="replace") if isinstance(v, (bytes, bytearray)) else str(v)).rstrip("\x00")
+
+
+class _Stream:
+    """One peer's parser (stream transports keep a partial frame between reads)."""
+
+    def __init__(self, key: bytes | None) -> None:
+        self.mav = mavlink2.MAVLink(None, 0, 0)
+        self.mav.robust_parsing = True
+        if key is not None:
+            self.mav.signing.secret_key = key
+            self.mav.signing.timestamp = int((time.time() - SIGNING_EPOCH) * 1e5)
+            # Decode everything; whether a write was signed is decided per message (m._signed).
+            self.mav.signing.allow_unsigned_callback = lambda _mav, _msgid: True
+            # pymavlink records a frame's timestamp before checking its signature, so one forged frame
+            # with a future timestamp would lock the real GCS out (replay check). Undo that on failure.
+            check = self.mav.check_signature
+
+            def checked(msgbuf: bytearray, src_system: int, src_component: int) -> bool:
+                stamps = self.mav.signing.stream_timestamps
+                key = (msgbuf[-13], src_system, src_component)
+                before = stamps.get(key)
+                ok = check(msgbuf, src_system, src_component)
+                if not ok:
+                    if before is None:
+                        stamps.pop(key, None)
+                    else:
+                        stamps[key] = before
+                return ok
+
+            self.mav.check_signature = checked
+
+    def parse(self, data: bytes, keep: bool) -> tuple[list[Any], list[str]]:
+        mav = self.mav
+        msgs, rejects = [], []
+        try:
+            got = mav.parse_buffer(data) or []
+        except Exception:
+            got, rejects = [], ["malformed"]
+            keep = False
+        for m in got:
+            if isinstance(m, mavlink2.MAVLink_bad_data):
+                reason = str(getattr(m, "reason", ""))
+                rejects.append("not_mavlink" if "prefix" in reason else "bad_crc" if "CRC" in reason else "malformed")
+            elif isinstance(m, mavlink2.MAVLink_unknown):
+                rejects.append("unknown_message")
+            else:
+                msgs.append(m)
+        if not keep:
+            if mav.buf_len() > 0:
+                rejects.append("truncated")
+            mav.buf = bytearray()
+            mav.buf_index = 0
+            mav.expected_length = mavlink2.HEADER_LEN_V1 + 2
+            mav.have_prefix_error = False
+        elif mav.buf_len() > 1 << 16:  # a stream of garbage: do not let the buffer grow
+            mav.buf, mav.buf_index = bytearray(), 0
+        return msgs, rejects
+
+
+class GcsLink:
+    """MAVLink 2 ground-station endpoint(s) of one vessel; the autopilot's ``telemetry`` object."""
+
+    def __init__(self, params: GcsParams, system_id: int, component_id: int, geo: LocalFrame, *,
+                 mirror_to: tuple[str, ...] = (), chart_size: tuple[float, float] | None = None,
+                 clock: Callable[[], float] = time.monotonic, log: Callable[[str], None] | None = None) -> None:
+        self.params = params
+        self.sysid, self.compid = system_id, component_id
+        self.geo = geo
+        self.clock = clock
+        self.log = log or (lambda _m: None)
+        self.key = load_signing_key(params.signing_key_file) if params.signing_key_file else None
+        self.transports = []
+        try:
+            for spec in params.endpoints:
+                self.transports.append(open_endpoint(spec, params.max_peers))
+        except ValueError:
+            self.close()
+            raise
+        self.addresses = [t.address for t in self.transports]
+        self.mirror = UdpEndpoint("127.0.0.1:0", list(mirror_to)) if mirror_to else None
+        self.codec = Codec(system_id, component_id)
+        if self.key is not None:
+            s = self.codec.mav.signing
+            s.secret_key, s.sign_outgoing, s.link_id = self.key, True, 0
+            s.timestamp = int((time.time() - SIGNING_EPOCH) * 1e5)
+        self._streams: dict[Any, _Stream] = {}
+        self.chart_size = chart_size        # (north extent, east extent) m of the chart, or None
+        self.failsafe_timeout = params.failsafe_timeout
+        self.failsafe_action = params.failsafe_action
+        self.failsafe_active = False
+        self.last_gcs_heartbeat: float | None = None
+        self.intervals = dict(DEFAULT_INTERVALS)
+        self.next_due: dict[str, float] = {k: 0.0 for k in DEFAULT_INTERVALS}
+        self.last_wall_heartbeat = -math.inf
+        self.ap: Any = None
+        self.mission: MissionServer | None = None
+        self.params_table: ParamTable | None = None
+        self.state: Any = None
+        self.cmd: Any = None
+        self.t = 0.0
+        self._paths_sent = 0
+        self.sent = 0
+        self.received: Counter = Counter()
+        self.rejects: Counter = Counter()
+        self.security: Counter = Counter()
+        self.commands: Counter = Counter()
+        self.encode_errors: Counter = Counter()
+
+    # -- wiring ---------------------------------------------------------------------------------
+    def attach(self, autopilot: Any) -> None:
+        """Connect to the autopilot: its vehicle state, mission and tunables."""
+        self.ap = autopilot
+        items = tuple(self._item(w) for w in autopilot.vehicle.mission)
+        self.mission = MissionServer(items, system_id=self.sysid, component_id=self.compid,
+                                     max_items=self.params.max_mission_items, item_timeout=self.params.mission_timeout,
+                                     retries=self.params.mission_retries, position_check=self._on_chart)
+        self.params_table = autopilot_params(autopilot, self)
+
+    def _item(self, w: Waypoint) -> MissionItem:
+        lat, lon = self.geo.sea_level_to_geodetic(w.north, w.east)
+        return MissionItem(M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_WAYPOINT, 1, 0.0, float(w.radius), 0.0,
+                           0.0, int(round(lat * 1e7)), int(round(lon * 1e7)), 0.0)
+
+    def _on_chart(self, lat: float, lon: float) -> tuple[int, str] | None:
+        if self.chart_size is None:
+            return None
+        n, e = self.geo.geodetic_to_sea_level(lat, lon)
+        if not 0.0 <= n <= self.chart_size[0]:
+            return M.MAV_MISSION_INVALID_PARAM5_X, f"waypoint {n:.0f} m north is off the chart (0-{self.chart_size[0]:.0f})"
+        if not 0.0 <= e <= self.chart_size[1]:
+            return M.MAV_MISSION_INVALID_PARAM6_Y, f"waypoint {e:.0f} m east is off the chart (0-{self.chart_size[1]:.0f})"
+        return None
+
+    # -- sending --------------------------------------------------------------------------------
+    def _send_frame(self, data: bytes) -> None:
+        for tr in self.transports:
+            tr.send(data)
+        if self.mirror is not None:
+            self.mirror.send(data)
+        self.sent += 1
+
+    def _send(self, name: str, *args: Any) -> None:
+        try:
+            frame = self.codec.encode(name, *args)
+        except Exception as exc:  # a field out of its wire range must cost a message, never the control loop
+            self.encode_errors[name] += 1
+            if self.encode_errors[name] == 1:
+                self.log(f"gcs: {name} not sent: {type(exc).__name__}: {exc}")
+            return
+        self._send_frame(frame)
+
+    def forward(self, name: str, *fields: Any) -> None:
+        """Encode message ``name`` (e.g. "ais_vessel") with the vessel's ids and send it to every GCS."""
+        self._send(name.lower(), *fields)
+
+    def statustext(self, text: str, severity: int = M.MAV_SEVERITY_INFO) -> None:
+        self._send("statustext", severity, text[:50].encode())
+
+    def mission_item_reached(self, seq: int) -> None:
+        self._send("mission_item_reached", seq)
+
+    # -- telemetry ------------------------------------------------------------------------------
+    def _position(self) -> tuple[float, float] | None:
+        s = self.state
+        return None if s is None else (s.x, s.y)
+
+    def heartbeat(self) -> None:
+        v = self.ap.vehicle if self.ap is not None else None
+        base = MODE_FLAGS
+        custom, status = int(Mode.HOLD), M.MAV_STATE_STANDBY
+        if v is not None:
+            custom = int(v.mode)
+            if v.armed:
+                base |= M.MAV_MODE_FLAG_SAFETY_ARMED
+                status = M.MAV_STATE_ACTIVE
+            if v.mode in (Mode.AUTO, Mode.RTL):
+                base |= M.MAV_MODE_FLAG_AUTO_ENABLED | M.MAV_MODE_FLAG_GUIDED_ENABLED | M.MAV_MODE_FLAG_STABILIZE_ENABLED
+            elif v.mode == Mode.GUIDED:
+                base |= M.MAV_MODE_FLAG_GUIDED_ENABLED | M.MAV_MODE_FLAG_STABILIZE_ENABLED
+            elif v.mode == Mode.MANUAL:
+                base |= M.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+            if self.failsafe_active:
+                status = M.MAV_STATE_CRITICAL
+        self._send("heartbeat", M.MAV_TYPE_SURFACE_BOAT, M.MAV_AUTOPILOT_GENERIC, base, custom, status)
+        self.last_wall_heartbeat = self.clock()
+
+    def _emit(self, name: str) -> None:
+        s, t_ms = self.state, int(round(self.t * 1000))
+        if name == "HEARTBEAT":
+            self.heartbeat()
+            return
+        if name == "MISSION_CURRENT":
+            self._mission_current()
+            return
+        if name == "SYS_STATUS":
+            self._sys_status()
+            return
+        if name == "HOME_POSITION":
+            self._home()
+            return
+        if s is None:
+            return
+        vn = s.u * math.cos(s.psi) - s.v * math.sin(s.psi)
+        ve = s.u * math.sin(s.psi) + s.v * math.cos(s.psi)
+        if name == "LOCAL_POSITION_NED":
+            self._send("local_position_ned", t_ms, s.x, s.y, 0.0, vn, ve, 0.0)
+        elif name == "ATTITUDE":
+            self._send("attitude", t_ms, 0.0, 0.0, s.psi, 0.0, 0.0, s.r)
+        elif name in ("GLOBAL_POSITION_INT", "GPS_RAW_INT"):
+            lat, lon = self.geo.sea_level_to_geodetic(s.x, s.y)
+            hdg = int(round(math.degrees(s.psi) % 360.0 * 100)) % 36000
+            if name == "GLOBAL_POSITION_INT":
+                self._send("global_position_int", t_ms, int(round(lat * 1e7)), int(round(lon * 1e7)),
+                           int(round(self.geo.alt0 * 1000)), 0, int(round(vn * 100)), int(round(ve * 100)), 0, hdg)
+            else:
+                cog = int(round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100)) % 36000
+                eph = min(int(round(s.position_std * 100)), 65534)
+                self._send("gps_raw_int", int(round(self.t * 1e6)), 3, int(round(lat * 1e7)), int(round(lon * 1e7)),
+                           int(round(self.geo.alt0 * 1000)), eph, 65535, int(round(math.hypot(vn, ve) * 100)), cog, 255)
+        elif name == "VFR_HUD":
+            thr = 0  # VFR_HUD's throttle is 0-100 %: the mean of the two thrusters' magnitudes
+            if self.cmd is not None:
+                thr = int(round(50.0 * (abs(self.cmd.port_cmd) + abs(self.cmd.stdb_cmd))))
+            self._send("vfr_hud", 0.0, math.hypot(vn, ve), int(round(math.degrees(s.psi) % 360.0)) % 360,
+                       max(0, min(100, thr)), 0.0, 0.0)
+        elif name == "ACTUATOR_OUTPUT_STATUS":
+            if self.cmd is not None:
+                act = [float(self.cmd.port_cmd), float(self.cmd.stdb_cmd)] + [0.0] * 30
+                self._send("actuator_output_status", int(round(self.t * 1e6)), 0b11, act)
+
+    def _mission_current(self) -> None:
+        v = self.ap.vehicle
+        total = len(v.mission)
+        if total == 0:
+            state = M.MISSION_STATE_NO_MISSION
+        elif v.complete and v.mode == Mode.AUTO:
+            state = M.MISSION_STATE_COMPLETE
+        elif v.mode == Mode.AUTO and v.armed:
+            state = M.MISSION_STATE_ACTIVE
+        else:
+            state = M.MISSION_STATE_PAUSED if v.current > 0 else M.MISSION_STATE_NOT_STARTED
+        self._send("mission_current", min(v.current, max(total - 1, 0)), total, state, 1 if v.mode == Mode.AUTO else 0)
+
+    def _sys_status(self) -> None:
+        ap, s = self.ap, self.state
+        present = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_MAG | M.MAV_SYS_STATUS_SENSOR_GPS
+                   | M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL | M.MAV_SYS_STATUS_AHRS
+                   | M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)
+        health = 0
+        if s is not None:
+            health |= M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_MAG | M.MAV_SYS_STATUS_AHRS
+            if s.position_std < 3.0:
+                health |= M.MAV_SYS_STATUS_SENSOR_GPS
+        if ap is not None and ap.mode in ("planned", "complete"):
+            health |= M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL  # the planner delivers local paths
+        health |= M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+        errors = min(sum(self.rejects.values()), 65535)
+        self._send("sys_status", present, present, health, 0, 0, -1, -1, 0, errors, 0, 0, 0, 0)
+
+    def _home(self) -> None:
+        v = self.ap.vehicle if self.ap is not None else None
+        if v is None or v.home is None:
+            return
+        lat, lon = self.geo.sea_level_to_geodetic(*v.home)
+        self._send("home_position", int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(self.geo.alt0 * 1000)),
+                   float(v.home[0]), float(v.home[1]), 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
+                   int(round(self.t * 1e6)))
+
+    def _trajectory(self) -> None:
+        paths = self.ap.local_paths
+        if len(paths) == self._paths_sent:
+            return
+        self._paths_sent = len(paths)
+        pts = paths[-1]["path_ned"]
+        # Five points along the local path (the message's capacity), first and last included.
+        idx = [round(i * (len(pts) - 1) / 4) for i in range(5)] if len(pts) >= 5 else list(range(len(pts)))
+        n = len(idx)
+        xs = [float(pts[i][0]) for i in idx] + [math.nan] * (5 - n)
+        ys = [float(pts[i][1]) for i in idx] + [math.nan] * (5 - n)
+        nan5 = [math.nan] * 5
+        self._send("trajectory_representation_waypoints", int(round(self.t * 1e6)), n, xs, ys, [0.0] * n + [math.nan] * (5 - n),
+                   nan5, nan5, nan5, nan5, nan5, nan5, nan5, nan5, [M.MAV_CMD_NAV_WAYPOINT] * n + [65535] * (5 - n))
+
+    def on_frame(self, t: float, s: Any, mode: str, cmd: Any) -> None:
+        """Per control frame: the streams that are due at simulated time ``t``, progress events."""
+        try:
+            self._on_frame(t, s, mode, cmd)
+        except Exception as exc:  # telemetry must never stop the control loop
+            self._internal_error("on_frame", exc)
+
+    def _internal_error(self, where: str, exc: Exception) -> None:
+        self.encode_errors[where] += 1
+        if self.encode_errors[where] == 1:
+            self.log(f"gcs: {where}: {type(exc).__name__}: {exc}")
+
+    def _on_frame(self, t: float, s: Any, mode: str, cmd: Any) -> None:
+        self.t, self.state, self.cmd = t, s, cmd
+        v = self.ap.vehicle if self.ap is not None else None
+        if v is not None:
+            for seq in v.take_reached():
+                self.mission_item_reached(seq)
+                self._mission_current()
+            if v.changed:
+                v.changed = False
+                self.heartbeat()
+                self._mission_current()
+        for name, interval in self.intervals.items():
+            if interval <= 0:
+                continue
+            if t + 1e-9 >= self.next_due[name] or self.next_due[name] - t > interval + 1.0:
+                self.next_due[name] = t + interval
+                self._emit(name)
+        if self.ap is not None:
+            self._trajectory()
+
+    # -- receiving ------------------------------------------------------------------------------
+    def service(self) -> None:
+        """Between frames: read every transport, answer, run timeouts and the failsafe."""
+        try:
+            self._service()
+        except Exception as exc:  # e.g. a socket error: the control loop goes on
+            self._internal_error("service", exc)
+
+    def _service(self) -> None:
+        now = self.clock()
+        for tr in self.transports:
+            for peer, data in tr.receive():
+                if tr.stream and not data:
+                    self._streams.pop(peer, None)
+                    continue
+                stream = self._streams.get(peer) if tr.stream else None
+                if stream is None:
+                    stream = _Stream(self.key)
+                    if tr.stream:
+                        self._streams[peer] = stream
+                    elif "udp" not in self._streams:
+                        self._streams["udp"] = stream
+                    else:
+                        stream = self._streams["udp"]  # datagrams: one parser, signing state shared
+                msgs, rejects = stream.parse(data, keep=tr.stream)
+                for r in rejects:
+                    self.rejects[r] += 1
+                if msgs:
+                    tr.heard(peer)
+                for m in msgs:
+                    if self.mirror is not None:
+                        self.mirror.send(bytes(m.get_msgbuf()))
+                    try:
+                        self._handle(m, now)
+                    except Exception as exc:  # absurd fields must never stop the boat
+                        self.rejects["handler_error"] += 1
+                        self.log(f"gcs: {m.get_type()} dropped: {type(exc).__name__}: {exc}")
+        if self.mission is not None:
+            for out in self.mission.tick(now):
+                self._send(out.name, *out.args)
+            self._mission_events()
+        self._failsafe(now)
+        if self.ap is not None and now - self.last_wall_heartbeat >= 1.0:
+            self.heartbeat()
+
+    def _allowed(self, m: Any, kind: str) -> bool:
+        if kind not in WRITES:
+            return True
+        if self.params.allowed_sysids and m.get_srcSystem() not in self.params.allowed_sysids:
+            self.security["not_allowed_sysid"] += 1
+            return False
+        if self.key is not None and not getattr(m, "_signed", False):
+            signed_flag = m.get_header().incompat_flags & mavlink2.MAVLINK_IFLAG_SIGNED
+            self.security["bad_signature" if signed_flag else "unsigned"] += 1
+            return False
+        return True
+
+    def _refuse(self, m: Any, kind: str) -> None:
+        src = (m.get_srcSystem(), m.get_srcComponent())
+        if kind in ("COMMAND_LONG", "COMMAND_INT"):
+            self._send("command_ack", m.command, M.MAV_RESULT_DENIED, 0, 0, src[0], src[1])
+        elif kind in MISSION_WRITES:
+            self._send("mission_ack", src[0], src[1], M.MAV_MISSION_DENIED, getattr(m, "mission_type", 0))
+
+    def _handle(self, m: Any, now: float) -> None:
+        kind = m.get_type()
+        self.received[kind] += 1
+        if m.get_srcSystem() == self.sysid and m.get_srcComponent() == self.compid:
+            return  # our own frames looped back
+        if kind == "HEARTBEAT":
+            if m.type == M.MAV_TYPE_GCS and (self.key is None or getattr(m, "_signed", False)):
+                self.last_gcs_heartbeat = now
+            return
+        if not self._allowed(m, kind):
+            self._refuse(m, kind)
+            return
+        if kind.startswith("MISSION_") and self.mission is not None:
+            for out in self.mission.handle(m, now):
+                self._send(out.name, *out.args)
+            self._mission_events()
+        elif kind in ("COMMAND_LONG", "COMMAND_INT"):
+            self._command(m, kind)
+        elif kind == "SET_MODE":
+            if m.target_system == self.sysid and m.base_mode & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+                self._set_mode(m.custom_mode)
+        elif kind.startswith("PARAM_"):
+            self._param(m, kind)
+        elif kind == "MANUAL_CONTROL":
+            if m.target in (0, self.sysid) and self.ap is not None:
+                clip = lambda v: max(-1.0, min(1.0, v / 1000.0))  # noqa: E731
+                self.ap.vehicle.manual = (clip(m.x), clip(m.r), now)
+        elif kind == "REQUEST_DATA_STREAM":
+            if m.target_system in (0, self.sysid):
+                self._data_stream(m.req_stream_id, m.req_message_rate, m.start_stop)
+
+    def _mission_events(self) -> None:
+        for ev in self.mission.take_events():
+            if ev.kind == "replaced":
+                wps = []
+                for it in ev.items:
+                    n, e = self.geo.geodetic_to_sea_level(it.lat, it.lon)
+                    wps.append(Waypoint(n, e, it.acceptance_radius(self.ap.vehicle.default_radius)))
+                self.ap.vehicle.replace_mission(wps, self._position())
+                self.statustext(f"mission: {len(wps)} items accepted" if wps else "mission cleared")
+                self._mission_current()
+            elif ev.kind == "set_current":
+                self.ap.vehicle.set_current(ev.seq, self._position())
+                self._mission_current()
+            elif ev.kind == "rejected" and self.mission.last_reject is not None:
+                seq, why = self.mission.last_reject
+                self.statustext(f"mission item {seq} rejected: {why}", M.MAV_SEVERITY_WARNING)
+
+    # -- commands -------------------------------------------------------------------------------
+    def _set_mode(self, custom_mode: float) -> tuple[int, str]:
+        try:
+            mode = Mode(int(custom_mode))
+        except (ValueError, OverflowError):
+            return M.MAV_RESULT_DENIED, f"unknown mode {custom_mode}"
+        ok, why = self.ap.vehicle.set_mode(mode, self._position())
+        if ok:
+            self.failsafe_active = False
+            self.statustext(f"mode {mode.name}")
+        return (M.MAV_RESULT_ACCEPTED if ok else M.MAV_RESULT_DENIED), why
+
+    def _command(self, m: Any, kind: str) -> None:
+        if m.target_system not in (0, self.sysid) or m.target_component not in (0, self.compid):
+            return
+        src = (m.get_srcSystem(), m.get_srcComponent())
+        p = [m.param1, m.param2, m.param3, m.param4]
+        if kind == "COMMAND_INT":
+            x5, y6 = m.x * 1e-7, m.y * 1e-7
+        else:
+            x5, y6 = m.param5, m.param6
+        result, why = self._execute(int(m.command), p, x5, y6)
+        self.commands[f"{m.command}:{result}"] += 1
+        self._send("command_ack", m.command, result, 0, 0, src[0], src[1])
+        if result != M.MAV_RESULT_ACCEPTED and why:
+            self.statustext(why, M.MAV_SEVERITY_WARNING)
+
+    def _execute(self, cmd: int, p: list[float], x5: float, y6: float) -> tuple[int, str]:
+        v = self.ap.vehicle
+        pos = self._position()
+        ok = M.MAV_RESULT_ACCEPTED
+
+        def finite(x: float) -> bool:
+            return x is not None and math.isfinite(x)
+
+        if cmd == M.MAV_CMD_COMPONENT_ARM_DISARM:
+            if not finite(p[0]) or p[0] not in (0.0, 1.0):
+                return M.MAV_RESULT_DENIED, "arm: param1 must be 0 or 1"
+            if p[0] == 1.0 and pos is None:
+                return M.MAV_RESULT_TEMPORARILY_REJECTED, "arm: no navigation fix yet"
+            _, why = v.arm(p[0] == 1.0)
+            self.statustext(why)
+            return ok, why
+        if cmd == M.MAV_CMD_DO_SET_MODE:
+            if not finite(p[0]) or not finite(p[1]) or not int(p[0]) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+                return M.MAV_RESULT_DENIED, "set mode: custom mode flag (param1) and mode (param2) needed"
+            return self._set_mode(p[1])
+        if cmd == M.MAV_CMD_MISSION_START:
+            first = int(p[0]) if finite(p[0]) else 0
+            if not v.armed:
+                return M.MAV_RESULT_DENIED, "mission start: not armed"
+            good, why = v.mission_start(first, pos)
+            if good:
+                self.failsafe_active = False
+            return (ok if good else M.MAV_RESULT_DENIED), why
+        if cmd == M.MAV_CMD_DO_PAUSE_CONTINUE:
+            mode = Mode.HOLD if (finite(p[0]) and p[0] == 0.0) else Mode.AUTO
+            return self._set_mode(mode)
+        if cmd == M.MAV_CMD_NAV_LOITER_UNLIM:
+            return self._set_mode(Mode.HOLD)
+        if cmd == M.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            return self._set_mode(Mode.RTL)
+        if cmd == M.MAV_CMD_DO_CHANGE_SPEED:
+            speed = p[1]
+            if not finite(speed) or speed == -1.0:
+                return ok, "speed unchanged"
+            good, why = self.params_table.set("CRUISE_SPEED", float(speed))
+            return (ok if good else M.MAV_RESULT_DENIED), why
+        if cmd == M.MAV_CMD_DO_REPOSITION:
+            if not (finite(x5) and finite(y6)) or not -90 <= x5 <= 90 or not -180 <= y6 <= 180:
+                return M.MAV_RESULT_DENIED, "reposition: bad latitude/longitude"
+            if self._on_chart(x5, y6) is not None:
+                return M.MAV_RESULT_DENIED, "reposition: target off the chart"
+            good, why = v.reposition(self.geo.geodetic_to_sea_level(x5, y6), pos)
+            return (ok if good else M.MAV_RESULT_DENIED), why
+        if cmd == M.MAV_CMD_DO_SET_MISSION_CURRENT:
+            seq = int(p[0]) if finite(p[0]) else -1
+            good = v.set_current(seq, pos)
+            self._mission_current()
+            return (ok if good else M.MAV_RESULT_DENIED), "" if good else f"no mission item {seq}"
+        if cmd == M.MAV_CMD_SET_MESSAGE_INTERVAL:
+            name = ID_NAMES.get(int(p[0])) if finite(p[0]) else None
+            if name is None or not finite(p[1]):
+                return M.MAV_RESULT_DENIED, "message interval: message not streamed here"
+            us = p[1]
+            if us == -1:
+                self.intervals[name] = 0.0
+            elif us == 0:
+                self.intervals[name] = DEFAULT_INTERVALS[name]
+            elif us > 0:
+                self.intervals[name] = max(us * 1e-6, 0.01)  # at most once per IMU frame
+            else:
+                return M.MAV_RESULT_DENIED, "message interval: negative interval"
+            self.next_due[name] = self.t
+            return ok, ""
+        if cmd == M.MAV_CMD_GET_MESSAGE_INTERVAL:
+            name = ID_NAMES.get(int(p[0])) if finite(p[0]) else None
+            if name is None:
+                return M.MAV_RESULT_DENIED, ""
+            iv = self.intervals[name]
+            self._send("message_interval", MSG_IDS[name], int(iv * 1e6) if iv > 0 else -1)
+            return ok, ""
+        if cmd == M.MAV_CMD_REQUEST_MESSAGE:
+            name = ON_REQUEST.get(int(p[0])) if finite(p[0]) else None
+            if name is None:
+                return M.MAV_RESULT_DENIED, "request message: not available"
+            self._on_request(name)
+            return ok, ""
+        if cmd == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
+            self._on_request("AUTOPILOT_VERSION")
+            return ok, ""
+        if cmd == M.MAV_CMD_GET_HOME_POSITION:
+            self._home()
+            return ok, ""
+        return M.MAV_RESULT_UNSUPPORTED, ""
+
+    def _on_request(self, name: str) -> None:
+        if name == "AUTOPILOT_VERSION":
+            caps = (M.MAV_PROTOCOL_CAPABILITY_MISSION_INT | M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+                    | M.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | M.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT)
+            self._send("autopilot_version", caps, FIRMWARE_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0,
+                       self.sysid)
+        else:
+            self._emit(name)
+
+    def _data_stream(self, stream_id: int, rate_hz: int, start: int) -> None:
+        names = sorted({n for g in STREAM_GROUPS.values() for n in g}) if stream_id == M.MAV_DATA_STREAM_ALL \
+            else STREAM_GROUPS.get(stream_id, ())
+        for n in names:
+            self.intervals[n] = (1.0 / max(1, min(rate_hz, 100))) if (start and rate_hz > 0) else 0.0
+            self.next_due[n] = self.t
+
+    # -- parameters -----------------------------------------------------------------------------
+    def _param_value(self, i: int) -> None:
+        p = self.params_table.params[i]
+        self._send("param_value", p.name.encode(), float(p.get()), M.MAV_PARAM_TYPE_REAL32,
+                   len(self.params_table), i)
+
+    def _param(self, m: Any, kind: str) -> None:
+        if self.params_table is None or getattr(m, "target_system", self.sysid) not in (0, self.sysid):
+            return
+        t = self.params_table
+        if kind == "PARAM_REQUEST_LIST":
+            for i in range(len(t)):
+                self._param_value(i)
+        elif kind == "PARAM_REQUEST_READ":
+            i = m.param_index if m.param_index >= 0 else t.index.get(_text(m.param_id), -1)
+            if 0 <= i < len(t):
+                self._param_value(i)
+        elif kind == "PARAM_SET":
+            name = _text(m.param_id)
+            ok, why = t.set(name, float(m.param_value))
+            if name in t.index:
+                self._param_value(t.index[name])  # the value now in force, changed or not
+            if not ok:
+                self.statustext(why, M.MAV_SEVERITY_WARNING)
+            else:
+                self.log(f"gcs: {why}")
+
+    # -- failsafe -------------------------------------------------------------------------------
+    def _failsafe(self, now: float) -> None:
+        if self.ap is None or self.last_gcs_heartbeat is None or self.failsafe_action == "none":
+            return
+        v = self.ap.vehicle
+        lost = now - self.last_gcs_heartbeat > self.failsafe_timeout
+        if not lost:
+            return
+        if self.failsafe_active or not v.armed or v.mode != Mode.AUTO:
+            return
+        self.failsafe_active = True
+        target = Mode.RTL if self.failsafe_action == "rtl" and v.home is not None else Mode.HOLD
+        v.set_mode(target, self._position())
+        self.failsafe_active = True
+        msg = f"GCS failsafe: no heartbeat {now - self.last_gcs_heartbeat:.1f}s: {target.name}"
+        self.log(f"gcs: {msg}")
+        self.statustext(msg, M.MAV_SEVERITY_CRITICAL)
+        if self.ap is not None:
+            self.ap.stats.events.append((self.t, msg))
+
+    # -- end ------------------------------------------------------------------------------------
+    def summary(self) -> dict[str, Any]:
+        return {
+            "endpoints": [f"{h}:{p}" for h, p in self.addresses],
+            "frames_sent": self.sent,
+            "received": dict(self.received),
+            "rejects": dict(self.rejects),
+            "security_rejects": dict(self.security),
+            "mission": dict(self.mission.stats) if self.mission is not None else {},
+            "param_rejects": self.params_table.rejected if self.params_table is not None else 0,
+            "encode_errors": dict(self.encode_errors),
+            "failsafe_active": self.failsafe_active,
+        }
+
+    def close(self) -> None:
+        for tr in self.transports:
+            tr.close()
+        self.transports = []
+        if getattr(self, "mirror", None) is not None:
+            self.mirror.close()
+            self.mirror = None

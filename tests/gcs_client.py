@@ -1,0 +1,147 @@
+"""A small ground station written with pymavlink's mavutil, for the GCS-link tests.
+
+It talks to a live `hil run` over loopback UDP: heartbeats at 1 Hz (wall), mission upload and
+download the way a GCS does them (answering MISSION_REQUEST_INT or legacy MISSION_REQUEST), commands
+with their COMMAND_ACK, parameters. Every wait is bounded and keeps the heartbeat going.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+os.environ.setdefault("MAVLINK20", "1")  # before mavutil picks its dialect: MAVLink 2 frames
+
+from pymavlink import mavutil  # noqa: E402
+
+REPO = Path(__file__).resolve().parent.parent
+M = mavutil.mavlink
+
+
+class Gcs:
+    def __init__(self, url: str, sysid: int = 255, compid: int = 190) -> None:
+        self.conn = mavutil.mavlink_connection(url, source_system=sysid, source_component=compid,
+                                               dialect="ardupilotmega", autoreconnect=False)
+        self.mav = self.conn.mav
+        self.target = (1, 1)
+        self.heartbeats_on = True
+        self._last_hb = 0.0
+        self.seen: list[Any] = []
+
+    def beat(self, force: bool = False) -> None:
+        if (self.heartbeats_on or force) and time.monotonic() - self._last_hb >= 1.0:
+            self._last_hb = time.monotonic()
+            self.mav.heartbeat_send(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, M.MAV_STATE_ACTIVE)
+
+    def recv(self, types: list[str] | str | None, timeout: float,
+             cond: Callable[[Any], bool] = lambda _m: True) -> Any:
+        """The next message of ``types`` from the boat that satisfies ``cond`` (None after ``timeout`` s)."""
+        if isinstance(types, str):
+            types = [types]
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            self.beat()
+            m = self.conn.recv_match(blocking=True, timeout=0.2)
+            if m is None or m.get_srcSystem() != self.target[0]:
+                continue
+            if types is None or m.get_type() in types:
+                if cond(m):
+                    return m
+        return None
+
+    def connect(self, timeout: float = 240.0) -> Any:
+        self.beat(force=True)
+        return self.recv("HEARTBEAT", timeout)
+
+    def drain(self) -> None:
+        while self.conn.recv_match(blocking=False) is not None:
+            pass
+
+    # -- commands ------------------------------------------------------------------------------
+    def command(self, cmd: int, *params: float, timeout: float = 10.0) -> Any:
+        p = list(params) + [0.0] * (7 - len(params))
+        self.drain()  # acks the boat sent to other ground stations earlier
+        self.mav.command_long_send(self.target[0], self.target[1], cmd, 0, *p)
+        me = (self.mav.srcSystem, self.mav.srcComponent)
+        return self.recv("COMMAND_ACK", timeout, lambda a: a.command == cmd and (a.target_system, a.target_component) == me)
+
+    def arm(self, on: bool = True) -> Any:
+        return self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0 if on else 0.0, float("nan"))
+
+    def set_mode(self, custom_mode: int) -> Any:
+        return self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode,
+                            float("nan"), float("nan"))
+
+    # -- mission ------------------------------------------------------------------------------
+    def upload(self, items: list[tuple], timeout: float = 30.0, stop_after: int | None = None) -> Any:
+        """Upload (frame, command, p1, p2, p3, p4, lat_e7, lon_e7, alt) items; the MISSION_ACK (or None).
+
+        ``stop_after``: answer only that many item requests, then go silent (an interrupted upload).
+        """
+        self.drain()
+        self.mav.mission_count_send(self.target[0], self.target[1], len(items), M.MAV_MISSION_TYPE_MISSION)
+        answered = 0
+        end = time.monotonic() + timeout
+        self.requests: list[int] = []
+        while time.monotonic() < end:
+            m = self.recv(["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"], end - time.monotonic())
+            if m is None:
+                return None
+            if m.get_type() == "MISSION_ACK":
+                return m
+            self.requests.append(m.seq)
+            if stop_after is not None and answered >= stop_after:
+                continue
+            fr, cmd, p1, p2, p3, p4, x, y, z = items[m.seq]
+            self.mav.mission_item_int_send(self.target[0], self.target[1], m.seq, fr, cmd, 0, 1, p1, p2, p3, p4,
+                                           x, y, z, M.MAV_MISSION_TYPE_MISSION)
+            answered += 1
+        return None
+
+    def download(self, timeout: float = 30.0) -> list[Any] | None:
+        self.drain()
+        self.mav.mission_request_list_send(self.target[0], self.target[1], M.MAV_MISSION_TYPE_MISSION)
+        c = self.recv("MISSION_COUNT", timeout)
+        if c is None:
+            return None
+        items = []
+        for seq in range(c.count):
+            self.mav.mission_request_int_send(self.target[0], self.target[1], seq, M.MAV_MISSION_TYPE_MISSION)
+            it = self.recv("MISSION_ITEM_INT", timeout, lambda m, s=seq: m.seq == s)
+            if it is None:
+                return None
+            items.append(it)
+        self.mav.mission_ack_send(self.target[0], self.target[1], M.MAV_MISSION_ACCEPTED, M.MAV_MISSION_TYPE_MISSION)
+        return items
+
+    # -- parameters -----------------------------------------------------------------------------
+    def param_set(self, name: str, value: float, timeout: float = 10.0) -> Any:
+        self.drain()
+        self.mav.param_set_send(self.target[0], self.target[1], name.encode(), value, M.MAV_PARAM_TYPE_REAL32)
+        return self.recv("PARAM_VALUE", timeout, lambda m: m.param_id == name)
+
+    def close(self) -> None:
+        self.conn.close()
+
+
+def start_run(out: Path, *args: str) -> subprocess.Popen:
+    """`hil run` as a real subprocess (own session, so the test can stop the whole tree)."""
+    cmd = [sys.executable, "-m", "hil", "run", "--json", "--no-plot", "--out", str(out), *args]
+    return subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+
+
+def stop_run(proc: subprocess.Popen, timeout: float = 60.0) -> tuple[str, str]:
+    """SIGINT (the run stops its processes and writes its folder), SIGKILL of the group if it hangs."""
+    if proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGINT)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        out, err = proc.communicate()
+    return out.decode(errors="replace"), err.decode(errors="replace")

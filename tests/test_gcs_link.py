@@ -1,0 +1,160 @@
+"""The GCS link's transports in-process, on real loopback sockets: udpout, udpin with several ground
+stations, tcpin with frames split across reads, forward() of any dialect message, the recorder copy."""
+
+from __future__ import annotations
+
+import socket
+import time
+
+import pytest
+
+from autopilot_bridge.gcs.config import GcsParams
+from autopilot_bridge.gcs.link import GcsLink, load_signing_key
+from autopilot_bridge.gcs.transport import parse_endpoint
+from common.geodesy import LocalFrame
+from common.mavlink import MAV_TYPE as M
+from common.mavlink import mavlink2
+from hil.hilrun import free_udp_port
+
+GEO = LocalFrame(38.92, 121.65, 0.0)
+
+
+def params(*endpoints: str) -> GcsParams:
+    return GcsParams(endpoints=tuple(endpoints), wait_for_arm=False, failsafe_timeout=5.0, failsafe_action="hold",
+                     mission_timeout=0.25, mission_retries=5, max_mission_items=200, signing_key_file="",
+                     allowed_sysids=(), max_peers=8)
+
+
+def free_tcp_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def gcs_heartbeat(sysid: int = 255) -> bytes:
+    mav = mavlink2.MAVLink(None, sysid, 190)
+    return bytes(mav.heartbeat_encode(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(mav))
+
+
+def ais(link: GcsLink) -> None:
+    link.forward("AIS_VESSEL", 412345678, 389210000, 1216510000, 9000, 9000, 500, 0, 0, 70, 50, 10, 5, 5,
+                 b"BXYZ", b"TEST SHIP", 1, 0)
+
+
+def read_until(sock: socket.socket, want: str, link: GcsLink, timeout: float = 5.0):
+    """Service the link and parse what ``sock`` receives until a ``want`` message arrives (bounded)."""
+    parser = mavlink2.MAVLink(None, 255, 190)
+    parser.robust_parsing = True
+    sock.settimeout(0.05)
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        link.service()
+        try:
+            data = sock.recv(65535)
+        except (TimeoutError, socket.timeout):
+            continue
+        for m in parser.parse_buffer(data) or []:
+            if m.get_type() == want:
+                return m
+    return None
+
+
+@pytest.fixture
+def closing():
+    items = []
+    yield items.append
+    for it in items:
+        it.close()
+
+
+def test_udpout_reaches_a_listening_gcs_without_it_talking_first(closing):
+    port = free_udp_port()
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    closing(gcs)
+    gcs.bind(("127.0.0.1", port))
+    link = GcsLink(params(f"udpout:127.0.0.1:{port}"), 1, 1, GEO)
+    closing(link)
+    link.heartbeat()
+    hb = read_until(gcs, "HEARTBEAT", link)
+    assert hb is not None and hb.type == M.MAV_TYPE_SURFACE_BOAT and hb.get_srcSystem() == 1
+
+
+def test_udpin_answers_several_gcs_and_forward_sends_any_message_to_each_and_to_the_recorder(closing):
+    port, rec_port = free_udp_port(), free_udp_port()
+    recorder = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    closing(recorder)
+    recorder.bind(("127.0.0.1", rec_port))
+    link = GcsLink(params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO, mirror_to=(f"127.0.0.1:{rec_port}",))
+    closing(link)
+    clients = []
+    for sysid in (255, 254):
+        c = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        closing(c)
+        c.bind(("127.0.0.1", 0))
+        c.sendto(gcs_heartbeat(sysid), ("127.0.0.1", port))
+        clients.append(c)
+    end = time.monotonic() + 5.0
+    while link.received["HEARTBEAT"] < 2 and time.monotonic() < end:
+        link.service()
+        time.sleep(0.01)
+    assert link.received["HEARTBEAT"] == 2
+    ais(link)
+    for c in clients:
+        m = read_until(c, "AIS_VESSEL", link)
+        assert m is not None and m.MMSI == 412345678 and m.get_srcSystem() == 1 and m.name == "TEST SHIP"
+    # The recorder got the ground stations' heartbeats and what the boat sent.
+    parser = mavlink2.MAVLink(None)
+    got = set()
+    recorder.settimeout(0.2)
+    try:
+        while True:
+            for m in parser.parse_buffer(recorder.recv(65535)) or []:
+                got.add((m.get_type(), m.get_srcSystem()))
+    except (TimeoutError, socket.timeout):
+        pass
+    assert {("HEARTBEAT", 255), ("HEARTBEAT", 254), ("AIS_VESSEL", 1)} <= got
+
+
+def test_tcpin_parses_frames_split_across_reads_and_answers_the_connection(closing):
+    port = free_tcp_port()
+    link = GcsLink(params(f"tcpin:127.0.0.1:{port}"), 1, 1, GEO)
+    closing(link)
+    c = socket.create_connection(("127.0.0.1", port), timeout=5.0)
+    closing(c)
+    frame = gcs_heartbeat() + b"\x00garbage\xff" + gcs_heartbeat()
+    c.sendall(frame[:7])
+    end = time.monotonic() + 5.0
+    while not link.transports[0].conns and time.monotonic() < end:
+        link.service()
+    link.service()
+    c.sendall(frame[7:])
+    while link.received["HEARTBEAT"] < 2 and time.monotonic() < end:
+        link.service()
+        time.sleep(0.01)
+    assert link.received["HEARTBEAT"] == 2 and link.rejects["not_mavlink"] >= 1
+    ais(link)
+    assert read_until(c, "AIS_VESSEL", link) is not None
+
+
+def test_endpoint_strings_and_signing_keys(tmp_path):
+    assert parse_endpoint("udpout:127.0.0.1:14550") == ("udpout", "127.0.0.1", 14550)
+    for bad in ("udp:1.2.3.4:5", "udpout:127.0.0.1", "tcpin:host:99999", "udpout:127.0.0.1:0"):
+        with pytest.raises(ValueError):
+            parse_endpoint(bad)
+    (tmp_path / "raw").write_bytes(bytes(range(32)))
+    (tmp_path / "hex").write_text(bytes(range(32)).hex() + "\n")
+    (tmp_path / "pass").write_text("correct horse\n")
+    import hashlib
+
+    assert load_signing_key(str(tmp_path / "raw")) == bytes(range(32)) == load_signing_key(str(tmp_path / "hex"))
+    assert load_signing_key(str(tmp_path / "pass")) == hashlib.sha256(b"correct horse").digest()
+    with pytest.raises(ValueError):
+        load_signing_key(str(tmp_path / "missing"))
+
+
+def test_a_field_out_of_its_wire_range_costs_one_message_not_the_caller(closing):
+    link = GcsLink(params(), 1, 1, GEO)
+    closing(link)
+    link.forward("VFR_HUD", 0.0, 1.0, 90, -40, 0.0, 0.0)   # throttle is uint16 on the wire
+    link.forward("VFR_HUD", 0.0, 1.0, 90, 40, 0.0, 0.0)
+    assert link.encode_errors["vfr_hud"] == 1 and link.sent == 1

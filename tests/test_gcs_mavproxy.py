@@ -1,0 +1,112 @@
+"""The GCS session with MAVProxy (no graphical modules) against a live `hil run`.
+
+Skipped, with the reason, where MAVProxy is not installed (`pip install MAVProxy`; it is not in the
+`test` extra: it pulls in OpenCV and VTK). MAVProxy is driven through its console: each command is
+sent when the previous one's answer has been printed (bounded waits, no sleeps).
+"""
+
+from __future__ import annotations
+
+import queue
+import shutil
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from gcs_client import Gcs, start_run, stop_run
+
+from common.geodesy import LocalFrame
+from hil.hilrun import free_udp_port
+
+MAVPROXY = shutil.which("mavproxy.py") or str(Path(sys.executable).with_name("mavproxy.py"))
+pytestmark = pytest.mark.skipif(not Path(MAVPROXY).exists(), reason="MAVProxy is not installed (pip install MAVProxy)")
+
+GEO = LocalFrame(38.92, 121.65, 0.0)
+WAYPOINTS_MAP = [(28.3, 47.5), (34.7, 55.0), (41.0, 62.5), (47.3, 70.0), (53.7, 77.5), (60.0, 85.0)]
+
+
+class Console:
+    def __init__(self, cmd: list[str], cwd: Path) -> None:
+        self.proc = subprocess.Popen(cmd, cwd=cwd, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True, bufsize=1, start_new_session=True)
+        self.lines: queue.Queue[str] = queue.Queue()
+        self.seen: list[str] = []
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            self.lines.put(line.rstrip("\n"))
+
+    def send(self, line: str) -> None:
+        self.proc.stdin.write(line + "\n")
+        self.proc.stdin.flush()
+
+    def expect(self, *texts: str, timeout: float = 60.0) -> str:
+        """The first line holding one of ``texts`` (AssertionError after ``timeout`` s)."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            try:
+                line = self.lines.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            self.seen.append(line)
+            if any(t in line for t in texts):
+                return line
+        raise AssertionError(f"MAVProxy never printed {texts!r}; last lines:\n" + "\n".join(self.seen[-30:]))
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            try:
+                self.send("exit")
+                self.proc.wait(timeout=10)
+            except (OSError, subprocess.TimeoutExpired):
+                self.proc.kill()
+                self.proc.wait()
+
+
+def test_mavproxy_session(tmp_path):
+    wp = tmp_path / "mission.txt"
+    lines = ["QGC WPL 110"]
+    for i, (x, y) in enumerate(WAYPOINTS_MAP):
+        lat, lon = GEO.sea_level_to_geodetic(y, x)
+        lines.append(f"{i}\t0\t3\t16\t0\t3\t0\t0\t{lat:.7f}\t{lon:.7f}\t0\t1")
+    wp.write_text("\n".join(lines) + "\n")
+    port = free_udp_port()
+    proc = start_run(tmp_path / "run", "--scenario", "harbour", "--duration", "5000", "--wait-for-arm",
+                     "--gcs", f"udpin:127.0.0.1:{port}")
+    state = tmp_path / "mavproxy"
+    mp = Console([MAVPROXY, f"--master=udpout:127.0.0.1:{port}", "--source-system=255",
+                  "--default-modules=wp,param,mode,arm,cmdlong,log", f"--state-basedir={state}"], tmp_path)
+    try:
+        mp.expect("Detected vehicle 1:1", timeout=240)
+        mp.expect("Mode HOLD")
+        mp.send(f"wp load {wp}")
+        mp.expect("Got MISSION_ACK: TYPE_MISSION: ACCEPTED")
+        mp.send("wp list")
+        mp.expect("Saved 6 waypoints")
+        got = [ln.split("\t") for ln in (state / "way.txt").read_text().splitlines()[1:]]
+        assert len(got) == 6
+        for (x, y), row in zip(WAYPOINTS_MAP, got):
+            lat, lon = GEO.sea_level_to_geodetic(y, x)
+            # MAVProxy writes its file with 6 decimals (0.1 m); the exact comparison is test_gcs_session's.
+            assert abs(float(row[8]) - lat) <= 6e-7 and abs(float(row[9]) - lon) <= 6e-7 and row[3] == "16"
+        # The boat refuses to arm before its navigation has a fix; a second ground station (a pymavlink
+        # script, beside MAVProxy on the same port) watches for the first position.
+        watcher = Gcs(f"udpout:127.0.0.1:{port}", sysid=254)
+        try:
+            assert watcher.connect(60) is not None and watcher.recv("GLOBAL_POSITION_INT", 60) is not None
+        finally:
+            watcher.close()
+        mp.send("arm throttle")
+        mp.expect("COMPONENT_ARM_DISARM: ACCEPTED")
+        mp.send("mode AUTO")
+        mp.expect("DO_SET_MODE: ACCEPTED")
+        mp.expect("waypoint 3", timeout=120)       # MISSION_CURRENT advancing, as MAVProxy reports it
+        mp.send("disarm")
+        mp.expect("DISARMED")
+    finally:
+        mp.close()
+        stop_run(proc)
