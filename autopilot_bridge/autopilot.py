@@ -93,6 +93,7 @@ class Autopilot:
                  int14_commands: bool = False, wait_for_arm: bool = False) -> None:
         self.p, self.nav_params, self.control_params = params, nav, control
         self.prop, self.world, self.link, self.worker = propulsion, world, link, worker
+        self.zero_thrust = allocate(0.0, 0.0, propulsion.B_u, propulsion.T_max, propulsion.T_min)
         self.telemetry = telemetry
         self.traffic = traffic  # autopilot_bridge.traffic_awareness.TrafficAwareness, or None
         self.actuators = actuators if actuators is not None else link  # send_controls(time_usec, port, stdb)
@@ -177,7 +178,7 @@ class Autopilot:
         east = s.y + (s.u * math.sin(s.psi) + s.v * math.cos(s.psi)) * lead
         x, y, heading = ned_to_map(north, east, s.psi)
         self.cycle += 1
-        self._sensed_at_submit = len(self.sensed.cells())
+        self._sensed_at_submit = self.sensed.count
         snap = None if self.traffic is None else self.traffic.snapshot(s.t + lead, x, y, heading, self.p.cruise_speed)
         request = PlanRequest(
             cycle=self.cycle,
@@ -273,7 +274,7 @@ class Autopilot:
         self._fuse(f)
         s = self.nav.state()
         if s is None:
-            self._send(f.time_usec, allocate(0.0, 0.0, self.prop.B_u, self.prop.T_max, self.prop.T_min), received_at)
+            self._send(f.time_usec, self.zero_thrust, received_at)
             return
         if self.mode == WAITING:
             self.mode = FALLBACK
@@ -306,9 +307,9 @@ class Autopilot:
             # Disarmed, HOLD (drift), MANUAL, GUIDED without a target, AUTO without a mission.
             self._idle = True
             cmd = self._manual_command() if (self.vehicle.armed and self.vehicle.mode == Mode.MANUAL) else \
-                allocate(0.0, 0.0, self.prop.B_u, self.prop.T_max, self.prop.T_min)
+                self.zero_thrust
         elif self.mode == COMPLETE:
-            cmd = allocate(0.0, 0.0, self.prop.B_u, self.prop.T_max, self.prop.T_min)
+            cmd = self.zero_thrust
         else:
             if self._idle:  # back under control: the controllers start from the present state
                 self._idle = False
@@ -392,7 +393,7 @@ class Autopilot:
     def _manual_command(self) -> Thrust:
         m = self.vehicle.manual
         if m is None or time.monotonic() - m[2] > 1.0:
-            return allocate(0.0, 0.0, self.prop.B_u, self.prop.T_max, self.prop.T_min)
+            return self.zero_thrust
         x, r = m[0], m[1]
         tau_u = x * 2.0 * (self.prop.T_max if x >= 0 else -self.prop.T_min)
         tau_r = r * 0.5 * (self.prop.T_max - self.prop.T_min) * self.prop.B_u

@@ -89,6 +89,11 @@ class SensedObstacles:
             self.version += 1
         return new
 
+    @property
+    def count(self) -> int:
+        """How many cells have been sensed so far."""
+        return len(self._cells)
+
     def cells(self) -> np.ndarray:
         """All sensed obstacle cells so far, ``(K, 2)`` int32 [row, col], in the order found."""
         return np.array(self._cells, dtype=np.int32).reshape(-1, 2)

@@ -5,6 +5,8 @@
   wall clock; it records (transfer ID, time applied) and prints its summary as JSON at the end.
 * ``python -m hil.can_path echo ...``: bare python-can, no stack: every frame received is
   stamped and sent straight back (the bench's reference).
+* :func:`esc_process_command`, :func:`recording_actuators`, :func:`paced`: the commanding side
+  that `hil bench can` and `hil soak --rate` share.
 * :func:`pair_latency`: command -> applied latencies from the two sides' records. Both processes
   stamp with ``time.monotonic()`` (CLOCK_MONOTONIC, one clock for every process of a machine).
 """
@@ -37,6 +39,47 @@ def pair_latency(sent_tid, sent_at, applied_tid, applied_at, modulo: int = TRANS
             out.append(ta - sa[k])
             j = k + 1
     return np.array(out)
+
+
+def esc_process_command(args: argparse.Namespace, record: Any) -> list[str]:
+    """``python -m hil.can_path esc`` with the caller's ``--config``/``--set`` (so both ends use the
+    same [can] and [esc] settings), running 30 s past ``args.duration`` and recording to ``record``."""
+    cmd = [sys.executable, "-m", "hil.can_path", "esc", "--duration", repr(float(args.duration) + 30.0),
+           "--record", str(record)]
+    if args.config:
+        cmd += ["--config", args.config]
+    for o in args.overrides:
+        cmd += ["--set", o]
+    return cmd
+
+
+def recording_actuators(cfg: Any) -> Any:
+    """The autopilot's CAN back-end on the configured bus, recording (transfer ID, time sent) of each
+    command; a bus that cannot be opened is a one-line UsageError."""
+    from autopilot_bridge.can_actuators import CanActuators
+    from common.can_params import open_bus
+    from hil.errors import UsageError
+
+    try:
+        acts = CanActuators(open_bus(cfg.can), cfg.can)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    acts.record = True
+    return acts
+
+
+def paced(rate: float, duration: float, send: Any, idle: Any, max_idle: float = 0.005) -> int:
+    """Call ``send(k)`` at ``rate`` Hz for ``duration`` s of wall time (no drift: the k-th call is due at
+    ``t0 + k / rate``), and ``idle(seconds)`` (at most ``max_idle``) while waiting; returns the calls made."""
+    period, t0, k = 1.0 / rate, time.monotonic(), 0
+    while (now := time.monotonic()) - t0 < duration:
+        target = t0 + k * period
+        if now < target:
+            idle(min(target - now, max_idle))
+            continue
+        send(k)
+        k += 1
+    return k
 
 
 def stats_ms(lat_s: np.ndarray) -> dict[str, Any]:

@@ -57,24 +57,10 @@ def _finish(proc: subprocess.Popen) -> dict:
         raise RunFailed(f"benchmark child printed no summary: {err.decode(errors='replace')[-300:]}") from None
 
 
-def _paced(rate: float, duration: float, send, idle) -> int:
-    period, t0, k = 1.0 / rate, time.monotonic(), 0
-    while (now := time.monotonic()) - t0 < duration:
-        target = t0 + k * period
-        if now < target:
-            idle(min(target - now, 0.005))
-            continue
-        send(k)
-        k += 1
-    return k
-
-
 def run(args: argparse.Namespace) -> int:
     import can
 
-    from autopilot_bridge.can_actuators import CanActuators
-    from common.can_params import open_bus
-    from hil.can_path import pair_latency, stats_ms
+    from hil.can_path import esc_process_command, pair_latency, paced, recording_actuators, stats_ms
     from hil.commands.can_options import can_overrides
 
     args.overrides = list(args.overrides) + can_overrides(args)
@@ -86,20 +72,11 @@ def run(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory(prefix="hil-bench-can-") as tmp:
         # -- ours -------------------------------------------------------------------------------
         rec = Path(tmp) / "esc.npz"
-        cmd = [sys.executable, "-m", "hil.can_path", "esc", "--duration", repr(args.duration + 30), "--record", str(rec)]
-        if args.config:
-            cmd += ["--config", args.config]
-        for o in args.overrides:
-            cmd += ["--set", o]
-        try:
-            acts = CanActuators(open_bus(cfg.can), cfg.can)
-        except ValueError as exc:
-            raise UsageError(str(exc)) from None
-        acts.record = True
-        esc = _child(cmd)
+        acts = recording_actuators(cfg)
+        esc = _child(esc_process_command(args, rec))
         progress(f"bench can: our path, {args.rate:g} Hz for {args.duration:g} s")
         try:
-            _paced(args.rate, args.duration, lambda k: acts.send_controls(k * 10_000, 0.5 * np.sin(k / 50), 0.2),
+            paced(args.rate, args.duration, lambda k: acts.send_controls(k * 10_000, 0.5 * np.sin(k / 50), 0.2),
                    lambda s: acts.service(s))
             time.sleep(0.2)
         finally:
@@ -134,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
 
         progress(f"bench can: bare python-can echo, {args.rate:g} Hz for {args.duration:g} s")
         try:
-            _paced(args.rate, args.duration, send, idle)
+            paced(args.rate, args.duration, send, idle)
             idle(0.2)
         finally:
             _finish(echo)

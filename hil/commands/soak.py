@@ -6,7 +6,6 @@ import argparse
 import json
 import os
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -216,45 +215,33 @@ def _latency(sent_path: Path, applied_path: Path) -> dict[str, Any]:
 
 
 def _soak_can_path(args: argparse.Namespace, cfg: Any, out: Path) -> dict[str, Any]:
-    from autopilot_bridge.can_actuators import CanActuators
-    from common.can_params import open_bus
     from hil import processes
-    from hil.can_path import pair_latency, stats_ms
+    from hil.can_path import esc_process_command, pair_latency, paced, recording_actuators, stats_ms
 
     rec = out / "esc.npz"
-    cmd = [sys.executable, "-m", "hil.can_path", "esc", "--duration", repr(args.duration + 30.0), "--record", str(rec)]
-    if args.config:
-        cmd += ["--config", args.config]
-    for o in args.overrides:
-        cmd += ["--set", o]
-    try:
-        acts = CanActuators(open_bus(cfg.can), cfg.can)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
-    acts.record = True
+    acts = recording_actuators(cfg)
     watch = ResourceWatch(_warmup(args))
-    esc = processes.start(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    esc = processes.start(esc_process_command(args, rec), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     problems: list[str] = []
     try:
         _wait_ready(esc, b"esc: ready")
         progress(f"soak: CAN path at {args.rate:g} Hz for {args.duration:g} s on {cfg.can.interface}:{cfg.can.channel}")
         period = 1.0 / args.rate
         t0 = time.monotonic()
-        k, next_report = 0, t0 + 5.0
-        while (now := time.monotonic()) - t0 < args.duration:
-            target = t0 + k * period
-            if now < target:
-                acts.service(min(target - now, 0.01))
-                continue
+        next_report = [t0 + 5.0]
+
+        def send(k: int) -> None:
             x = 0.8 * np.sin(2 * np.pi * 0.05 * k * period)  # a slow sweep through forward and reverse
             acts.send_controls(int(round(k * period * 1e6)), x, -x)
-            k += 1
-            if k % 50 == 0:
+            if (k + 1) % 50 == 0:
                 watch.sample({"commander": os.getpid(), "esc_nodes": esc.pid})
-            if now >= next_report:
-                next_report += 5.0
+            now = time.monotonic()
+            if now >= next_report[0]:
+                next_report[0] += 5.0
                 progress(f"soak: {now - t0:.0f}/{args.duration:g} s, {acts.commands_sent} commands, "
                          f"{sum(acts.tracker.received.values())} transfers back")
+
+        k = paced(args.rate, args.duration, send, acts.service, max_idle=0.01)
         deadline = time.monotonic() + 0.5
         while time.monotonic() < deadline:
             acts.service(0.05)
