@@ -55,7 +55,7 @@ class CanActuators:
 
     def _send(self, full_name: str, payload: bytes, priority: int) -> int:
         tid = self.tids.take(full_name)
-        for frame in dc.to_frames(full_name, payload, self.node_id, tid, priority, time.time()):
+        for frame in dc.to_frames(full_name, payload, self.node_id, tid, priority):
             try:
                 self.bus.send(frame, timeout=0.1)
             except can.CanError:
