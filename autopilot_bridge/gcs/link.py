@@ -494,6 +494,11 @@ class GcsLink:
             if m.target in (0, self.sysid) and self.ap is not None:
                 clip = lambda v: max(-1.0, min(1.0, v / 1000.0))  # noqa: E731
                 self.ap.vehicle.manual = (clip(m.x), clip(m.r), now)
+        elif kind == "PING":
+            # The ping protocol (mavlink.io/en/services/ping.html): a request has target 0/0; the reply
+            # echoes time_usec and seq, addressed to the sender.
+            if m.target_system == 0 and m.target_component == 0:
+                self._send("ping", m.time_usec, m.seq, m.get_srcSystem(), m.get_srcComponent())
         elif kind == "REQUEST_DATA_STREAM":
             if m.target_system in (0, self.sysid):
                 self._data_stream(m.req_stream_id, m.req_message_rate, m.start_stop)
@@ -561,6 +566,11 @@ class GcsLink:
         if cmd == M.MAV_CMD_DO_SET_MODE:
             if not finite(p[0]) or not finite(p[1]) or not int(p[0]) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
                 return M.MAV_RESULT_DENIED, "set mode: custom mode flag (param1) and mode (param2) needed"
+            if finite(p[2]) and p[2] != 0.0:
+                # Our modes have no sub-mode. A (main, sub) pair is another autopilot's numbering (PX4's
+                # AUTO.MISSION is (4, 4), as MAVSDK sends to a non-ArduPilot vehicle): read as Rover's
+                # custom mode 4 it would silently mean HOLD, so refuse it.
+                return M.MAV_RESULT_DENIED, f"set mode: no sub-mode {p[2]:g} (Rover modes: param2 only)"
             return self._set_mode(p[1])
         if cmd == M.MAV_CMD_MISSION_START:
             first = int(p[0]) if finite(p[0]) else 0
