@@ -193,6 +193,12 @@ def test_set_mode_with_a_custom_sub_mode_is_refused_not_read_as_a_rover_mode(clo
         assert ack is not None and ack.command == M.MAV_CMD_DO_SET_MODE and ack.result == result, (p2, p3, ack)
         assert (ack.target_system, ack.target_component) == (245, 190)
         assert vehicle.mode == mode, (p2, p3)
+    # The counters the run summary carries.
+    s = link.summary()
+    assert s["datagrams_in"] == s["frames_in"] == 4 and s["datagrams_out"] >= 4
+    assert s["command_acks"] == {"MAV_RESULT_DENIED": 2, "MAV_RESULT_ACCEPTED": 2}
+    assert s["commands"] == {"MAV_CMD_DO_SET_MODE:MAV_RESULT_DENIED": 2, "MAV_CMD_DO_SET_MODE:MAV_RESULT_ACCEPTED": 2}
+    assert s["failsafe_events"] == 0 and not s["signing"]
 
 
 def test_a_ping_request_is_answered_to_its_sender(closing):

@@ -86,6 +86,11 @@ def load_signing_key(path: str) -> bytes:
     return hashlib.sha256(text.encode()).digest()
 
 
+def _enum_name(enum: str, value: int) -> str:
+    entry = mavlink2.enums.get(enum, {}).get(int(value))
+    return entry.name if entry is not None else f"{enum}_{int(value)}"
+
+
 def _text(v: Any) -> str:
     return (v.decode(errors="replace") if isinstance(v, (bytes, bytearray)) else str(v)).rstrip("\x00")
 
@@ -190,10 +195,15 @@ class GcsLink:
         self.t = 0.0
         self._paths_sent = 0
         self.sent = 0
+        self.datagrams_in = 0               # UDP datagrams / TCP reads from ground stations
+        self._datagrams_out_closed = 0      # per-peer sends of transports already closed
         self.received: Counter = Counter()
         self.rejects: Counter = Counter()
         self.security: Counter = Counter()
-        self.commands: Counter = Counter()
+        self.commands: Counter = Counter()        # "MAV_CMD_...:MAV_RESULT_..." of every COMMAND_ACK sent
+        self.command_acks: Counter = Counter()    # COMMAND_ACKs sent, by MAV_RESULT (refusals included)
+        self.mission_acks: Counter = Counter()    # MISSION_ACKs sent, by MAV_MISSION_RESULT
+        self.failsafe_events = 0
         self.encode_errors: Counter = Counter()
 
     # -- wiring ---------------------------------------------------------------------------------
@@ -238,6 +248,12 @@ class GcsLink:
                 self.log(f"gcs: {name} not sent: {type(exc).__name__}: {exc}")
             return
         self._send_frame(frame)
+        if name == "command_ack":
+            cmd, result = _enum_name("MAV_CMD", args[0]), _enum_name("MAV_RESULT", args[1])
+            self.command_acks[result] += 1
+            self.commands[f"{cmd}:{result}"] += 1
+        elif name == "mission_ack":
+            self.mission_acks[_enum_name("MAV_MISSION_RESULT", args[2])] += 1
 
     def forward(self, name: str, *fields: Any) -> None:
         """Encode message ``name`` (e.g. "ais_vessel") with the vessel's ids and send it to every GCS."""
@@ -418,6 +434,7 @@ class GcsLink:
                 if tr.stream and not data:
                     self._streams.pop(peer, None)
                     continue
+                self.datagrams_in += 1
                 stream = self._streams.get(peer) if tr.stream else None
                 if stream is None:
                     stream = _Stream(self.key)
@@ -542,7 +559,6 @@ class GcsLink:
         else:
             x5, y6 = m.param5, m.param6
         result, why = self._execute(int(m.command), p, x5, y6)
-        self.commands[f"{m.command}:{result}"] += 1
         self._send("command_ack", m.command, result, 0, 0, src[0], src[1])
         if result != M.MAV_RESULT_ACCEPTED and why:
             self.statustext(why, M.MAV_SEVERITY_WARNING)
@@ -695,6 +711,7 @@ class GcsLink:
         if self.failsafe_active or not v.armed or v.mode != Mode.AUTO:
             return
         self.failsafe_active = True
+        self.failsafe_events += 1
         target = Mode.RTL if self.failsafe_action == "rtl" and v.home is not None else Mode.HOLD
         v.set_mode(target, self._position())
         self.failsafe_active = True
@@ -706,20 +723,37 @@ class GcsLink:
 
     # -- end ------------------------------------------------------------------------------------
     def summary(self) -> dict[str, Any]:
+        """The link's counters (the autopilot's summary and the run's summary.json carry them as "gcs").
+
+        Datagrams count what crossed the sockets (out: one per peer a frame went to); frames count MAVLink
+        messages (in: valid ones only, by type in ``received``; out: each frame once, fanned out or not).
+        """
+        acks = self.mission_acks
         return {
             "endpoints": [f"{h}:{p}" for h, p in self.addresses],
+            "datagrams_in": self.datagrams_in,
+            "datagrams_out": self._datagrams_out_closed + sum(tr.sent for tr in self.transports),
+            "frames_in": sum(self.received.values()),
             "frames_sent": self.sent,
             "received": dict(self.received),
             "rejects": dict(self.rejects),
             "security_rejects": dict(self.security),
+            "signing": self.key is not None,
+            "missions_accepted": self.mission.stats.get("uploads_accepted", 0) if self.mission is not None else 0,
+            "missions_rejected": sum(n for r, n in acks.items() if r != "MAV_MISSION_ACCEPTED"),
+            "mission_acks": dict(acks),
             "mission": dict(self.mission.stats) if self.mission is not None else {},
+            "command_acks": dict(self.command_acks),
+            "commands": dict(self.commands),
             "param_rejects": self.params_table.rejected if self.params_table is not None else 0,
             "encode_errors": dict(self.encode_errors),
+            "failsafe_events": self.failsafe_events,
             "failsafe_active": self.failsafe_active,
         }
 
     def close(self) -> None:
         for tr in self.transports:
+            self._datagrams_out_closed += tr.sent
             tr.close()
         self.transports = []
         if getattr(self, "mirror", None) is not None:
