@@ -4,8 +4,8 @@ no mavsdk_server) against a live `hil run --wait-for-arm`.
 MAVSDK listens (``udpin://127.0.0.1:PORT``) and the boat sends there (``--gcs udpout:127.0.0.1:PORT``),
 as with a ground station on 14550. What MAVSDK does against this boat, plugin by plugin:
 
-* discovery, telemetry (position, armed), MissionRaw (upload, download, progress), Param (list, get, set)
-  and Action.arm/disarm are generic MAVLink and work;
+* discovery, telemetry (position, armed), Mission and MissionRaw (upload, download, progress), Param
+  (list, get, set) and Action.arm/disarm are generic MAVLink and work;
 * MAVSDK is PX4-first: for any autopilot that is not ArduPilot (ours says MAV_AUTOPILOT_GENERIC) it sets
   modes the PX4 way, DO_SET_MODE with param2 = PX4 main mode and param3 = sub mode (MissionRaw.start_mission
   is AUTO.MISSION = (4, 4), Action.hold (4, 3), Action.return_to_launch (4, 5)), and decodes custom_mode as
@@ -37,6 +37,8 @@ try:
     from mavsdk import Autopilot, ComponentType, Configuration, ConnectionResult, Mavsdk, log_subscribe
     from mavsdk.plugins.action import Action
     from mavsdk.plugins.mavlink_direct import MavlinkDirect, MavlinkMessage
+    from mavsdk.plugins.mission import Mission, MissionPlan
+    from mavsdk.plugins.mission import MissionItem as PlanItem
     from mavsdk.plugins.mission_raw import MissionItem, MissionRaw, MissionRawError, MissionRawResult
     from mavsdk.plugins.param import Param, ParamError, ParamResult
     from mavsdk.plugins.telemetry import Telemetry
@@ -133,8 +135,16 @@ def test_mavsdk_session(tmp_path):
         assert hb is not None and hb["type"] == M.MAV_TYPE_SURFACE_BOAT and hb["custom_mode"] == ROVER_HOLD
         assert not hb["base_mode"] & M.MAV_MODE_FLAG_SAFETY_ARMED
 
-        # Upload 6 waypoints, download them, compare exactly.
+        # The Mission plugin (MAVSDK's waypoint abstraction) uploads and downloads the 6 waypoints ...
         items = [_item(i, x, y) for i, (x, y) in enumerate(WAYPOINTS_MAP)]
+        plan = MissionPlan([PlanItem(latitude_deg=it.x * 1e-7, longitude_deg=it.y * 1e-7, relative_altitude_m=0.0,
+                                     is_fly_through=True, acceptance_radius_m=3.0) for it in items])
+        waypoints = Mission(boat)
+        waypoints.upload_mission(plan)
+        back = waypoints.download_mission().mission_items
+        assert [(round(p.latitude_deg * 1e7), round(p.longitude_deg * 1e7), p.acceptance_radius_m) for p in back] \
+            == [(it.x, it.y, 3.0) for it in items]
+        # ... and MissionRaw, item by item as MAVLink has them: upload, download, compare exactly.
         assert mission.upload_mission(items) == MissionRawResult.SUCCESS
         got = mission.download_mission()
         assert len(got) == 6 and all(_same(a, b) for a, b in zip(items, got)), [str(g) for g in got]
@@ -185,7 +195,7 @@ def test_mavsdk_session(tmp_path):
             stop_run(proc)
 
     g = json.loads((out / "autopilot.json").read_text())["gcs"]
-    assert g["mission"]["uploads_accepted"] == 1 and g["mission"]["rejected_item"] == 1
+    assert g["mission"]["uploads_accepted"] == 2 and g["mission"]["rejected_item"] == 1
     assert g["received"].get("PING", 0) >= 1
     # MAVSDK's side of the conversation is in the run's tlog, and the boat answered its pings.
     from pymavlink import mavutil
