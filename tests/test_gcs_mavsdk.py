@@ -34,7 +34,7 @@ from common.mavlink import MAV_TYPE as M
 from hil.hilrun import free_udp_port
 
 try:
-    from mavsdk import Autopilot, ComponentType, Configuration, ConnectionResult, Mavsdk, log_subscribe
+    from mavsdk import Autopilot, ComponentType, Configuration, ConnectionResult, Mavsdk, log_subscribe, log_unsubscribe
     from mavsdk.plugins.action import Action
     from mavsdk.plugins.mavlink_direct import MavlinkDirect, MavlinkMessage
     from mavsdk.plugins.mission import Mission, MissionPlan
@@ -191,6 +191,7 @@ def test_mavsdk_session(tmp_path):
         assert heartbeats.wait(lambda h: not h["base_mode"] & M.MAV_MODE_FLAG_SAFETY_ARMED, 10) is not None
     finally:
         sdk.destroy()
+        log_unsubscribe()
         if proc is not None:
             stop_run(proc)
 
