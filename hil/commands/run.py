@@ -126,10 +126,10 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                     "pymavlink's mavlogdump), summary.json, the processes' logs and plot.png, and prints "
                     "the summary: goal reached, collisions, minimum clearance, simulated and wall time, "
                     "path length, energy, planning cycles, deadline overruns, worker restarts, fallback "
-                    "activations, navigation RMSE, control-loop latency, the ground-station link's counters. "
-                    "Exit 0 only when the goal was reached without collision; Ctrl-C ends the run with "
-                    "outcome 'interrupted', its folder written, exit 130. With --demo, a constant-thrust controller replaces the "
-                    "autopilot (a steady starboard turn).",
+                    "activations, navigation RMSE, control-loop latency, the ground-station link's "
+                    "counters. Exit 0 only when the goal was reached without collision; Ctrl-C ends the "
+                    "run with outcome 'interrupted', its folder written, exit 130. With --demo, a "
+                    "constant-thrust controller replaces the autopilot (a steady starboard turn).",
     )
     p.add_argument("--scenario", default="harbour",
                    help="configs/scenarios/NAME.toml: map, start, goal, reference path, current (default: harbour)")
