@@ -126,9 +126,10 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                     "pymavlink's mavlogdump), summary.json, the processes' logs and plot.png, and prints "
                     "the summary: goal reached, collisions, minimum clearance, simulated and wall time, "
                     "path length, energy, planning cycles, deadline overruns, worker restarts, fallback "
-                    "activations, navigation RMSE, control-loop latency. Exit 0 only when the goal was "
-                    "reached without collision. With --demo, a constant-thrust controller replaces the "
-                    "autopilot (a steady starboard turn).",
+                    "activations, navigation RMSE, control-loop latency, the ground-station link's "
+                    "counters. Exit 0 only when the goal was reached without collision; Ctrl-C ends the "
+                    "run with outcome 'interrupted', its folder written, exit 130. With --demo, a "
+                    "constant-thrust controller replaces the autopilot (a steady starboard turn).",
     )
     p.add_argument("--scenario", default="harbour",
                    help="configs/scenarios/NAME.toml: map, start, goal, reference path, current (default: harbour)")
@@ -194,12 +195,15 @@ def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
     opts = RunOptions(scenario=args.scenario, lockstep=args.speedup is None, speedup=args.speedup or 1.0,
                       duration=args.duration, seed=seed, config=args.config, overrides=overrides, out=out,
                       on_progress=progress, plot=not args.no_plot,
-                      extra_autopilot_args=_gcs_args(args))
+                      extra_autopilot_args=_gcs_args(args), summary_on_interrupt=True)
     opts.actuators = cfg.can.actuators
     progress(f"run: scenario {args.scenario}, {'lockstep' if opts.lockstep else f'real time x{opts.speedup:g}'}, "
              f"actuators {cfg.can.actuators}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
     summary = run_loop(opts, cfg)
     emit(args, summary)
+    if summary["outcome"] == "interrupted":
+        progress(f"run: interrupted; summary in {out}")
+        return 130
     if not args.json:
         progress(f"run: {'goal reached' if summary['reached_goal'] else summary['outcome']}; "
                  f"plot: {summary.get('plot', 'none')}; folder: {out}")
