@@ -84,3 +84,9 @@ def test_unknown_scenario_is_one_line_exit_2(hil):
     r = hil("run", "--scenario", "atlantis", timeout=60)
     assert r.returncode == 2
     assert len(r.stderr.strip().splitlines()) == 1 and "atlantis" in r.stderr
+
+
+def test_wall_timeout_ends_the_run_with_its_folder_written(hil, tmp_path):
+    code, s = _run(hil, tmp_path, "--wall-timeout", "4")
+    assert s["outcome"] == "wall_timeout" and code == 1
+    assert 4.0 <= s["wall_time_s"] < 60.0

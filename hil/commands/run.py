@@ -146,6 +146,9 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--out", metavar="DIR", default=None,
                    help="run folder (default: runs/SCENARIO-seedN-YYYYmmdd-HHMMSS)")
     p.add_argument("--no-plot", action="store_true", help="do not draw plot.png")
+    p.add_argument("--wall-timeout", metavar="SECONDS", type=float, default=None,
+                   help="end the run after this much wall time whatever happens (default: real time "
+                        "--duration / speedup + 300 s; lockstep the larger of 900 s and 3 x --duration)")
     add_can_arguments(p)
     from hil.commands.autopilot import add_gcs_arguments
 
@@ -163,6 +166,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--duration: must be > 0 seconds")
     if args.speedup is not None and not args.speedup > 0:
         raise ConfigError("--speedup: must be > 0")
+    if args.wall_timeout is not None and not args.wall_timeout > 0:
+        raise ConfigError("--wall-timeout: must be > 0 seconds")
     args.overrides = list(args.overrides) + can_overrides(args)
     cfg = load_settings(args)  # fail here, with one line, on a bad configuration
     previous_term = signal.signal(signal.SIGTERM, _raise_terminated)
@@ -175,6 +180,12 @@ def run(args: argparse.Namespace) -> int:
         return _run_hil(args, cfg)
     finally:
         signal.signal(signal.SIGTERM, previous_term)
+
+
+def _default_wall_timeout(args: argparse.Namespace) -> float:
+    if args.speedup is None:  # lockstep: usually faster than real time, slower on a busy machine
+        return max(900.0, 3.0 * args.duration)
+    return args.duration / args.speedup + 300.0
 
 
 def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
@@ -195,7 +206,8 @@ def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
     opts = RunOptions(scenario=args.scenario, lockstep=args.speedup is None, speedup=args.speedup or 1.0,
                       duration=args.duration, seed=seed, config=args.config, overrides=overrides, out=out,
                       on_progress=progress, plot=not args.no_plot,
-                      extra_autopilot_args=_gcs_args(args), summary_on_interrupt=True)
+                      extra_autopilot_args=_gcs_args(args), summary_on_interrupt=True,
+                      wall_timeout=args.wall_timeout or _default_wall_timeout(args))
     opts.actuators = cfg.can.actuators
     progress(f"run: scenario {args.scenario}, {'lockstep' if opts.lockstep else f'real time x{opts.speedup:g}'}, "
              f"actuators {cfg.can.actuators}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
