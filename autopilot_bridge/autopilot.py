@@ -47,6 +47,7 @@ from autopilot_bridge.hil_link import HilLink, SensorFrame
 from autopilot_bridge.local_planning import CycleInput, LocalPlan, World, map_to_ned_path, ned_to_map
 from autopilot_bridge.navigation import NavigationFilter, NavigationParams, NavState
 from autopilot_bridge.obstacle_map import SensedObstacles, path_blocked
+from autopilot_bridge.plan_commitment import CommitmentParams, keep_current
 from autopilot_bridge.planning_worker import PlannerWorker, PlanRequest
 from autopilot_bridge.reactive import ReactiveAvoidance
 from autopilot_bridge.telemetry import Telemetry
@@ -146,6 +147,8 @@ class Autopilot:
         self.complete_t: float | None = None
         self.target = self.goal_ned
         self.speed_factor = 1.0
+        self._path_invalid = False   # the followed path is blocked (sensed) or traffic asks for a new one
+        self._traffic_planned = False
         if self.traffic is not None:
             self.traffic.reset()
 
@@ -180,6 +183,7 @@ class Autopilot:
         self.cycle += 1
         self._sensed_at_submit = self.sensed.count
         snap = None if self.traffic is None else self.traffic.snapshot(s.t + lead, x, y, heading, self.p.cruise_speed)
+        self._traffic_planned = snap is not None   # ships move: their cycle's newest plan always wins
         request = PlanRequest(
             cycle=self.cycle,
             problem=CycleInput(x, y, heading, s.t + lead, self.seed * 100003 + self.cycle,
@@ -245,6 +249,10 @@ class Autopilot:
             self.stats.plans_rejected["sensed_since_planning"] += 1
             self.next_plan_t = s.t
             return False
+        if self._keeps_current_path(ned, s):
+            self.stats.plans_rejected["other_way_round"] += 1
+            return False
+        self._path_invalid = False
         self.los = LineOfSight(ned, self.p.lookahead, acceptance_radius=self.p.goal_tolerance)
         self.target = (plan.subgoal[1], plan.subgoal[0])
         self.speed_factor = plan.speed_factor
@@ -252,6 +260,19 @@ class Autopilot:
         self.local_paths.append({"t": s.t, "cycle": plan.cycle, "status": plan.status,
                                  "path_ned": ned[:: max(1, len(ned) // 200)].round(3).tolist()})
         return True
+
+    def _keeps_current_path(self, ned: np.ndarray, s: NavState) -> bool:
+        """Plan commitment: stay on the followed path rather than swing round the other side of an
+        obstacle (autopilot_bridge/plan_commitment.py) - unless it is blocked, traffic is being
+        planned for, or the vessel is off it by more than the look-ahead."""
+        if self.mode != PLANNED or self.los is None or self._path_invalid or self._traffic_planned:
+            return False
+        ahead = self.los.path[self.los.index:]
+        if float(np.min(np.hypot(ahead[:, 0] - s.x, ahead[:, 1] - s.y))) > self.p.lookahead:
+            return False
+        p = self.p
+        return keep_current(ahead, ned, self.grid.occ, self.grid.resolution,
+                            CommitmentParams(p.commit_compare_length, p.commit_min_remaining, p.commit_shortcut_ratio))
 
     # -- one frame -----------------------------------------------------------------------------
     def on_frame(self, f: SensorFrame, received_at: float) -> None:
@@ -287,6 +308,7 @@ class Autopilot:
                 self._event(t, text)
             if replan and self.mode != COMPLETE:
                 self.next_plan_t = t  # a new encounter: plan now, not at the next period
+                self._path_invalid = True
         if self.stats.frames % 10 == 0:  # the estimated track at 10 Hz, for the run's plot
             self.track.append((t, s.x, s.y, s.psi))
 
@@ -412,6 +434,7 @@ class Autopilot:
                 self.stats.sensed_replans += 1
                 self._event(t, "sensed obstacle near the local path: replanning")
                 self.next_plan_t = t
+                self._path_invalid = True
 
     def _to_fallback(self, t: float, why: str) -> None:
         if self.mode != FALLBACK:
