@@ -51,6 +51,7 @@ from autopilot_bridge.plan_commitment import CommitmentParams, keep_current
 from autopilot_bridge.planning_worker import PlannerWorker, PlanRequest
 from autopilot_bridge.reactive import ReactiveAvoidance
 from autopilot_bridge.telemetry import Telemetry
+from autopilot_bridge.tracking_stats import TrackingStats
 from common.dronecan_codec import RAW_COMMAND_MAX, quantize
 from autopilot_bridge.vehicle import Mode, Vehicle, Waypoint
 
@@ -113,6 +114,7 @@ class Autopilot:
         self._sensed_at_submit = 0
         self.reactive = ReactiveAvoidance(self.grid, params.fallback_range, params.min_clearance, params.fallback_speed)
         self.stats = AutopilotStats()
+        self.tracking = TrackingStats()
         self._waited = False
         self.local_paths: list[dict[str, Any]] = []
         self.track: list[tuple[float, float, float, float]] = []
@@ -446,6 +448,7 @@ class Autopilot:
     def _control(self, s: NavState, dt: float, g: GuidanceOutput | None) -> Thrust:
         if g is not None and self.los is not None:
             psi_ref, u_ref = g.heading, self.p.cruise_speed * self.speed_factor
+            self.tracking.add(g.cross_track, psi_ref, s.psi)
             # Slow down for sharp turns ahead so the yaw rate they need (u kappa) stays within reach.
             if g.curvature_ahead > 1e-6:
                 u_ref = min(u_ref, max(self.p.min_turn_speed, self.p.max_turn_rate / g.curvature_ahead))
@@ -502,6 +505,7 @@ class Autopilot:
             "worker_kills": w.killed,
             "worker_restarts": w.restarts,
             "fallback_activations": self.stats.fallback_activations,
+            "tracking": self.tracking.summary(),
             "simulator_restarts": self.stats.simulator_restarts,
             "navigation": {"updates": dict(self.nav.stats.updates), "rejected": dict(self.nav.stats.rejected),
                            "position_resets": self.nav.stats.position_resets},

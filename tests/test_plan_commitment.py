@@ -62,3 +62,4 @@ def test_truncate_keeps_the_first_metres(length):
     t = truncate(path, length)
     assert path_length(t) == pytest.approx(min(length, path_length(path)), abs=1e-9)
     assert np.allclose(t[0], path[0])
+
