@@ -449,6 +449,7 @@ class Autopilot:
         if g is not None and self.los is not None:
             psi_ref, u_ref = g.heading, self.p.cruise_speed * self.speed_factor
             self.tracking.add(g.cross_track, psi_ref, s.psi)
+            r_ref = max(s.u, 0.0) * g.curvature   # the path turns at u kappa: feed it forward
             # Slow down for sharp turns ahead so the yaw rate they need (u kappa) stays within reach.
             if g.curvature_ahead > 1e-6:
                 u_ref = min(u_ref, max(self.p.min_turn_speed, self.p.max_turn_rate / g.curvature_ahead))
@@ -456,8 +457,8 @@ class Autopilot:
                 u_ref = max(0.5, self.p.cruise_speed * g.remaining / (2.0 * self.p.lookahead))
         else:
             a = self.reactive.command(s.x, s.y, s.psi, self.target)
-            psi_ref, u_ref = a.heading, a.speed
-        tau_r = self.heading_pid.update(psi_ref, s.psi, s.r, dt)
+            psi_ref, u_ref, r_ref = a.heading, a.speed, 0.0
+        tau_r = self.heading_pid.update(psi_ref, s.psi, s.r, dt, r_ref)
         tau_u = self.speed_ctl.update(u_ref, s.u, s.v, s.r, dt)
         return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
 
