@@ -138,7 +138,6 @@ class OnlineContext:
     safe_grid: OccupancyGrid | None = None
     _free_index: np.ndarray | None = None
     _velocity_grids: dict = dc_field(default_factory=dict)
-    _graded: dict = dc_field(default_factory=dict)
     _distance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
@@ -160,14 +159,17 @@ class OnlineContext:
 
     def recovery_grid(self, pos: tuple[float, float]) -> OccupancyGrid | None:
         """The map for a vessel inside the safety inflation (tracking error or the current put it
-        there): the safety-inflated map, except within ``recovery_radius`` of the vessel where the
-        inflation shrinks to the largest multiple of the resolution that leaves the vessel's cell
-        free. None when that is no inflation at all (the vessel touches an obstacle: raw map).
+        there): the inflation radius grows linearly with the distance from the vessel, from the
+        largest multiple of the resolution that leaves the vessel's cell free to the full safety
+        radius at ``recovery_radius``. None when that is no inflation at all (the vessel touches
+        an obstacle: raw map).
 
         Planning on the raw map instead (as before) let every new path run along the obstacle at
         the vessel's distance or closer; the next cycle then started closer still, a ratchet that
-        walked the lockstep runs into labyrinth walls. Here a path may not get closer than the
-        vessel is, and must be back outside the full inflation within ``recovery_radius``."""
+        walked the lockstep runs into labyrinth walls. A constant reduced radius near the vessel
+        still allowed a slower ratchet (a path parallel to the wall at the vessel's clearance,
+        tracking error a cell inwards, the next path a cell closer): the ramp makes every path
+        gain clearance as it goes."""
         res = self.grid.resolution
         dist = self._centre_distance()
         r, c = self.grid.cell_of(*pos)
@@ -176,21 +178,20 @@ class OnlineContext:
         radius = math.floor((float(dist[r, c]) - 1e-9) / res) * res
         if radius <= 0.0:
             return None
-        radius = min(radius, self.params.safety_radius)
-        key = round(radius / res)
-        if key not in self._graded:
-            self._graded[key] = dist <= radius + 1e-12
+        full = self.params.safety_radius
+        radius = min(radius, full)
         rows, cols = dist.shape
         yy = (np.arange(rows) + 0.5) * res - pos[1]
         xx = (np.arange(cols) + 0.5) * res - pos[0]
-        near = (yy[:, None] ** 2 + xx[None, :] ** 2) <= self.recovery_radius ** 2
-        return OccupancyGrid(np.where(near, self._graded[key], self.safe_grid.occ), res)
+        away = np.sqrt(yy[:, None] ** 2 + xx[None, :] ** 2)
+        allowed = radius + (full - radius) * np.minimum(away / self.recovery_radius, 1.0)
+        return OccupancyGrid(dist <= allowed + 1e-12, res)
 
     @property
     def recovery_radius(self) -> float:
-        """Distance (m) in which a vessel inside the safety inflation must get back out of it: two
-        tree extensions, enough for the lateral step of one safety radius on the turning circle."""
-        return 2.0 * self.params.step
+        """Distance (m) from the vessel at which a path must be back outside the full inflation:
+        one tree extension (4 m: a lateral step of 1 m on the 3 m turning circle takes ~3.5 m)."""
+        return self.params.step
 
     def _centre_distance(self) -> np.ndarray:
         """Distance (m) of each cell centre from the nearest obstacle cell centre or the map's edge
