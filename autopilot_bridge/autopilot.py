@@ -41,6 +41,7 @@ from autopilot_bridge.control import (
     SurgeModel,
     Thrust,
     allocate,
+    clearance_speed_cap,
 )
 from autopilot_bridge.guidance import GuidanceOutput, LineOfSight
 from autopilot_bridge.hil_link import HilLink, SensorFrame
@@ -447,12 +448,17 @@ class Autopilot:
 
     def _control(self, s: NavState, dt: float, g: GuidanceOutput | None) -> Thrust:
         if g is not None and self.los is not None:
-            psi_ref, u_ref = g.heading, self.p.cruise_speed * self.speed_factor
+            # LOS gives the course to steer; the hull must point the drift angle beta = atan2(v, u)
+            # (current, sway in turns) away from it. Uncompensated, each cycle's new path (starting
+            # where the vessel is) forgave the drift, and a cross-current set the boat onto walls.
+            beta = math.atan2(s.v, s.u) if s.u > self.p.min_turn_speed else 0.0
+            psi_ref, u_ref = g.heading - beta, self.p.cruise_speed * self.speed_factor
             self.tracking.add(g.cross_track, psi_ref, s.psi)
             r_ref = max(s.u, 0.0) * g.curvature   # the path turns at u kappa: feed it forward
             # Slow down for sharp turns ahead so the yaw rate they need (u kappa) stays within reach.
             if g.curvature_ahead > 1e-6:
                 u_ref = min(u_ref, max(self.p.min_turn_speed, self.p.max_turn_rate / g.curvature_ahead))
+            u_ref = min(u_ref, self._near_obstacle_speed(s))
             if g.remaining < 2.0 * self.p.lookahead and self.los.path[-1].tolist() == list(self.goal_ned):
                 u_ref = max(0.5, self.p.cruise_speed * g.remaining / (2.0 * self.p.lookahead))
         else:
@@ -461,6 +467,14 @@ class Autopilot:
         tau_r = self.heading_pid.update(psi_ref, s.psi, s.r, dt, r_ref)
         tau_u = self.speed_ctl.update(u_ref, s.u, s.v, s.r, dt)
         return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
+
+    def _near_obstacle_speed(self, s: NavState) -> float:
+        """Speed cap (m/s) near obstacles: cruise beyond ``slow_clearance`` of the vessel's clearance
+        (cell-centre distance on the chart plus sensed obstacles), ``min_turn_speed`` at the
+        planner's safety radius. The cross-track error of a turn grows with speed; a path at the
+        inflation's edge leaves the hull only safety radius - L/2 of it."""
+        return clearance_speed_cap(self.grid.clearance_at(s.y, s.x), self.world.params.safety_radius,
+                                   self.p.slow_clearance, self.p.min_turn_speed, self.p.cruise_speed)
 
     def _send(self, time_usec: int, cmd: Thrust, received_at: float) -> None:
         port, stdb = cmd.port_cmd, cmd.stdb_cmd

@@ -21,6 +21,9 @@ class AutopilotParams:
     lookahead: float = param("line-of-sight look-ahead distance", "m", gt=0)
     max_turn_rate: float = param("speed is reduced so that sharp turns ahead need at most this yaw rate", "rad/s", gt=0)
     min_turn_speed: float = param("lowest speed of that reduction (steerage way)", "m/s", gt=0)
+    slow_clearance: float = param(
+        "closer than this to an obstacle the speed set-point falls linearly, to min_turn_speed at the planner's "
+        "safety radius: path-following error grows with speed, and the margin there is what is left", "m", gt=0)
     goal_tolerance: float = param("the mission is complete within this distance of the final goal", "m", gt=0)
     planning_period: float = param("simulated time between local planning cycles", "s", gt=0)
     planning_deadline: float = param("hard deadline of one local planning cycle (watchdog)", "s", gt=0)

@@ -128,6 +128,15 @@ class Thrust:
     saturated: bool
 
 
+def clearance_speed_cap(clearance: float, inner: float, outer: float, v_min: float, v_max: float) -> float:
+    """Speed cap (m/s) at ``clearance`` m from the nearest obstacle: ``v_max`` from ``outer`` on,
+    falling linearly to ``v_min`` at ``inner`` (and below); no cap when ``outer <= inner``."""
+    if outer <= inner:
+        return math.inf
+    f = min(max((clearance - inner) / (outer - inner), 0.0), 1.0)
+    return v_min + f * (v_max - v_min)
+
+
 def normalise(thrust: float, t_max: float, t_min: float) -> float:
     """Thrust (N) to the simulator's command in [-1, 1] (u >= 0: u T_max; u < 0: |u| T_min)."""
     if thrust >= 0.0:

@@ -165,3 +165,11 @@ def test_yaw_rate_feedforward_holds_a_steady_turn_without_heading_error():
     assert pid.update(0.3, 0.3, 0.3, 0.01, r_ref=0.3) == pytest.approx(30.0)
     plain = HeadingPID(params(heading_ki=0.0))
     assert plain.update(0.3, 0.3, 0.3, 0.01, r_ref=0.3) == pytest.approx(0.0)
+
+
+@pytest.mark.parametrize("clearance, cap", [(10.0, 1.5), (4.0, 1.5), (3.0, 1.05), (2.0, 0.6), (0.5, 0.6)])
+def test_speed_falls_linearly_near_obstacles(clearance, cap):
+    from autopilot_bridge.control import clearance_speed_cap
+
+    assert clearance_speed_cap(clearance, 2.0, 4.0, 0.6, 1.5) == pytest.approx(cap)
+    assert clearance_speed_cap(clearance, 2.0, 2.0, 0.6, 1.5) == float("inf")
