@@ -148,6 +148,7 @@ class Autopilot:
         self.last_command: Thrust | None = None
         self.last_t: float | None = None
         self.complete_t: float | None = None
+        self._returning = False            # loiter: on the way back to the final goal
         self.target = self.goal_ned
         self.speed_factor = 1.0
         self._path_invalid = False   # the followed path is blocked (sensed) or traffic asks for a new one
@@ -334,7 +335,7 @@ class Autopilot:
             cmd = self._manual_command() if (self.vehicle.armed and self.vehicle.mode == Mode.MANUAL) else \
                 self.zero_thrust
         elif self.mode == COMPLETE:
-            cmd = self.zero_thrust
+            cmd = self._station_keep(s, dt)
         else:
             if self._idle:  # back under control: the controllers start from the present state
                 self._idle = False
@@ -475,6 +476,26 @@ class Autopilot:
         inflation's edge leaves the hull only safety radius - L/2 of it."""
         return clearance_speed_cap(self.grid.clearance_at(s.y, s.x), self.world.params.safety_radius,
                                    self.p.slow_clearance, self.p.min_turn_speed, self.p.cruise_speed)
+
+    def _station_keep(self, s: NavState, dt: float) -> Thrust:
+        """After the final goal. ``mission_done = "hold"``: thrusters off, the boat drifts.
+        ``"loiter"`` (ArduPilot's LOITER for boats): drift while within ``loiter_radius`` of the goal;
+        beyond it, steer straight back at ``loiter_speed`` until within half the radius. The way back
+        is the water the boat has just drifted across, so it needs no planning."""
+        d = math.hypot(self.goal_ned[0] - s.x, self.goal_ned[1] - s.y)
+        if self.p.mission_done == "hold" or d <= 0.5 * self.p.loiter_radius or \
+                (not self._returning and d <= self.p.loiter_radius):
+            self._returning = False
+            return self.zero_thrust
+        if not self._returning:
+            self._returning = True
+            self.heading_pid.reset()
+            self.speed_ctl.reset(s.u)
+        psi_ref = math.atan2(self.goal_ned[1] - s.y, self.goal_ned[0] - s.x)
+        u_ref = min(self.p.loiter_speed, max(0.3, 0.5 * d))
+        tau_r = self.heading_pid.update(psi_ref, s.psi, s.r, dt)
+        tau_u = self.speed_ctl.update(u_ref, s.u, s.v, s.r, dt)
+        return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
 
     def _send(self, time_usec: int, cmd: Thrust, received_at: float) -> None:
         port, stdb = cmd.port_cmd, cmd.stdb_cmd

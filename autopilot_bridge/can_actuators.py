@@ -55,7 +55,7 @@ class CanActuators:
 
     def _send(self, full_name: str, payload: bytes, priority: int) -> int:
         tid = self.tids.take(full_name)
-        for frame in dc.to_frames(full_name, payload, self.node_id, tid, priority, time.time()):
+        for frame in dc.to_frames(full_name, payload, self.node_id, tid, priority):
             try:
                 self.bus.send(frame, timeout=0.1)
             except can.CanError:
@@ -102,6 +102,16 @@ class CanActuators:
         self.esc_status[index] = {"node_id": tr.source_node, "rpm": int(m.rpm), "voltage": float(m.voltage),
                                   "current": float(m.current), "temperature": float(m.temperature),
                                   "power_rating_pct": int(m.power_rating_pct), "error_count": int(m.error_count)}
+
+    def esc_telemetry(self) -> list[dict[str, float] | None]:
+        """Per ESC index (port, starboard): the newest Status fields plus ``count``, the Status
+        transfers received from that ESC; None for an ESC not heard from yet (the GCS link's
+        ESC_TELEMETRY_1_TO_4)."""
+        out: list[dict[str, float] | None] = []
+        for i, node in enumerate(self.esc_ids):
+            s = self.esc_status.get(i)
+            out.append(None if s is None else {**s, "count": self.tracker.received.get(f"Status@{node}", 0)})
+        return out if any(r is not None for r in out) else []
 
     def summary(self) -> dict[str, Any]:
         """Counters of the CAN path (the ``can`` key of the autopilot summary)."""

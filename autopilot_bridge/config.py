@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 from common.params import param
 
@@ -54,6 +55,12 @@ class AutopilotParams:
     send_loss: float = param("fault injection: probability of dropping an outgoing HIL datagram", ge=0, le=1)
     recv_loss: float = param("fault injection: probability of dropping an incoming HIL datagram", ge=0, le=1)
     sim_restart_gap: float = param("sensor time going back by more than this means the simulator restarted", "s", gt=0)
+    mission_done: Literal["loiter", "hold"] = param(
+        "after the final goal: loiter (hold position at the goal, as ArduPilot boats do in LOITER) or hold "
+        "(thrusters off, drift)", default="loiter")
+    loiter_radius: float = param("loiter: drifting this far from the final goal starts the way back", "m", gt=0,
+                                 default=3.0)
+    loiter_speed: float = param("loiter: speed set-point of the way back to the goal", "m/s", gt=0, default=0.8)
 
     def __post_init__(self) -> None:
         if self.planning_deadline >= self.planning_period:

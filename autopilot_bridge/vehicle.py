@@ -63,6 +63,7 @@ class Vehicle:
         self.route: Route | None = None
         self._versions = 0
         self.reached: list[int] = []          # items reached since last taken (MISSION_ITEM_REACHED)
+        self._last_reported = -1              # the item reported last (each is reported once)
         self.complete = False                 # the active route's end reached
         self.manual: tuple[float, float, float] | None = None  # (x, r, wall time) of MANUAL_CONTROL
         if scenario_route is not None and mode == Mode.AUTO:
@@ -124,6 +125,7 @@ class Vehicle:
         self.mission = list(mission)
         self.current = 0
         self.reached.clear()
+        self._last_reported = -1
         if self.mode == Mode.AUTO:
             if self.mission and position is not None:
                 self._route_from(position)
@@ -135,6 +137,7 @@ class Vehicle:
         if not 0 <= seq < len(self.mission):
             return False
         self.current = seq
+        self._last_reported = -1
         if self.mode == Mode.AUTO and position is not None:
             self._route_from(position)
         self.changed = True
@@ -146,6 +149,7 @@ class Vehicle:
         if not 0 <= first < len(self.mission):
             return False, f"no item {first}"
         self.current = first
+        self._last_reported = -1
         self.mode = Mode.AUTO  # set_mode re-routes from the (new) current item
         return self.set_mode(Mode.AUTO, position)
 
@@ -174,7 +178,7 @@ class Vehicle:
                 leg = (w.north - prev.north, w.east - prev.east)
                 passed = (north - w.north) * leg[0] + (east - w.east) * leg[1] > 0.0
             if d <= w.radius or passed:
-                self.reached.append(self.current)
+                self._report(self.current)
                 if final:
                     self.complete = True
                     return
@@ -186,11 +190,18 @@ class Vehicle:
     def finish(self) -> None:
         """The autopilot reached the final goal: every item not yet reported counts as reached."""
         while self.mission and self.current < len(self.mission):
-            self.reached.append(self.current)
+            self._report(self.current)
             if self.current == len(self.mission) - 1:
                 break
             self.current += 1
         self.complete = True
+
+    def _report(self, seq: int) -> None:
+        """Item ``seq`` reached: reported once (a boat keeping station at the final goal stays
+        within its radius frame after frame)."""
+        if seq != self._last_reported:
+            self.reached.append(seq)
+            self._last_reported = seq
 
     def take_reached(self) -> list[int]:
         r, self.reached = self.reached, []

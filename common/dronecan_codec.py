@@ -2,7 +2,9 @@
 
 Shared by the simulator's ESC nodes and the autopilot's CAN actuator back-end. The data types
 (field layout, default data type IDs, data type signatures) and their bit-level serialisation
-come from the ``dronecan`` package's DSDL definitions; its node and driver layers are not used.
+come from the ``dronecan`` package's DSDL definitions, except RawCommand and NodeStatus, which
+are on the command path and use the same layout in integer arithmetic (common/dronecan_layout.py,
+checked against the package in the tests); its node and driver layers are not used.
 The transport layer is ours and follows the DroneCAN specification ("CAN bus transport layer"):
 
 * 29-bit message frame ID: priority (bits 28-24), data type ID (23-8), service flag (7) = 0,
@@ -23,11 +25,14 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any, Iterable
 
 import can
 import dronecan
 from dronecan.transport import bits_from_bytes, bytes_from_bits
+
+from common import dronecan_layout
 
 # Data type IDs and full names (DroneCAN standard data types).
 RAW_COMMAND = "uavcan.equipment.esc.RawCommand"   # 1030
@@ -53,6 +58,10 @@ UNKNOWN_DATA_TYPE = "unknown_data_type"
 UNKNOWN_NODE = "unknown_node"
 NOT_DRONECAN = "not_dronecan"                # 11-bit ID, remote or error frame, CAN FD
 SERVICE_OR_ANONYMOUS = "service_or_anonymous"
+
+
+# The command-path types, serialised with integer arithmetic (common/dronecan_layout.py).
+FAST_LAYOUTS = {RAW_COMMAND: dronecan_layout.RAW_COMMAND, NODE_STATUS: dronecan_layout.NODE_STATUS}
 
 
 def data_type(full_name: str) -> Any:
@@ -88,6 +97,18 @@ def serialize(msg: Any) -> bytes:
     if len(bits) % 8:
         bits += "0" * (8 - len(bits) % 8)
     return bytes(bytes_from_bits(bits))
+
+
+def decode(dt: Any, payload: bytes) -> Any | None:
+    """The ``dronecan`` message object of type ``dt`` in ``payload``, or None unless ``payload`` is
+    exactly its serialisation (too short, too long, or non-zero padding)."""
+    try:
+        msg = dt()
+        msg._unpack(bits_from_bytes(bytearray(payload)), True)
+        canonical = serialize(msg)
+    except Exception:  # noqa: BLE001  (a payload too short for the type's fields: counted, never raised)
+        return None
+    return msg if canonical == payload else None
 
 
 def make(full_name: str, **fields: Any) -> Any:
@@ -225,14 +246,12 @@ class TransferReceiver:
             if crc16_ccitt(body, transfer_crc_seed(dt.get_data_type_signature())) != got:
                 self.rejects[BAD_CRC] += 1
                 return None
-        try:
-            msg = dt()
-            msg._unpack(bits_from_bytes(bytearray(body)), True)
-            canonical = serialize(msg)
-        except Exception:  # noqa: BLE001  (a payload too short for the type's fields: counted, never raised)
-            self.rejects[WRONG_DLC] += 1
-            return None
-        if canonical != body:  # too short / too long for the type, or trailing garbage
+        layout = FAST_LAYOUTS.get(dt.full_name)
+        if layout is not None:
+            msg = dronecan_layout.unpack(layout, body)
+        else:
+            msg = decode(dt, body)
+        if msg is None:  # too short / too long for the type, or trailing garbage
             self.rejects[WRONG_DLC] += 1
             return None
         return Transfer(dt.full_name, arb & 0x7F, tid, (arb >> 24) & 0x1F, body, msg, timestamp)
@@ -243,6 +262,7 @@ class TransferIdTracker:
 
     def __init__(self) -> None:
         self.last: dict[tuple[str, int], int] = {}
+        self.names: dict[tuple[str, int], str] = {}
         self.received: Counter = Counter()
         self.lost: Counter = Counter()
         self.duplicated: Counter = Counter()
@@ -250,7 +270,9 @@ class TransferIdTracker:
     def observe(self, t: Transfer) -> bool:
         """Record ``t``; False when it repeats the previous transfer ID (a duplicate)."""
         key = (t.full_name, t.source_node)
-        name = f"{t.full_name.rsplit('.', 1)[-1]}@{t.source_node}"
+        name = self.names.get(key)
+        if name is None:
+            name = self.names[key] = f"{short_name(t.full_name)}@{t.source_node}"
         last = self.last.get(key)
         self.last[key] = t.transfer_id
         if last is not None:
@@ -277,8 +299,9 @@ class TransferIds:
 
 def node_status(uptime_sec: int, health: int = 0, mode: int = 0, vendor_status: int = 0) -> bytes:
     """NodeStatus payload (7 bytes): health 0 = OK, mode 0 = OPERATIONAL."""
-    return serialize(make(NODE_STATUS, uptime_sec=int(uptime_sec) & 0xFFFFFFFF, health=health, mode=mode,
-                          sub_mode=0, vendor_specific_status_code=vendor_status))
+    return dronecan_layout.pack(dronecan_layout.NODE_STATUS, {
+        "uptime_sec": int(uptime_sec) & 0xFFFFFFFF, "health": health, "mode": mode, "sub_mode": 0,
+        "vendor_specific_status_code": vendor_status})
 
 
 def raw_command(values: Iterable[int]) -> bytes:
@@ -286,7 +309,7 @@ def raw_command(values: Iterable[int]) -> bytes:
     vals = [int(v) for v in values]
     if any(abs(v) > RAW_COMMAND_MAX for v in vals):
         raise ValueError(f"RawCommand values must lie in [-{RAW_COMMAND_MAX}, {RAW_COMMAND_MAX}]: {vals}")
-    return serialize(make(RAW_COMMAND, cmd=vals))
+    return dronecan_layout.pack(dronecan_layout.RAW_COMMAND, {}, vals)
 
 
 def quantize(normalised: float) -> int:
@@ -295,5 +318,7 @@ def quantize(normalised: float) -> int:
     return int(round(x * RAW_COMMAND_MAX))
 
 
+@lru_cache(maxsize=None)
 def short_name(full_name: str) -> str:
+    """"uavcan.equipment.esc.Status" -> "Status"."""
     return full_name.rsplit(".", 1)[-1]

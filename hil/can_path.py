@@ -109,16 +109,22 @@ def esc_main(args: argparse.Namespace) -> int:
 
     cfg = settings.load(args.config, args.overrides)
     vessel = Vessel(cfg.vessel)
-    esc = EscBank(open_bus(cfg.can), cfg.can, cfg.esc, vessel)
+    filters = None
+    if args.only_from_autopilot:  # messages (service bit 0) from the autopilot's node ID only
+        filters = [{"can_id": cfg.can.autopilot_node_id, "can_mask": 0xFF, "extended": True}]
+    esc = EscBank(open_bus(cfg.can, can_filters=filters), cfg.can, cfg.esc, vessel)
     esc.record = True
     flag = _stop_flag()
     print("esc: ready", file=sys.stderr, flush=True)
     t0 = time.monotonic()
     end = t0 + args.duration
-    while not flag["stop"] and time.monotonic() < end:
+    while not flag["stop"]:
         esc.poll(0.005)
+        now = time.monotonic()
+        if now >= end:
+            break
         c = esc.controls() or (0.0, 0.0)
-        esc.publish(time.monotonic() - t0, (vessel.thrust(c[0]), vessel.thrust(c[1])))
+        esc.publish(now - t0, (vessel.thrust(c[0]), vessel.thrust(c[1])))
     esc.bus.shutdown()
     np.savez(args.record, tid=np.frombuffer(esc.applied_tid, dtype=np.int8),
              at=np.frombuffer(esc.applied_at, dtype=float))
@@ -129,13 +135,15 @@ def esc_main(args: argparse.Namespace) -> int:
 def echo_main(args: argparse.Namespace) -> int:
     import can
 
-    bus = can.Bus(interface=args.interface, channel=args.channel)
+    bus = can.Bus(interface=args.interface, channel=args.channel,
+                  can_filters=[{"can_id": args.request_id, "can_mask": 0x1FFFFFFF, "extended": True}])
     flag = _stop_flag()
     print("echo: ready", file=sys.stderr, flush=True)
     stamps = []
     end = time.monotonic() + args.duration
     while not flag["stop"] and time.monotonic() < end:
         msg = bus.recv(0.05)
+        # Filtered in the kernel on SocketCAN; the check stays for back-ends that filter nothing.
         if msg is None or msg.arbitration_id != args.request_id:
             continue
         stamps.append((msg.data[0], time.monotonic()))
@@ -155,6 +163,8 @@ def main(argv: list[str] | None = None) -> int:
     e.add_argument("--set", dest="overrides", action="append", default=[])
     e.add_argument("--duration", type=float, required=True)
     e.add_argument("--record", required=True)
+    e.add_argument("--only-from-autopilot", action="store_true",
+                   help="kernel filter: take only message frames from the autopilot's node ID (bench)")
     e.set_defaults(func=esc_main)
     c = sub.add_parser("echo")
     c.add_argument("--interface", required=True)

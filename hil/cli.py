@@ -18,7 +18,7 @@ import sys
 from hil.errors import HilError
 
 # Subcommand modules under hil/commands/, in the order `hil --help` lists them.
-COMMANDS = ("run", "sim", "autopilot", "plan", "montecarlo", "bench", "soak")
+COMMANDS = ("run", "sim", "autopilot", "plan", "montecarlo", "bench", "soak", "vcan")
 
 
 class ArgumentParser(argparse.ArgumentParser):

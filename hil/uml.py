@@ -25,7 +25,7 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 UML_CANDIDATES = ("/usr/bin/linux.uml", "/usr/bin/linux")
 UML_MODULES = Path("/usr/lib/uml/modules")
@@ -206,9 +206,10 @@ class UmlRun:
 
 
 def run_in_uml(jobs: list[Job], mem: str = "1536M", boot_timeout: float = 60.0,
-               workdir: str | Path | None = None) -> UmlRun:
+               workdir: str | Path | None = None, follow: IO[str] | None = None) -> UmlRun:
     """Boot User-Mode Linux once, run ``jobs`` on its vcan0 one after the other, power off.
 
+    ``follow``: copy the jobs' stderr there as it is written (progress of long jobs).
     RuntimeError (with the console's tail) if the guest does not come up or does not finish in
     time; each job is killed at its own time limit (returncode None).
     """
@@ -245,7 +246,10 @@ def run_in_uml(jobs: list[Job], mem: str = "1536M", boot_timeout: float = 60.0,
         proc = subprocess.Popen(cmd, stdin=devnull, stdout=console, stderr=subprocess.STDOUT,
                                 start_new_session=True, cwd=work)
         try:
-            proc.wait(timeout=limit)
+            if follow is None:
+                proc.wait(timeout=limit)
+            else:
+                _wait_following(proc, limit, [work / f"job{i}.err" for i in range(len(jobs))], follow)
         except subprocess.TimeoutExpired:
             _kill_group(proc)
             raise RuntimeError(f"User-Mode Linux did not finish within {limit:.0f} s; console:\n"
@@ -270,6 +274,36 @@ def run_in_uml(jobs: list[Job], mem: str = "1536M", boot_timeout: float = 60.0,
     if len(results) < len(jobs):
         raise RuntimeError(f"User-Mode Linux ran {len(results)} of {len(jobs)} jobs; console:\n" + _tail(console_path))
     return UmlRun(results, guest.get("boot_s"), wall, console_path.read_text(errors="replace"))
+
+
+def _wait_following(proc: subprocess.Popen, limit: float, paths: list[Path], out: IO[str]) -> None:
+    """Wait up to ``limit`` s for ``proc``, copying what is appended to ``paths`` to ``out``
+    (the guest writes them through hostfs); TimeoutExpired at the limit."""
+    end = time.monotonic() + limit
+    offsets = [0] * len(paths)
+
+    def copy() -> None:
+        for i, path in enumerate(paths):
+            try:
+                with open(path, "rb") as fh:
+                    fh.seek(offsets[i])
+                    chunk = fh.read()
+            except OSError:
+                continue
+            if chunk:
+                offsets[i] += len(chunk)
+                out.write(chunk.decode(errors="replace"))
+                out.flush()
+
+    while True:
+        try:
+            proc.wait(timeout=max(0.0, min(0.5, end - time.monotonic())))
+            copy()
+            return
+        except subprocess.TimeoutExpired:
+            copy()
+            if time.monotonic() >= end:
+                raise
 
 
 def run_native(jobs: list[Job]) -> list[JobResult]:

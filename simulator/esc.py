@@ -109,8 +109,8 @@ class EscBank:
         return {"rpm": rpm, "power": power, "current": power / e.voltage,
                 "temperature": e.ambient_temperature + e.heating * power}
 
-    def _send(self, k: int, full_name: str, payload: bytes, priority: int, stamp: float) -> None:
-        for frame in dc.to_frames(full_name, payload, self.node_ids[k], self.tids[k].take(full_name), priority, stamp):
+    def _send(self, k: int, full_name: str, payload: bytes, priority: int) -> None:
+        for frame in dc.to_frames(full_name, payload, self.node_ids[k], self.tids[k].take(full_name), priority):
             try:
                 self.bus.send(frame, timeout=0.1)
             except can.CanError:
@@ -120,7 +120,6 @@ class EscBank:
 
     def publish(self, t: float, thrust: tuple[float, float]) -> None:
         """Send whatever is due at simulated time ``t`` (s) given the applied ``thrust`` (N)."""
-        stamp = time.time()
         if t + 1e-9 >= self.next_status_t:
             self.next_status_t = t + 1.0 / self.p.status_rate_hz
             for k, th in enumerate(thrust):
@@ -129,11 +128,11 @@ class EscBank:
                               temperature=s["temperature"], rpm=int(round(s["rpm"])),
                               power_rating_pct=min(127, int(round(100.0 * s["power"] / self.esc.max_power))),
                               esc_index=k)
-                self._send(k, dc.ESC_STATUS, dc.serialize(msg), dc.PRIORITY_MEDIUM, stamp)
+                self._send(k, dc.ESC_STATUS, dc.serialize(msg), dc.PRIORITY_MEDIUM)
         if t + 1e-9 >= self.next_node_status_t:
             self.next_node_status_t = t + 1.0 / self.p.node_status_rate_hz
             for k in range(len(self.node_ids)):
-                self._send(k, dc.NODE_STATUS, dc.node_status(int(t)), dc.PRIORITY_LOW, stamp)
+                self._send(k, dc.NODE_STATUS, dc.node_status(int(t)), dc.PRIORITY_LOW)
 
     def summary(self) -> dict[str, Any]:
         return {

@@ -17,7 +17,7 @@ from pathlib import Path
 import can
 import pytest
 
-from hil import uml
+from hil import settings, uml
 
 REPO = Path(__file__).resolve().parent.parent
 PY = sys.executable
@@ -83,6 +83,24 @@ def test_lockstep_can_run_gives_the_same_summary_as_mavlink(vcan_batch):
     assert ap["rejects"] == {} and sum(ap["transfers_lost"].values()) == 0
     assert ap["transfers_received"]["Status@20"] > 0 and ap["transfers_received"]["Status@21"] > 0
     assert set(ap["esc_status"]) == {"port", "starboard"}
+
+
+def test_esc_telemetry_goes_to_the_ground_station_and_into_the_tlog(vcan_batch):
+    """The GCS link (udpout 127.0.0.1:14550 by default) forwards the ESC Status read over CAN as
+    ESC_TELEMETRY_1_TO_4; every GCS datagram is in the run's .tlog."""
+    from pymavlink import mavutil
+
+    s = _json(vcan_batch["run_can"])
+    log = mavutil.mavlink_connection(s["tlog"], dialect="ardupilotmega")
+    rows = []
+    while (m := log.recv_match(type="ESC_TELEMETRY_1_TO_4")) is not None:
+        rows.append(m)
+    assert len(rows) > 10
+    assert max(r.rpm[0] for r in rows) > 100 and max(r.rpm[1] for r in rows) > 100
+    assert all(r.rpm[2] == r.rpm[3] == 0 for r in rows)             # two thrusters
+    assert rows[-1].count[0] > rows[0].count[0]                     # Status keeps arriving
+    volts = settings.load(None, []).esc.voltage
+    assert all(r.voltage[0] == round(volts * 100) for r in rows)    # cV
 
 
 def test_can_log_is_readable_by_python_can(vcan_batch):

@@ -6,7 +6,8 @@ One :class:`GcsLink` per vessel computer. It
   with MAV_CMD_SET_MESSAGE_INTERVAL or REQUEST_DATA_STREAM: HEARTBEAT (MAV_TYPE_SURFACE_BOAT, armed
   flag, ArduPilot Rover custom mode; also at least once per wall second so a GCS keeps the link
   while the simulator is paused), SYS_STATUS, GLOBAL_POSITION_INT, GPS_RAW_INT, LOCAL_POSITION_NED,
-  ATTITUDE, VFR_HUD, HOME_POSITION, MISSION_CURRENT, ACTUATOR_OUTPUT_STATUS, the planned local path as
+  ATTITUDE, VFR_HUD, HOME_POSITION, MISSION_CURRENT, ACTUATOR_OUTPUT_STATUS, ESC_TELEMETRY_1_TO_4 (the
+  DroneCAN ESC Status of the CAN actuator path, as ArduPilot forwards it), the planned local path as
   TRAJECTORY_REPRESENTATION_WAYPOINTS, MISSION_ITEM_REACHED and STATUSTEXT events;
 * answers commands (COMMAND_LONG / COMMAND_INT -> COMMAND_ACK), the mission microservice
   (:mod:`autopilot_bridge.gcs.mission`) and the parameter microservice (:mod:`.params`);
@@ -42,7 +43,7 @@ from common.udp import UdpEndpoint
 DEFAULT_INTERVALS = {
     "HEARTBEAT": 1.0, "SYS_STATUS": 1.0, "GPS_RAW_INT": 0.5, "GLOBAL_POSITION_INT": 0.2,
     "LOCAL_POSITION_NED": 0.1, "ATTITUDE": 0.1, "VFR_HUD": 0.25, "MISSION_CURRENT": 1.0,
-    "ACTUATOR_OUTPUT_STATUS": 0.5, "HOME_POSITION": 5.0,
+    "ACTUATOR_OUTPUT_STATUS": 0.5, "HOME_POSITION": 5.0, "ESC_TELEMETRY_1_TO_4": 0.5,
 }
 # REQUEST_DATA_STREAM groups (ArduPilot's grouping of the same messages).
 STREAM_GROUPS = {
@@ -52,6 +53,7 @@ STREAM_GROUPS = {
     M.MAV_DATA_STREAM_EXTRA2: ("VFR_HUD",),
     M.MAV_DATA_STREAM_RAW_CONTROLLER: ("ACTUATOR_OUTPUT_STATUS",),
     M.MAV_DATA_STREAM_RC_CHANNELS: ("ACTUATOR_OUTPUT_STATUS",),
+    M.MAV_DATA_STREAM_EXTRA3: ("ESC_TELEMETRY_1_TO_4",),
 }
 MSG_IDS = {name: getattr(mavlink2, f"MAVLINK_MSG_ID_{name}") for name in DEFAULT_INTERVALS}
 ID_NAMES = {v: k for k, v in MSG_IDS.items()}
@@ -288,6 +290,9 @@ class GcsLink:
         if name == "HOME_POSITION":
             self._home()
             return
+        if name == "ESC_TELEMETRY_1_TO_4":
+            self._esc_telemetry()
+            return
         if s is None:
             return
         vn = s.u * math.cos(s.psi) - s.v * math.sin(s.psi)
@@ -317,6 +322,22 @@ class GcsLink:
             if self.cmd is not None:
                 act = [float(self.cmd.port_cmd), float(self.cmd.stdb_cmd)] + [0.0] * 30
                 self._send("actuator_output_status", int(round(self.t * 1e6)), 0b11, act)
+
+    def _esc_telemetry(self) -> None:
+        """ESC_TELEMETRY_1_TO_4 from the newest ESC Status of each thruster (CAN path only), in the
+        message's units: degC, cV, cA, mAh, rpm (magnitude), Status transfers received."""
+        esc = getattr(getattr(self.ap, "actuators", None), "esc_telemetry", None)
+        rows = esc() if callable(esc) else []
+        if not rows:
+            return
+        rows = (rows + [None] * 4)[:4]
+
+        def col(key: str, scale: float, offset: float = 0.0, top: int = 65535) -> list[int]:
+            return [0 if r is None else max(0, min(top, int(round((r[key] + offset) * scale)))) for r in rows]
+
+        self._send("esc_telemetry_1_to_4", col("temperature", 1.0, -273.15, 255), col("voltage", 100.0),
+                   col("current", 100.0), [0] * 4, [0 if r is None else min(65535, abs(int(r["rpm"]))) for r in rows],
+                   [0 if r is None else int(r["count"]) % 65536 for r in rows])
 
     def _mission_current(self) -> None:
         v = self.ap.vehicle
