@@ -66,6 +66,9 @@ class RunOptions:
     plot: bool = True
     hooks: list[Callable[["Tap", "HilRun"], None]] = field(default_factory=list)  # tests: fault injection
     traffic: tuple | None = None         # ships replacing the scenario's [[traffic]] (Monte Carlo draws)
+    # hil run: Ctrl-C/SIGTERM end the run with outcome "interrupted" and its folder written (a GCS session
+    # with --wait-for-arm ends that way); elsewhere (Monte Carlo, soak) the interrupt propagates.
+    summary_on_interrupt: bool = False
 
 
 class Tap:
@@ -368,6 +371,10 @@ class HilRun:
                     last_report = time.monotonic()
                     opts.on_progress(f"run: t={t_sim:.1f} s simulated, {time.monotonic() - wall0:.1f} s wall, "
                                      f"clearance min {min_clearance:.2f} m")
+        except KeyboardInterrupt:
+            if not opts.summary_on_interrupt:
+                raise
+            outcome = "interrupted"
         finally:
             ap_summary = self._stop(self.ap)
             sim_summary = self._stop(self.sim)
@@ -422,6 +429,10 @@ class HilRun:
             "events": ap.get("events", []),
             "actuators": self.cfg.can.actuators,
         }
+        if ap.get("gcs") is not None:
+            # The ground-station link's counters (datagrams, rejects, missions, command acks, signing,
+            # failsafe): what a GCS did during the run. Wall-clock dependent (heartbeats per wall second).
+            summary["gcs"] = ap["gcs"]
         if self.encounter_judge is not None:
             from hil.encounter_report import totals
 

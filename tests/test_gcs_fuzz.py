@@ -97,3 +97,5 @@ def test_fuzzing_the_gcs_port_keeps_the_boat_running_and_counts_rejects(tmp_path
     assert rejects.get("not_mavlink", 0) > 100 and rejects.get("bad_crc", 0) > 50 and rejects.get("truncated", 0) > 50
     assert sum(rejects.values()) < 10 * n_sent
     assert g["param_rejects"] >= 3  # NaN, inf/unknown name, 1.5 for an integer choice
+    s = json.loads((out / "summary.json").read_text())["gcs"]
+    assert s["rejects"] == rejects and s["datagrams_in"] > s["frames_in"]  # garbage came in, few frames

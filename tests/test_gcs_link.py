@@ -158,3 +158,63 @@ def test_a_field_out_of_its_wire_range_costs_one_message_not_the_caller(closing)
     link.forward("VFR_HUD", 0.0, 1.0, 90, -40, 0.0, 0.0)   # throttle is uint16 on the wire
     link.forward("VFR_HUD", 0.0, 1.0, 90, 40, 0.0, 0.0)
     assert link.encode_errors["vfr_hud"] == 1 and link.sent == 1
+
+
+def _command_long(cmd: int, *p: float, sysid: int = 245) -> bytes:
+    mav = mavlink2.MAVLink(None, sysid, 190)
+    p = list(p) + [0.0] * (7 - len(p))
+    return bytes(mav.command_long_encode(1, 1, cmd, 0, *p).pack(mav))
+
+
+def test_set_mode_with_a_custom_sub_mode_is_refused_not_read_as_a_rover_mode(closing):
+    """MAVSDK sets a non-ArduPilot vehicle's mode the PX4 way: DO_SET_MODE param2 = main mode, param3 = sub
+    mode; its "start mission" is (4, 4). Rover's custom mode 4 is HOLD: that must be refused (DENIED),
+    not acknowledged as a HOLD the GCS did not ask for. A Rover mode with param3 0 or NaN is accepted."""
+    from types import SimpleNamespace
+
+    from autopilot_bridge.vehicle import Mode, Vehicle, Waypoint
+
+    port = free_udp_port()
+    link = GcsLink(params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO)
+    closing(link)
+    vehicle = Vehicle([Waypoint(10.0, 10.0, 3.0)], armed=True, mode=Mode.MANUAL)
+    link.ap = SimpleNamespace(vehicle=vehicle)
+    link.state = SimpleNamespace(x=0.0, y=0.0)
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    closing(gcs)
+    gcs.bind(("127.0.0.1", 0))
+    flag = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    for p2, p3, result, mode in ((4.0, 4.0, M.MAV_RESULT_DENIED, Mode.MANUAL),    # PX4 AUTO.MISSION
+                                 (4.0, 5.0, M.MAV_RESULT_DENIED, Mode.MANUAL),    # PX4 AUTO.RTL
+                                 (10.0, float("nan"), M.MAV_RESULT_ACCEPTED, Mode.AUTO),
+                                 (4.0, 0.0, M.MAV_RESULT_ACCEPTED, Mode.HOLD)):
+        gcs.sendto(_command_long(M.MAV_CMD_DO_SET_MODE, flag, p2, p3), ("127.0.0.1", port))
+        ack = read_until(gcs, "COMMAND_ACK", link)
+        assert ack is not None and ack.command == M.MAV_CMD_DO_SET_MODE and ack.result == result, (p2, p3, ack)
+        assert (ack.target_system, ack.target_component) == (245, 190)
+        assert vehicle.mode == mode, (p2, p3)
+    # The counters the run summary carries.
+    s = link.summary()
+    assert s["datagrams_in"] == s["frames_in"] == 4 and s["datagrams_out"] >= 4
+    assert s["command_acks"] == {"MAV_RESULT_DENIED": 2, "MAV_RESULT_ACCEPTED": 2}
+    assert s["commands"] == {"MAV_CMD_DO_SET_MODE:MAV_RESULT_DENIED": 2, "MAV_CMD_DO_SET_MODE:MAV_RESULT_ACCEPTED": 2}
+    assert s["failsafe_events"] == 0 and not s["signing"]
+
+
+def test_a_ping_request_is_answered_to_its_sender(closing):
+    """The ping protocol (https://mavlink.io/en/services/ping.html): a PING with target 0/0 is a request; the
+    answer echoes time_usec and seq and is addressed to the requester (MAVSDK pings every connection)."""
+    port = free_udp_port()
+    link = GcsLink(params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO)
+    closing(link)
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    closing(gcs)
+    gcs.bind(("127.0.0.1", 0))
+    mav = mavlink2.MAVLink(None, 245, 190)
+    gcs.sendto(bytes(mav.ping_encode(123456789, 42, 0, 0).pack(mav)), ("127.0.0.1", port))
+    pong = read_until(gcs, "PING", link)
+    assert pong is not None and (pong.time_usec, pong.seq) == (123456789, 42)
+    assert (pong.target_system, pong.target_component, pong.get_srcSystem()) == (245, 190, 1)
+    # A response (target set) is not answered again.
+    gcs.sendto(bytes(mav.ping_encode(5, 6, 1, 1).pack(mav)), ("127.0.0.1", port))
+    assert read_until(gcs, "PING", link, timeout=0.5) is None

@@ -142,6 +142,21 @@ def test_gcs_session_mission_commands_params_failsafe(live_run):
     assert g["mission"]["rejected_no_space"] == 1
     assert any("GCS failsafe" in e for e in ap["events"])
 
+    # Ctrl-C (SIGINT) ended the run: exit 130, and the run's summary.json carries the link's counters.
+    assert proc.returncode == 130
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "interrupted" and not summary["reached_goal"]
+    s = summary["gcs"]
+    assert s == g
+    assert s["datagrams_in"] > 0 and s["datagrams_out"] > 0 and s["frames_in"] > 0 and not s["signing"]
+    assert s["missions_accepted"] == 1 and s["missions_rejected"] >= 4
+    for result in ("MAV_MISSION_UNSUPPORTED", "MAV_MISSION_INVALID_PARAM6_Y", "MAV_MISSION_NO_SPACE",
+                   "MAV_MISSION_OPERATION_CANCELLED"):
+        assert s["mission_acks"].get(result, 0) >= 1, (result, s["mission_acks"])
+    assert s["command_acks"]["MAV_RESULT_ACCEPTED"] >= 5
+    assert s["commands"]["MAV_CMD_COMPONENT_ARM_DISARM:MAV_RESULT_ACCEPTED"] >= 3
+    assert s["failsafe_events"] == 1
+
     # The GCS traffic both ways is in the run's tlog.
     from pymavlink import mavutil
 
@@ -201,3 +216,7 @@ def test_signing_rejects_unsigned_and_forged_writes_and_the_allow_list_holds(liv
     stop_run(proc)
     sec = json.loads((out / "autopilot.json").read_text())["gcs"]["security_rejects"]
     assert sec.get("unsigned", 0) >= 1 and sec.get("bad_signature", 0) >= 1 and sec.get("not_allowed_sysid", 0) >= 1
+    s = json.loads((out / "summary.json").read_text())["gcs"]
+    assert s["signing"] and s["security_rejects"] == sec
+    assert s["command_acks"].get("MAV_RESULT_DENIED", 0) >= 3 and s["command_acks"]["MAV_RESULT_ACCEPTED"] >= 1
+    assert s["failsafe_events"] == 0

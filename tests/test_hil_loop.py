@@ -10,7 +10,7 @@ import pytest
 # tlog_messages and the autopilot's navigation counters are read when the processes are stopped:
 # after the goal the autopilot keeps answering frames until its SIGTERM arrives, a wall-clock moment.
 WALL_CLOCK_KEYS = {"wall_time_s", "control_latency_ms", "run_folder", "tlog", "plot", "simulator",
-                   "tlog_messages", "navigation", "sensed_obstacles"}
+                   "tlog_messages", "navigation", "gcs", "sensed_obstacles"}
 
 
 def _run(hil, tmp_path, *args: str, name: str = "run") -> tuple[int, dict]:
@@ -84,3 +84,9 @@ def test_unknown_scenario_is_one_line_exit_2(hil):
     r = hil("run", "--scenario", "atlantis", timeout=60)
     assert r.returncode == 2
     assert len(r.stderr.strip().splitlines()) == 1 and "atlantis" in r.stderr
+
+
+def test_wall_timeout_ends_the_run_with_its_folder_written(hil, tmp_path):
+    code, s = _run(hil, tmp_path, "--wall-timeout", "4")
+    assert s["outcome"] == "wall_timeout" and code == 1
+    assert 4.0 <= s["wall_time_s"] < 60.0

@@ -88,6 +88,11 @@ def load_signing_key(path: str) -> bytes:
     return hashlib.sha256(text.encode()).digest()
 
 
+def _enum_name(enum: str, value: int) -> str:
+    entry = mavlink2.enums.get(enum, {}).get(int(value))
+    return entry.name if entry is not None else f"{enum}_{int(value)}"
+
+
 def _text(v: Any) -> str:
     return (v.decode(errors="replace") if isinstance(v, (bytes, bytearray)) else str(v)).rstrip("\x00")
 
@@ -192,10 +197,15 @@ class GcsLink:
         self.t = 0.0
         self._paths_sent = 0
         self.sent = 0
+        self.datagrams_in = 0               # UDP datagrams / TCP reads from ground stations
+        self._datagrams_out_closed = 0      # per-peer sends of transports already closed
         self.received: Counter = Counter()
         self.rejects: Counter = Counter()
         self.security: Counter = Counter()
-        self.commands: Counter = Counter()
+        self.commands: Counter = Counter()        # "MAV_CMD_...:MAV_RESULT_..." of every COMMAND_ACK sent
+        self.command_acks: Counter = Counter()    # COMMAND_ACKs sent, by MAV_RESULT (refusals included)
+        self.mission_acks: Counter = Counter()    # MISSION_ACKs sent, by MAV_MISSION_RESULT
+        self.failsafe_events = 0
         self.encode_errors: Counter = Counter()
 
     # -- wiring ---------------------------------------------------------------------------------
@@ -240,6 +250,12 @@ class GcsLink:
                 self.log(f"gcs: {name} not sent: {type(exc).__name__}: {exc}")
             return
         self._send_frame(frame)
+        if name == "command_ack":
+            cmd, result = _enum_name("MAV_CMD", args[0]), _enum_name("MAV_RESULT", args[1])
+            self.command_acks[result] += 1
+            self.commands[f"{cmd}:{result}"] += 1
+        elif name == "mission_ack":
+            self.mission_acks[_enum_name("MAV_MISSION_RESULT", args[2])] += 1
 
     def forward(self, name: str, *fields: Any) -> None:
         """Encode message ``name`` (e.g. "ais_vessel") with the vessel's ids and send it to every GCS."""
@@ -439,6 +455,7 @@ class GcsLink:
                 if tr.stream and not data:
                     self._streams.pop(peer, None)
                     continue
+                self.datagrams_in += 1
                 stream = self._streams.get(peer) if tr.stream else None
                 if stream is None:
                     stream = _Stream(self.key)
@@ -515,6 +532,11 @@ class GcsLink:
             if m.target in (0, self.sysid) and self.ap is not None:
                 clip = lambda v: max(-1.0, min(1.0, v / 1000.0))  # noqa: E731
                 self.ap.vehicle.manual = (clip(m.x), clip(m.r), now)
+        elif kind == "PING":
+            # The ping protocol (mavlink.io/en/services/ping.html): a request has target 0/0; the reply
+            # echoes time_usec and seq, addressed to the sender.
+            if m.target_system == 0 and m.target_component == 0:
+                self._send("ping", m.time_usec, m.seq, m.get_srcSystem(), m.get_srcComponent())
         elif kind == "REQUEST_DATA_STREAM":
             if m.target_system in (0, self.sysid):
                 self._data_stream(m.req_stream_id, m.req_message_rate, m.start_stop)
@@ -558,7 +580,6 @@ class GcsLink:
         else:
             x5, y6 = m.param5, m.param6
         result, why = self._execute(int(m.command), p, x5, y6)
-        self.commands[f"{m.command}:{result}"] += 1
         self._send("command_ack", m.command, result, 0, 0, src[0], src[1])
         if result != M.MAV_RESULT_ACCEPTED and why:
             self.statustext(why, M.MAV_SEVERITY_WARNING)
@@ -582,6 +603,11 @@ class GcsLink:
         if cmd == M.MAV_CMD_DO_SET_MODE:
             if not finite(p[0]) or not finite(p[1]) or not int(p[0]) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
                 return M.MAV_RESULT_DENIED, "set mode: custom mode flag (param1) and mode (param2) needed"
+            if finite(p[2]) and p[2] != 0.0:
+                # Our modes have no sub-mode. A (main, sub) pair is another autopilot's numbering (PX4's
+                # AUTO.MISSION is (4, 4), as MAVSDK sends to a non-ArduPilot vehicle): read as Rover's
+                # custom mode 4 it would silently mean HOLD, so refuse it.
+                return M.MAV_RESULT_DENIED, f"set mode: no sub-mode {p[2]:g} (Rover modes: param2 only)"
             return self._set_mode(p[1])
         if cmd == M.MAV_CMD_MISSION_START:
             first = int(p[0]) if finite(p[0]) else 0
@@ -706,6 +732,7 @@ class GcsLink:
         if self.failsafe_active or not v.armed or v.mode != Mode.AUTO:
             return
         self.failsafe_active = True
+        self.failsafe_events += 1
         target = Mode.RTL if self.failsafe_action == "rtl" and v.home is not None else Mode.HOLD
         v.set_mode(target, self._position())
         self.failsafe_active = True
@@ -717,20 +744,37 @@ class GcsLink:
 
     # -- end ------------------------------------------------------------------------------------
     def summary(self) -> dict[str, Any]:
+        """The link's counters (the autopilot's summary and the run's summary.json carry them as "gcs").
+
+        Datagrams count what crossed the sockets (out: one per peer a frame went to); frames count MAVLink
+        messages (in: valid ones only, by type in ``received``; out: each frame once, fanned out or not).
+        """
+        acks = self.mission_acks
         return {
             "endpoints": [f"{h}:{p}" for h, p in self.addresses],
+            "datagrams_in": self.datagrams_in,
+            "datagrams_out": self._datagrams_out_closed + sum(tr.sent for tr in self.transports),
+            "frames_in": sum(self.received.values()),
             "frames_sent": self.sent,
             "received": dict(self.received),
             "rejects": dict(self.rejects),
             "security_rejects": dict(self.security),
+            "signing": self.key is not None,
+            "missions_accepted": self.mission.stats.get("uploads_accepted", 0) if self.mission is not None else 0,
+            "missions_rejected": sum(n for r, n in acks.items() if r != "MAV_MISSION_ACCEPTED"),
+            "mission_acks": dict(acks),
             "mission": dict(self.mission.stats) if self.mission is not None else {},
+            "command_acks": dict(self.command_acks),
+            "commands": dict(self.commands),
             "param_rejects": self.params_table.rejected if self.params_table is not None else 0,
             "encode_errors": dict(self.encode_errors),
+            "failsafe_events": self.failsafe_events,
             "failsafe_active": self.failsafe_active,
         }
 
     def close(self) -> None:
         for tr in self.transports:
+            self._datagrams_out_closed += tr.sent
             tr.close()
         self.transports = []
         if getattr(self, "mirror", None) is not None:

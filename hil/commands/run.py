@@ -126,9 +126,10 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                     "pymavlink's mavlogdump), summary.json, the processes' logs and plot.png, and prints "
                     "the summary: goal reached, collisions, minimum clearance, simulated and wall time, "
                     "path length, energy, planning cycles, deadline overruns, worker restarts, fallback "
-                    "activations, navigation RMSE, control-loop latency. Exit 0 only when the goal was "
-                    "reached without collision. With --demo, a constant-thrust controller replaces the "
-                    "autopilot (a steady starboard turn).",
+                    "activations, navigation RMSE, control-loop latency, the ground-station link's "
+                    "counters. Exit 0 only when the goal was reached without collision; Ctrl-C ends the "
+                    "run with outcome 'interrupted', its folder written, exit 130. With --demo, a "
+                    "constant-thrust controller replaces the autopilot (a steady starboard turn).",
     )
     p.add_argument("--scenario", default="harbour",
                    help="configs/scenarios/NAME.toml: map, start, goal, reference path, current (default: harbour)")
@@ -145,6 +146,9 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--out", metavar="DIR", default=None,
                    help="run folder (default: runs/SCENARIO-seedN-YYYYmmdd-HHMMSS)")
     p.add_argument("--no-plot", action="store_true", help="do not draw plot.png")
+    p.add_argument("--wall-timeout", metavar="SECONDS", type=float, default=None,
+                   help="end the run after this much wall time whatever happens (default: real time "
+                        "--duration / speedup + 300 s; lockstep the larger of 900 s and 3 x --duration)")
     add_can_arguments(p)
     from hil.commands.autopilot import add_gcs_arguments
 
@@ -162,6 +166,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--duration: must be > 0 seconds")
     if args.speedup is not None and not args.speedup > 0:
         raise ConfigError("--speedup: must be > 0")
+    if args.wall_timeout is not None and not args.wall_timeout > 0:
+        raise ConfigError("--wall-timeout: must be > 0 seconds")
     args.overrides = list(args.overrides) + can_overrides(args)
     cfg = load_settings(args)  # fail here, with one line, on a bad configuration
     previous_term = signal.signal(signal.SIGTERM, _raise_terminated)
@@ -174,6 +180,12 @@ def run(args: argparse.Namespace) -> int:
         return _run_hil(args, cfg)
     finally:
         signal.signal(signal.SIGTERM, previous_term)
+
+
+def _default_wall_timeout(args: argparse.Namespace) -> float:
+    if args.speedup is None:  # lockstep: usually faster than real time, slower on a busy machine
+        return max(900.0, 3.0 * args.duration)
+    return args.duration / args.speedup + 300.0
 
 
 def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
@@ -194,12 +206,16 @@ def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
     opts = RunOptions(scenario=args.scenario, lockstep=args.speedup is None, speedup=args.speedup or 1.0,
                       duration=args.duration, seed=seed, config=args.config, overrides=overrides, out=out,
                       on_progress=progress, plot=not args.no_plot,
-                      extra_autopilot_args=_gcs_args(args))
+                      extra_autopilot_args=_gcs_args(args), summary_on_interrupt=True,
+                      wall_timeout=args.wall_timeout or _default_wall_timeout(args))
     opts.actuators = cfg.can.actuators
     progress(f"run: scenario {args.scenario}, {'lockstep' if opts.lockstep else f'real time x{opts.speedup:g}'}, "
              f"actuators {cfg.can.actuators}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
     summary = run_loop(opts, cfg)
     emit(args, summary)
+    if summary["outcome"] == "interrupted":
+        progress(f"run: interrupted; summary in {out}")
+        return 130
     if not args.json:
         progress(f"run: {'goal reached' if summary['reached_goal'] else summary['outcome']}; "
                  f"plot: {summary.get('plot', 'none')}; folder: {out}")
