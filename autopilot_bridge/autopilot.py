@@ -41,15 +41,18 @@ from autopilot_bridge.control import (
     SurgeModel,
     Thrust,
     allocate,
+    clearance_speed_cap,
 )
 from autopilot_bridge.guidance import GuidanceOutput, LineOfSight
 from autopilot_bridge.hil_link import HilLink, SensorFrame
 from autopilot_bridge.local_planning import CycleInput, LocalPlan, World, map_to_ned_path, ned_to_map
 from autopilot_bridge.navigation import NavigationFilter, NavigationParams, NavState
 from autopilot_bridge.obstacle_map import SensedObstacles, path_blocked
+from autopilot_bridge.plan_commitment import CommitmentParams, keep_current
 from autopilot_bridge.planning_worker import PlannerWorker, PlanRequest
 from autopilot_bridge.reactive import ReactiveAvoidance
 from autopilot_bridge.telemetry import Telemetry
+from autopilot_bridge.tracking_stats import TrackingStats
 from common.dronecan_codec import RAW_COMMAND_MAX, quantize
 from autopilot_bridge.vehicle import Mode, Vehicle, Waypoint
 
@@ -112,6 +115,7 @@ class Autopilot:
         self._sensed_at_submit = 0
         self.reactive = ReactiveAvoidance(self.grid, params.fallback_range, params.min_clearance, params.fallback_speed)
         self.stats = AutopilotStats()
+        self.tracking = TrackingStats()
         self._waited = False
         self.local_paths: list[dict[str, Any]] = []
         self.track: list[tuple[float, float, float, float]] = []
@@ -147,6 +151,8 @@ class Autopilot:
         self._returning = False            # loiter: on the way back to the final goal
         self.target = self.goal_ned
         self.speed_factor = 1.0
+        self._path_invalid = False   # the followed path is blocked (sensed) or traffic asks for a new one
+        self._traffic_planned = False
         if self.traffic is not None:
             self.traffic.reset()
 
@@ -181,6 +187,7 @@ class Autopilot:
         self.cycle += 1
         self._sensed_at_submit = self.sensed.count
         snap = None if self.traffic is None else self.traffic.snapshot(s.t + lead, x, y, heading, self.p.cruise_speed)
+        self._traffic_planned = snap is not None   # ships move: their cycle's newest plan always wins
         request = PlanRequest(
             cycle=self.cycle,
             problem=CycleInput(x, y, heading, s.t + lead, self.seed * 100003 + self.cycle,
@@ -246,6 +253,10 @@ class Autopilot:
             self.stats.plans_rejected["sensed_since_planning"] += 1
             self.next_plan_t = s.t
             return False
+        if self._keeps_current_path(ned, s):
+            self.stats.plans_rejected["other_way_round"] += 1
+            return False
+        self._path_invalid = False
         self.los = LineOfSight(ned, self.p.lookahead, acceptance_radius=self.p.goal_tolerance)
         self.target = (plan.subgoal[1], plan.subgoal[0])
         self.speed_factor = plan.speed_factor
@@ -253,6 +264,19 @@ class Autopilot:
         self.local_paths.append({"t": s.t, "cycle": plan.cycle, "status": plan.status,
                                  "path_ned": ned[:: max(1, len(ned) // 200)].round(3).tolist()})
         return True
+
+    def _keeps_current_path(self, ned: np.ndarray, s: NavState) -> bool:
+        """Plan commitment: stay on the followed path rather than swing round the other side of an
+        obstacle (autopilot_bridge/plan_commitment.py) - unless it is blocked, traffic is being
+        planned for, or the vessel is off it by more than the look-ahead."""
+        if self.mode != PLANNED or self.los is None or self._path_invalid or self._traffic_planned:
+            return False
+        ahead = self.los.path[self.los.index:]
+        if float(np.min(np.hypot(ahead[:, 0] - s.x, ahead[:, 1] - s.y))) > self.p.lookahead:
+            return False
+        p = self.p
+        return keep_current(ahead, ned, self.grid.occ, self.grid.resolution,
+                            CommitmentParams(p.commit_compare_length, p.commit_min_remaining, p.commit_shortcut_ratio))
 
     # -- one frame -----------------------------------------------------------------------------
     def on_frame(self, f: SensorFrame, received_at: float) -> None:
@@ -288,6 +312,7 @@ class Autopilot:
                 self._event(t, text)
             if replan and self.mode != COMPLETE:
                 self.next_plan_t = t  # a new encounter: plan now, not at the next period
+                self._path_invalid = True
         if self.stats.frames % 10 == 0:  # the estimated track at 10 Hz, for the run's plot
             self.track.append((t, s.x, s.y, s.psi))
 
@@ -413,6 +438,7 @@ class Autopilot:
                 self.stats.sensed_replans += 1
                 self._event(t, "sensed obstacle near the local path: replanning")
                 self.next_plan_t = t
+                self._path_invalid = True
 
     def _to_fallback(self, t: float, why: str) -> None:
         if self.mode != FALLBACK:
@@ -423,18 +449,33 @@ class Autopilot:
 
     def _control(self, s: NavState, dt: float, g: GuidanceOutput | None) -> Thrust:
         if g is not None and self.los is not None:
-            psi_ref, u_ref = g.heading, self.p.cruise_speed * self.speed_factor
+            # LOS gives the course to steer; the hull must point the drift angle beta = atan2(v, u)
+            # (current, sway in turns) away from it. Uncompensated, each cycle's new path (starting
+            # where the vessel is) forgave the drift, and a cross-current set the boat onto walls.
+            beta = math.atan2(s.v, s.u) if s.u > self.p.min_turn_speed else 0.0
+            psi_ref, u_ref = g.heading - beta, self.p.cruise_speed * self.speed_factor
+            self.tracking.add(g.cross_track, psi_ref, s.psi)
+            r_ref = max(s.u, 0.0) * g.curvature   # the path turns at u kappa: feed it forward
             # Slow down for sharp turns ahead so the yaw rate they need (u kappa) stays within reach.
             if g.curvature_ahead > 1e-6:
                 u_ref = min(u_ref, max(self.p.min_turn_speed, self.p.max_turn_rate / g.curvature_ahead))
+            u_ref = min(u_ref, self._near_obstacle_speed(s))
             if g.remaining < 2.0 * self.p.lookahead and self.los.path[-1].tolist() == list(self.goal_ned):
                 u_ref = max(0.5, self.p.cruise_speed * g.remaining / (2.0 * self.p.lookahead))
         else:
             a = self.reactive.command(s.x, s.y, s.psi, self.target)
-            psi_ref, u_ref = a.heading, a.speed
-        tau_r = self.heading_pid.update(psi_ref, s.psi, s.r, dt)
+            psi_ref, u_ref, r_ref = a.heading, a.speed, 0.0
+        tau_r = self.heading_pid.update(psi_ref, s.psi, s.r, dt, r_ref)
         tau_u = self.speed_ctl.update(u_ref, s.u, s.v, s.r, dt)
         return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
+
+    def _near_obstacle_speed(self, s: NavState) -> float:
+        """Speed cap (m/s) near obstacles: cruise beyond ``slow_clearance`` of the vessel's clearance
+        (cell-centre distance on the chart plus sensed obstacles), ``min_turn_speed`` at the
+        planner's safety radius. The cross-track error of a turn grows with speed; a path at the
+        inflation's edge leaves the hull only safety radius - L/2 of it."""
+        return clearance_speed_cap(self.grid.clearance_at(s.y, s.x), self.world.params.safety_radius,
+                                   self.p.slow_clearance, self.p.min_turn_speed, self.p.cruise_speed)
 
     def _station_keep(self, s: NavState, dt: float) -> Thrust:
         """After the final goal. ``mission_done = "hold"``: thrusters off, the boat drifts.
@@ -500,6 +541,7 @@ class Autopilot:
             "worker_kills": w.killed,
             "worker_restarts": w.restarts,
             "fallback_activations": self.stats.fallback_activations,
+            "tracking": self.tracking.summary(),
             "simulator_restarts": self.stats.simulator_restarts,
             "navigation": {"updates": dict(self.nav.stats.updates), "rejected": dict(self.nav.stats.rejected),
                            "position_resets": self.nav.stats.position_resets},

@@ -22,6 +22,9 @@ class AutopilotParams:
     lookahead: float = param("line-of-sight look-ahead distance", "m", gt=0)
     max_turn_rate: float = param("speed is reduced so that sharp turns ahead need at most this yaw rate", "rad/s", gt=0)
     min_turn_speed: float = param("lowest speed of that reduction (steerage way)", "m/s", gt=0)
+    slow_clearance: float = param(
+        "closer than this to an obstacle the speed set-point falls linearly, to min_turn_speed at the planner's "
+        "safety radius: path-following error grows with speed, and the margin there is what is left", "m", gt=0)
     goal_tolerance: float = param("the mission is complete within this distance of the final goal", "m", gt=0)
     planning_period: float = param("simulated time between local planning cycles", "s", gt=0)
     planning_deadline: float = param("hard deadline of one local planning cycle (watchdog)", "s", gt=0)
@@ -31,6 +34,16 @@ class AutopilotParams:
         "lockstep: wall time to wait for a cycle's plan before the watchdog kills the worker (simulated time "
         "stands still meanwhile, so a loaded machine must not change the run)", "s", gt=0)
     gps_latency: float = param("GPS output latency compensated by dead reckoning", "s", ge=0)
+    commit_compare_length: float = param(
+        "metres of a new and the followed local path compared: an obstacle between them means they pass it on "
+        "different sides (autopilot_bridge/plan_commitment.py)", "m", gt=0)
+    commit_min_remaining: float = param(
+        "a new path that passes an obstacle the other way round replaces the followed one once that has less "
+        "than this left", "m", ge=0)
+    commit_shortcut_ratio: float = param(
+        "... or at once when it is shorter than this fraction of the followed path's rest plus the gap between "
+        "their ends",
+        gt=0, le=1)
     fallback_speed: float = param("speed of the reactive obstacle-avoidance behaviour", "m/s", gt=0)
     fallback_range: float = param("look-ahead of the reactive behaviour's free-space rays", "m", gt=0)
     min_clearance: float = param("the reactive behaviour keeps rays this far from obstacles", "m", ge=0)

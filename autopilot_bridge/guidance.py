@@ -25,6 +25,7 @@ class GuidanceOutput:
     remaining: float        # m, path length from the closest point to the end
     finished: bool          # within the acceptance radius of the end point
     curvature_ahead: float  # 1/m, the sharpest turn of the path within the preview distance
+    curvature: float = 0.0  # 1/m, signed (> 0 turning to starboard) path curvature at the closest point
 
 
 class LineOfSight:
@@ -49,6 +50,8 @@ class LineOfSight:
         ang = np.arctan2(self.seg[:, 1], self.seg[:, 0])
         turn = np.abs((np.diff(ang) + np.pi) % (2.0 * np.pi) - np.pi)
         self.vertex_curvature = turn / np.maximum(0.5 * (self.seg_len[:-1] + self.seg_len[1:]), 1e-6)
+        signed = (np.diff(ang) + np.pi) % (2.0 * np.pi) - np.pi
+        self.signed_curvature = signed / np.maximum(0.5 * (self.seg_len[:-1] + self.seg_len[1:]), 1e-6)
 
     @property
     def length(self) -> float:
@@ -60,6 +63,15 @@ class LineOfSight:
         hi = int(np.searchsorted(self.cum, start + preview, side="right"))
         k = self.vertex_curvature[index:max(index, hi - 1)]  # vertex j sits at the end of segment j
         return float(k.max()) if len(k) else 0.0
+
+    def curvature_at(self, index: int, along: float, span: float = 1.0) -> float:
+        """Mean signed curvature (1/m, > 0 to starboard) of the vertices within ``span`` m either
+        side of ``along`` metres into segment ``index``: the turn a yaw-rate feed-forward follows."""
+        s = self.cum[index] + along
+        lo = int(np.searchsorted(self.cum, s - span, side="left"))
+        hi = int(np.searchsorted(self.cum, s + span, side="right"))
+        k = self.signed_curvature[max(lo - 1, 0):max(hi - 1, 0)]  # vertex j sits at cum[j + 1]
+        return float(k.mean()) if len(k) else 0.0
 
     def update(self, north: float, east: float, preview: float = 0.0) -> GuidanceOutput:
         """Desired heading for the vessel at (north, east); ``preview`` m of path are scanned for curvature."""
@@ -86,4 +98,5 @@ class LineOfSight:
             heading = math.atan2(self.path[-1][1] - east, self.path[-1][0] - north) if end_dist > 1e-6 else pi_p
         return GuidanceOutput(heading=heading, cross_track=e, remaining=remaining,
                               finished=end_dist <= self.acceptance_radius,
-                              curvature_ahead=self.curvature_ahead(i, s * self.seg_len[i], preview))
+                              curvature_ahead=self.curvature_ahead(i, s * self.seg_len[i], preview),
+                              curvature=self.curvature_at(i, s * self.seg_len[i]))

@@ -415,6 +415,7 @@ class HilRun:
             "deadline_overruns": ap.get("deadline_overruns"),
             "worker_restarts": ap.get("worker_restarts"),
             "fallback_activations": ap.get("fallback_activations"),
+            "tracking": ap.get("tracking"),     # cross-track and heading errors on local paths
             "navigation_rmse_m": None if rmse is None else round(rmse, 3),
             "control_latency_ms": ap.get("control_latency_ms"),
             "simulator_restarts": self.sim_restarts,

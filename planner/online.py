@@ -138,6 +138,7 @@ class OnlineContext:
     safe_grid: OccupancyGrid | None = None
     _free_index: np.ndarray | None = None
     _velocity_grids: dict = dc_field(default_factory=dict)
+    _distance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.reference_path = np.asarray(self.reference_path, dtype=float).reshape(-1, 2)
@@ -155,6 +156,50 @@ class OnlineContext:
             self._velocity_grids[key] = self.grid.inflate_velocity(
                 key, self.params.velocity_inflation_gain, self.params.safety_radius)
         return self._velocity_grids[key]
+
+    def recovery_grid(self, pos: tuple[float, float]) -> OccupancyGrid | None:
+        """The map for a vessel inside the safety inflation (tracking error or the current put it
+        there): the inflation radius grows linearly with the distance from the vessel, from the
+        largest multiple of the resolution that leaves the vessel's cell free to the full safety
+        radius at ``recovery_radius``. None when that is no inflation at all (the vessel touches
+        an obstacle: raw map).
+
+        Planning on the raw map instead (as before) let every new path run along the obstacle at
+        the vessel's distance or closer; the next cycle then started closer still, a ratchet that
+        walked the lockstep runs into labyrinth walls. A constant reduced radius near the vessel
+        still allowed a slower ratchet (a path parallel to the wall at the vessel's clearance,
+        tracking error a cell inwards, the next path a cell closer): the ramp makes every path
+        gain clearance as it goes."""
+        res = self.grid.resolution
+        dist = self._centre_distance()
+        r, c = self.grid.cell_of(*pos)
+        if not (0 <= r < dist.shape[0] and 0 <= c < dist.shape[1]):
+            return None
+        radius = math.floor((float(dist[r, c]) - 1e-9) / res) * res
+        if radius <= 0.0:
+            return None
+        full = self.params.safety_radius
+        radius = min(radius, full)
+        rows, cols = dist.shape
+        yy = (np.arange(rows) + 0.5) * res - pos[1]
+        xx = (np.arange(cols) + 0.5) * res - pos[0]
+        away = np.sqrt(yy[:, None] ** 2 + xx[None, :] ** 2)
+        allowed = radius + (full - radius) * np.minimum(away / self.recovery_radius, 1.0)
+        return OccupancyGrid(dist <= allowed + 1e-12, res)
+
+    @property
+    def recovery_radius(self) -> float:
+        """Distance (m) from the vessel at which a path must be back outside the full inflation:
+        one tree extension (4 m: a lateral step of 1 m on the 3 m turning circle takes ~3.5 m)."""
+        return self.params.step
+
+    def _centre_distance(self) -> np.ndarray:
+        """Distance (m) of each cell centre from the nearest obstacle cell centre or the map's edge
+        (the measure of :meth:`OccupancyGrid.inflate`)."""
+        if self._distance is None:
+            self._distance = ndimage.distance_transform_edt(~np.pad(self.grid.occ, 1, constant_values=True))[1:-1, 1:-1] \
+                * self.grid.resolution
+        return self._distance
 
     def nearest_free(self, grid: OccupancyGrid, point: tuple[float, float]) -> tuple[float, float] | None:
         """The centre of the free cell of ``grid`` nearest to ``point`` (None if the map is full)."""
@@ -315,12 +360,13 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
     pos = (state.x, state.y)
     sub_point, sub_index, rule = select_local_subgoal(ctx, pos)
 
-    # Planning map: velocity-inflated, else only safety-inflated, else raw when the vessel
-    # itself is inside the inflation (it may have been pushed there; it must still get out).
+    # Planning map: velocity-inflated, else only safety-inflated, else (the vessel itself is
+    # inside the inflation: pushed there, it must still get out) the recovery map, else raw.
     velocity = reference_velocity(ctx.reference_path, sub_point, params.speed)
     grid = None
-    for candidate in (ctx.planning_grid(velocity), ctx.safe_grid, ctx.grid):
-        if candidate.is_free(*pos):
+    recovery = None if ctx.safe_grid.is_free(*pos) else ctx.recovery_grid(pos)
+    for candidate in (ctx.planning_grid(velocity), ctx.safe_grid, recovery, ctx.grid):
+        if candidate is not None and candidate.is_free(*pos):
             grid = candidate
             break
     empty = np.zeros((0, 2))
@@ -383,7 +429,7 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
     radius = params.turn_radius_factor * params.speed
     # The bypass of a short leg must be clear of the safety-inflated map (the velocity
     # inflation is a planning margin; the smoothed path is checked against the same map).
-    check_grid = ctx.safe_grid if ctx.safe_grid.is_free(*pos) else ctx.grid
+    check_grid = next(g for g in (ctx.safe_grid, recovery, ctx.grid) if g is not None and g.is_free(*pos))
     if traffic_grid is not None:
         check_grid = traffic_grid(check_grid)
     local = drop_short_legs(local, check_grid, radius)

@@ -124,9 +124,9 @@ def test_esc_lag_is_first_order_and_shared_by_both_paths():
 
 def test_int14_resolution_rounds_commands_like_raw_command():
     from simulator.core import Command
-    plain = SimulatorCore(settings.load())
+    plain = SimulatorCore(settings.load(None, ["esc.int14_resolution=false"]))
     plain.apply(Command(0, 0.5, -0.3))
-    assert plain.controls == (0.5, -0.3)  # the MAVLink path as it always was
+    assert plain.controls == (0.5, -0.3)  # float commands on the MAVLink path (int14 is the default)
     for overrides in (["esc.int14_resolution=true"], ["can.actuators=\"can\""]):
         core = SimulatorCore(settings.load(None, overrides))
         core.apply(Command(0, 0.5, -0.3))

@@ -22,7 +22,7 @@ MODEL = SurgeModel(m11=57.75, m22=112.82, d_u=31.915)
 
 
 def params(**kw) -> ControlParams:
-    base = dict(heading_kp=40.0, heading_ki=2.0, heading_kd=30.0, heading_integral_limit=10.0,
+    base = dict(heading_kp=40.0, heading_ki=2.0, heading_kd=30.0, heading_integral_limit=10.0, heading_rate_feedforward=0.0,
                 speed_bandwidth=1.0, speed_damping=1.0, speed_integral_limit=40.0,
                 speed_reference_time_constant=2.0, max_acceleration=0.5)
     base.update(kw)
@@ -143,3 +143,33 @@ def test_los_rejects_degenerate_paths():
         LineOfSight(np.array([[0.0, 0.0]]), 5.0, 1.0)
     with pytest.raises(ValueError):
         LineOfSight(np.array([[1.0, 1.0], [1.0, 1.0]]), 5.0, 1.0)
+
+
+@pytest.mark.parametrize("turn", [+1.0, -1.0])
+def test_guidance_reports_the_signed_curvature_of_a_bend(turn):
+    """A 5 m radius arc to starboard (+1) or port (-1), sampled every 0.5 m as the Dubins paths are."""
+    th = np.arange(0.0, np.pi / 2, 0.5 / 5.0)
+    # heading north at the start; a starboard turn bends towards east
+    path = np.column_stack([5.0 * np.sin(th), turn * 5.0 * (1.0 - np.cos(th))])
+    los = LineOfSight(path, lookahead=3.0, acceptance_radius=1.0)
+    g = los.update(*path[8])
+    assert g.curvature == pytest.approx(turn / 5.0, rel=0.05)
+    straight = LineOfSight(np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0]]), 3.0, 1.0)
+    assert straight.update(5.0, 0.0).curvature == 0.0
+
+
+def test_yaw_rate_feedforward_holds_a_steady_turn_without_heading_error():
+    """On heading with the reference turning at r_ref and the vessel turning with it, the PID adds
+    nothing; the feed-forward alone supplies the yaw damping d_r r_ref of the turn."""
+    pid = HeadingPID(params(heading_ki=0.0, heading_rate_feedforward=100.0))
+    assert pid.update(0.3, 0.3, 0.3, 0.01, r_ref=0.3) == pytest.approx(30.0)
+    plain = HeadingPID(params(heading_ki=0.0))
+    assert plain.update(0.3, 0.3, 0.3, 0.01, r_ref=0.3) == pytest.approx(0.0)
+
+
+@pytest.mark.parametrize("clearance, cap", [(10.0, 1.5), (4.0, 1.5), (3.0, 1.05), (2.0, 0.6), (0.5, 0.6)])
+def test_speed_falls_linearly_near_obstacles(clearance, cap):
+    from autopilot_bridge.control import clearance_speed_cap
+
+    assert clearance_speed_cap(clearance, 2.0, 4.0, 0.6, 1.5) == pytest.approx(cap)
+    assert clearance_speed_cap(clearance, 2.0, 2.0, 0.6, 1.5) == float("inf")

@@ -112,3 +112,34 @@ def test_subgoal_does_not_jump_behind_a_folded_reference_path():
     # Rule 1 is not applied through the wall either (the goal is 32.8 m away, beyond wall B).
     point3, _, rule3 = select_local_subgoal(ctx, (75.8, 63.5))
     assert rule3 != 1 and point3 != ctx.goal
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_vessel_inside_the_inflation_plans_out_of_it_not_along_the_wall(seed):
+    """Pushed 1.5 m from the labyrinth's north wall (inside the 2 m safety inflation), the vessel
+    heads west along it towards the wall's end. The cycle's path may not get closer to the wall
+    than the vessel is, and must be outside the full inflation beyond the recovery radius; the
+    raw map that was used before let the path hug the wall."""
+    sc, ctx = _context("labyrinth", "ddrrt-star")
+    start = VesselState(45.0, 64.8, math.pi)
+    assert not ctx.safe_grid.is_free(start.x, start.y)
+    vessel_clearance = ctx.grid.inflate(1.5).is_free(start.x, start.y), ctx.grid.inflate(1.0).is_free(start.x, start.y)
+    assert vessel_clearance == (False, True)          # between 1.0 and 1.5 m from wall cell centres
+    rec = plan_cycle(ctx, start, 0, seed=seed)
+    assert rec.status in ("exact", "approximate") and len(rec.smooth_path) >= 2
+    path = rec.smooth_path
+    near = ctx.grid.inflate(1.0)
+    assert near.path_free(path)
+    far = [p for p in path if math.dist(p, (start.x, start.y)) > ctx.recovery_radius + 0.5]
+    assert far and all(ctx.safe_grid.is_free(*p) for p in far)
+
+
+def test_recovery_grid_shrinks_the_inflation_only_near_the_vessel():
+    _, ctx = _context("labyrinth", "ddrrt-star")
+    pos = (45.0, 64.8)
+    g = ctx.recovery_grid(pos)
+    assert g is not None and g.is_free(*pos)
+    assert not g.is_free(45.0, 65.3)                  # closer to the wall than the vessel: blocked
+    assert not g.is_free(70.0, 64.8)                  # 25 m on, the full 2 m inflation holds
+    assert ctx.recovery_grid((45.0, 65.9)) is None    # touching the wall: nothing left to shrink
+    assert ctx.recovery_grid((45.0, 60.0)).is_free(45.0, 60.0)

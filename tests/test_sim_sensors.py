@@ -143,4 +143,4 @@ def test_stale_command_failsafe_zeroes_thrust_once_per_silence():
         core.step()
     assert core.stale_command_events == 1
     core.apply(Command(core.time_usec, 0.5, 0.5))
-    assert core.thrusts() == (0.5 * core.vessel.T_max,) * 2
+    assert core.thrusts() == (4096 / 8191 * core.vessel.T_max,) * 2   # int14 commands (esc default)
