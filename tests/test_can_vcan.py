@@ -25,7 +25,7 @@ PY = sys.executable
 PHYSICS = ["--set", "esc.time_constant=0.1", "--set", "esc.int14_resolution=true"]
 RUN = ["-m", "hil", "run", "--json", "--no-plot", "--scenario", "harbour", "--seed", "2", *PHYSICS]
 WALL_CLOCK_KEYS = {"wall_time_s", "control_latency_ms", "run_folder", "tlog", "plot", "simulator",
-                   "tlog_messages", "navigation", "gcs", "can", "actuators"}
+                   "tlog_messages", "navigation", "sensed_obstacles", "gcs", "can", "actuators"}
 
 
 @pytest.fixture(scope="module")
