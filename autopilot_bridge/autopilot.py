@@ -268,8 +268,13 @@ class Autopilot:
     def _keeps_current_path(self, ned: np.ndarray, s: NavState) -> bool:
         """Plan commitment: stay on the followed path rather than swing round the other side of an
         obstacle (autopilot_bridge/plan_commitment.py) - unless it is blocked, traffic is being
-        planned for, or the vessel is off it by more than the look-ahead."""
+        planned for, the followed path is not an exact one, or the vessel is off it by more than the
+        look-ahead."""
         if self.mode != PLANNED or self.los is None or self._path_invalid or self._traffic_planned:
+            return False
+        if self.local_paths and self.local_paths[-1]["status"] != "exact":
+            # The followed path stopped short of its subgoal (the tree found no way there): it may
+            # lead into a dead end, such as along a mole the reference path crosses. No commitment.
             return False
         ahead = self.los.path[self.los.index:]
         if float(np.min(np.hypot(ahead[:, 0] - s.x, ahead[:, 1] - s.y))) > self.p.lookahead:
