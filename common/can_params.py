@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import socket
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -28,6 +29,9 @@ class CanParams:
     lockstep_wait: float = param(
         "lockstep: wall time the simulator waits for the RawCommand that matches a frame's answer", "s", gt=0, default=1.0)
     log: bool = param("hil run: record every CAN frame to can.log (candump format) in the run folder", default=True)
+    socket_rx_buffer: int = param(
+        "SocketCAN: receive buffer of each node's socket (SO_RCVBUF; the kernel caps it at net.core.rmem_max)",
+        "bytes", ge=0, default=1 << 20)
 
     def __post_init__(self) -> None:
         ids = (self.autopilot_node_id, *self.esc_node_ids)
@@ -38,8 +42,17 @@ class CanParams:
 
 
 def open_bus(params: CanParams, **kwargs: Any) -> can.BusABC:
-    """``can.Bus`` of the configured interface and channel; ValueError with a one-line reason."""
+    """``can.Bus`` of the configured interface and channel; ValueError with a one-line reason.
+
+    On SocketCAN the socket's receive buffer is raised to ``socket_rx_buffer``: the default (about
+    200 KB) holds only about a hundred frames in User-Mode Linux, and a control loop held up for a
+    second and a half while the ESCs kept sending overflowed it in the hour-long soak.
+    """
     try:
-        return can.Bus(interface=params.interface, channel=params.channel, **kwargs)
+        bus = can.Bus(interface=params.interface, channel=params.channel, **kwargs)
     except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
         raise ValueError(f"cannot open CAN bus {params.interface}:{params.channel}: {exc}") from None
+    sock = getattr(bus, "socket", None)
+    if params.interface == "socketcan" and params.socket_rx_buffer and isinstance(sock, socket.socket):
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, params.socket_rx_buffer)
+    return bus

@@ -8,11 +8,10 @@ when ``duration`` simulated seconds have been run (0: never), or when ``stop()``
 from __future__ import annotations
 
 import time
-from array import array
 from typing import Any, Callable
 
-import numpy as np
 
+from common.percentiles import StreamingPercentiles
 from common.udp import UdpEndpoint
 from simulator.core import OUT_OF_STEP, Command, SimulatorCore
 
@@ -38,7 +37,7 @@ class SimulatorServer:
         self.end_frame = int(round(duration / core.frame_dt)) if duration > 0 else None
         self.lockstep_resends = 0
         self.datagrams_sent = 0
-        self.lateness = array("d")  # real time: lateness of each step vs its ideal wall time (s)
+        self.lateness = StreamingPercentiles()  # real time: lateness of each step vs its ideal wall time (ms)
         self._stop = False
         self.wall_time = 0.0
 
@@ -136,7 +135,7 @@ class SimulatorServer:
                 if self._stop:
                     return
                 time.sleep(min(remaining, POLL_S))
-            self.lateness.append(time.perf_counter() - ideal)
+            self.lateness.add(max(0.0, (time.perf_counter() - ideal) * 1e3))
             newest = None
             for data in self.ep.drain():
                 cmds = core.receive(data)
@@ -157,10 +156,10 @@ class SimulatorServer:
 
     # -- report ----------------------------------------------------------------------------
     def jitter_ms(self) -> dict[str, float] | None:
-        if not len(self.lateness):
+        j = self.lateness
+        if not j.count:
             return None
-        a = np.frombuffer(self.lateness, dtype=float) * 1e3
-        return {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)), "max": float(a.max())}
+        return {"p50": j.percentile(50), "p99": j.percentile(99), "max": j.max}
 
     def summary(self) -> dict[str, Any]:
         c = self.core

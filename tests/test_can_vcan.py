@@ -117,6 +117,9 @@ def test_bad_frames_on_vcan_are_counted_never_applied(vcan_batch):
     r = _json(vcan_batch["bad_frames"])
     assert r["applied"] == 1 and r["raw"] == [1000, -1000]
     assert r["rejects"] == {"not_dronecan": 1, "raw_command_out_of_range": 1, "unknown_node": 1, "wrong_dlc": 1}
+    # The node socket's receive buffer as configured (can.socket_rx_buffer), capped by rmem_max.
+    want = min(settings.load(None, []).can.socket_rx_buffer, int(Path("/proc/sys/net/core/rmem_max").read_text()))
+    assert r["rcvbuf"] >= want
 
 
 def test_soak_60s_is_clean(vcan_batch):

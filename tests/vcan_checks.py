@@ -7,6 +7,7 @@ one JSON line: what the ESC nodes applied and rejected.
 from __future__ import annotations
 
 import json
+import socket
 
 import can
 
@@ -32,8 +33,9 @@ def main() -> None:
         tx.send(f)
     for _ in range(20):
         esc.poll(0.05)
+    rcvbuf = esc.bus.socket.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)  # Linux reports twice the request
     print(json.dumps({"raw": list(esc.raw) if esc.raw else None, "applied": esc.commands,
-                      "rejects": esc.summary()["rejects"]}))
+                      "rejects": esc.summary()["rejects"], "rcvbuf": rcvbuf}))
     tx.shutdown()
     esc.bus.shutdown()
 

@@ -10,6 +10,8 @@ import signal
 import tempfile
 from pathlib import Path
 
+import numpy as np
+
 from hil import scenario as scenarios
 from hil.commands.can_options import add_can_arguments, can_overrides
 from hil.commands.sim import _hostport
@@ -243,7 +245,7 @@ def run(args: argparse.Namespace) -> int:
     if autopilot.telemetry is not None:
         summary["gcs"] = autopilot.telemetry.summary()
     summary["local_paths"] = autopilot.local_paths
-    summary["estimated_track"] = [list(map(lambda v: round(v, 3), row)) for row in autopilot.track]
+    summary["estimated_track"] = np.frombuffer(autopilot.track, dtype=float).reshape(-1, 4).round(3).tolist()
     summary["sensed_cells"] = autopilot.sensed.cells().tolist()
     if args.summary_out:
         write_json_atomic(args.summary_out, summary)
