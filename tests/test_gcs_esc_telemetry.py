@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import math
 import socket
-import time
 from types import SimpleNamespace
 
 import can
@@ -21,6 +20,7 @@ from hil import settings
 from hil.hilrun import free_udp_port
 from simulator.core import SimulatorCore
 from simulator.esc import EscBank
+from test_gcs_link import read_until
 
 
 def _gcs_params(endpoint: str) -> GcsParams:
@@ -44,18 +44,7 @@ def _request(sock: socket.socket, port: int, link: GcsLink, msg_id: int, timeout
     mav = mavlink2.MAVLink(None, 255, 190)
     sock.sendto(bytes(mav.command_long_encode(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, msg_id, 0, 0, 0, 0, 0, 0).pack(mav)),
                 ("127.0.0.1", port))
-    parser = mavlink2.MAVLink(None, 255, 190)
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        link.service()
-        try:
-            data = sock.recv(65535)
-        except (TimeoutError, socket.timeout):
-            continue
-        for m in parser.parse_buffer(data) or []:
-            if m.get_msgId() == msg_id:
-                return m
-    return None
+    return read_until(sock, mavlink2.mavlink_map[msg_id].msgname, link, timeout)
 
 
 def test_esc_status_from_can_is_forwarded_as_esc_telemetry(can_rig):
