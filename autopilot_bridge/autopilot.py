@@ -346,8 +346,7 @@ class Autopilot:
         else:
             if self._idle:  # back under control: the controllers start from the present state
                 self._idle = False
-                self.heading_pid.reset()
-                self.speed_ctl.reset(s.u)
+                self._reset_controllers(s)
             plan = self._collect_plan(t)
             if plan is not None:
                 if self._accept(plan, s):
@@ -472,9 +471,17 @@ class Autopilot:
         else:
             a = self.reactive.command(s.x, s.y, s.psi, self.target)
             psi_ref, u_ref, r_ref = a.heading, a.speed, 0.0
+        return self._drive(s, dt, psi_ref, u_ref, r_ref)
+
+    def _drive(self, s: NavState, dt: float, psi_ref: float, u_ref: float, r_ref: float = 0.0) -> Thrust:
+        """Heading (rad, with yaw-rate feed-forward r_ref rad/s) and speed (m/s) set-points to thrust."""
         tau_r = self.heading_pid.update(psi_ref, s.psi, s.r, dt, r_ref)
         tau_u = self.speed_ctl.update(u_ref, s.u, s.v, s.r, dt)
         return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
+
+    def _reset_controllers(self, s: NavState) -> None:
+        self.heading_pid.reset()
+        self.speed_ctl.reset(s.u)
 
     def _near_obstacle_speed(self, s: NavState) -> float:
         """Speed cap (m/s) near obstacles: cruise beyond ``slow_clearance`` of the vessel's clearance
@@ -496,13 +503,9 @@ class Autopilot:
             return self.zero_thrust
         if not self._returning:
             self._returning = True
-            self.heading_pid.reset()
-            self.speed_ctl.reset(s.u)
+            self._reset_controllers(s)
         psi_ref = math.atan2(self.goal_ned[1] - s.y, self.goal_ned[0] - s.x)
-        u_ref = min(self.p.loiter_speed, max(0.3, 0.5 * d))
-        tau_r = self.heading_pid.update(psi_ref, s.psi, s.r, dt)
-        tau_u = self.speed_ctl.update(u_ref, s.u, s.v, s.r, dt)
-        return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
+        return self._drive(s, dt, psi_ref, min(self.p.loiter_speed, max(0.3, 0.5 * d)))
 
     def _send(self, time_usec: int, cmd: Thrust, received_at: float) -> None:
         port, stdb = cmd.port_cmd, cmd.stdb_cmd

@@ -110,7 +110,7 @@ class CanActuators:
         out: list[dict[str, float] | None] = []
         for i, node in enumerate(self.esc_ids):
             s = self.esc_status.get(i)
-            out.append(None if s is None else {**s, "count": self.tracker.received.get(f"Status@{node}", 0)})
+            out.append(None if s is None else {**s, "count": self.tracker.received_from(dc.ESC_STATUS, node)})
         return out if any(r is not None for r in out) else []
 
     def summary(self) -> dict[str, Any]:

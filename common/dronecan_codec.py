@@ -267,12 +267,22 @@ class TransferIdTracker:
         self.lost: Counter = Counter()
         self.duplicated: Counter = Counter()
 
+    def _name(self, full_name: str, node: int) -> str:
+        """The counters' key: "Status@20"."""
+        key = (full_name, node)
+        name = self.names.get(key)
+        if name is None:
+            name = self.names[key] = f"{short_name(full_name)}@{node}"
+        return name
+
+    def received_from(self, full_name: str, node: int) -> int:
+        """Transfers of ``full_name`` received from ``node`` so far."""
+        return self.received.get(self._name(full_name, node), 0)
+
     def observe(self, t: Transfer) -> bool:
         """Record ``t``; False when it repeats the previous transfer ID (a duplicate)."""
         key = (t.full_name, t.source_node)
-        name = self.names.get(key)
-        if name is None:
-            name = self.names[key] = f"{short_name(t.full_name)}@{t.source_node}"
+        name = self._name(*key)
         last = self.last.get(key)
         self.last[key] = t.transfer_id
         if last is not None:

@@ -294,20 +294,10 @@ class GcsLink:
 
     def _emit(self, name: str) -> None:
         s, t_ms = self.state, int(round(self.t * 1000))
-        if name == "HEARTBEAT":
-            self.heartbeat()
-            return
-        if name == "MISSION_CURRENT":
-            self._mission_current()
-            return
-        if name == "SYS_STATUS":
-            self._sys_status()
-            return
-        if name == "HOME_POSITION":
-            self._home()
-            return
-        if name == "ESC_TELEMETRY_1_TO_4":
-            self._esc_telemetry()
+        own = {"HEARTBEAT": self.heartbeat, "MISSION_CURRENT": self._mission_current, "SYS_STATUS": self._sys_status,
+               "HOME_POSITION": self._home, "ESC_TELEMETRY_1_TO_4": self._esc_telemetry}.get(name)
+        if own is not None:  # messages that need no navigation state
+            own()
             return
         if s is None:
             return
