@@ -34,12 +34,13 @@ DONE_FULL = 3
 C_STEP, C_MAXTURN, C_GOALTOL, C_GOALBIAS, C_PNGP, C_PNGX, C_PNGY, C_DR, C_DALPHA, C_GAMMA = range(10)
 C_RGAMMA, C_FMIN, C_BUCKET, C_BX0, C_BX1, C_BY0, C_BY1, C_DCX, C_DCY, C_DR_DOM = range(10, 20)
 C_GX, C_GY, C_SX, C_SY, C_RES, C_FRES, C_FOX, C_FOY, C_KGROW = range(20, 29)
-N_FCFG = 29
+C_DD0, C_DDGROW, C_DDSHRINK, C_DDMIN = range(29, 33)
+N_FCFG = 33
 # int config indices
 I_ALGO, I_FIELD, I_K, I_NBX, I_NBY, I_CAP, I_PNG = range(7)
 N_ICFG = 7
 # int state indices
-S_N, S_GOAL, S_ITER, S_REJ, S_CLOSEST, S_FIRST_ITER, S_CHECKS = range(7)
+S_N, S_GOAL, S_ITER, S_REJ, S_CLOSEST, S_FIRST_ITER, S_CHECKS, S_FAILED = range(8)
 N_ISTATE = 8
 # float state indices
 F_CLOSEST_D, F_FIRST_NS = range(2)
@@ -260,10 +261,12 @@ def _reparent(j, p, new_cost, X, parent, cost, head, first_child, next_sib, stac
 
 @njit(cache=True)
 def _add_node(x, y, p, c, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head,
-              node_next, st):
+              node_next, st, nv, fvx, fvy):
     i = st[S_N]
     X[i, 0] = x
     X[i, 1] = y
+    if ic[I_FIELD] != 0:
+        nv[i, 0], nv[i, 1] = field_at(fvx, fvy, fc[C_FRES], fc[C_FOX], fc[C_FOY], x, y)
     parent[i] = p
     cost[i] = c
     head[i] = math.atan2(y - X[p, 1], x - X[p, 0])
@@ -289,17 +292,13 @@ def _free(occ, fc, st, x0, y0, x1, y1):
 
 
 @njit(cache=True)
-def _esd(i, qx, qy, X, dd, fc, ic, fvx, fvy):
-    """Eq. (11) for node i towards (qx, qy); the current is taken at the node."""
-    second = fc[C_DALPHA] * fc[C_DR]
-    if ic[I_FIELD] != 0:
-        vx, vy = field_at(fvx, fvy, fc[C_FRES], fc[C_FOX], fc[C_FOY], X[i, 0], X[i, 1])
-        dx = qx - X[i, 0]
-        dy = qy - X[i, 1]
-        arg, ok = sigmoid_arg(dx, dy, math.hypot(dx, dy), vx, vy, fc[C_GAMMA])
-        if ok:
-            second = fc[C_DALPHA] * fc[C_DR] / (1.0 + math.exp(-arg))
-    return min(dd[i], second)
+def _dd_failed(i, dd, fc):
+    """A failed (colliding) extension from node i: its dynamic domain becomes bounded (DD0), or,
+    already bounded, shrinks by the adaptive factor (Jaillet et al. 2005), never below DDMIN."""
+    if math.isinf(dd[i]):
+        dd[i] = fc[C_DD0]
+    else:
+        dd[i] = max(dd[i] * fc[C_DDSHRINK], fc[C_DDMIN])
 
 
 @njit(cache=True)
@@ -319,7 +318,7 @@ def _sort_by(keys, idx, m):
 
 @njit(cache=True)
 def _try_goal(i, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head, node_next,
-              st, fs, fvx, fvy, stack, clockbuf):
+              st, fs, fvx, fvy, stack, clockbuf, nv):
     """After node i joined the tree: track the closest node and connect the goal exactly."""
     gx = fc[C_GX]
     gy = fc[C_GY]
@@ -351,7 +350,7 @@ def _try_goal(i, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, 
         if st[S_N] >= ic[I_CAP]:
             return
         g = _add_node(gx, gy, i, c, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head,
-                      node_next, st)
+                      node_next, st, nv, fvx, fvy)
         st[S_GOAL] = g
         st[S_FIRST_ITER] = st[S_ITER]
         fs[F_FIRST_NS] = monotonic_ns(clockbuf)
@@ -381,7 +380,7 @@ def _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, fi
 
 @njit(cache=True)
 def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib, bucket_head, node_next,
-         st, fs, stack, max_iter, deadline_ns, stop_on_exact):
+         st, fs, stack, nv, max_iter, deadline_ns, stop_on_exact):
     """Run up to max_iter iterations; see the module docstring for the return codes."""
     clockbuf = np.zeros(2, np.int64)
     k_min = ic[I_K]
@@ -424,8 +423,19 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
             ne = 0
             for a in range(m):
                 i = kn_i[a]
-                dc = _cost(X[i, 0], X[i, 1], sx, sy, fc, ic, fvx, fvy)
-                if dc <= _esd(i, sx, sy, X, dd, fc, ic, fvx, fvy):
+                ed = kn_d[a]
+                if ed > dd[i]:
+                    continue  # outside the node's dynamic domain (a disc of radius DD, Yershova 2005)
+                # eq. (12) with one alpha_y, the current at q_i (the same alpha_y as eq. (11)'s)
+                dc = ed
+                second = fc[C_DALPHA] * fc[C_DR]
+                if ic[I_FIELD] != 0 and ed > 0.0:
+                    arg, ok = sigmoid_arg(sx - X[i, 0], sy - X[i, 1], ed, nv[i, 0], nv[i, 1], fc[C_GAMMA])
+                    if ok:
+                        e = math.exp(arg)
+                        dc = min(ed, fc[C_DALPHA] * ed / (1.0 + e))
+                        second = fc[C_DALPHA] * fc[C_DR] * e / (1.0 + e)  # D_alpha DR / (1 + exp(-arg))
+                if dc <= second:
                     ext_i[ne] = i
                     ext_k[ne] = dc
                     ne += 1
@@ -462,11 +472,14 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                     p = i
                     pc = near_c[a]
                     break
-                dd[i] = fc[C_DR]  # a failed extension: the dynamic domain shrinks to DR
+                st[S_FAILED] += 1
+                _dd_failed(i, dd, fc)
             if p < 0:
                 continue
+            if not math.isinf(dd[p]):
+                dd[p] *= fc[C_DDGROW]  # a successful extension grows a bounded domain (adaptive form)
             new = _add_node(nx, ny, p, pc, X, parent, cost, head, dd, first_child, next_sib, fc, ic,
-                            bucket_head, node_next, st)
+                            bucket_head, node_next, st, nv, fvx, fvy)
             # ---- lines 18-21: rewire the other extendable nodes through q_new
             for a in range(ne):
                 j = ext_i[a]
@@ -521,7 +534,7 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
             if p < 0:
                 continue
             new = _add_node(nx, ny, p, pc, X, parent, cost, head, dd, first_child, next_sib, fc, ic,
-                            bucket_head, node_next, st)
+                            bucket_head, node_next, st, nv, fvx, fvy)
             # rewire: the near set again (the buffer was reordered above)
             nn = _near(nx, ny, radius, X, fc, ic, bucket_head, node_next, near_i)
             for a in range(nn):
@@ -531,7 +544,7 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                 _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, first_child, next_sib,
                         stack, max_turn)
         _try_goal(new, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head, node_next,
-                  st, fs, fvx, fvy, stack, clockbuf)
+                  st, fs, fvx, fvy, stack, clockbuf, nv)
         if stop_on_exact and st[S_GOAL] >= 0:
             return DONE_EXACT
     return DONE_ITERATIONS
