@@ -92,7 +92,8 @@ def _insert_bucket(i, X, fc, ic, bucket_head, node_next):
 
 @njit(cache=True)
 def _knn(qx, qy, k, X, fc, ic, bucket_head, node_next, out_i, out_d):
-    """k nearest nodes (Euclidean), ascending; returns how many were found (<= k)."""
+    """k nearest nodes (Euclidean), ascending; returns how many were found (<= k). Squared
+    distances while scanning (no square root per candidate), roots of the k results at the end."""
     cx, cy = _bucket(qx, qy, fc, ic)
     nbx = ic[I_NBX]
     nby = ic[I_NBY]
@@ -109,7 +110,9 @@ def _knn(qx, qy, k, X, fc, ic, bucket_head, node_next, out_i, out_d):
                 if 0 <= bx < nbx:
                     j = bucket_head[by * nbx + bx]
                     while j >= 0:
-                        d = math.hypot(X[j, 0] - qx, X[j, 1] - qy)
+                        ex = X[j, 0] - qx
+                        ey = X[j, 1] - qy
+                        d = ex * ex + ey * ey
                         if m < k or d < out_d[m - 1]:
                             p = m if m < k else k - 1
                             while p > 0 and out_d[p - 1] > d:
@@ -125,8 +128,10 @@ def _knn(qx, qy, k, X, fc, ic, bucket_head, node_next, out_i, out_d):
                     bx += 1
                 else:
                     bx += 2 * ring  # interior rows: only the two edge columns
-        if m == k and out_d[m - 1] <= ring * B:
+        if m == k and out_d[m - 1] <= (ring * B) * (ring * B):
             break
+    for a in range(m):
+        out_d[a] = math.sqrt(out_d[a])
     return m
 
 
@@ -140,12 +145,15 @@ def _near(qx, qy, radius, X, fc, ic, bucket_head, node_next, out_i):
     bx1 = int(math.floor((qx + radius) / B))
     by0 = int(math.floor((qy - radius) / B))
     by1 = int(math.floor((qy + radius) / B))
+    r2 = radius * radius
     m = 0
     for by in range(max(by0, 0), min(by1, nby - 1) + 1):
         for bx in range(max(bx0, 0), min(bx1, nbx - 1) + 1):
             j = bucket_head[by * nbx + bx]
             while j >= 0:
-                if m < NEAR_CAP and math.hypot(X[j, 0] - qx, X[j, 1] - qy) <= radius:
+                ex = X[j, 0] - qx
+                ey = X[j, 1] - qy
+                if m < NEAR_CAP and ex * ex + ey * ey <= r2:
                     out_i[m] = j
                     m += 1
                 j = node_next[j]
@@ -260,13 +268,26 @@ def _reparent(j, p, new_cost, X, parent, cost, head, first_child, next_sib, stac
 
 
 @njit(cache=True)
+def _set_direction(i, x, y, nv, fvx, fvy, fc):
+    """nv[i] = the unit vector of the current at (x, y), or (0, 0) where there is none."""
+    vx, vy = field_at(fvx, fvy, fc[C_FRES], fc[C_FOX], fc[C_FOY], x, y)
+    v = math.hypot(vx, vy)
+    if v < 1e-9:
+        nv[i, 0] = 0.0
+        nv[i, 1] = 0.0
+    else:
+        nv[i, 0] = vx / v
+        nv[i, 1] = vy / v
+
+
+@njit(cache=True)
 def _add_node(x, y, p, c, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head,
               node_next, st, nv, fvx, fvy):
     i = st[S_N]
     X[i, 0] = x
     X[i, 1] = y
     if ic[I_FIELD] != 0:
-        nv[i, 0], nv[i, 1] = field_at(fvx, fvy, fc[C_FRES], fc[C_FOX], fc[C_FOY], x, y)
+        _set_direction(i, x, y, nv, fvx, fvy, fc)
     parent[i] = p
     cost[i] = c
     head[i] = math.atan2(y - X[p, 1], x - X[p, 0])
@@ -379,6 +400,12 @@ def _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, fi
 
 
 @njit(cache=True)
+def node_direction(i, x, y, nv, fvx, fvy, fc):
+    """Entry point for the solve loop: the root's current direction (see _set_direction)."""
+    _set_direction(i, x, y, nv, fvx, fvy, fc)
+
+
+@njit(cache=True)
 def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib, bucket_head, node_next,
          st, fs, stack, nv, max_iter, deadline_ns, stop_on_exact):
     """Run up to max_iter iterations; see the module docstring for the return codes."""
@@ -429,12 +456,12 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                 # eq. (12) with one alpha_y, the current at q_i (the same alpha_y as eq. (11)'s)
                 dc = ed
                 second = fc[C_DALPHA] * fc[C_DR]
-                if ic[I_FIELD] != 0 and ed > 0.0:
-                    arg, ok = sigmoid_arg(sx - X[i, 0], sy - X[i, 1], ed, nv[i, 0], nv[i, 1], fc[C_GAMMA])
-                    if ok:
-                        e = math.exp(arg)
-                        dc = min(ed, fc[C_DALPHA] * ed / (1.0 + e))
-                        second = fc[C_DALPHA] * fc[C_DR] * e / (1.0 + e)  # D_alpha DR / (1 + exp(-arg))
+                if ic[I_FIELD] != 0 and ed > 0.0 and (nv[i, 0] != 0.0 or nv[i, 1] != 0.0):
+                    c = ((sx - X[i, 0]) * nv[i, 0] + (sy - X[i, 1]) * nv[i, 1]) / ed
+                    c = min(1.0, max(-1.0, c))
+                    e = math.exp(c - fc[C_GAMMA] * math.sqrt(max(0.0, 1.0 - c * c)))
+                    dc = min(ed, fc[C_DALPHA] * ed / (1.0 + e))
+                    second = fc[C_DALPHA] * fc[C_DR] * e / (1.0 + e)  # D_alpha DR / (1 + exp(-arg))
                 if dc <= second:
                     ext_i[ne] = i
                     ext_k[ne] = dc

@@ -22,7 +22,6 @@ import numpy as np
 from scipy import ndimage
 
 from planner import _tree
-from planner._kernels import field_at
 from planner.cost import min_cost_factor, path_cost, path_length
 from planner.field import GridField
 from planner.gridmap import OccupancyGrid
@@ -256,10 +255,10 @@ class TreePlanner:
         st = np.zeros(_tree.N_ISTATE, dtype=np.int64)
         fs = np.zeros(_tree.N_FSTATE)
         stack = np.empty(cap, dtype=np.int64)
-        nv = np.empty((cap, 2)) if field is not None else np.zeros((1, 2))  # the current at each node
+        nv = np.empty((cap, 2)) if field is not None else np.zeros((1, 2))  # current direction at each node
         X[0] = (sx, sy)
         if field is not None:
-            nv[0] = field_at(fvx, fvy, fc[_tree.C_FRES], fc[_tree.C_FOX], fc[_tree.C_FOY], sx, sy)
+            _tree.node_direction(0, sx, sy, nv, fvx, fvy, fc)
         parent[0] = -1
         cost[0] = 0.0
         dd[0] = np.inf
