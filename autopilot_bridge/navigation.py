@@ -179,7 +179,8 @@ class NavigationFilter:
             return False
         x0, P0 = self.ekf.x.copy(), self.ekf.P.copy()
         try:
-            ok = self._gated_update(kind, z, model, Rm, angle_rows)
+            with np.errstate(all="ignore"):  # overflow is caught below, as a non-finite result
+                ok = self._gated_update(kind, z, model, Rm, angle_rows)
         except (np.linalg.LinAlgError, ArithmeticError, ValueError):
             ok = None
         if ok is None or not (np.isfinite(self.ekf.x).all() and np.isfinite(self.ekf.P).all()):
