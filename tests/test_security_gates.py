@@ -298,3 +298,38 @@ def test_atomic_json_on_a_full_disk_leaves_no_temporary_file(tmp_path):
         subprocess.run(["umount", str(disk)], check=False)
 
 
+
+
+def test_simulator_learns_its_peer_and_then_refuses_every_other_address(cfg):
+    """`hil sim --commands-from learn`: the first valid command's address is the only source; a
+    forger with the autopilot's ids on another socket is refused and counted."""
+    from hil.commands.run import HilClient
+    from tests.test_sim_udp import FRAME_WAIT_S, finish, start_sim
+
+    client = HilClient(system_id=cfg.autopilot.system_id, component_id=cfg.autopilot.component_id)
+    forger = Codec(cfg.autopilot.system_id, cfg.autopilot.component_id)
+    other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    client_port = client.port
+    proc = start_sim(client_port, "--lockstep", "--duration", "0.5", "--commands-from", "learn")
+    forged = 0
+    try:
+        frame = client.next_frame(timeout=FRAME_WAIT_S)
+        for _ in range(50):
+            assert frame is not None
+            if frame.time_usec > 0:  # after the first command: full astern from another socket, right time
+                other.sendto(forger.encode("hil_actuator_controls", frame.time_usec, [-1.0, -1.0] + [0.0] * 14,
+                                           0, 0), client.ep.last_sender)
+                forged += 1
+            client.command(frame.time_usec, 0.7, 0.7)
+            frame = client.next_frame(timeout=FRAME_WAIT_S)
+        summary = finish(proc)
+    finally:
+        from hil.commands.run import stop_process
+
+        stop_process(proc)
+        client.close()
+        other.close()
+    port = summary["command_port"]
+    assert port["source"] == f"127.0.0.1:{client_port}"
+    assert port["wrong_source_address"] == forged
+    assert summary["steps"] == 50 and summary["commands_received"] == 50

@@ -89,6 +89,7 @@ class HilClient:
 
 def sim_command(args: argparse.Namespace, client_port: int, lockstep: bool) -> list[str]:
     cmd = [sys.executable, "-m", "hil", "sim", "--json", "--state-to", f"127.0.0.1:{client_port}",
+           "--commands-from", f"127.0.0.1:{client_port}",
            "--commands-on", "127.0.0.1:0", "--duration", repr(float(args.duration))]
     if args.config:
         cmd += ["--config", args.config]
