@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import os
 import signal
+import threading
 import uuid
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass
@@ -168,9 +169,18 @@ class DaskExecutor(Executor):
             if scheduler:
                 self.client = distributed.Client(scheduler, timeout=f"{connect_timeout_s}s")
             else:
-                self.cluster = distributed.LocalCluster(
-                    n_workers=max(1, int(jobs)), threads_per_worker=1, processes=True, host="127.0.0.1",
-                    dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+                # A terminal's Ctrl-C reaches the whole process group: the worker processes (and the
+                # replacements their nannies start) inherit SIGINT ignored, so only this process
+                # decides (cancel, keep the finished runs) and no worker dies mid-run with a traceback.
+                main = threading.current_thread() is threading.main_thread()
+                previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+                try:
+                    self.cluster = distributed.LocalCluster(
+                        n_workers=max(1, int(jobs)), threads_per_worker=1, processes=True, host="127.0.0.1",
+                        dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+                finally:
+                    if main:
+                        signal.signal(signal.SIGINT, previous)
                 self.client = distributed.Client(self.cluster)
         except (OSError, TimeoutError, ValueError) as exc:
             if self.cluster is not None:

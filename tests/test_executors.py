@@ -127,7 +127,8 @@ def test_ctrl_c_on_dask_cancels_and_keeps_finished_runs(repo, tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "hil", "montecarlo", "--scenario", "labyrinth", "--runs", "300",
                              "--jobs", "2", "--seed", "1", "--out", str(out), *FAST, "--no-plots",
                              "--executor", "dask"],
-                            cwd=repo, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            cwd=repo, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
     try:
         runs = out / "runs.csv"
         deadline = time.monotonic() + 240
@@ -138,7 +139,7 @@ def test_ctrl_c_on_dask_cancels_and_keeps_finished_runs(repo, tmp_path):
                 break
             time.sleep(0.1)
         assert proc.poll() is None, "finished before it could be interrupted"
-        proc.send_signal(signal.SIGINT)
+        os.killpg(proc.pid, signal.SIGINT)   # a terminal's Ctrl-C: the whole group, workers included
         _, err = proc.communicate(timeout=90)
     finally:
         if proc.poll() is None:
@@ -176,3 +177,23 @@ def test_port_reservations_never_collide_across_processes():
     ports.release(*mine)
     with ports._Locked() as entries:
         assert not {str(p) for p in mine} & set(entries)
+
+
+@pytest.mark.slow
+def test_traffic_campaign_on_dask_matches_local_threads(hil, tmp_path):
+    """Whole HIL runs (two processes each) on a 2-worker LocalCluster: two runs share the host at a
+    time (their ports reserved host-wide), and the campaign equals the local one."""
+    _distributed()
+    common = ("montecarlo", "--traffic", "--scenario", "colregs-head-on", "--runs", "2", "--jobs", "2",
+              "--seed", "3", "--duration", "60", "--json")
+    a = hil(*common, "--out", str(tmp_path / "local"), timeout=900)
+    assert a.returncode == 0, a.stderr
+    b = hil(*common, "--out", str(tmp_path / "dask"), "--executor", "dask", timeout=900)
+    assert b.returncode == 0, b.stderr
+    assert "Dask LocalCluster of 2 worker" in b.stderr
+    sa, sb = (json.loads(p.stdout.strip().splitlines()[-1]) for p in (a, b))
+    for key in ("runs", "outcomes", "collision_rate", "encounters", "by_type"):
+        assert sa[key] == sb[key], key
+    assert (tmp_path / "local" / "runs.csv").read_text() == (tmp_path / "dask" / "runs.csv").read_text()
+    for run in ("run0000", "run0001"):
+        assert (tmp_path / "dask" / run / "summary.json").exists()
