@@ -237,7 +237,3 @@ def make(executor: str = "local", jobs: int = 1, scheduler: str | None = None, t
 def worker_pids(ex: DaskExecutor) -> dict[str, int]:
     """Worker address -> OS process id (tests, diagnostics)."""
     return {addr: int(pid) for addr, pid in ex.client.run(os.getpid).items()}
-
-
-def cpu_count() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
