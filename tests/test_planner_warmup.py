@@ -37,10 +37,12 @@ def test_warm_up_compiles_every_specialisation_the_online_loop_uses():
     assert _signatures() - before == set()
 
 
-def test_worker_init_warms_up():
+def test_each_worker_warms_up_with_the_planner():
+    """The campaign's per-worker warm-up (hil.executors runs it once per worker) is planner.warm_up()."""
     import planner.core as core
+    from hil import executors
 
-    experiment.worker_init()
+    executors._warm_once(experiment.warm_up)
     assert core._WARM is not None and core._WARM.seconds >= 0
 
 
