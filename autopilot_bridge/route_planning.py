@@ -151,3 +151,24 @@ class RouteKeeper:
     def _index_of(self, waypoint: np.ndarray) -> int:
         d = np.hypot(self.path[:, 0] - waypoint[0], self.path[:, 1] - waypoint[1])
         return int(np.argmin(d))
+
+
+# Mission commands whose item carries a position the boat sails to (lat = lon = 0: "here", skipped).
+POSITION_COMMANDS = frozenset({M.MAV_CMD_NAV_WAYPOINT, M.MAV_CMD_NAV_LOITER_UNLIM, M.MAV_CMD_NAV_LOITER_TURNS,
+                               M.MAV_CMD_NAV_LOITER_TIME, M.MAV_CMD_NAV_LAND, M.MAV_CMD_NAV_SPLINE_WAYPOINT})
+
+
+def check_mission_items(items, to_ned: Callable[[float, float], tuple[float, float]], grid, safety_radius: float,
+                        position_ned: tuple[float, float] | None) -> tuple[int, int, str] | None:
+    """:func:`check_mission` on an upload's items (``gcs.mission.MissionItem``: ``command``, ``x``,
+    ``y``, ``lat``, ``lon``): ``(seq, MAV_MISSION_RESULT, reason)`` of the first bad one, or None.
+    ``to_ned(lat, lon)`` -> (north, east) m."""
+    seqs, ned = [], []
+    for seq, it in enumerate(items):
+        if it.command in POSITION_COMMANDS and not (it.x == 0 and it.y == 0):
+            seqs.append(seq)
+            ned.append(to_ned(it.lat, it.lon))
+    if not ned:
+        return None
+    bad = check_mission(grid, ned, safety_radius, position_ned)
+    return None if bad is None else (seqs[bad[0]], bad[1], bad[2])
