@@ -68,12 +68,12 @@ def check_mission(grid, waypoints_ned, safety_radius: float,
     if route.status is RouteStatus.IN_OBSTACLE:
         return item, M.MAV_MISSION_INVALID, _in_obstacle(safety_radius)
     if route.status is RouteStatus.UNREACHABLE:
-        return item, M.MAV_MISSION_INVALID, "not reachable by water from the previous waypoint"
+        return item, M.MAV_MISSION_INVALID, "unreachable by water"
     return item, M.MAV_MISSION_INVALID_PARAM5_X, "off the chart"
 
 
 def _in_obstacle(safety_radius: float) -> str:
-    return f"inside an obstacle or within its {safety_radius:g} m safety margin"
+    return f"in obstacle or {safety_radius:g} m margin"
 
 
 class RouteKeeper:

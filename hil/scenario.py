@@ -251,7 +251,7 @@ def load(name: str, base_current: Any = None, safety_radius: float | None = None
     ``safety_radius`` (m): the configuration's ``planner.safety_radius`` (default: the default
     configuration's); the scenario's own ``[planner]`` value wins, as for the planner."""
     spec = load_spec(name)
-    return instance(spec, None, base_current, safety_radius)
+    return instance(spec, None, base_current, safety_radius, source=str(scenario_path(name)))
 
 
 def _safety_radius(spec: ScenarioSpec, base: float | None, source: str) -> float:
@@ -295,9 +295,10 @@ def _default_current() -> Any:
 
 
 def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: Any = None,
-             safety_radius: float | None = None) -> Scenario:
-    """A concrete :class:`Scenario`; random scenarios draw map and end points from ``rng``."""
-    source = str(scenario_path(spec.name))
+             safety_radius: float | None = None, source: str | None = None) -> Scenario:
+    """A concrete :class:`Scenario`; random scenarios draw map and end points from ``rng``.
+    ``source`` names the file in error messages (default: configs/scenarios/NAME.toml)."""
+    source = source or str(scenario_path(spec.name))
     current, field_time = _current_params(base_current if base_current is not None else _default_current(),
                                           spec.current, source)
     if spec.kind == "fixed":
@@ -310,7 +311,7 @@ def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: 
         if spec.global_route:
             wps = route_waypoints(spec.start, spec.goal, spec.reference_path)
             given = len(spec.reference_path) > 0 and math.dist(spec.reference_path[0], spec.start) < 1e-9
-            names = ["start"] + [f"reference_path[{i + (1 if given else 0)}]" for i in range(1, len(wps) - 1)] + ["goal"]
+            names = ["start"] + [f"reference_path[{i if given else i - 1}]" for i in range(1, len(wps) - 1)] + ["goal"]
             ref = global_route(occ, spec.resolution, wps, _safety_radius(spec, safety_radius, source),
                                spec.route_spacing, source, names)
         else:
