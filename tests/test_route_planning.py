@@ -73,4 +73,3 @@ def test_route_is_planned_and_replanned_round_a_sensed_obstacle():
     grid = keeper2.grid.inflate(2.0)
     assert all(grid.segment_free(a[1], a[0], b[1], b[0]) for a, b in zip(new[:-1], new[1:]))
     assert keeper2.on_sensed(np.array([[150, 10]]), (20.0, 12.0)) is None      # far from the route: kept
-
