@@ -36,7 +36,8 @@ def write_instance(scen: Any, spec: Any, folder: Path, name: str) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     np.save(folder / "map.npy", scen.occ)
     lines = [f"name = {_toml_value(name)}", f"description = {_toml_value(spec.description)}", 'kind = "fixed"',
-             f"map = {_toml_value(str((folder / 'map.npy').resolve()))}", f"resolution = {_toml_value(scen.resolution)}",
+             f"map = {_toml_value(str((folder / 'map.npy').resolve()))}",
+             f"resolution = {_toml_value(scen.resolution)}",
              f"start = {_toml_value(scen.start)}", f"start_heading = {_toml_value(scen.start_heading)}",
              f"goal = {_toml_value(scen.goal)}",
              f"reference_path = {_toml_value(np.asarray(scen.waypoints).tolist())}",
