@@ -32,7 +32,7 @@ from scipy import ndimage
 from common.geodesy import LocalFrame
 from common.mavlink import Codec, mavlink2
 from common.udp import UdpEndpoint
-from hil import processes
+from hil import config, processes
 from hil import scenario as scenarios
 from hil.errors import RunFailed, UsageError
 
@@ -46,6 +46,19 @@ def free_udp_port() -> int:
         return s.getsockname()[1]
 
 
+def startup_error(log: Path) -> str:
+    """The one-line error a child process printed before exiting (``hil ...: error: ...``), or ''."""
+    try:
+        lines = log.read_text(errors="replace").splitlines()
+    except OSError:
+        return ""
+    for line in reversed(lines):
+        head, sep, rest = line.partition(": error: ")
+        if sep and head.startswith("hil "):
+            return rest.strip()
+    return lines[-1].strip() if lines else ""
+
+
 @dataclass
 class RunOptions:
     scenario: str = "harbour"
@@ -53,7 +66,7 @@ class RunOptions:
     speedup: float = 1.0
     duration: float = 300.0              # s of simulated time at most
     seed: int = 1
-    config: str | None = None
+    config: "str | tuple[str, ...] | None" = None   # --config file(s), laid over the defaults in order
     overrides: list[str] = field(default_factory=list)
     out: Path | None = None              # run folder
     wall_timeout: float = 900.0          # s, whatever happens
@@ -225,8 +238,7 @@ class HilRun:
     # -- processes ---------------------------------------------------------------------------------
     def _common_args(self) -> list[str]:
         args = []
-        if self.opts.config:
-            args += ["--config", self.opts.config]
+        args += config.config_args(self.opts.config)
         for o in self.opts.overrides:
             args += ["--set", o]
         return args
@@ -285,7 +297,10 @@ class HilRun:
         deadline = time.monotonic() + ready_timeout
         while b"autopilot: listening on" not in log.read_bytes():
             if self.ap.poll() is not None:
-                raise RunFailed(f"the autopilot exited during start-up (see {log})")
+                cause = startup_error(log)
+                if self.ap.returncode == 2 and cause:  # a user mistake (a busy port ...): say which, exit 2
+                    raise UsageError(f"the autopilot could not start: {cause}")
+                raise RunFailed(f"the autopilot exited during start-up{': ' + cause if cause else ''} (see {log})")
             if time.monotonic() > deadline:
                 raise RunFailed(f"the autopilot was not ready after {ready_timeout:g} s (see {log})")
             self.tap.pump(timeout=0.05)

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from hil import scenario as scenarios
-from hil.commands.can_options import add_can_arguments, can_overrides
+from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.commands.sim import _hostport
 from hil.console import emit, load_settings, progress
 from hil.errors import UsageError
@@ -209,6 +209,7 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
 def run(args: argparse.Namespace) -> int:
     args.overrides = list(args.overrides) + _overrides(args)
     cfg = load_settings(args)
+    check_can(cfg, "hil autopilot (a process of its own)")
     autopilot = build(cfg, args.scenario, args.lockstep, args.planner_factory)
     stop = {"flag": False}
     if args.can_record and autopilot.actuators is not autopilot.link:

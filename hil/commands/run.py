@@ -24,7 +24,8 @@ from typing import Any
 from common.mavlink import Codec
 from common.udp import UdpEndpoint
 from hil import processes
-from hil.commands.can_options import add_can_arguments, can_overrides
+from hil.commands.can_options import add_can_arguments, can_overrides, check_can
+from hil.config import config_args
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, RunFailed, UsageError
 
@@ -89,8 +90,7 @@ class HilClient:
 def sim_command(args: argparse.Namespace, client_port: int, lockstep: bool) -> list[str]:
     cmd = [sys.executable, "-m", "hil", "sim", "--json", "--state-to", f"127.0.0.1:{client_port}",
            "--commands-on", "127.0.0.1:0", "--duration", repr(float(args.duration))]
-    if args.config:
-        cmd += ["--config", args.config]
+    cmd += config_args(args.config)
     for o in args.overrides:
         cmd += ["--set", o]
     if args.seed is not None:
@@ -170,6 +170,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--wall-timeout: must be > 0 seconds")
     args.overrides = list(args.overrides) + can_overrides(args)
     cfg = load_settings(args)  # fail here, with one line, on a bad configuration
+    check_can(cfg, "hil run")
     previous_term = signal.signal(signal.SIGTERM, _raise_terminated)
     if args.demo and cfg.can.actuators == "can":
         raise UsageError("--demo drives the simulator over MAVLink; --actuators can needs the autopilot (drop --demo)")

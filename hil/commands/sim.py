@@ -7,7 +7,7 @@ import json
 import signal
 
 from common.udp import UdpEndpoint, parse_hostport
-from hil.commands.can_options import add_can_arguments, can_overrides
+from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, UsageError
 from simulator.core import SimulatorCore
@@ -85,6 +85,7 @@ def config_overrides(args: argparse.Namespace) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     args.overrides = list(args.overrides) + config_overrides(args)
     cfg = load_settings(args)
+    check_can(cfg, "hil sim (a process of its own)")
     world = None
     if args.world is not None:
         try:

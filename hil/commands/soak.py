@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from hil.commands.can_options import add_can_arguments, can_overrides
+from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, RunFailed, UsageError
 
@@ -123,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--rate: must be > 0 Hz")
     args.overrides = list(args.overrides) + can_overrides(args)
     cfg = load_settings(args)
+    check_can(cfg, "hil soak")
     with tempfile.TemporaryDirectory(prefix="hil-soak-") as tmp:
         out = Path(args.out) if args.out else Path(tmp)
         out.mkdir(parents=True, exist_ok=True)
