@@ -135,10 +135,14 @@ def _check_bounds(value: Any, meta: typing.Mapping[str, Any], key: str) -> None:
             raise ValueError(f"{key}: {v:g}{unit} is out of range (|value| <= {limit:g})")
 
 
-def suggest(word: str, choices: typing.Iterable[str]) -> str:
-    """" (did you mean 'X'?)" for the nearest of ``choices`` to ``word`` (difflib), or ""."""
-    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
-    return f" (did you mean {close[0]!r}?)" if close else ""
+def suggest(word: str, choices: typing.Iterable[str], or_list: bool = True) -> str:
+    """" (did you mean 'X'?)" for the nearest of ``choices`` to ``word`` (difflib); without a close
+    one, " (expected one of: ...)" (``or_list``) or ""."""
+    choices = list(choices)
+    close = difflib.get_close_matches(word, choices, n=1, cutoff=0.6)
+    if close:
+        return f" (did you mean {close[0]!r}?)"
+    return f" (expected one of: {', '.join(choices)})" if or_list and choices else ""
 
 
 def _build(cls: type[T], table: dict[str, Any], prefix: str) -> T:
@@ -147,8 +151,7 @@ def _build(cls: type[T], table: dict[str, Any], prefix: str) -> T:
     for k in table:
         if k not in fields:
             where = f"{prefix}.{k}" if prefix else k
-            hint = suggest(k, fields) or f" (expected one of: {', '.join(fields)})"
-            raise ValueError(f"{where}: unknown key{hint}")
+            raise ValueError(f"{where}: unknown key{suggest(k, fields)}")
     kwargs = {}
     for name, f in fields.items():
         where = f"{prefix}.{name}" if prefix else name

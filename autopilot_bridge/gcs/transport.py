@@ -211,6 +211,10 @@ class TcpClientTransport:
         return self._local
 
     @property
+    def connected(self) -> bool:
+        return self.sock is not None and not self._connecting
+
+    @property
     def peer(self) -> Any:
         return ("tcp", (self.host, self.port), self.connects)
 

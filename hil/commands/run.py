@@ -132,7 +132,8 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                     "constant-thrust controller replaces the autopilot (a steady starboard turn).",
     )
     p.add_argument("--scenario", default="harbour",
-                   help="configs/scenarios/NAME.toml: map, start, goal, reference path, current (default: harbour)")
+                   help="NAME of configs/scenarios/NAME.toml, or a path to a scenario .toml: map, start, goal, "
+                        "reference path, current (default: harbour)")
     p.add_argument("--duration", metavar="SECONDS", type=float, default=None,
                    help="simulated seconds at most (default: 300; --demo: 60)")
     p.add_argument("--seed", type=int, default=None, help="seed of every random process (default: sim.seed)")
@@ -144,7 +145,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--algorithm", choices=("rrt-star", "informed-rrt-star", "ddrrt-star"), default=None,
                    help="local planner (default: planner.algorithm = ddrrt-star)")
     p.add_argument("--out", metavar="DIR", default=None,
-                   help="run folder (default: runs/SCENARIO-seedN-YYYYmmdd-HHMMSS)")
+                   help="run folder (default: runs/NAME-seedN-YYYYmmdd-HHMMSS, NAME the scenario's name key)")
     p.add_argument("--no-plot", action="store_true", help="do not draw plot.png")
     p.add_argument("--wall-timeout", metavar="SECONDS", type=float, default=None,
                    help="end the run after this much wall time whatever happens (default: real time "
@@ -200,7 +201,8 @@ def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
         raise UsageError(f"scenario {args.scenario!r} draws a new map per run; hil run needs a fixed "
                          f"scenario (random ones are for hil montecarlo)")
     seed = cfg.sim.seed if args.seed is None else args.seed
-    out = Path(args.out) if args.out else REPO / "runs" / f"{args.scenario}-seed{seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+    stamp = time.strftime('%Y%m%d-%H%M%S')
+    out = Path(args.out) if args.out else REPO / "runs" / f"{scenarios.folder_name(spec)}-seed{seed}-{stamp}"
     overrides = list(args.overrides)
     if args.algorithm:
         overrides.append(f"planner.algorithm={json.dumps(args.algorithm)}")

@@ -6,7 +6,8 @@ import argparse
 import json
 import signal
 
-from common.udp import UdpEndpoint, parse_hostport
+from common import connection
+from common.udp import UdpEndpoint
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, UsageError
@@ -15,12 +16,21 @@ from simulator.rangefinder import WorldMap
 from simulator.server import SimulatorServer
 
 
-def _hostport(text: str) -> str:
-    try:
-        parse_hostport(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return text
+def _endpoint(role):
+    """An argparse type checking a connection string for ``role`` (common.connection)."""
+    def check(text: str) -> str:
+        try:
+            connection.parse(text, role)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return text
+    check.__name__ = "connection string"
+    return check
+
+
+_hostport = _endpoint(connection.RECEIVE_UDP)   # a bound address (kept for older imports)
+sending = _endpoint(connection.SEND_UDP)
+receiving = _endpoint(connection.RECEIVE_UDP)
 
 
 def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
@@ -36,12 +46,12 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                     "simulated seconds or on SIGINT/SIGTERM, printing its summary.",
         epilog="Options given here override the [sim] and [link] configuration keys.",
     )
-    p.add_argument("--state-to", metavar="HOST:PORT", action="append", type=_hostport, default=None,
-                   help="destination of the sensor/truth datagrams; repeatable "
+    p.add_argument("--state-to", metavar="HOST:PORT", action="append", type=sending, default=None,
+                   help="destination of the sensor/truth datagrams, HOST:PORT or udpout:HOST:PORT; repeatable "
                         "(default: link.state_to = 127.0.0.1:14560)")
-    p.add_argument("--commands-on", metavar="HOST:PORT", type=_hostport, default=None,
-                   help="UDP address to receive HIL_ACTUATOR_CONTROLS on; port 0 picks a free port "
-                        "(default: link.commands_on = 127.0.0.1:14561)")
+    p.add_argument("--commands-on", metavar="HOST:PORT", type=receiving, default=None,
+                   help="UDP address to receive HIL_ACTUATOR_CONTROLS on, HOST:PORT or udpin:HOST:PORT (udp: "
+                        "alike); port 0 picks a free port (default: link.commands_on = 127.0.0.1:14561)")
     p.add_argument("--lockstep", action="store_true", default=None,
                    help="advance exactly one IMU period per HIL_ACTUATOR_CONTROLS whose time_usec equals "
                         "the current frame's, instead of following the wall clock (default: sim.lockstep = false)")
