@@ -88,7 +88,7 @@ class Tap:
     """Receives everything both processes send to it; writes the .tlog; keeps the evaluation data."""
 
     def __init__(self, tlog_path: Path, geo: LocalFrame, encounters: Any = None, truth_component_id: int = 52,
-                 sim_component_id: int = 51) -> None:
+                 sim_component_id: int = 51, lockstep: bool = False) -> None:
         self.ep = UdpEndpoint("127.0.0.1:0", [], recv_buffer=8 << 20)
         # Every message of the dialect: the autopilot copies all ground-station traffic here too.
         self.codec = Codec(255, 190, accept=[c.msgname for c in mavlink2.mavlink_map.values()])
@@ -107,9 +107,15 @@ class Tap:
         self.frames = 0
         # A simulator restart starts its clock at 0 again: each stream keeps a running epoch so
         # that the run's time axis stays monotonic (epoch = the time reached before the restart).
-        self._epoch = {"truth": 0, "estimate": 0, "commands": 0}
-        self._last = {"truth": -1, "estimate": -1, "commands": -1}
-        self._segment = {"truth": 0, "estimate": 0, "commands": 0}
+        self._epoch = {"truth": 0, "estimate": 0, "commands": 0, "clock": 0}
+        self._last = {"truth": -1, "estimate": -1, "commands": -1, "clock": -1}
+        self._segment = {"truth": 0, "estimate": 0, "commands": 0, "clock": 0}
+        # tlog time stamps: in lockstep the run's start (wall clock) plus the simulated time of the
+        # newest simulator frame, so that log viewers replay simulated time (docs/simulator.md);
+        # in real time the wall clock.
+        self.lockstep = lockstep
+        self._t0_usec = int(time.time() * 1e6)
+        self._sim_usec = 0
         # (segment, time_usec) -> (n, e, run time usec)
         self.truth_raw: dict[tuple[int, int], tuple[float, float, int]] = {}
 
@@ -136,7 +142,7 @@ class Tap:
 
     def _handle(self, data: bytes) -> None:
         msgs, _ = self.codec.decode(data)
-        stamp = struct.pack(">Q", int(time.time() * 1e6))
+        stamp = struct.pack(">Q", self._stamp(msgs))
         own = None
         for m in msgs:
             self.tlog.write(stamp + bytes(m.get_msgbuf()))
@@ -170,6 +176,17 @@ class Tap:
                 self.statustext.append(m.text if isinstance(m.text, str) else m.text.decode(errors="replace"))
             elif kind == "MISSION_ITEM_REACHED":
                 self.mission_reached = True
+
+    def _stamp(self, msgs: list) -> int:
+        """The tlog time stamp (µs since the Unix epoch) of one datagram's messages."""
+        if not self.lockstep:
+            return int(time.time() * 1e6)
+        for m in msgs:
+            if m.get_type() == "HIL_SENSOR":
+                t = self._monotonic("clock", int(m.time_usec), 1_000_000)
+                self._sim_usec = max(self._sim_usec, t)
+                break
+        return self._t0_usec + self._sim_usec
 
     def close(self) -> None:
         self.tlog.flush()
@@ -213,7 +230,7 @@ class HilRun:
 
         self.encounter_judge = EncounterJudge(cfg.vessel.L, cfg.vessel.W, cfg.colregs) if self.scen.traffic else None
         self.tap = Tap(self.out / "run.tlog", self.geo, self.encounter_judge, cfg.traffic.truth_component_id,
-                       cfg.link.component_id)
+                       cfg.link.component_id, lockstep=opts.lockstep)
         goal_ned = (self.scen.goal[1], self.scen.goal[0])
         # The truth: the chart plus the obstacles it lacks; the simulator's range sensor scans it.
         truth_occ = self.scen.truth_occ()
@@ -511,7 +528,10 @@ def run_loop(opts: RunOptions, cfg: Any) -> dict[str, Any]:
             ap = json.loads(ap_path.read_text()) if ap_path.exists() else {}
             plot_run(opts.out / "plot.png", run.scen, run.tap.truth, ap, cfg,
                      ships=run.encounter_judge.ships if run.encounter_judge is not None else None,
-                     encounters=summary.get("encounters"))
+                     encounters=summary.get("encounters"),
+                     outcome="goal reached" if summary.get("reached_goal") else
+                     f"{summary.get('outcome')}" + (f" at {summary['collision_time_s']:.1f} s"
+                                                     if summary.get("collision_time_s") is not None else ""))
             summary["plot"] = str(opts.out / "plot.png")
         except Exception as exc:  # a plot must never lose the run's data
             summary["plot_error"] = f"{type(exc).__name__}: {exc}"

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import signal
 import subprocess
 import sys
@@ -215,14 +216,55 @@ def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
     progress(f"run: scenario {args.scenario}, {'lockstep' if opts.lockstep else f'real time x{opts.speedup:g}'}, "
              f"actuators {cfg.can.actuators}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
     summary = run_loop(opts, cfg)
-    emit(args, summary)
+    emit(args, summary, human_summary(summary))
     if summary["outcome"] == "interrupted":
         progress(f"run: interrupted; summary in {out}")
         return 130
-    if not args.json:
-        progress(f"run: {'goal reached' if summary['reached_goal'] else summary['outcome']}; "
-                 f"plot: {summary.get('plot', 'none')}; folder: {out}")
     return 0 if summary["reached_goal"] else 1
+
+
+# Counters worth a human's attention: something was refused, lost, late, restarted or failed.
+PROBLEM_COUNTER = re.compile(r"reject|refus|drop|overrun|restart|error|lost|loss|fail|stale|resend|timeout|reset|"
+                             r"collision|fallback|malformed|invalid|overflow|kill", re.I)
+
+
+def human_summary(s: dict[str, Any]) -> list[str]:
+    """The run in at most 15 lines: outcome, time, clearance, errors, non-zero problem counters
+    (everything else: --json and summary.json)."""
+    from hil.console import MAX_LINES, clip, fmt, nonzero_counters, wrap_items
+
+    def num(v: Any, unit: str = "", digits: str = ".3g") -> str:
+        return "-" if v is None else f"{v:{digits}}{unit}"
+
+    outcome = "goal reached" if s.get("reached_goal") else str(s.get("outcome", "?")).upper()
+    if s.get("collision_time_s") is not None:
+        outcome += f" at {s['collision_time_s']:.1f} s"
+    lines = [f"outcome: {outcome} (scenario {s.get('scenario')}, seed {s.get('seed')}, {s.get('mode')}, "
+             f"actuators {s.get('actuators')})"]
+    sim_t, wall = s.get("sim_time_s") or 0.0, s.get("wall_time_s") or 0.0
+    lines.append(f"time: {sim_t:.1f} s simulated in {wall:.1f} s wall" + (f" (x{sim_t / wall:.1f})" if wall > 0 else ""))
+    energy = s.get("energy_J")
+    lines.append(f"clearance: min {num(s.get('min_clearance_m'), ' m')}; path {num(s.get('path_length_m'), ' m', '.1f')}"
+                 f"; energy {'-' if energy is None else f'{energy / 1000:.1f} kJ'}")
+    tr, lat = s.get("tracking") or {}, s.get("control_latency_ms") or {}
+    lines.append(f"errors: navigation RMSE {num(s.get('navigation_rmse_m'), ' m')}; cross-track RMS "
+                 f"{num(tr.get('cross_track_rms_m'), ' m')} (max {num(tr.get('cross_track_max_m'), ' m')}); "
+                 f"control latency p99 {num(lat.get('p99'), ' ms')}")
+    lines.append(f"planning: {fmt(s.get('planning_cycles'))} cycles, {fmt(s.get('plans_accepted'))} plans accepted")
+    traffic = s.get("traffic")
+    if isinstance(traffic, dict):
+        shown = {k: v for k, v in traffic.items() if not isinstance(v, (dict, list)) and v is not None}
+        lines.append("traffic: " + ", ".join(f"{k} {fmt(v)}" for k, v in list(shown.items())[:6]))
+    problems = [c for c in nonzero_counters({k: v for k, v in s.items() if k not in ("collisions",)})
+                if PROBLEM_COUNTER.search(c.partition("=")[0])]
+    lines += wrap_items("counters (non-zero)", problems or ["none"], 3)
+    events = s.get("events") or []
+    if events:
+        lines.append(f"events: {len(events)}, last: {fmt(events[-1])}")
+    if s.get("plot_error"):
+        lines.append(f"plot: failed: {s['plot_error']}")
+    lines.append(f"folder: {s.get('run_folder')} (summary.json has everything; --json prints it)")
+    return [clip(line) for line in lines[:MAX_LINES]]
 
 
 def _gcs_args(args: argparse.Namespace) -> list[str]:
