@@ -61,6 +61,12 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                    help="seed of every random process: sensor noise, GPS events, waves (default: sim.seed = 1)")
     p.add_argument("--speedup", metavar="N", type=float, default=None,
                    help="real-time mode: simulated seconds per wall-clock second (default: sim.speedup = 1)")
+    p.add_argument("--scenario", metavar="NAME", default=None,
+                   help="start where `hil run` would on this scenario (configs/scenarios/NAME.toml or a .toml "
+                        "path): its start position and heading, its current, its true obstacle map (chart plus "
+                        "uncharted obstacles) for the range sensor, and its ship traffic. Pair it with `hil autopilot "
+                        "--scenario NAME` (same --lockstep or not, same --seed) for the loop by hand; --set and the "
+                        "options below still override it (default: none: sim.initial, no obstacles, no traffic)")
     p.add_argument("--world", metavar="FILE.npz", default=None,
                    help="the true obstacle map the range sensor scans: an .npz with 'occ' (bool rows x cols, "
                         "row = north / resolution, column = east / resolution) and 'resolution' (m), as "
@@ -92,17 +98,43 @@ def config_overrides(args: argparse.Namespace) -> list[str]:
     return out + can_overrides(args)
 
 
+def scenario_overrides(scen, base_current) -> list[str]:
+    """The ``--set`` overrides that put the simulator where `hil run` starts it on ``scen``: the
+    start (map x east, y north, heading counter-clockwise from east) as NED ``sim.initial`` and the
+    scenario's own ``[current]`` keys."""
+    import math
+
+    from hil.config import to_table
+
+    north, east, psi = scen.start[1], scen.start[0], math.pi / 2.0 - scen.start_heading
+    out = [f"sim.initial.x={north!r}", f"sim.initial.y={east!r}", f"sim.initial.psi={psi!r}"]
+    base, mine = to_table(base_current), to_table(scen.current)
+    out += [f"current.{k}={json.dumps(v)}" for k, v in mine.items() if base.get(k) != v]
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
+    world = None
+    traffic = ()
+    if getattr(args, "scenario", None):
+        from hil import scenario as scenarios
+
+        base = load_settings(args)  # the user's configuration, validated before the scenario is read
+        spec = scenarios.load_spec(args.scenario)
+        if spec.kind != "fixed":
+            raise UsageError(f"--scenario {args.scenario}: draws a new map per run; hil sim needs a fixed scenario")
+        scen = scenarios.instance(spec, None, base.current)
+        args.overrides = scenario_overrides(scen, base.current) + list(args.overrides)
+        world = WorldMap(scen.truth_occ(), scen.resolution)
+        traffic = tuple(scen.traffic)
     args.overrides = list(args.overrides) + config_overrides(args)
     cfg = load_settings(args)
     check_can(cfg, "hil sim (a process of its own)")
-    world = None
     if args.world is not None:
         try:
             world = WorldMap.load(args.world)
         except (OSError, KeyError, ValueError) as exc:
             raise UsageError(f"--world {args.world}: not a world map ({exc})") from None
-    traffic = ()
     if getattr(args, "traffic", None):
         from hil.scenario import load_traffic
 
