@@ -164,12 +164,12 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
 def run(args: argparse.Namespace) -> int:
     if args.duration is None:
         args.duration = 60.0 if args.demo else 300.0
-    if not args.duration > 0:
-        raise ConfigError("--duration: must be > 0 seconds")
-    if args.speedup is not None and not args.speedup > 0:
-        raise ConfigError("--speedup: must be > 0")
-    if args.wall_timeout is not None and not args.wall_timeout > 0:
-        raise ConfigError("--wall-timeout: must be > 0 seconds")
+    if not 0 < args.duration < math.inf:
+        raise ConfigError("--duration: must be a finite number > 0 of seconds")
+    if args.speedup is not None and not 0 < args.speedup < math.inf:
+        raise ConfigError("--speedup: must be a finite number > 0")
+    if args.wall_timeout is not None and not 0 < args.wall_timeout < math.inf:
+        raise ConfigError("--wall-timeout: must be a finite number > 0 of seconds")
     args.overrides = list(args.overrides) + can_overrides(args)
     cfg = load_settings(args)  # fail here, with one line, on a bad configuration
     check_can(cfg, "hil run")
