@@ -226,9 +226,11 @@ def _current_params(base_current: Any, overrides: dict[str, Any], source: str) -
     field_time = ov.pop("field_time", 0.0)
     if isinstance(field_time, bool) or not isinstance(field_time, (int, float)):
         raise ConfigError(f"{source}: current.field_time: expected a number, got {field_time!r}")
+    if not 0.0 <= field_time <= config.MAX_MAGNITUDE:
+        raise ConfigError(f"{source}: current.field_time: must be a finite number of seconds >= 0 (got {field_time})")
     for k, v in ov.items():
         if k not in table:
-            raise ConfigError(f"{source}: current.{k}: unknown key (expected one of: {', '.join(table)}, field_time)")
+            raise ConfigError(f"{source}: current.{k}: unknown key{config.suggest(k, list(table) + ['field_time'])}")
         table[k] = v
     return config.from_table(type(base_current), table, source, prefix="current"), float(field_time)
 

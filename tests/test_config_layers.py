@@ -110,3 +110,13 @@ def test_scenario_numbers_are_bounded(tmp_path, capsys):
                  .replace('map = "../maps/', f'map = "{CONFIG_DIR}/maps/'))
     err = _run_config_error(["plan", "--scenario", str(p)], capsys)
     assert "start_heading: must be <=" in err, err
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-1.0"])
+def test_scenario_field_time_must_be_finite(tmp_path, value):
+    p = tmp_path / "s.toml"
+    p.write_text((CONFIG_DIR / "scenarios" / "labyrinth.toml").read_text()
+                 .replace('map = "../maps/', f'map = "{CONFIG_DIR}/maps/')
+                 .replace("field_time = 0.0", f"field_time = {value}"))
+    with pytest.raises(ConfigError, match=r"current\.field_time: must be a finite number"):
+        scenario.instance(scenario.load_spec(str(p)), None)
