@@ -4,13 +4,18 @@ The section dataclasses live beside the code that uses them (``simulator.config`
 ``planner.params`` ...); this module only knows how to fill any frozen dataclass from a TOML
 table, strictly:
 
-* an unknown key, a missing key or a value of the wrong type is an error;
-* per-field constraints come from the field's metadata (see :func:`param`): ``gt``, ``ge``,
-  ``lt``, ``le`` bounds and ``choices``;
+* an unknown key (with the nearest known one, difflib), a missing key or a value of the wrong
+  type is an error;
+* every real number is finite; per-field constraints come from the field's metadata (see
+  :func:`param`): ``gt``, ``ge``, ``lt``, ``le`` bounds; a real without an upper (lower) bound
+  must stay within MAX_MAGNITUDE (MAX_RADIANS for angles);
 * cross-field rules live in the dataclass's ``__post_init__``, which raises ``ValueError``
   naming the offending key as ``"key: problem"``.
 
-Every problem becomes one :class:`~hil.errors.ConfigError` line ``FILE: section.key: problem``.
+:func:`load` builds the table in layers (:class:`Layers`): ``configs/default.toml``, then each
+``--config`` file (only the keys it changes), then each ``--set``. Every problem becomes one
+:class:`~hil.errors.ConfigError` line ``SOURCE: section.key: problem``, SOURCE being the file or
+the ``--set`` that gave the offending value.
 """
 
 from __future__ import annotations
@@ -104,8 +109,9 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
     raise TypeError(f"{key}: unsupported field type {tp!r}")  # a bug in a schema, not user input
 
 
-# A number this large in a field without an upper bound is a mistake (and 1e300 radians hangs an
-# angle wrap): the whole project lives within a few kilometres, hours and thousands of iterations.
+# A real number this large in a field without an upper bound is a mistake (and 1e300 radians hangs
+# an angle wrap): the whole project lives within a few kilometres and hours. Integers (seeds, ids,
+# counts) are exact and keep only their declared bounds.
 MAX_MAGNITUDE = 1e9
 MAX_RADIANS = 1e3
 
@@ -131,7 +137,7 @@ def _check_bounds(value: Any, meta: typing.Mapping[str, Any], key: str) -> None:
         limit = MAX_RADIANS if meta.get("unit") == "rad" else MAX_MAGNITUDE
         upper = meta.get("lt") is not None or meta.get("le") is not None
         lower = meta.get("gt") is not None or meta.get("ge") is not None
-        if (v > limit and not upper) or (-v > limit and not lower):
+        if isinstance(v, float) and ((v > limit and not upper) or (-v > limit and not lower)):
             raise ValueError(f"{key}: {v:g}{unit} is out of range (|value| <= {limit:g})")
 
 
