@@ -116,3 +116,14 @@ def test_lockstep_tlog_stamps_follow_simulated_time(tmp_path):
     # a raw look at the first record: 8-byte big-endian µs since the Unix epoch
     raw = (tmp_path / "run.tlog").read_bytes()
     assert struct.unpack(">Q", raw[:8])[0] == pytest.approx(t0 * 1e6, abs=1)
+
+
+def test_montecarlo_prints_the_markdown_table(tmp_path, capsys):
+    rc = cli.main(["montecarlo", "--scenario", "labyrinth", "--runs", "1", "--jobs", "1", "--seed", "3",
+                   "--local-iterations", "500", "--cycle-time", "8", "--no-plots", "--out", str(tmp_path)])
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert out.startswith((tmp_path / "table3.md").read_text().rstrip("\n"))
+    assert "|---|" in out
+    assert "'algorithm':" not in out  # not the raw Python list of dicts of before
+    assert out.splitlines()[-1].startswith("3 runs in ")
