@@ -202,7 +202,7 @@ def run(args: argparse.Namespace) -> int:
         console.emit(args, summary)
     else:  # the table itself, as Markdown, is the human summary (the same text as table3.md)
         print(markdown.rstrip("\n"), flush=True)
-        print(f"\n{len(camp.rows)} runs in {wall:.0f} s; files in {out} (table3.md, table3.csv, runs.csv"
+        print(f"\n{len(camp.rows)} runs ({args.runs} per algorithm) in {wall:.0f} s; files in {out} (table3.md, table3.csv, runs.csv"
               f"{', figures' if figures else ''}, summary.json)", flush=True)
     if camp.interrupted:
         return 130
