@@ -79,6 +79,14 @@ class RunOptions:
     plot: bool = True
     hooks: list[Callable[["Tap", "HilRun"], None]] = field(default_factory=list)  # tests: fault injection
     traffic: tuple | None = None         # ships replacing the scenario's [[traffic]] (Monte Carlo draws)
+
+    def __post_init__(self) -> None:
+        # The children run in the repository (cwd=REPO): files the user named relative to where
+        # they stand must be absolute before they travel on a child's command line.
+        if Path(self.scenario).suffix == ".toml":
+            self.scenario = str(Path(self.scenario).resolve())
+        if self.config is not None:
+            self.config = tuple(str(Path(p).resolve()) for p in config.config_files(self.config))
     # hil run: Ctrl-C/SIGTERM end the run with outcome "interrupted" and its folder written (a GCS session
     # with --wait-for-arm ends that way); elsewhere (Monte Carlo, soak) the interrupt propagates.
     summary_on_interrupt: bool = False
