@@ -38,7 +38,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                "usage error. Overruns are judged against the load the run saw, never failing on a busy machine "
                "alone: from /proc, the CPU-seconds that processes other than the soak's own (and the "
                "hypervisor's steal) took during the run; each --load-per-overrun CPU-seconds of that beyond a "
-               "quiet machine's 5%% of one CPU excuses one overrun on top of --max-overruns (docs/can.md).",
+               "quiet machine's 5 percent of one CPU excuses one overrun on top of --max-overruns (docs/can.md).",
     )
     p.add_argument("--duration", type=float, default=60.0, metavar="S", help="seconds to run (default: 60)")
     p.add_argument("--rate", type=float, default=None, metavar="HZ",
