@@ -126,4 +126,4 @@ def test_montecarlo_prints_the_markdown_table(tmp_path, capsys):
     assert out.startswith((tmp_path / "table3.md").read_text().rstrip("\n"))
     assert "|---|" in out
     assert "'algorithm':" not in out  # not the raw Python list of dicts of before
-    assert out.splitlines()[-1].startswith("3 runs in ")
+    assert out.splitlines()[-1].startswith("3 runs (1 per algorithm) in ")
