@@ -48,10 +48,11 @@ REPO = Path(__file__).resolve().parent.parent
 
 
 def free_udp_port() -> int:
-    """A currently free UDP port on 127.0.0.1 (chosen by the kernel)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    """A free UDP port on 127.0.0.1, reserved host-wide so that parallel runs never share it
+    (:mod:`hil.ports`; :meth:`HilRun.execute` releases a run's ports when it ends)."""
+    from hil.ports import reserve_udp_port
+
+    return reserve_udp_port()
 
 
 def startup_error(log: Path) -> str:
@@ -526,6 +527,9 @@ class HilRun:
             self.tap.pump(timeout=0.0)
             self.tap.counters_at_close = self.tap.counters()
             self.tap.close()
+            from hil.ports import release
+
+            release(self.ap_port, self.sim_port)
             if self.can_recorder is not None:
                 self.can_log = self.can_recorder.close()
         wall = time.monotonic() - wall0
