@@ -204,8 +204,14 @@ def run(args: argparse.Namespace) -> int:
         "table3": table,
     }
     (out / "summary.json").write_text(console.to_json(summary))
-    console.progress(experiment.table_markdown(table, title))
-    console.emit(args, summary)
+    markdown = experiment.table_markdown(table, title)
+    if args.json:
+        console.progress(markdown)
+        console.emit(args, summary)
+    else:  # the table itself, as Markdown, is the human summary (the same text as table3.md)
+        print(markdown.rstrip("\n"), flush=True)
+        print(f"\n{len(camp.rows)} runs ({args.runs} per algorithm) in {wall:.0f} s; files in {out} (table3.md, table3.csv, runs.csv"
+              f"{', figures' if figures else ''}, summary.json)", flush=True)
     if camp.interrupted:
         return 130
     return 0
