@@ -1,4 +1,5 @@
-"""Scenarios: a map, start and goal, a global reference path and the current, from ``configs/scenarios/NAME.toml``.
+"""Scenarios: a map, start and goal, a global reference path and the current, from ``configs/scenarios/NAME.toml``
+(or any .toml path; files it names, such as the map, are relative to it).
 
 Map frame (planner/API): x east, y north in metres, headings counter-clockwise from +x (rad).
 The map's origin (x = 0, y = 0, its south-west corner) is the NED origin of the simulator, so
@@ -87,10 +88,11 @@ class ScenarioSpec:
     name: str = param("scenario name (the file's stem)")
     description: str = param("one-line description")
     kind: Literal["fixed", "random"] = param("'fixed' map and end points, or 'random' per Monte Carlo run")
-    map: str = param("map file (.npy or .png) relative to configs/ (fixed scenarios)", default="")
+    map: str = param("map file (.npy or .png) relative to the scenario file (fixed scenarios)", default="")
     resolution: float = param("map cell size", "m", gt=0, default=0.5)
     start: tuple[float, float] = param("start position [x east, y north]", "m", default=(0.0, 0.0))
-    start_heading: float = param("start heading, counter-clockwise from east", "rad", default=0.0)
+    start_heading: float = param("start heading, counter-clockwise from east", "rad", ge=-4 * math.pi,
+                                 le=4 * math.pi, default=0.0)
     goal: tuple[float, float] = param("final goal [x east, y north]", "m", default=(0.0, 0.0))
     reference_path: tuple[tuple[float, float], ...] = param(
         "route waypoints [[x, y], ...], start to goal (legs of any length; may cross obstacles, Figure 9); "
@@ -107,6 +109,8 @@ class ScenarioSpec:
     online: dict[str, Any] = field(default_factory=dict, metadata={"help": "overrides of the online process"})
     random: RandomSpec | None = field(default=None, metadata={"help": "random map generator (kind = 'random')"})
     traffic: tuple[ShipSpec, ...] = field(default=(), metadata={"help": "ship traffic ([[traffic]] tables)"})
+    # The file it was read from (set by load_spec, not a TOML key): relative paths start there.
+    path: str = field(default="", init=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.kind == "fixed":
@@ -213,7 +217,27 @@ def load_spec(name: str) -> ScenarioSpec:
     if not path.exists():
         raise UsageError(f"unknown scenario {name!r} (no {path}; available: {', '.join(available())})")
     table = config.read_toml(path)
-    return config.from_table(ScenarioSpec, table, str(path))
+    spec = config.from_table(ScenarioSpec, table, str(path))
+    object.__setattr__(spec, "path", str(path))
+    return spec
+
+
+def folder_name(spec: ScenarioSpec) -> str:
+    """The scenario's ``name`` made safe as a file name (run folders are named after it)."""
+    import re
+
+    return re.sub(r"[^A-Za-z0-9_.-]+", "-", spec.name).strip("-.") or "scenario"
+
+
+def resolve_file(spec: ScenarioSpec, name: str) -> Path:
+    """A file named in a scenario: relative to the scenario file; for scenarios written before
+    that rule (paths relative to ``configs/``), ``configs/`` when the first does not exist."""
+    p = Path(name).expanduser()
+    if p.is_absolute():
+        return p
+    here = (Path(spec.path).parent if spec.path else SCENARIO_DIR) / p
+    legacy = CONFIG_DIR / p
+    return here if here.exists() or not legacy.exists() else legacy
 
 
 def _current_params(base_current: Any, overrides: dict[str, Any], source: str) -> tuple[Any, float]:
@@ -222,9 +246,11 @@ def _current_params(base_current: Any, overrides: dict[str, Any], source: str) -
     field_time = ov.pop("field_time", 0.0)
     if isinstance(field_time, bool) or not isinstance(field_time, (int, float)):
         raise ConfigError(f"{source}: current.field_time: expected a number, got {field_time!r}")
+    if not 0.0 <= field_time <= config.MAX_MAGNITUDE:
+        raise ConfigError(f"{source}: current.field_time: must be a finite number of seconds >= 0 (got {field_time})")
     for k, v in ov.items():
         if k not in table:
-            raise ConfigError(f"{source}: current.{k}: unknown key (expected one of: {', '.join(table)}, field_time)")
+            raise ConfigError(f"{source}: current.{k}: unknown key{config.suggest(k, list(table) + ['field_time'])}")
         table[k] = v
     return config.from_table(type(base_current), table, source, prefix="current"), float(field_time)
 
@@ -258,7 +284,7 @@ def load(name: str, base_current: Any = None, safety_radius: float | None = None
     ``safety_radius`` (m): the configuration's ``planner.safety_radius`` (default: the default
     configuration's); the scenario's own ``[planner]`` value wins, as for the planner."""
     spec = load_spec(name)
-    return instance(spec, None, base_current, safety_radius, source=str(scenario_path(name)))
+    return instance(spec, None, base_current, safety_radius)
 
 
 def _safety_radius(spec: ScenarioSpec, base: float | None, source: str) -> float:
@@ -304,12 +330,12 @@ def _default_current() -> Any:
 def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: Any = None,
              safety_radius: float | None = None, source: str | None = None) -> Scenario:
     """A concrete :class:`Scenario`; random scenarios draw map and end points from ``rng``.
-    ``source`` names the file in error messages (default: configs/scenarios/NAME.toml)."""
-    source = source or str(scenario_path(spec.name))
+    ``source`` names the file in error messages (default: the file the spec was read from)."""
+    source = source or spec.path or str(scenario_path(spec.name))
     current, field_time = _current_params(base_current if base_current is not None else _default_current(),
                                           spec.current, source)
     if spec.kind == "fixed":
-        map_path = CONFIG_DIR / spec.map
+        map_path = resolve_file(spec, spec.map)
         if not map_path.exists():
             raise ConfigError(f"{source}: map: no such file {map_path}")
         occ = load_occupancy(map_path, spec.resolution)

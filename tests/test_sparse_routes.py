@@ -23,6 +23,8 @@ HARBOUR_4 = [[22.0, 40.0], [60.0, 85.0], [120.0, 100.0], [185.0, 140.0]]
 def scenario_file(tmp_path: Path, base: str, route, name: str = "sparse", **keys) -> Path:
     """``configs/scenarios/BASE.toml`` with its reference_path replaced by ``route`` (and ``keys`` set)."""
     text = (CONFIG_DIR / "scenarios" / f"{base}.toml").read_text()
+    rel = re.search(r'^map = "(.*)"$', text, flags=re.M).group(1)      # relative to the scenario file
+    text = re.sub(r"^map = .*$", f'map = "{(CONFIG_DIR / "scenarios" / rel).resolve()}"', text, flags=re.M)
     text = re.sub(r"^reference_path = .*$", f"reference_path = {json.dumps(route)}", text, flags=re.M)
     text = re.sub(r'^name = .*$', f'name = "{name}"', text, flags=re.M)
     for key, value in keys.items():
