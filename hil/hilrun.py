@@ -283,7 +283,7 @@ class HilRun:
 
     def __init__(self, opts: RunOptions, cfg: Any) -> None:
         self.opts, self.cfg = opts, cfg
-        self.scen = scenarios.load(opts.scenario, cfg.current)
+        self.scen = scenarios.load(opts.scenario, cfg.current, cfg.planner.safety_radius)
         if opts.traffic is not None:
             self.scen.traffic = tuple(opts.traffic)
         self.out = opts.out
