@@ -86,10 +86,10 @@ def scenario_instance(name: str, seed: int, run: int, config: str | None = None,
     if spec.kind == "fixed":
         key = ("fixed", name, config, overrides)
         if key not in _CACHE:
-            _CACHE[key] = scenarios.instance(spec, None, cfg.current)
+            _CACHE[key] = scenarios.instance(spec, None, cfg.current, cfg.planner.safety_radius)
         return _CACHE[key]
     rng = np.random.default_rng(seed_sequence(seed, run, 0))
-    return scenarios.instance(spec, rng, cfg.current)
+    return scenarios.instance(spec, rng, cfg.current, cfg.planner.safety_radius)
 
 
 def _context(task: Task, sc):
