@@ -5,7 +5,6 @@ heading of 1e300."""
 
 from __future__ import annotations
 
-import math
 import os
 import signal
 import socket
@@ -225,4 +224,3 @@ def test_start_heading_1e300_does_not_hang(tmp_path, hil, repo):
     assert time.monotonic() - t0 < 240
     assert "Traceback" not in r.stderr
     assert r.returncode in (0, 1, 2), r.stderr
-    assert math.isfinite(1e300)
