@@ -52,6 +52,7 @@ from autopilot_bridge.obstacle_map import SensedObstacles, path_blocked
 from autopilot_bridge.plan_commitment import CommitmentParams, keep_current
 from autopilot_bridge.planning_worker import PlannerWorker, PlanRequest
 from autopilot_bridge.reactive import ReactiveAvoidance
+from autopilot_bridge.route_planning import RouteKeeper
 from autopilot_bridge.telemetry import Telemetry
 from autopilot_bridge.tracking_stats import TrackingStats
 from common.dronecan_codec import RAW_COMMAND_MAX, quantize
@@ -114,6 +115,10 @@ class Autopilot:
         self.grid = OccupancyGrid(world.occ.copy(), world.resolution)
         self.sensed = SensedObstacles(world.occ, world.resolution, params.sensed_confirm_hits,
                                       params.sensed_explain_radius)
+        # The global route (autopilot_bridge/route_planning.py): planned on this grid for every new
+        # route, re-planned when sensed obstacles block it.
+        self.routes = RouteKeeper(self.grid, world.params.safety_radius, log=self.log)
+        self.routes.adopt(self.reference_ned)
         self._sensed_at_submit = 0
         self.reactive = ReactiveAvoidance(self.grid, params.fallback_range, params.min_clearance, params.fallback_speed)
         self.stats = AutopilotStats()
@@ -382,7 +387,7 @@ class Autopilot:
         if r is None or r.version == self._route_version:
             return
         self._route_version = r.version
-        self.reference_ned = r.path
+        self.reference_ned = self.routes.set_route(r.path)   # legs of any length: routed on the chart
         self.goal_ned = (float(r.path[-1][0]), float(r.path[-1][1]))
         self.goal_radius = r.goal_radius
         self.target = self.goal_ned
@@ -396,7 +401,7 @@ class Autopilot:
 
     def world_update(self) -> Any:
         """What the planner worker must use instead of the World it started with (None: nothing changed)."""
-        if self._route_version == 0 and not self.planner_overrides:
+        if self._world_version == 0:   # no route, re-planned route or parameter since the start
             return None
         from autopilot_bridge.local_planning import WorldUpdate
 
@@ -438,6 +443,11 @@ class Autopilot:
         if len(new) == 0:
             return
         self.grid.mark(new)
+        replanned = self.routes.on_sensed(new, (s.x, s.y))
+        if replanned is not None:
+            self.reference_ned = replanned
+            self._world_version += 1
+            self._event(t, "sensed obstacle on the global route: route re-planned")
         if self.mode == PLANNED and self.los is not None:
             ahead = self.los.path[self.los.index:]
             if path_blocked(ahead, new, self.grid.resolution, self.p.sensed_path_clearance):

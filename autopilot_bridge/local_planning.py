@@ -124,13 +124,17 @@ def online_cycle_handler(world: World) -> Callable[[Any], LocalPlan]:
         rebuilt = False
         if start.sensed_version != version:
             # The map known a priori plus what is sensed: inflated maps are rebuilt only when it grows.
+            progress = ctx.progress           # where along the reference path the vessel is
             ctx, version = context(start.sensed), start.sensed_version
+            ctx.progress = progress
             rebuilt = True
         update = getattr(start, "world", None)
         if update is not None and (rebuilt or update.version != applied["version"]):
             # Same maps (and their inflation caches); new route and planner parameters.
             ctx.goal = (float(update.goal[0]), float(update.goal[1]))
             ctx.reference_path = np.asarray(update.reference_path, dtype=float).reshape(-1, 2)
+            if update.version != applied["version"]:
+                ctx.progress = 0              # a new route begins where the vessel is
             ctx.params = replace(ctx.params, **update.planner_overrides)
             applied["version"] = update.version
         if request.iterations is not None:

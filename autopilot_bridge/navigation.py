@@ -96,6 +96,10 @@ class NavigationFilter:
         self._heading: float | None = None
         self._consecutive_gps_rejections = 0
         self._gates: dict[int, float] = {}
+        # Per-frame work reuses these (the control loop runs this 100 times a second): F keeps its
+        # identity entries and only the Jacobian's entries are rewritten; Q depends on dt only.
+        self._F = np.eye(DIM)
+        self._Q: dict[float, np.ndarray] = {}
 
     # -- life cycle ------------------------------------------------------------------------
     @property
@@ -129,7 +133,7 @@ class NavigationFilter:
         x = self.ekf.x
         psi, u, v = x[PSI, 0], x[U, 0], x[V, 0]
         c, s = math.cos(psi), math.sin(psi)
-        F = np.eye(DIM)
+        F = self._F
         F[X, PSI] = (-u * s - v * c) * dt
         F[X, U] = c * dt
         F[X, V] = -s * dt
@@ -137,14 +141,19 @@ class NavigationFilter:
         F[Y, U] = s * dt
         F[Y, V] = c * dt
         F[PSI, R] = dt
-        q_a, q_r, q_b = self.p.accel_noise**2, self.p.yaw_accel_noise**2, self.p.gyro_bias_walk**2
-        # Continuous white acceleration integrated over dt (velocity variance q dt, position q dt^3/3).
-        Q = np.zeros((DIM, DIM))
-        Q[U, U] = Q[V, V] = q_a * dt
-        Q[X, X] = Q[Y, Y] = q_a * dt**3 / 3.0
-        Q[R, R] = q_r * dt
-        Q[PSI, PSI] = q_r * dt**3 / 3.0
-        Q[BG, BG] = q_b * dt
+        Q = self._Q.get(dt)
+        if Q is None:
+            if len(self._Q) > 64:   # irregular time steps: keep the cache small
+                self._Q.clear()
+            q_a, q_r, q_b = self.p.accel_noise**2, self.p.yaw_accel_noise**2, self.p.gyro_bias_walk**2
+            # Continuous white acceleration integrated over dt (velocity variance q dt, position q dt^3/3).
+            Q = np.zeros((DIM, DIM))
+            Q[U, U] = Q[V, V] = q_a * dt
+            Q[X, X] = Q[Y, Y] = q_a * dt**3 / 3.0
+            Q[R, R] = q_r * dt
+            Q[PSI, PSI] = q_r * dt**3 / 3.0
+            Q[BG, BG] = q_b * dt
+            self._Q[dt] = Q
         x_new = x.copy()
         x_new[X, 0] += (u * c - v * s) * dt  # eq. (2)
         x_new[Y, 0] += (u * s + v * c) * dt
@@ -201,7 +210,10 @@ class NavigationFilter:
 
         y = residual(z, hx)
         S = H @ self.ekf.P @ H.T + Rm
-        nis = float((y.T @ np.linalg.solve(S, y))[0, 0])
+        if S.shape[0] == 1:   # compass, gyro: most updates; a scalar division instead of a solve
+            nis = float(y[0, 0] * y[0, 0] / S[0, 0])
+        else:
+            nis = float((y.T @ np.linalg.solve(S, y))[0, 0])
         if not math.isfinite(nis):
             raise ArithmeticError("innovation not finite")
         if nis > self._gate(z.shape[0]):
@@ -312,8 +324,9 @@ class NavigationFilter:
         """The current estimate, or None before the first GPS fix."""
         if self.t is None:
             return None
-        x = self.ekf.x[:, 0]
-        pos_cov = self.ekf.P[:2, :2]
-        return NavState(t=self.t, x=float(x[X]), y=float(x[Y]), psi=float(x[PSI]), u=float(x[U]),
-                        v=float(x[V]), r=float(x[R]), gyro_bias=float(x[BG]),
-                        position_std=float(math.sqrt(max(np.linalg.eigvalsh(pos_cov)[-1], 0.0))))
+        x = self.ekf.x[:, 0].tolist()
+        P = self.ekf.P
+        a, b, d = float(P[X, X]), float(P[X, Y]), float(P[Y, Y])
+        largest = 0.5 * (a + d) + math.hypot(0.5 * (a - d), b)   # of the symmetric 2x2 position covariance
+        return NavState(t=self.t, x=x[X], y=x[Y], psi=x[PSI], u=x[U], v=x[V], r=x[R], gyro_bias=x[BG],
+                        position_std=math.sqrt(max(largest, 0.0)))

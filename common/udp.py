@@ -1,6 +1,6 @@
 """A small UDP endpoint in the spirit of python-can's ``Bus``: one socket, fan-out send, recv.
 
-The socket is bound to ``bind`` ("HOST:PORT"; port 0 picks a free port, see :attr:`address`)
+The socket is bound to ``bind`` ("HOST:PORT" or "udpin:HOST:PORT"; port 0 picks a free port, see :attr:`address`)
 and sends every datagram to each destination, from that same socket, so a peer can answer to
 the source address. Only the latest datagram matters on these links, hence :meth:`drain_latest`.
 Optional seeded loss injection per direction simulates a lossy link (both ends can use it).
@@ -22,19 +22,13 @@ import time
 
 import numpy as np
 
+from common.connection import RECEIVE_UDP, SEND_UDP, Role, parse
 
-def parse_hostport(text: str) -> tuple[str, int]:
-    """("host", port) from "HOST:PORT"; ValueError with a one-line message on bad input."""
-    host, sep, port = str(text).rpartition(":")
-    if not sep or not host:
-        raise ValueError(f"{text!r}: expected HOST:PORT, e.g. 127.0.0.1:14560")
-    try:
-        p = int(port)
-    except ValueError:
-        raise ValueError(f"{text!r}: port {port!r} is not an integer") from None
-    if not 0 <= p <= 65535:
-        raise ValueError(f"{text!r}: port {p} is outside 0-65535")
-    return host, p
+
+def parse_hostport(text: str, role: Role = RECEIVE_UDP) -> tuple[str, int]:
+    """("host", port) from a UDP connection string of ``role`` (``common.connection``: HOST:PORT,
+    udpin:/udp: for a bound address, udpout: for a destination); ValueError with one line otherwise."""
+    return parse(text, role).address
 
 
 class UdpEndpoint:
@@ -53,8 +47,8 @@ class UdpEndpoint:
         for p in (send_loss, recv_loss):
             if not 0.0 <= p <= 1.0:
                 raise ValueError(f"loss probability {p} is outside [0, 1]")
-        self.destinations = [parse_hostport(d) for d in destinations]
-        host, port = parse_hostport(bind)
+        self.destinations = [parse_hostport(d, SEND_UDP) for d in destinations]
+        host, port = parse_hostport(bind, RECEIVE_UDP)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, recv_buffer)

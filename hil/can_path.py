@@ -46,8 +46,9 @@ def esc_process_command(args: argparse.Namespace, record: Any) -> list[str]:
     same [can] and [esc] settings), running 30 s past ``args.duration`` and recording to ``record``."""
     cmd = [sys.executable, "-m", "hil.can_path", "esc", "--duration", repr(float(args.duration) + 30.0),
            "--record", str(record)]
-    if args.config:
-        cmd += ["--config", args.config]
+    from hil.config import config_args
+
+    cmd += config_args(args.config)
     for o in args.overrides:
         cmd += ["--set", o]
     return cmd
@@ -159,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m hil.can_path")
     sub = p.add_subparsers(dest="role", required=True)
     e = sub.add_parser("esc")
-    e.add_argument("--config", default=None)
+    e.add_argument("--config", action="append", default=None)
     e.add_argument("--set", dest="overrides", action="append", default=[])
     e.add_argument("--duration", type=float, required=True)
     e.add_argument("--record", required=True)

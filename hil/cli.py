@@ -2,7 +2,8 @@
 
 Conventions shared by every subcommand:
 
-* ``--config FILE`` (default ``configs/default.toml``) and repeatable ``--set section.key=value``;
+* repeatable ``--config FILE`` (keys laid over ``configs/default.toml``, in order) and repeatable
+  ``--set section.key=value``;
 * ``--json`` prints one JSON object, the run's summary, on stdout at the end;
 * human-readable progress goes to stderr;
 * exit 0 on success, 1 when the run itself failed, 2 on a usage or configuration error, which is
@@ -32,8 +33,9 @@ def common_options() -> argparse.ArgumentParser:
     """The options every subcommand accepts."""
     p = argparse.ArgumentParser(add_help=False)
     g = p.add_argument_group("common options")
-    g.add_argument("--config", metavar="FILE", default=None,
-                   help="complete TOML configuration (default: configs/default.toml)")
+    g.add_argument("--config", metavar="FILE", action="append", default=None,
+                   help="TOML file holding only the keys it changes, laid over configs/default.toml; "
+                        "repeatable, applied in order (then --set)")
     g.add_argument("--set", metavar="SECTION.KEY=VALUE", action="append", default=[], dest="overrides",
                    help="override one configuration key, value in TOML syntax "
                         "(e.g. --set current.enabled=false); repeatable")
@@ -61,6 +63,8 @@ def build_parser() -> ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if getattr(args, "config", None) is not None:
+        args.config = tuple(args.config)
     try:
         return int(args.func(args))
     except HilError as exc:

@@ -4,18 +4,24 @@ The section dataclasses live beside the code that uses them (``simulator.config`
 ``planner.params`` ...); this module only knows how to fill any frozen dataclass from a TOML
 table, strictly:
 
-* an unknown key, a missing key or a value of the wrong type is an error;
-* per-field constraints come from the field's metadata (see :func:`param`): ``gt``, ``ge``,
-  ``lt``, ``le`` bounds and ``choices``;
+* an unknown key (with the nearest known one, difflib), a missing key or a value of the wrong
+  type is an error;
+* every real number is finite; per-field constraints come from the field's metadata (see
+  :func:`param`): ``gt``, ``ge``, ``lt``, ``le`` bounds; a real without an upper (lower) bound
+  must stay within MAX_MAGNITUDE (MAX_RADIANS for angles);
 * cross-field rules live in the dataclass's ``__post_init__``, which raises ``ValueError``
   naming the offending key as ``"key: problem"``.
 
-Every problem becomes one :class:`~hil.errors.ConfigError` line ``FILE: section.key: problem``.
+:func:`load` builds the table in layers (:class:`Layers`): ``configs/default.toml``, then each
+``--config`` file (only the keys it changes), then each ``--set``. Every problem becomes one
+:class:`~hil.errors.ConfigError` line ``SOURCE: section.key: problem``, SOURCE being the file or
+the ``--set`` that gave the offending value.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 import tomllib
 import types
@@ -85,8 +91,8 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ValueError(f"{key}: expected a number, got {value!r}")
         value = float(value)
-        if math.isnan(value):
-            raise ValueError(f"{key}: must not be NaN")
+        if not math.isfinite(value):
+            raise ValueError(f"{key}: must be a finite number (got {value})")
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
@@ -103,11 +109,22 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
     raise TypeError(f"{key}: unsupported field type {tp!r}")  # a bug in a schema, not user input
 
 
+# A real number this large in a field without an upper bound is a mistake (and 1e300 radians hangs
+# an angle wrap): the whole project lives within a few kilometres and hours. Integers (seeds, ids,
+# counts) are exact and keep only their declared bounds.
+MAX_MAGNITUDE = 1e9
+MAX_RADIANS = 1e3
+
+
 def _check_bounds(value: Any, meta: typing.Mapping[str, Any], key: str) -> None:
     values = value if isinstance(value, tuple) else (value,)
     for v in values:
+        if isinstance(v, tuple):
+            _check_bounds(v, meta, key)
+            continue
         if not isinstance(v, (int, float)) or isinstance(v, bool):
             continue
+        unit = f" {meta['unit']}" if meta.get("unit") else ""
         for name, op, text in (
             ("gt", lambda a, b: a > b, ">"),
             ("ge", lambda a, b: a >= b, ">="),
@@ -116,8 +133,22 @@ def _check_bounds(value: Any, meta: typing.Mapping[str, Any], key: str) -> None:
         ):
             bound = meta.get(name)
             if bound is not None and not op(v, bound):
-                unit = f" {meta['unit']}" if meta.get("unit") else ""
                 raise ValueError(f"{key}: must be {text} {bound}{unit} (got {v})")
+        limit = MAX_RADIANS if meta.get("unit") == "rad" else MAX_MAGNITUDE
+        upper = meta.get("lt") is not None or meta.get("le") is not None
+        lower = meta.get("gt") is not None or meta.get("ge") is not None
+        if isinstance(v, float) and ((v > limit and not upper) or (-v > limit and not lower)):
+            raise ValueError(f"{key}: {v:g}{unit} is out of range (|value| <= {limit:g})")
+
+
+def suggest(word: str, choices: typing.Iterable[str], or_list: bool = True) -> str:
+    """" (did you mean 'X'?)" for the nearest of ``choices`` to ``word`` (difflib); without a close
+    one, " (expected one of: ...)" (``or_list``) or ""."""
+    choices = list(choices)
+    close = difflib.get_close_matches(word, choices, n=1, cutoff=0.6)
+    if close:
+        return f" (did you mean {close[0]!r}?)"
+    return f" (expected one of: {', '.join(choices)})" if or_list and choices else ""
 
 
 def _build(cls: type[T], table: dict[str, Any], prefix: str) -> T:
@@ -126,7 +157,7 @@ def _build(cls: type[T], table: dict[str, Any], prefix: str) -> T:
     for k in table:
         if k not in fields:
             where = f"{prefix}.{k}" if prefix else k
-            raise ValueError(f"{where}: unknown key (expected one of: {', '.join(fields)})")
+            raise ValueError(f"{where}: unknown key{suggest(k, fields)}")
     kwargs = {}
     for name, f in fields.items():
         where = f"{prefix}.{name}" if prefix else name
@@ -144,12 +175,19 @@ def _build(cls: type[T], table: dict[str, Any], prefix: str) -> T:
         raise ValueError(f"{prefix}.{msg}" if prefix else msg) from None
 
 
-def from_table(cls: type[T], table: dict[str, Any], source: str, prefix: str = "") -> T:
-    """Build dataclass ``cls`` from a parsed TOML table; errors name ``source`` and the key."""
+def from_table(cls: type[T], table: dict[str, Any], source: str | typing.Callable[[str], str],
+               prefix: str = "") -> T:
+    """Build dataclass ``cls`` from a parsed TOML table; errors name the source and the key.
+
+    ``source`` is a file name, or a function from the offending dotted key to the file or
+    ``--set`` that gave it (layered configurations).
+    """
     try:
         return _build(cls, table, prefix)
     except ValueError as exc:
-        raise ConfigError(f"{source}: {exc}") from None
+        msg = str(exc)
+        where = source(msg.partition(":")[0]) if callable(source) else source
+        raise ConfigError(f"{where}: {msg}") from None
 
 
 def parse_override(text: str) -> tuple[list[str], Any]:
@@ -167,18 +205,78 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     return keys, value
 
 
-def apply_overrides(table: dict[str, Any], overrides: list[str]) -> None:
-    """Apply ``--set`` overrides in place; a key that does not exist in the file is an error."""
-    for text in overrides:
+def _schema_names(cls: Any, keys: list[str]) -> tuple[int, list[str]]:
+    """Walk ``keys`` down dataclass ``cls``: (index of the first unknown key or -1, the names valid there)."""
+    tp = cls
+    for i, k in enumerate(keys):
+        if not dataclasses.is_dataclass(tp):
+            return -1, []  # a free-form table (dict) or a value below here
+        names = [f.name for f in dataclasses.fields(tp) if f.init]
+        if k not in names:
+            return i, names
+        tp = typing.get_type_hints(tp)[k]
+        if get_origin(tp) in (typing.Union, types.UnionType):
+            tp = next((a for a in get_args(tp) if dataclasses.is_dataclass(a)), tp)
+    return -1, []
+
+
+class Layers:
+    """A configuration table built in layers, remembering which layer gave each key.
+
+    The first layer is the defaults file; each ``--config`` file is laid over it key by key (a
+    file holds only the keys it changes; a table merges, any other value replaces), then each
+    ``--set`` in order.
+    """
+
+    def __init__(self, cls: Any) -> None:
+        self.cls = cls
+        self.table: dict[str, Any] = {}
+        self.origin: dict[str, str] = {}
+
+    def _merge(self, node: dict[str, Any], layer: dict[str, Any], prefix: str, source: str) -> None:
+        for k, v in layer.items():
+            key = f"{prefix}{k}"
+            if isinstance(v, dict) and isinstance(node.get(k), dict):
+                self._merge(node[k], v, key + ".", source)
+            else:
+                node[k] = v
+            self.origin[key] = source
+
+    def add_file(self, path: str | Path, check: bool = True) -> None:
+        layer = read_toml(path)
+        if check:
+            self._check(layer, [], str(path))
+        self._merge(self.table, layer, "", str(path))
+
+    def _check(self, layer: dict[str, Any], keys: list[str], source: str) -> None:
+        for k, v in layer.items():
+            bad, names = _schema_names(self.cls, keys + [k])
+            if bad >= 0:
+                raise ConfigError(f"{source}: {'.'.join(keys + [k])}: unknown key{suggest(k, names)}")
+            if isinstance(v, dict):
+                self._check(v, keys + [k], source)
+
+    def add_override(self, text: str) -> None:
         keys, value = parse_override(text)
-        node = table
-        for i, k in enumerate(keys[:-1]):
+        bad, names = _schema_names(self.cls, keys)
+        if bad >= 0:
+            raise ConfigError(f"--set {text}: unknown key {'.'.join(keys[: bad + 1])}{suggest(keys[bad], names)}")
+        node = self.table
+        for k in keys[:-1]:
             if not isinstance(node.get(k), dict):
-                raise ConfigError(f"--set {text}: unknown key {'.'.join(keys[: i + 1])}")
+                node[k] = {}
             node = node[k]
-        if keys[-1] not in node:
-            raise ConfigError(f"--set {text}: unknown key {'.'.join(keys)}")
         node[keys[-1]] = value
+        self.origin[".".join(keys)] = f"--set {text}"
+
+    def source_of(self, key: str) -> str:
+        """The file or ``--set`` that gave ``key`` (its nearest given parent for a missing key)."""
+        parts = [p.partition("[")[0] for p in key.split(".")]
+        for n in range(len(parts), 0, -1):
+            src = self.origin.get(".".join(parts[:n]))
+            if src is not None:
+                return src
+        return str(DEFAULT_CONFIG)
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:
@@ -197,12 +295,35 @@ def read_toml(path: str | Path) -> dict[str, Any]:
         raise ConfigError(f"{p}: cannot read: {exc}") from None
 
 
-def load(cls: type[T], path: str | Path | None = None, overrides: list[str] | None = None) -> T:
-    """Load a whole configuration file (default ``configs/default.toml``) into ``cls``."""
-    p = Path(path) if path is not None else DEFAULT_CONFIG
-    table = read_toml(p)
-    apply_overrides(table, list(overrides or []))
-    return from_table(cls, table, str(p))
+def config_files(path: str | Path | typing.Sequence[str | Path] | None) -> list[Path]:
+    """``--config`` as a list of files (one, several in order, or none)."""
+    if path is None:
+        return []
+    if isinstance(path, (str, Path)):
+        return [Path(path)]
+    return [Path(p) for p in path]
+
+
+def config_args(path: str | Path | typing.Sequence[str | Path] | None) -> list[str]:
+    """``--config`` options that give a child process the same configuration files."""
+    return [a for p in config_files(path) for a in ("--config", str(p))]
+
+
+def load(cls: type[T], path: str | Path | typing.Sequence[str | Path] | None = None,
+         overrides: list[str] | None = None) -> T:
+    """``configs/default.toml``, then each ``--config`` file laid over it, then the ``--set`` overrides.
+
+    A file need hold only the keys it changes; a complete file (a copy of ``configs/default.toml``)
+    works as before. Every error names the file or ``--set`` that gave the offending value, and an
+    unknown key the nearest known one.
+    """
+    layers = Layers(cls)
+    layers.add_file(DEFAULT_CONFIG, check=False)
+    for p in config_files(path):
+        layers.add_file(p)
+    for text in overrides or []:
+        layers.add_override(text)
+    return from_table(cls, layers.table, layers.source_of)
 
 
 def to_table(obj: Any) -> Any:

@@ -59,24 +59,92 @@ def to_json(summary: dict[str, Any]) -> str:
     return json.dumps(_jsonable(summary), allow_nan=False)
 
 
-def _human(summary: dict[str, Any], indent: str = "") -> list[str]:
-    lines = []
-    for k, v in summary.items():
-        if isinstance(v, dict):
-            lines.append(f"{indent}{k}:")
-            lines += _human(v, indent + "  ")
-        elif isinstance(v, float):
-            lines.append(f"{indent}{k}: {v:.6g}")
-        elif isinstance(v, list) and len(v) > 8:
-            lines.append(f"{indent}{k}: [{len(v)} items]")
-        else:
-            lines.append(f"{indent}{k}: {v}")
+MAX_LINES = 15        # a human summary fits on a screen; everything else is in --json / summary.json
+MAX_LINE_CHARS = 160  # and no line of it runs off the screen (an events list once made a 36 KB line)
+MAX_LIST_SHOWN = 3
+
+
+def clip(text: str, limit: int = MAX_LINE_CHARS) -> str:
+    """``text`` cut to ``limit`` characters, saying how much was left out."""
+    if len(text) <= limit:
+        return text
+    return text[: limit - 24] + f" ... (+{len(text) - limit + 24} chars)"
+
+
+def fmt(v: Any) -> str:
+    """A value for a human line: numbers short, lists capped and counted."""
+    if isinstance(v, bool) or v is None:
+        return str(v).lower() if isinstance(v, bool) else "-"
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    if isinstance(v, (list, tuple)):
+        shown = ", ".join(fmt(x) for x in v[:MAX_LIST_SHOWN])
+        return f"[{shown}{', ...' if len(v) > MAX_LIST_SHOWN else ''}] ({len(v)} items)" if len(v) > MAX_LIST_SHOWN \
+            else f"[{shown}]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{k}: {fmt(x)}" for k, x in list(v.items())[:MAX_LIST_SHOWN]) + \
+            (f", ... ({len(v)} keys)}}" if len(v) > MAX_LIST_SHOWN else "}")
+    return str(v)
+
+
+def _empty(v: Any) -> bool:
+    return v is None or v == "" or (isinstance(v, (list, tuple, dict)) and not v)
+
+
+def nonzero_counters(d: Any, prefix: str = "") -> list[str]:
+    """``key=value`` for every non-zero integer counter in a nested summary (booleans excluded)."""
+    out = []
+    if isinstance(d, dict):
+        for k, v in d.items():
+            key = f"{prefix}{k}"
+            if isinstance(v, dict):
+                out += nonzero_counters(v, key + ".")
+            elif isinstance(v, int) and not isinstance(v, bool) and v != 0:
+                out.append(f"{key}={v}")
+    return out
+
+
+def wrap_items(label: str, items: list[str], max_lines: int) -> list[str]:
+    """``label: a, b, c`` over at most ``max_lines`` lines of MAX_LINE_CHARS, the rest counted."""
+    lines, cur = [], f"{label}:"
+    for i, it in enumerate(items):
+        piece = f" {it}" if cur.endswith(":") else f", {it}"
+        room = MAX_LINE_CHARS - (16 if len(lines) == max_lines - 1 else 0)  # the last line keeps room for the count
+        if len(cur) + len(piece) <= room:
+            cur += piece
+            continue
+        if len(lines) == max_lines - 1:
+            lines.append(f"{cur}, ... (+{len(items) - i} more)")
+            return lines
+        lines.append(cur)
+        cur = "  " + it
+    lines.append(cur)
     return lines
 
 
-def emit(args: argparse.Namespace, summary: dict[str, Any]) -> None:
-    """Print the summary: one JSON object with ``--json``, readable lines otherwise."""
+def brief(summary: dict[str, Any], max_lines: int = MAX_LINES) -> list[str]:
+    """A generic short summary: the top-level values that are set, one line each, nested tables
+    as their non-zero counters; capped at ``max_lines`` with a pointer to --json."""
+    lines = []
+    for k, v in summary.items():
+        if _empty(v):
+            continue
+        if isinstance(v, dict):
+            counters = nonzero_counters(v)
+            if counters:
+                lines.append(clip(f"{k}: " + ", ".join(counters)))
+            continue
+        lines.append(clip(f"{k}: {fmt(v)}"))
+    if len(lines) > max_lines:
+        lines = lines[: max_lines - 1] + [f"... {len(lines) - max_lines + 1} more lines: use --json"]
+    return lines
+
+
+def emit(args: argparse.Namespace, summary: dict[str, Any], human: list[str] | None = None) -> None:
+    """Print the summary: one JSON object with ``--json``; otherwise ``human`` lines (a command's
+    own short summary) or :func:`brief`, never more than MAX_LINES lines."""
     if getattr(args, "json", False):
         print(to_json(summary), flush=True)
     else:
-        print("\n".join(_human(summary)), flush=True)
+        lines = human if human is not None else brief(summary)
+        print("\n".join(clip(line) for line in lines[:MAX_LINES]), flush=True)

@@ -40,7 +40,7 @@ from scipy import ndimage
 from common.geodesy import LocalFrame
 from common.mavlink import Codec, mavlink2
 from common.udp import UdpEndpoint
-from hil import processes
+from hil import config, processes
 from hil import scenario as scenarios
 from hil.errors import RunFailed, UsageError
 
@@ -48,10 +48,24 @@ REPO = Path(__file__).resolve().parent.parent
 
 
 def free_udp_port() -> int:
-    """A currently free UDP port on 127.0.0.1 (chosen by the kernel)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    """A free UDP port on 127.0.0.1, reserved host-wide so that parallel runs never share it
+    (:mod:`hil.ports`; :meth:`HilRun.execute` releases a run's ports when it ends)."""
+    from hil.ports import reserve_udp_port
+
+    return reserve_udp_port()
+
+
+def startup_error(log: Path) -> str:
+    """The one-line error a child process printed before exiting (``hil ...: error: ...``), or ''."""
+    try:
+        lines = log.read_text(errors="replace").splitlines()
+    except OSError:
+        return ""
+    for line in reversed(lines):
+        head, sep, rest = line.partition(": error: ")
+        if sep and head.startswith("hil "):
+            return rest.strip()
+    return lines[-1].strip() if lines else ""
 
 
 @dataclass
@@ -61,7 +75,7 @@ class RunOptions:
     speedup: float = 1.0
     duration: float = 300.0              # s of simulated time at most
     seed: int = 1
-    config: str | None = None
+    config: "str | tuple[str, ...] | None" = None   # --config file(s), laid over the defaults in order
     overrides: list[str] = field(default_factory=list)
     out: Path | None = None              # run folder
     wall_timeout: float = 900.0          # s, whatever happens
@@ -74,6 +88,14 @@ class RunOptions:
     plot: bool = True
     hooks: list[Callable[["Tap", "HilRun"], None]] = field(default_factory=list)  # tests: fault injection
     traffic: tuple | None = None         # ships replacing the scenario's [[traffic]] (Monte Carlo draws)
+
+    def __post_init__(self) -> None:
+        # The children run in the repository (cwd=REPO): files the user named relative to where
+        # they stand must be absolute before they travel on a child's command line.
+        if Path(self.scenario).suffix == ".toml":
+            self.scenario = str(Path(self.scenario).resolve())
+        if self.config is not None:
+            self.config = tuple(str(Path(p).resolve()) for p in config.config_files(self.config))
     # hil run: Ctrl-C/SIGTERM end the run with outcome "interrupted" and its folder written (a GCS session
     # with --wait-for-arm ends that way); elsewhere (Monte Carlo, soak) the interrupt propagates.
     summary_on_interrupt: bool = False
@@ -83,7 +105,7 @@ class Tap:
     """Receives everything both processes send to it; writes the .tlog; keeps the evaluation data."""
 
     def __init__(self, tlog_path: Path, geo: LocalFrame, encounters: Any = None, truth_component_id: int = 52,
-                 sim_component_id: int = 51) -> None:
+                 sim_component_id: int = 51, lockstep: bool = False) -> None:
         self.ep = UdpEndpoint("127.0.0.1:0", [], recv_buffer=8 << 20)
         # Every message of the dialect: the autopilot copies all ground-station traffic here too.
         self.codec = Codec(255, 190, accept=[c.msgname for c in mavlink2.mavlink_map.values()])
@@ -102,9 +124,15 @@ class Tap:
         self.frames = 0
         # A simulator restart starts its clock at 0 again: each stream keeps a running epoch so
         # that the run's time axis stays monotonic (epoch = the time reached before the restart).
-        self._epoch = {"truth": 0, "estimate": 0, "commands": 0}
-        self._last = {"truth": -1, "estimate": -1, "commands": -1}
-        self._segment = {"truth": 0, "estimate": 0, "commands": 0}
+        self._epoch = {"truth": 0, "estimate": 0, "commands": 0, "clock": 0}
+        self._last = {"truth": -1, "estimate": -1, "commands": -1, "clock": -1}
+        self._segment = {"truth": 0, "estimate": 0, "commands": 0, "clock": 0}
+        # tlog time stamps: in lockstep the run's start (wall clock) plus the simulated time of the
+        # newest simulator frame, so that log viewers replay simulated time (docs/simulator.md);
+        # in real time the wall clock.
+        self.lockstep = lockstep
+        self._t0_usec = int(time.time() * 1e6)
+        self._sim_usec = 0
         # (segment, time_usec) -> (n, e, run time usec)
         self.truth_raw: dict[tuple[int, int], tuple[float, float, int]] = {}
         # Source addresses of the two processes (HilRun sets them once the ports are chosen):
@@ -169,7 +197,7 @@ class Tap:
 
     def _handle(self, data: bytes, sender: tuple[str, int] | None = None) -> None:
         msgs, _ = self.codec.decode(data)
-        stamp = struct.pack(">Q", int(time.time() * 1e6))
+        stamp = struct.pack(">Q", self._stamp(msgs))
         own = None
         for m in msgs:
             if not self._allowed(m, sender):
@@ -205,6 +233,17 @@ class Tap:
                 self.statustext.append(m.text if isinstance(m.text, str) else m.text.decode(errors="replace"))
             elif kind == "MISSION_ITEM_REACHED":
                 self.mission_reached = True
+
+    def _stamp(self, msgs: list) -> int:
+        """The tlog time stamp (µs since the Unix epoch) of one datagram's messages."""
+        if not self.lockstep:
+            return int(time.time() * 1e6)
+        for m in msgs:
+            if m.get_type() == "HIL_SENSOR":
+                t = self._monotonic("clock", int(m.time_usec), 1_000_000)
+                self._sim_usec = max(self._sim_usec, t)
+                break
+        return self._t0_usec + self._sim_usec
 
     def counters(self) -> dict[str, Any]:
         """What the tap refused, by reason, and its socket's counters (kernel drops)."""
@@ -244,7 +283,7 @@ class HilRun:
 
     def __init__(self, opts: RunOptions, cfg: Any) -> None:
         self.opts, self.cfg = opts, cfg
-        self.scen = scenarios.load(opts.scenario, cfg.current)
+        self.scen = scenarios.load(opts.scenario, cfg.current, cfg.planner.safety_radius)
         if opts.traffic is not None:
             self.scen.traffic = tuple(opts.traffic)
         self.out = opts.out
@@ -254,7 +293,7 @@ class HilRun:
 
         self.encounter_judge = EncounterJudge(cfg.vessel.L, cfg.vessel.W, cfg.colregs) if self.scen.traffic else None
         self.tap = Tap(self.out / "run.tlog", self.geo, self.encounter_judge, cfg.traffic.truth_component_id,
-                       cfg.link.component_id)
+                       cfg.link.component_id, lockstep=opts.lockstep)
         goal_ned = (self.scen.goal[1], self.scen.goal[0])
         # The truth: the chart plus the obstacles it lacks; the simulator's range sensor scans it.
         truth_occ = self.scen.truth_occ()
@@ -283,8 +322,7 @@ class HilRun:
     # -- processes ---------------------------------------------------------------------------------
     def _common_args(self) -> list[str]:
         args = []
-        if self.opts.config:
-            args += ["--config", self.opts.config]
+        args += config.config_args(self.opts.config)
         for o in self.opts.overrides:
             args += ["--set", o]
         return args
@@ -344,7 +382,10 @@ class HilRun:
         deadline = time.monotonic() + ready_timeout
         while b"autopilot: listening on" not in log.read_bytes():
             if self.ap.poll() is not None:
-                raise RunFailed(f"the autopilot exited during start-up (see {log})")
+                cause = startup_error(log)
+                if self.ap.returncode == 2 and cause:  # a user mistake (a busy port ...): say which, exit 2
+                    raise UsageError(f"the autopilot could not start: {cause}")
+                raise RunFailed(f"the autopilot exited during start-up{': ' + cause if cause else ''} (see {log})")
             if time.monotonic() > deadline:
                 raise _NotReady(f"the autopilot was not ready after {ready_timeout:g} s (see {log})")
             self.tap.pump(timeout=0.05)
@@ -486,6 +527,9 @@ class HilRun:
             self.tap.pump(timeout=0.0)
             self.tap.counters_at_close = self.tap.counters()
             self.tap.close()
+            from hil.ports import release
+
+            release(self.ap_port, self.sim_port)
             if self.can_recorder is not None:
                 self.can_log = self.can_recorder.close()
         wall = time.monotonic() - wall0
@@ -649,7 +693,10 @@ def _run_loop(opts: RunOptions, cfg: Any) -> dict[str, Any]:
             ap = json.loads(ap_path.read_text()) if ap_path.exists() else {}
             plot_run(opts.out / "plot.png", run.scen, run.tap.truth, ap, cfg,
                      ships=run.encounter_judge.ships if run.encounter_judge is not None else None,
-                     encounters=summary.get("encounters"))
+                     encounters=summary.get("encounters"),
+                     outcome="goal reached" if summary.get("reached_goal") else
+                     f"{summary.get('outcome')}" + (f" at {summary['collision_time_s']:.1f} s"
+                                                     if summary.get("collision_time_s") is not None else ""))
             summary["plot"] = str(opts.out / "plot.png")
         except Exception as exc:  # a plot must never lose the run's data
             summary["plot_error"] = f"{type(exc).__name__}: {exc}"

@@ -100,8 +100,8 @@ def plot_online(out: str | Path, occ: np.ndarray, resolution: float, runs: Seque
                                     label="perceptual domain" if k == 0 else None))
             ax.plot(*cyc.subgoal, "x", color="purple", ms=4, zorder=4, label="subgoals" if k == 0 else None)
         _path(ax, res.executed, color="red", lw=1.8, zorder=5, label="executed Dubins path")
-        ax.plot(*start, "o", color="tab:green", ms=7, zorder=6)
-        ax.plot(*goal, "*", color="tab:orange", ms=12, zorder=6)
+        ax.plot(*start, "o", color="tab:green", ms=7, zorder=6, ls="none", label="start")
+        ax.plot(*goal, "*", color="tab:orange", ms=12, zorder=6, ls="none", label="goal")
         m = res.metrics
         ax.set_title(f"{label}: {'reached' if res.reached else 'FAILED'}, cost {m.get('cost', float('nan')):.1f}, "
                      f"{len(res.cycles)} cycles", fontsize=10)
@@ -126,11 +126,11 @@ def plot_runs_grid(out: str | Path, panels: Sequence[dict], cols: int = 3, title
         _path(ax, p["reference_path"], color="black", ls=":", lw=1.0)
         for label, path, reached in p["paths"]:
             _path(ax, path, color=colors.get(label, None), lw=1.4, ls="-" if reached else "--", label=label)
-        ax.plot(*p["start"], "o", color="tab:green", ms=5)
-        ax.plot(*p["goal"], "*", color="tab:orange", ms=9)
+        ax.plot(*p["start"], "o", color="tab:green", ms=5, ls="none", label="start")
+        ax.plot(*p["goal"], "*", color="tab:orange", ms=9, ls="none", label="goal")
         ax.set_title(p.get("title", ""), fontsize=9)
-        ax.set_xlabel("")
-        ax.set_ylabel("")
+        ax.set_xlabel("x east (m)", fontsize=8)
+        ax.set_ylabel("y north (m)", fontsize=8)
         ax.tick_params(labelsize=7)
     axes.flat[0].legend(loc="upper left", fontsize=7)
     if title:

@@ -14,9 +14,12 @@ import numpy as np  # noqa: E402
 
 
 def plot_run(path: Path, scen: Any, truth: dict[int, tuple], autopilot: dict, cfg: Any,
-             ships: dict | None = None, encounters: list | None = None) -> None:
+             ships: dict | None = None, encounters: list | None = None, outcome: str | None = None) -> dict:
     """``ships``: MMSI -> ``hil.encounter_report.ShipTrack`` (their truth); ``encounters``: the
-    summary's per-ship report (CPA time and distance, type, compliance)."""
+    summary's per-ship report (CPA time and distance, type, compliance); ``outcome``: the run's
+    outcome for the title (e.g. "goal reached", "collision at 45.2 s").
+
+    Returns what was drawn: ``{"title", "legend": [labels], "xlabel", "ylabel"}``."""
     fig, ax = plt.subplots(figsize=(10, 10 * scen.height / max(scen.width, 1e-9) * 0.9 + 1))
     ax.imshow(scen.occ, origin="lower", cmap="Greys", extent=(0, scen.width, 0, scen.height),
               interpolation="nearest", alpha=0.85)
@@ -49,20 +52,25 @@ def plot_run(path: Path, scen: Any, truth: dict[int, tuple], autopilot: dict, cf
     if len(est):
         ax.plot(est[:, 2], est[:, 1], "--", color="black", lw=0.8, label="estimated track")
     _plot_ships(ax, ships or {}, encounters or [], truth)
-    ax.plot(*scen.start, "o", color="red", ms=7)
-    ax.plot(*scen.goal, "*", color="gold", ms=16, mec="k")
+    ax.plot(*scen.start, "o", color="red", ms=7, ls="none",
+            label=f"start ({scen.start[0]:.0f}, {scen.start[1]:.0f}) m")
+    ax.plot(*scen.goal, "*", color="gold", ms=16, mec="k", ls="none",
+            label=f"goal ({scen.goal[0]:.0f}, {scen.goal[1]:.0f}) m")
     r = cfg.autopilot.goal_tolerance
-    ax.add_patch(plt.Circle(scen.goal, r, fill=False, ls="--", color="gold"))
+    ax.add_patch(plt.Circle(scen.goal, r, fill=False, ls="--", color="gold", label=f"goal tolerance {r:g} m"))
     ax.set_xlim(0, scen.width)
     ax.set_ylim(0, scen.height)
     ax.set_aspect("equal")
     ax.set_xlabel("x east (m)")
     ax.set_ylabel("y north (m)")
-    ax.set_title(f"HIL run: {scen.name}")
-    ax.legend(loc="lower right", fontsize=8)
+    title = f"HIL run: {scen.name}" + (f": {outcome}" if outcome else "")
+    ax.set_title(title)
+    legend = ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return {"title": title, "legend": [t.get_text() for t in legend.get_texts()],
+            "xlabel": ax.get_xlabel(), "ylabel": ax.get_ylabel()}
 
 
 def _plot_ships(ax: Any, ships: dict, encounters: list, truth: dict[int, tuple]) -> None:

@@ -1,4 +1,5 @@
-"""Scenarios: a map, start and goal, a global reference path and the current, from ``configs/scenarios/NAME.toml``.
+"""Scenarios: a map, start and goal, a global reference path and the current, from ``configs/scenarios/NAME.toml``
+(or any .toml path; files it names, such as the map, are relative to it).
 
 Map frame (planner/API): x east, y north in metres, headings counter-clockwise from +x (rad).
 The map's origin (x = 0, y = 0, its south-west corner) is the NED origin of the simulator, so
@@ -20,7 +21,17 @@ are one-line errors). Its optional tables override keys of other sections:
   waypoints with per-leg speeds, AIS dimensions), sailed by the simulator and reported by AIS.
 * ``[random]``   for ``kind = "random"`` (Figure 11): each Monte Carlo run draws its own map,
   start and goal from the run's seed; the reference path is then the straight line between
-  them, which may cross obstacles.
+  them, which may cross obstacles. With ``waypoints = [lo, hi]`` it also draws that many
+  intermediate waypoints, and the route through them is planned as for a fixed scenario.
+
+The global route. ``reference_path`` holds the route's waypoints as a user gives them (start
+first, goal last; only start and goal is fine). With ``global_route = true`` (the default) it is
+turned into the global reference path by ``planner.global_route`` on the chart inflated by the
+planner's safety radius: legs whose straight line is free stay straight, the others are routed
+round the obstacles (Lazy Theta*), and the result is densified to points at most
+``route_spacing`` apart. A waypoint off the chart, inside an obstacle or its safety margin, or
+not reachable by water is a one-line error naming it. ``global_route = false`` keeps the
+reference path exactly as given (the paper's Figures 9-11: a path that may cross obstacles).
 """
 
 from __future__ import annotations
@@ -56,9 +67,13 @@ class RandomSpec:
     min_distance: float = param("minimum start-goal distance", "m", gt=0)
     clearance: float = param("start and goal are cleared of obstacles within this radius", "m", ge=0)
     reference_spacing: float = param("spacing of the straight reference path's waypoints", "m", gt=0)
+    waypoints: tuple[int, int] = param(
+        "range of the number of intermediate route waypoints [min, max]; 0 = the straight start-goal line "
+        "(Figure 11), else the global route through them", "", ge=0, default=(0, 0))
+    min_leg: float = param("minimum distance between consecutive route waypoints", "m", gt=0, default=35.0)
 
     def __post_init__(self) -> None:
-        for key in ("discs", "rects", "radius"):
+        for key in ("discs", "rects", "radius", "waypoints"):
             lo, hi = getattr(self, key)
             if lo > hi:
                 raise ValueError(f"{key}: min must not exceed max")
@@ -73,13 +88,19 @@ class ScenarioSpec:
     name: str = param("scenario name (the file's stem)")
     description: str = param("one-line description")
     kind: Literal["fixed", "random"] = param("'fixed' map and end points, or 'random' per Monte Carlo run")
-    map: str = param("map file (.npy or .png) relative to configs/ (fixed scenarios)", default="")
+    map: str = param("map file (.npy or .png) relative to the scenario file (fixed scenarios)", default="")
     resolution: float = param("map cell size", "m", gt=0, default=0.5)
     start: tuple[float, float] = param("start position [x east, y north]", "m", default=(0.0, 0.0))
-    start_heading: float = param("start heading, counter-clockwise from east", "rad", default=0.0)
+    start_heading: float = param("start heading, counter-clockwise from east", "rad", ge=-4 * math.pi,
+                                 le=4 * math.pi, default=0.0)
     goal: tuple[float, float] = param("final goal [x east, y north]", "m", default=(0.0, 0.0))
     reference_path: tuple[tuple[float, float], ...] = param(
-        "global reference path [[x, y], ...], start to goal; may cross obstacles (Figure 9)", "m", default=())
+        "route waypoints [[x, y], ...], start to goal (legs of any length; may cross obstacles, Figure 9); "
+        "empty: start and goal", "m", default=())
+    global_route: bool = param(
+        "plan the global route through the waypoints on the inflated chart (false: use reference_path as given)",
+        default=True)
+    route_spacing: float = param("largest gap between the global route's points", "m", gt=0, default=10.0)
     uncharted: tuple[tuple[float, float, float], ...] = param(
         "obstacles missing from the chart: discs [[x, y, radius], ...]; only the range sensor reveals them",
         "m", default=())
@@ -88,13 +109,15 @@ class ScenarioSpec:
     online: dict[str, Any] = field(default_factory=dict, metadata={"help": "overrides of the online process"})
     random: RandomSpec | None = field(default=None, metadata={"help": "random map generator (kind = 'random')"})
     traffic: tuple[ShipSpec, ...] = field(default=(), metadata={"help": "ship traffic ([[traffic]] tables)"})
+    # The file it was read from (set by load_spec, not a TOML key): relative paths start there.
+    path: str = field(default="", init=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.kind == "fixed":
             if not self.map:
                 raise ValueError("map: a fixed scenario needs a map file")
-            if len(self.reference_path) < 2:
-                raise ValueError("reference_path: needs at least two points (start ... goal)")
+            if len(self.reference_path) == 1:
+                raise ValueError("reference_path: needs at least two points (start ... goal), or none")
         elif self.random is None:
             raise ValueError("random: a random scenario needs a [random] table")
         for x, y, r in self.uncharted:
@@ -120,6 +143,7 @@ class Scenario:
     online_overrides: dict[str, Any]
     uncharted: tuple[tuple[float, float, float], ...] = ()   # discs (x, y, radius), m, map frame
     traffic: tuple[ShipSpec, ...] = ()                        # ships sailed by the simulator ([[traffic]])
+    waypoints: np.ndarray | None = None                       # (K, 2) the route as given, m (None: = reference_path)
 
     def truth_occ(self) -> np.ndarray:
         """The simulated world's obstacles: the chart (``occ``) plus the uncharted discs."""
@@ -193,7 +217,27 @@ def load_spec(name: str) -> ScenarioSpec:
     if not path.exists():
         raise UsageError(f"unknown scenario {name!r} (no {path}; available: {', '.join(available())})")
     table = config.read_toml(path)
-    return config.from_table(ScenarioSpec, table, str(path))
+    spec = config.from_table(ScenarioSpec, table, str(path))
+    object.__setattr__(spec, "path", str(path))
+    return spec
+
+
+def folder_name(spec: ScenarioSpec) -> str:
+    """The scenario's ``name`` made safe as a file name (run folders are named after it)."""
+    import re
+
+    return re.sub(r"[^A-Za-z0-9_.-]+", "-", spec.name).strip("-.") or "scenario"
+
+
+def resolve_file(spec: ScenarioSpec, name: str) -> Path:
+    """A file named in a scenario: relative to the scenario file; for scenarios written before
+    that rule (paths relative to ``configs/``), ``configs/`` when the first does not exist."""
+    p = Path(name).expanduser()
+    if p.is_absolute():
+        return p
+    here = (Path(spec.path).parent if spec.path else SCENARIO_DIR) / p
+    legacy = CONFIG_DIR / p
+    return here if here.exists() or not legacy.exists() else legacy
 
 
 def _current_params(base_current: Any, overrides: dict[str, Any], source: str) -> tuple[Any, float]:
@@ -202,9 +246,11 @@ def _current_params(base_current: Any, overrides: dict[str, Any], source: str) -
     field_time = ov.pop("field_time", 0.0)
     if isinstance(field_time, bool) or not isinstance(field_time, (int, float)):
         raise ConfigError(f"{source}: current.field_time: expected a number, got {field_time!r}")
+    if not 0.0 <= field_time <= config.MAX_MAGNITUDE:
+        raise ConfigError(f"{source}: current.field_time: must be a finite number of seconds >= 0 (got {field_time})")
     for k, v in ov.items():
         if k not in table:
-            raise ConfigError(f"{source}: current.{k}: unknown key (expected one of: {', '.join(table)}, field_time)")
+            raise ConfigError(f"{source}: current.{k}: unknown key{config.suggest(k, list(table) + ['field_time'])}")
         table[k] = v
     return config.from_table(type(base_current), table, source, prefix="current"), float(field_time)
 
@@ -233,10 +279,47 @@ def _check_point(what: str, p: tuple[float, float], occ: np.ndarray, res: float,
         raise ConfigError(f"{source}: {what}: ({p[0]:g}, {p[1]:g}) m is inside an obstacle")
 
 
-def load(name: str, base_current: Any = None) -> Scenario:
-    """Load a fixed scenario (for a random one, use :func:`instance` with a run's generator)."""
+def load(name: str, base_current: Any = None, safety_radius: float | None = None) -> Scenario:
+    """Load a fixed scenario (for a random one, use :func:`instance` with a run's generator).
+    ``safety_radius`` (m): the configuration's ``planner.safety_radius`` (default: the default
+    configuration's); the scenario's own ``[planner]`` value wins, as for the planner."""
     spec = load_spec(name)
-    return instance(spec, None, base_current)
+    return instance(spec, None, base_current, safety_radius)
+
+
+def _safety_radius(spec: ScenarioSpec, base: float | None, source: str) -> float:
+    value = spec.planner.get("safety_radius", base)
+    if value is None:
+        from hil import settings
+        value = settings.load().planner.safety_radius
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0:
+        raise ConfigError(f"{source}: planner.safety_radius: expected a number >= 0, got {value!r}")
+    return float(value)
+
+
+def route_waypoints(start, goal, given) -> np.ndarray:
+    """start, the given waypoints (their first/last dropped where they repeat start/goal), goal."""
+    pts = [tuple(map(float, p)) for p in given]
+    if pts and math.dist(pts[0], start) < 1e-9:
+        pts = pts[1:]
+    if pts and math.dist(pts[-1], goal) < 1e-9:
+        pts = pts[:-1]
+    return np.array([tuple(map(float, start)), *pts, tuple(map(float, goal))], dtype=float)
+
+
+def global_route(occ: np.ndarray, resolution: float, waypoints: np.ndarray, safety_radius: float,
+                 spacing: float, source: str, names: list[str]) -> np.ndarray:
+    """The global reference path through ``waypoints`` (map frame); ConfigError naming the
+    waypoint (``names[i]``) that is off the chart, in an obstacle or unreachable."""
+    from planner.global_route import plan_chart_route
+    from planner.gridmap import OccupancyGrid
+
+    route = plan_chart_route(OccupancyGrid(occ, resolution), waypoints, safety_radius, spacing)
+    if not route.ok:
+        i = route.failed_index or 0
+        margin = f" (safety radius {safety_radius:g} m)" if route.status.value == "in_obstacle" else ""
+        raise ConfigError(f"{source}: {names[i]}: {route.reason}{margin}")
+    return route.path
 
 
 def _default_current() -> Any:
@@ -244,22 +327,33 @@ def _default_current() -> Any:
     return settings.load().current
 
 
-def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: Any = None) -> Scenario:
-    """A concrete :class:`Scenario`; random scenarios draw map and end points from ``rng``."""
-    source = str(scenario_path(spec.name))
+def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: Any = None,
+             safety_radius: float | None = None, source: str | None = None) -> Scenario:
+    """A concrete :class:`Scenario`; random scenarios draw map and end points from ``rng``.
+    ``source`` names the file in error messages (default: the file the spec was read from)."""
+    source = source or spec.path or str(scenario_path(spec.name))
     current, field_time = _current_params(base_current if base_current is not None else _default_current(),
                                           spec.current, source)
     if spec.kind == "fixed":
-        map_path = CONFIG_DIR / spec.map
+        map_path = resolve_file(spec, spec.map)
         if not map_path.exists():
             raise ConfigError(f"{source}: map: no such file {map_path}")
         occ = load_occupancy(map_path, spec.resolution)
         for what, p in (("start", spec.start), ("goal", spec.goal)):
             _check_point(what, p, occ, spec.resolution, source)
-        ref = np.asarray(spec.reference_path, dtype=float)
+        if spec.global_route:
+            wps = route_waypoints(spec.start, spec.goal, spec.reference_path)
+            given = len(spec.reference_path) > 0 and math.dist(spec.reference_path[0], spec.start) < 1e-9
+            names = ["start"] + [f"reference_path[{i if given else i - 1}]" for i in range(1, len(wps) - 1)] + ["goal"]
+            ref = global_route(occ, spec.resolution, wps, _safety_radius(spec, safety_radius, source),
+                               spec.route_spacing, source, names)
+        else:
+            if len(spec.reference_path) < 2:
+                raise ConfigError(f"{source}: reference_path: global_route = false needs the path itself (>= 2 points)")
+            wps = ref = np.asarray(spec.reference_path, dtype=float)
         scen = Scenario(spec.name, spec.description, occ, spec.resolution, spec.start, spec.start_heading,
                         spec.goal, ref, current, field_time, dict(spec.planner), dict(spec.online),
-                        tuple(tuple(map(float, d)) for d in spec.uncharted), traffic=spec.traffic)
+                        tuple(tuple(map(float, d)) for d in spec.uncharted), traffic=spec.traffic, waypoints=wps)
         truth = scen.truth_occ()
         for what, p in (("start", spec.start), ("goal", spec.goal)):
             if truth[int(p[1] / spec.resolution), int(p[0] / spec.resolution)]:
@@ -267,10 +361,11 @@ def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: 
         return scen
     if rng is None:
         raise UsageError(f"scenario {spec.name!r} is random: it needs a run seed (use hil montecarlo)")
-    return _random_instance(spec, rng, current, field_time)
+    return _random_instance(spec, rng, current, field_time, _safety_radius(spec, safety_radius, source), source)
 
 
-def _random_instance(spec: ScenarioSpec, rng: np.random.Generator, current: Any, field_time: float) -> Scenario:
+def _random_instance(spec: ScenarioSpec, rng: np.random.Generator, current: Any, field_time: float,
+                     safety_radius: float = 2.0, source: str = "random scenario") -> Scenario:
     from hil.maps import Canvas, random_map
     r = spec.random
     assert r is not None
@@ -284,12 +379,52 @@ def _random_instance(spec: ScenarioSpec, rng: np.random.Generator, current: Any,
     canvas.occ = occ
     canvas.clear_disc(start[0], start[1], r.clearance)
     canvas.clear_disc(goal[0], goal[1], r.clearance)
-    n = max(int(math.ceil(math.hypot(*(goal - start)) / r.reference_spacing)), 1)
-    ref = start + (goal - start) * np.linspace(0.0, 1.0, n + 1)[:, None]
-    heading = math.atan2(goal[1] - start[1], goal[0] - start[0])
-    return Scenario(spec.name, spec.description, canvas.occ, r.resolution, (float(start[0]), float(start[1])),
-                    heading, (float(goal[0]), float(goal[1])), ref, current, field_time,
-                    dict(spec.planner), dict(spec.online), traffic=spec.traffic)
+    if r.waypoints[1] == 0:
+        n = max(int(math.ceil(math.hypot(*(goal - start)) / r.reference_spacing)), 1)
+        ref = start + (goal - start) * np.linspace(0.0, 1.0, n + 1)[:, None]
+        heading = math.atan2(goal[1] - start[1], goal[0] - start[0])
+        return Scenario(spec.name, spec.description, canvas.occ, r.resolution, (float(start[0]), float(start[1])),
+                        heading, (float(goal[0]), float(goal[1])), ref, current, field_time,
+                        dict(spec.planner), dict(spec.online), traffic=spec.traffic)
+    return _random_route(spec, rng, canvas, start, goal, current, field_time, safety_radius, source)
+
+
+def _random_route(spec: ScenarioSpec, rng: np.random.Generator, canvas: Any, start: np.ndarray, goal: np.ndarray,
+                  current: Any, field_time: float, safety_radius: float, source: str) -> Scenario:
+    """A random scenario with intermediate waypoints: each drawn in the usable area at least
+    ``min_leg`` from the previous one (the goal too), cleared like start and goal, and the route
+    through them planned; a draw whose route fails (a waypoint walled in) is drawn again."""
+    from planner.global_route import plan_chart_route
+    from planner.gridmap import OccupancyGrid
+
+    r = spec.random
+    assert r is not None
+    lo, hi = [r.margin, r.margin], [r.width - r.margin, r.height - r.margin]
+    k = int(rng.integers(r.waypoints[0], r.waypoints[1] + 1))
+    base = canvas.occ.copy()
+    for _ in range(200):
+        pts = [start]
+        for _j in range(k):
+            for _t in range(1000):
+                p = rng.uniform(lo, hi)
+                if math.dist(p, pts[-1]) >= r.min_leg:
+                    break
+            pts.append(p)
+        if math.dist(pts[-1], goal) < r.min_leg:
+            continue
+        pts.append(goal)
+        canvas.occ = base.copy()
+        for p in pts[1:-1]:
+            canvas.clear_disc(p[0], p[1], r.clearance)
+        wps = np.array(pts)
+        route = plan_chart_route(OccupancyGrid(canvas.occ, r.resolution), wps, safety_radius, spec.route_spacing)
+        if route.ok:
+            first = route.path[1] - route.path[0]
+            return Scenario(spec.name, spec.description, canvas.occ, r.resolution,
+                            (float(start[0]), float(start[1])), math.atan2(first[1], first[0]),
+                            (float(goal[0]), float(goal[1])), route.path, current, field_time,
+                            dict(spec.planner), dict(spec.online), traffic=spec.traffic, waypoints=wps)
+    raise ConfigError(f"{source}: random: no route with {k} waypoint(s) found in 200 draws")
 
 
 def planner_params(base: Any, overrides: dict[str, Any], source: str = "scenario") -> Any:

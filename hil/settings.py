@@ -1,13 +1,15 @@
 """The root of the configuration: one frozen dataclass per TOML section of configs/default.toml.
 
-A configuration file is complete: every section and key must be present (copy
-``configs/default.toml`` and edit it, or use ``--set section.key=value``).
+``configs/default.toml`` holds every key; a ``--config`` file holds only the keys it changes and
+is laid over it (several in order), then the ``--set section.key=value`` overrides
+(:func:`hil.config.load`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Sequence
 
 from autopilot_bridge.ais_tracking import TrackerParams
 from autopilot_bridge.config import AutopilotParams
@@ -54,7 +56,23 @@ class HilConfig:
     # The ground-station link (issue 6); defaults as configs/default.toml's [gcs].
     gcs: GcsParams = field(default_factory=GcsParams)
 
+    def __post_init__(self) -> None:
+        # Connection strings of the HIL links (common.connection): refused here, naming the key,
+        # rather than silently sending nowhere.
+        from common import connection as c
 
-def load(path: str | Path | None = None, overrides: list[str] | None = None) -> HilConfig:
-    """Load and validate a whole configuration (default: configs/default.toml)."""
+        for key, values, role in (("link.state_to", self.link.state_to, c.SEND_UDP),
+                                  ("link.commands_on", (self.link.commands_on,), c.RECEIVE_UDP),
+                                  ("autopilot.listen", (self.autopilot.listen,), c.RECEIVE_UDP),
+                                  ("autopilot.actuators_to", self.autopilot.actuators_to, c.SEND_UDP),
+                                  ("autopilot.telemetry_to", self.autopilot.telemetry_to, c.SEND_UDP)):
+            for v in values:
+                try:
+                    c.parse(v, role)
+                except ValueError as exc:
+                    raise ValueError(f"{key}: {exc}") from None
+
+
+def load(path: str | Path | Sequence[str | Path] | None = None, overrides: list[str] | None = None) -> HilConfig:
+    """The defaults, the ``--config`` file(s) laid over them, then ``overrides``; validated."""
     return config.load(HilConfig, path, overrides)

@@ -139,6 +139,7 @@ class OnlineContext:
     _free_index: np.ndarray | None = None
     _velocity_grids: dict = dc_field(default_factory=dict)
     _distance: np.ndarray | None = None
+    progress: int = 0              # index of the reference point the vessel was last nearest (see select_local_subgoal)
 
     def __post_init__(self) -> None:
         self.reference_path = np.asarray(self.reference_path, dtype=float).reshape(-1, 2)
@@ -294,11 +295,24 @@ def _free_subgoal(ctx: OnlineContext, grid: OccupancyGrid, position: tuple[float
     return ctx.nearest_free(grid, point)
 
 
-def _arc_from_nearest(ref: np.ndarray, pos: tuple[float, float]) -> tuple[int, np.ndarray]:
+def _arc_from_nearest(ref: np.ndarray, pos: tuple[float, float], progress: int = 0,
+                      window: float = math.inf, radius: float = math.inf) -> tuple[int, np.ndarray]:
     """Index j of the reference waypoint nearest ``pos`` and the arc length (m) from q_j to every
-    waypoint (negative before j)."""
-    j = int(np.argmin(np.hypot(ref[:, 0] - pos[0], ref[:, 1] - pos[1])))
+    waypoint (negative before j).
+
+    j is searched from ``progress`` (the vessel's last q_j) to ``window`` metres of arc beyond it,
+    so that a route that passes the same water twice (out to a waypoint and back, a route that
+    crosses itself) is followed in order rather than jumping to the other pass; if no waypoint of
+    that stretch lies within ``radius`` (the vessel is far off it, or a restarted worker lost its
+    progress), the whole path is searched."""
     s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(ref, axis=0).T))]) if len(ref) > 1 else np.zeros(1)
+    d = np.hypot(ref[:, 0] - pos[0], ref[:, 1] - pos[1])
+    lo = min(max(int(progress), 0), len(ref) - 1)
+    hi = int(np.searchsorted(s, s[lo] + window, side="right"))
+    hi = min(max(hi, lo + 1), len(ref))
+    j = lo + int(np.argmin(d[lo:hi]))
+    if d[j] > radius:
+        j = int(np.argmin(d))
     return j, s - s[j]
 
 
@@ -316,12 +330,14 @@ def select_local_subgoal(ctx: OnlineContext, pos: tuple[float, float]) -> tuple[
     ref = ctx.reference_path
     radius = params.perceptual_radius
     limit = radius if ctx.online.subgoal_arc_limit else math.inf
-    j, arc = _arc_from_nearest(ref, pos)
+    j, arc = _arc_from_nearest(ref, pos, ctx.progress, 2.0 * radius, radius)
+    ctx.progress = j
     goal_arc = arc[-1] if np.allclose(ref[-1], ctx.goal) else 0.0
     if math.hypot(ctx.goal[0] - pos[0], ctx.goal[1] - pos[1]) <= radius and goal_arc <= limit:
         return ctx.goal, len(ref) - 1, 1
-    sub = select_subgoal(ref, pos, radius)
-    idx, rule = sub.index, sub.rule
+    # Section 3.1's rules on the reference path from q_j on (q_j found in order, above).
+    sub = select_subgoal(ref[j:], pos, radius)
+    idx, rule = sub.index + j, sub.rule
     if arc[idx] > limit:
         within = np.nonzero((arc <= limit) & (np.arange(len(ref)) >= j))[0]
         idx = int(within[-1]) if len(within) else j

@@ -10,6 +10,7 @@ no CAN and runs here natively.
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -37,24 +38,47 @@ def vcan_batch(tmp_path_factory):
         print(f"\nCAN-vcan tests skipped: {exc}")
         pytest.skip(str(exc))
     print(f"\nCAN-vcan tests: {why}")
+    # The host's foreign CPU load while the batch runs: inside User-Mode Linux a busy host is
+    # invisible (the guest's clock charges the time to whatever it was running), so the soak's
+    # overruns are judged against what this host-side watch saw (hil/cpu_load.py).
+    import threading
+
+    from hil.cpu_load import LoadWatch
+
+    host = LoadWatch(every_s=1.0)
+    done = threading.Event()
+
+    def watch_host() -> None:
+        while not done.wait(1.0):
+            host.sample([os.getpid()])
+
+    host.sample([os.getpid()], force=True)
+    watcher = threading.Thread(target=watch_host, daemon=True)
+    watcher.start()
     jobs = [
         uml.Job("run_can", [PY, *RUN, "--actuators", "can", "--out", str(tmp / "run-can")], cwd=str(REPO), timeout=600),
         uml.Job("bad_frames", [PY, str(REPO / "tests" / "vcan_checks.py")], cwd=str(REPO), timeout=60),
         # The planner may overrun its 0.3 s real-time deadline now and then inside User-Mode Linux
-        # (every syscall and fork is slower there): a budget of 3 a minute, not a free pass.
+        # (every syscall and fork is slower there): a budget of 3 a minute on a quiet host, more
+        # only for the load the host saw (test_soak_60s_is_clean), not a free pass.
         uml.Job("soak", [PY, "-m", "hil", "soak", "--json", "--duration", "60", "--max-overruns", "3",
                          "--out", str(tmp / "soak")],
                 cwd=str(REPO), timeout=400),
         uml.Job("bench", [PY, "-m", "hil", "bench", "can", "--json", "--duration", "5"], cwd=str(REPO), timeout=120),
     ]
-    if kind == "native":
-        results = uml.run_native(jobs)
-        boot = None
-    else:
-        r = uml.run_in_uml(jobs, workdir=tmp / "uml")
-        results, boot = r.results, r.boot_s
-        print(f"User-Mode Linux: vcan0 up {boot:.2f} s after boot, whole batch {r.wall_s:.0f} s")
-    return {"kind": kind, "tmp": tmp, "boot_s": boot, **{j.name: j for j in results}}
+    try:
+        if kind == "native":
+            results = uml.run_native(jobs)
+            boot = None
+        else:
+            r = uml.run_in_uml(jobs, workdir=tmp / "uml")
+            results, boot = r.results, r.boot_s
+            print(f"User-Mode Linux: vcan0 up {boot:.2f} s after boot, whole batch {r.wall_s:.0f} s")
+    finally:
+        done.set()
+        watcher.join(timeout=10)
+        host.sample([os.getpid()], force=True)
+    return {"kind": kind, "tmp": tmp, "boot_s": boot, "host_load": host.report(), **{j.name: j for j in results}}
 
 
 def _json(job):
@@ -123,11 +147,22 @@ def test_bad_frames_on_vcan_are_counted_never_applied(vcan_batch):
 
 
 def test_soak_60s_is_clean(vcan_batch):
+    from hil.cpu_load import overruns_allowed
+
     job = vcan_batch["soak"]
     s = _json(job)
     assert s["mode"] == "hil_loop" and s["actuators"] == "can"
-    assert s["clean"], s["problems"]
-    assert job.returncode == 0
+    overrun = [p for p in s["problems"] if p.startswith("planner deadline overruns")]
+    assert not [p for p in s["problems"] if p not in overrun], s["problems"]
+    # Loss, rejects, memory and descriptors are judged as they are; overruns against the load: the
+    # soak's own measurement (native) or the host's over the batch, scaled to the soak's minute (UML).
+    allowed = s["overruns_allowed"]
+    host = vcan_batch["host_load"]
+    if vcan_batch["kind"] != "native" and host is not None and host["wall_s"] > 0:
+        scaled = dict(host, foreign_cpu_s=host["foreign_cpu_s"] * 60.0 / host["wall_s"], wall_s=60.0)
+        allowed = max(allowed, overruns_allowed(3, scaled, 1.0))
+    assert (s["deadline_overruns"] or 0) <= allowed, (s["deadline_overruns"], allowed, s.get("load"), host)
+    assert job.returncode == (1 if overrun else 0)
     assert "soak:" in job.stderr and "run: t=" in job.stderr  # progress while running
     lat = s["command_to_applied_ms"]
     assert lat["samples"] > 50 * 60 and lat["p50"] is not None

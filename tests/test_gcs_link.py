@@ -138,7 +138,8 @@ def test_tcpin_parses_frames_split_across_reads_and_answers_the_connection(closi
 
 def test_endpoint_strings_and_signing_keys(tmp_path):
     assert parse_endpoint("udpout:127.0.0.1:14550") == ("udpout", "127.0.0.1", 14550)
-    for bad in ("udp:1.2.3.4:5", "udpout:127.0.0.1", "tcpin:host:99999", "udpout:127.0.0.1:0"):
+    assert parse_endpoint("udp:1.2.3.4:5") == ("udpin", "1.2.3.4", 5)  # mavutil's udp: is udpin: (issue 16)
+    for bad in ("udpx:1.2.3.4:5", "udpout:127.0.0.1", "tcpin:host:99999", "udpout:127.0.0.1:0"):
         with pytest.raises(ValueError):
             parse_endpoint(bad)
     (tmp_path / "raw").write_bytes(bytes(range(32)))

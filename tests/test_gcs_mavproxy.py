@@ -29,7 +29,7 @@ MAVPROXY = shutil.which("mavproxy.py") or str(Path(sys.executable).with_name("ma
 pytestmark = pytest.mark.skipif(not Path(MAVPROXY).exists(), reason="MAVProxy is not installed (pip install MAVProxy)")
 
 GEO = LocalFrame(38.92, 121.65, 0.0)
-WAYPOINTS_MAP = [(28.3, 47.5), (34.7, 55.0), (41.0, 62.5), (47.3, 70.0), (53.7, 77.5), (60.0, 85.0)]
+WAYPOINTS_MAP = [(28.3, 47.5), (31.0, 51.0), (30.0, 58.0), (47.3, 70.0), (53.7, 77.5), (60.0, 85.0)]
 
 
 class Console:

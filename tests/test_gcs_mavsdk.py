@@ -46,7 +46,7 @@ except (ImportError, OSError) as exc:  # OSError: the bundled libcmavsdk.so does
     pytest.skip(f"mavsdk is not importable (pip install mavsdk): {exc}", allow_module_level=True)
 
 GEO = LocalFrame(38.92, 121.65, 0.0)  # [geodesy] of configs/default.toml
-WAYPOINTS_MAP = [(28.3, 47.5), (34.7, 55.0), (41.0, 62.5), (47.3, 70.0), (53.7, 77.5), (60.0, 85.0)]
+WAYPOINTS_MAP = [(28.3, 47.5), (31.0, 51.0), (30.0, 58.0), (47.3, 70.0), (53.7, 77.5), (60.0, 85.0)]
 ROVER_AUTO, ROVER_HOLD = 10, 4
 
 

@@ -18,7 +18,7 @@ from gcs_client import M, Gcs, start_run, stop_run
 
 GEO = LocalFrame(38.92, 121.65, 0.0)  # [geodesy] of configs/default.toml
 # Six waypoints in the harbour's open water north-east of the start (map x east, y north; m).
-WAYPOINTS_MAP = [(28.3, 47.5), (34.7, 55.0), (41.0, 62.5), (47.3, 70.0), (53.7, 77.5), (60.0, 85.0)]
+WAYPOINTS_MAP = [(28.3, 47.5), (31.0, 51.0), (30.0, 58.0), (47.3, 70.0), (53.7, 77.5), (60.0, 85.0)]
 
 
 def _item(x: float, y: float, radius: float = 3.0) -> tuple:

@@ -215,13 +215,24 @@ class GcsLink:
         items = tuple(self._item(w) for w in autopilot.vehicle.mission)
         self.mission = MissionServer(items, system_id=self.sysid, component_id=self.compid,
                                      max_items=self.params.max_mission_items, item_timeout=self.params.mission_timeout,
-                                     retries=self.params.mission_retries, position_check=self._on_chart)
+                                     retries=self.params.mission_retries, position_check=self._on_chart,
+                                     mission_check=self._check_mission)
         self.params_table = autopilot_params(autopilot, self)
 
     def _item(self, w: Waypoint) -> MissionItem:
         lat, lon = self.geo.sea_level_to_geodetic(w.north, w.east)
         return MissionItem(M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_WAYPOINT, 1, 0.0, float(w.radius), 0.0,
                            0.0, int(round(lat * 1e7)), int(round(lon * 1e7)), 0.0)
+
+    def _check_mission(self, items: tuple[MissionItem, ...]) -> tuple[int, int, str] | None:
+        """A complete upload's route through the chart (autopilot_bridge/route_planning.py)."""
+        from autopilot_bridge.route_planning import check_mission_items
+
+        grid = getattr(self.ap, "grid", None)
+        if grid is None:
+            return None
+        return check_mission_items(items, self.geo.geodetic_to_sea_level, grid, self.ap.world.params.safety_radius,
+                                   self._position())
 
     def _on_chart(self, lat: float, lon: float) -> tuple[int, str] | None:
         if self.chart_size is None:

@@ -96,6 +96,8 @@ def _same(a: float, b: float) -> bool:
 
 # Validation: (code, text) for a bad item, None for a good one. ``position_check`` adds the chart test.
 PositionCheck = Callable[[float, float], "tuple[int, str] | None"]
+# The whole upload, once complete (route through the chart): (seq, code, text) of the first bad item, or None.
+MissionCheck = Callable[[tuple["MissionItem", ...]], "tuple[int, int, str] | None"]
 
 
 def validate_item(item: MissionItem, position_check: PositionCheck | None = None) -> tuple[int, str] | None:
@@ -120,8 +122,9 @@ class MissionServer:
 
     def __init__(self, items: tuple[MissionItem, ...] = (), *, system_id: int = 1, component_id: int = 1,
                  max_items: int = 200, item_timeout: float = 0.25, retries: int = 5,
-                 position_check: PositionCheck | None = None) -> None:
+                 position_check: PositionCheck | None = None, mission_check: MissionCheck | None = None) -> None:
         self.items: tuple[MissionItem, ...] = tuple(items)
+        self.mission_check = mission_check
         self.sysid, self.compid = system_id, component_id
         self.max_items, self.item_timeout, self.retries = max_items, item_timeout, retries
         self.position_check = position_check
@@ -226,6 +229,13 @@ class MissionServer:
         if len(up.items) < up.count:
             return [self._request(up, now)]
         self.upload = None
+        whole = self.mission_check(tuple(up.items)) if self.mission_check is not None else None
+        if whole is not None:   # e.g. an item inside an obstacle or unreachable: the old mission stays
+            seq, code, why = whole
+            self._count("rejected_item")
+            self.events.append(MissionEvent("rejected", seq=int(seq)))
+            self.last_reject = (int(seq), why)
+            return [self._ack(sender, code)]
         return self._replace(tuple(up.items), sender, now)
 
     def _on_mission_item(self, msg: Any, sender: tuple[int, int], now: float) -> list[Out]:

@@ -1,11 +1,16 @@
-"""Ground-station transports, configured like MAVProxy/MAVSDK connection strings.
+"""Ground-station transports, configured by the connection strings of :mod:`common.connection`
+(pymavlink mavutil's grammar, as MAVProxy and MAVSDK write them).
 
 * ``udpout:HOST:PORT`` - a socket on a free local port sends everything to HOST:PORT (the way SITL
   sends to 14550, so a GCS listening there sees the boat with no configuration); whoever sends
   a valid MAVLink frame to that socket is answered too.
-* ``udpin:HOST:PORT`` - listen on HOST:PORT; every peer heard is answered.
+* ``udpin:HOST:PORT`` (or ``udp:HOST:PORT``) - listen on HOST:PORT; every peer heard is answered.
 * ``tcpin:HOST:PORT`` - accept TCP connections on HOST:PORT; each connection is one peer with its
   own stream parser (frames may span reads).
+* ``tcp:HOST:PORT`` - connect to a ground station's TCP server; a lost connection is retried once
+  a second (the boat never waits for it).
+* ``serial:DEVICE:BAUD`` - a telemetry radio on a serial port, through pyserial.
+* ``HOST:PORT`` - as ``udpout:``.
 
 Peers are learned only from valid MAVLink frames (a fuzzer's garbage does not make it a peer) and
 kept up to ``max_peers`` per endpoint, the least recently heard dropped first. Every transport
@@ -19,20 +24,21 @@ import socket
 from collections import OrderedDict
 from typing import Any
 
-from common.udp import UdpEndpoint, parse_hostport
+from common import connection
+from common.udp import UdpEndpoint
 
-KINDS = ("udpout", "udpin", "tcpin")
+KINDS = ("udpout", "udpin", "tcp", "tcpin", "serial")
+RECONNECT_S = 1.0  # tcp: seconds between connection attempts while the ground station is away
 
 
 def parse_endpoint(text: str) -> tuple[str, str, int]:
-    """("udpout" | "udpin" | "tcpin", host, port) from "KIND:HOST:PORT"; ValueError with one line otherwise."""
-    kind, sep, rest = str(text).partition(":")
-    if not sep or kind not in KINDS:
-        raise ValueError(f"{text!r}: expected udpout:HOST:PORT, udpin:HOST:PORT or tcpin:HOST:PORT")
-    host, port = parse_hostport(rest)
-    if kind == "udpout" and port == 0:
-        raise ValueError(f"{text!r}: udpout needs the port a ground station listens on")
-    return kind, host, port
+    """(kind, host, port) from a connection string (``common.connection``, role GCS); ``udp:`` gives
+    "udpin"; for ``serial:DEVICE:BAUD`` the host is the device and the port the baud rate.
+    ValueError with one line naming the accepted forms otherwise."""
+    c = connection.parse(text, connection.GCS)
+    if c.kind == "serial":
+        return c.kind, c.device, c.baud
+    return c.kind, c.host, c.port
 
 
 class UdpTransport:
@@ -167,11 +173,186 @@ class TcpServerTransport:
         self.lsock.close()
 
 
-def open_endpoint(spec: str, max_peers: int = 8) -> UdpTransport | TcpServerTransport:
-    """A transport from "KIND:HOST:PORT" (ValueError with one line on bad input or a busy port)."""
+class TcpClientTransport:
+    """tcp: one connection to a ground station's TCP server, retried every RECONNECT_S when lost.
+
+    The first connection must succeed (a wrong port is a start-up error, not a silent boat); later
+    attempts are non-blocking, so a ground station that goes away never stalls the control loop.
+    """
+
+    stream = True
+
+    def __init__(self, host: str, port: int, clock=None) -> None:
+        import time
+
+        self.host, self.port = host, port
+        self.clock = clock or time.monotonic
+        self.sent = 0
+        self.connects = 0
+        self.sock: socket.socket | None = None
+        self._connecting = False
+        self._next_try = 0.0
+        try:
+            sock = socket.create_connection((host, port), timeout=2.0)
+        except OSError as exc:
+            raise ValueError(f"cannot connect to TCP {host}:{port}: {exc.strerror or exc} "
+                             f"(is the ground station's TCP server running?)") from None
+        self._connected(sock)
+
+    def _connected(self, sock: socket.socket) -> None:
+        sock.setblocking(False)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self.sock, self._connecting = sock, False
+        self.connects += 1
+        self._local = sock.getsockname()
+
+    @property
+    def address(self) -> tuple[str, int]:
+        return self._local
+
+    @property
+    def connected(self) -> bool:
+        return self.sock is not None and not self._connecting
+
+    @property
+    def peer(self) -> Any:
+        return ("tcp", (self.host, self.port), self.connects)
+
+    def fileno(self) -> int:
+        return self.sock.fileno() if self.sock is not None else -1
+
+    def _retry(self) -> None:
+        now = self.clock()
+        if self._connecting and self.sock is not None:
+            err = self.sock.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR)
+            import select
+
+            _, w, _ = select.select([], [self.sock], [], 0)
+            if w and err == 0:
+                self._connected(self.sock)
+            elif w or now >= self._next_try:
+                self.sock.close()
+                self.sock, self._connecting = None, False
+            return
+        if now < self._next_try:
+            return
+        self._next_try = now + RECONNECT_S
+        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        sock.setblocking(False)
+        rc = sock.connect_ex((self.host, self.port))
+        if rc == 0:
+            self._connected(sock)
+        else:
+            self.sock, self._connecting = sock, True
+
+    def _drop(self) -> None:
+        if self.sock is not None:
+            self.sock.close()
+        self.sock, self._connecting = None, False
+        self._next_try = self.clock() + RECONNECT_S
+
+    def receive(self) -> list[tuple[Any, bytes]]:
+        if self.sock is None or self._connecting:
+            self._retry()
+            return []
+        out = []
+        peer = self.peer
+        for _ in range(16):
+            try:
+                data = self.sock.recv(65536)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:
+                data = b""
+            if not data:
+                self._drop()
+                out.append((peer, b""))
+                break
+            out.append((peer, data))
+        return out
+
+    def heard(self, peer: Any) -> None:
+        pass
+
+    def send(self, data: bytes) -> None:
+        if self.sock is None or self._connecting:
+            return
+        try:
+            self.sock.sendall(data)
+            self.sent += 1
+        except (BlockingIOError, InterruptedError):
+            pass
+        except OSError:
+            self._drop()
+
+    def close(self) -> None:
+        if self.sock is not None:
+            self.sock.close()
+            self.sock = None
+
+
+class SerialTransport:
+    """serial: a telemetry radio through pyserial (non-blocking reads and writes)."""
+
+    stream = True
+
+    def __init__(self, device: str, baud: int) -> None:
+        try:
+            import serial
+        except ImportError:
+            raise ValueError(f"serial:{device}:{baud}: needs pyserial (pip install pyserial)") from None
+        try:
+            self.port = serial.Serial(device, baud, timeout=0, write_timeout=0)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise ValueError(f"cannot open serial port {device}: {exc}") from None
+        self._serial_error = serial.SerialException
+        self.device, self.baud = device, baud
+        self.sent = 0
+        self.write_drops = 0
+
+    @property
+    def address(self) -> tuple[str, int]:
+        return self.device, self.baud
+
+    def fileno(self) -> int:
+        return self.port.fileno()
+
+    def receive(self) -> list[tuple[Any, bytes]]:
+        out = []
+        for _ in range(16):
+            try:
+                data = self.port.read(65536)
+            except (self._serial_error, OSError):
+                break
+            if not data:
+                break
+            out.append((("serial", self.device), data))
+        return out
+
+    def heard(self, peer: Any) -> None:
+        pass
+
+    def send(self, data: bytes) -> None:
+        try:
+            self.port.write(data)
+            self.sent += 1
+        except (self._serial_error, OSError):  # a full radio buffer: telemetry is dropped, the boat never blocks
+            self.write_drops += 1
+
+    def close(self) -> None:
+        self.port.close()
+
+
+def open_endpoint(spec: str, max_peers: int = 8):
+    """A transport from a connection string (ValueError with one line on bad input, a busy port,
+    a ground station that cannot be reached, a serial port that cannot be opened)."""
     kind, host, port = parse_endpoint(spec)
     if kind == "tcpin":
         return TcpServerTransport(host, port, max_peers)
+    if kind == "tcp":
+        return TcpClientTransport(host, port)
+    if kind == "serial":
+        return SerialTransport(host, port)
     try:
         return UdpTransport(kind, host, port, max_peers)
     except socket.gaierror as exc:

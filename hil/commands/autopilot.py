@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from hil import scenario as scenarios
-from hil.commands.can_options import add_can_arguments, can_overrides
-from hil.commands.sim import _hostport
+from hil.commands.can_options import add_can_arguments, can_overrides, check_can
+from hil.commands.sim import receiving, sending
 from hil.console import emit, load_settings, progress
 from hil.errors import UsageError
 
@@ -33,10 +33,13 @@ def _gcs_endpoint(text: str) -> str:
 
 def add_gcs_arguments(p: argparse.ArgumentParser) -> None:
     """--gcs and --wait-for-arm (shared by `hil autopilot` and `hil run`)."""
-    p.add_argument("--gcs", metavar="KIND:HOST:PORT", type=_gcs_endpoint, action="append", default=None,
-                   help="ground-station endpoint, repeatable: udpout:HOST:PORT sends to a GCS listening there "
-                        "(default: gcs.endpoints = udpout:127.0.0.1:14550, as SITL), udpin:HOST:PORT and "
-                        "tcpin:HOST:PORT listen; every GCS that talks is answered. 'none' turns the link off")
+    p.add_argument("--gcs", metavar="CONNECTION", type=_gcs_endpoint, action="append", default=None,
+                   help="ground-station endpoint as pymavlink's mavutil writes it, repeatable: udpout:HOST:PORT "
+                        "(or plain HOST:PORT) sends to a GCS listening there (default: gcs.endpoints = "
+                        "udpout:127.0.0.1:14550, as SITL); udpin:HOST:PORT (= udp:HOST:PORT) listens; "
+                        "tcpin:HOST:PORT accepts TCP connections; tcp:HOST:PORT connects to a GCS's TCP server; "
+                        "serial:DEVICE:BAUD is a telemetry radio (pyserial). Every GCS that talks is answered. "
+                        "'none' turns the link off")
     p.add_argument("--wait-for-arm", action="store_true",
                    help="start disarmed in HOLD: a ground station uploads a mission (or keeps the scenario's), "
                         "arms and sets AUTO (custom mode 10) or sends MISSION_START")
@@ -68,15 +71,17 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--scenario", default="harbour",
                    help="scenario whose map, reference path and current the vessel knows a priori "
                         "(configs/scenarios/NAME.toml; default: harbour)")
-    p.add_argument("--listen", metavar="HOST:PORT", type=_hostport, default=None,
-                   help="where sensor frames arrive (default: autopilot.listen = 127.0.0.1:14560)")
-    p.add_argument("--actuators-to", metavar="HOST:PORT", type=_hostport, action="append", default=None,
-                   help="where HIL_ACTUATOR_CONTROLS go; repeatable (default: autopilot.actuators_to = 127.0.0.1:14561)")
-    p.add_argument("--sensors-from", metavar="HOST:PORT", type=_hostport, default=None,
+    p.add_argument("--listen", metavar="HOST:PORT", type=receiving, default=None,
+                   help="where sensor frames arrive, HOST:PORT or udpin:HOST:PORT "
+                        "(default: autopilot.listen = 127.0.0.1:14560)")
+    p.add_argument("--actuators-to", metavar="HOST:PORT", type=sending, action="append", default=None,
+                   help="where HIL_ACTUATOR_CONTROLS go, HOST:PORT or udpout:HOST:PORT; repeatable "
+                        "(default: autopilot.actuators_to = 127.0.0.1:14561)")
+    p.add_argument("--sensors-from", metavar="HOST:PORT", type=sending, default=None,
                    help="take sensor frames only from this source address, the simulator's socket (its "
                         "--commands-on; default: any address). Frames must also carry link.system_id and "
                         "link.component_id")
-    p.add_argument("--telemetry-to", metavar="HOST:PORT", type=_hostport, action="append", default=None,
+    p.add_argument("--telemetry-to", metavar="HOST:PORT", type=sending, action="append", default=None,
                    help="where a copy of all ground-station traffic in and out goes (a recorder); repeatable "
                         "(default: autopilot.telemetry_to, none)")
     add_gcs_arguments(p)
@@ -147,7 +152,7 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     from common.geodesy import LocalFrame
     from simulator.vessel import Vessel
 
-    scen = scenarios.load(scenario_name, cfg.current)
+    scen = scenarios.load(scenario_name, cfg.current, cfg.planner.safety_radius)
     params = scenarios.planner_params(cfg.planner, scen.planner_overrides, f"scenario {scen.name}")
     online = scenarios.online_params(scen.online_overrides, f"scenario {scen.name}")
     world = World(occ=scen.occ, resolution=scen.resolution, goal=tuple(scen.goal),
@@ -230,6 +235,7 @@ def _max_time_step(cfg, lockstep: bool) -> float:
 def run(args: argparse.Namespace) -> int:
     args.overrides = list(args.overrides) + _overrides(args)
     cfg = load_settings(args)
+    check_can(cfg, "hil autopilot (a process of its own)")
     autopilot = build(cfg, args.scenario, args.lockstep, args.planner_factory, getattr(args, "sensors_from", None))
     stop = {"flag": False}
     if args.can_record and autopilot.actuators is not autopilot.link:

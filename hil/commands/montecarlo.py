@@ -8,7 +8,7 @@ import math
 import time
 from pathlib import Path
 
-from hil import console, experiment, scenario as scenarios
+from hil import console, executors, experiment, scenario as scenarios
 from hil.errors import RunFailed, UsageError
 
 
@@ -45,6 +45,14 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--jobs", "-j", metavar="J", type=int, default=experiment.default_jobs(),
                    help=f"worker processes (default: the CPUs available, {experiment.default_jobs()})")
     p.add_argument("--seed", metavar="S", type=int, default=1, help="master seed (default 1)")
+    p.add_argument("--executor", choices=executors.EXECUTORS, default="local",
+                   help="where the runs execute: 'local' (default) = J processes of this machine (threads with "
+                        "--traffic); 'dask' = a Dask cluster, a LocalCluster of J single-threaded worker processes "
+                        f"unless --scheduler names one (needs the optional extra: {executors.DASK_HINT})")
+    p.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                   help="address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (implies --executor dask; "
+                        "--jobs is then ignored: the cluster's workers run the campaign). Results are the same "
+                        "as with local processes for the same seed")
     p.add_argument("--out", metavar="DIR", type=Path, default=None,
                    help="output folder (default runs/montecarlo-SCENARIO-sSEED)")
     g = p.add_argument_group("online process (defaults: planner.online.OnlineParams, then the scenario's [online])")
@@ -75,7 +83,14 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     t.add_argument("--miss", metavar="LO,HI", type=_range, default=(-6.0, 6.0),
                    help="un-manoeuvred CPA, m to her starboard (negative: port) (default -6,6)")
     t.add_argument("--duration", metavar="S", type=float, default=240.0,
-                   help="simulated seconds per run at most (default 240)")
+                   help="simulated seconds per run at most (default 240 with --traffic, 300 with --routes)")
+    r = p.add_argument_group(
+        "sparse routes (--routes): whole HIL runs in lockstep on random maps, each with a route of 2-3 waypoints "
+        "after the start (legs of 35 m or more) drawn from the run's seed (hil.route_montecarlo); reports the "
+        "success rate (goal reached without collision)")
+    r.add_argument("--routes", action="store_true",
+                   help="sail random sparse routes (scenario random-route unless --scenario names another random "
+                        "scenario with [random] waypoints) instead of the planner-only Table 3 experiment")
     p.set_defaults(func=run)
 
 
@@ -91,8 +106,7 @@ def _range(text: str) -> tuple[float, float]:
 
 def run_traffic(args: argparse.Namespace) -> int:
     """`hil montecarlo --traffic`: HIL runs over randomised ship traffic."""
-    from hil.hilrun import RunOptions, run_loop
-    from hil.traffic_montecarlo import TrafficDraw, run_campaign
+    from hil.traffic_montecarlo import TrafficDraw, TrafficJob, run_campaign
 
     if args.ships < 1:
         raise UsageError("--ships must be >= 1")
@@ -108,19 +122,17 @@ def run_traffic(args: argparse.Namespace) -> int:
     bar = console.ProgressBar(args.runs, "montecarlo traffic", every_s=2.0)
     bad = [0]
 
-    def make(i, ships, folder):
-        return RunOptions(scenario=args.scenario, lockstep=True, duration=args.duration, seed=args.seed * 1000 + i,
-                          config=args.config, overrides=list(args.overrides), out=folder, plot=False, traffic=ships)
-
     def progress(done, s):
         bad[0] += 1 if s["collisions"] else 0
         bar.update(done, f"collisions {bad[0]}")
 
-    console.progress(f"hil montecarlo --traffic: {args.runs} lockstep HIL runs on {spec.name}, {args.ships} ship(s) "
-                     f"each, {args.jobs} at a time, seed {args.seed} -> {out}")
-    t0 = time.monotonic()
-    summary = run_campaign(args.scenario, args.runs, args.seed, draw, out, args.jobs, make,
-                           lambda o: run_loop(o, cfg), progress)
+    job = TrafficJob(scenario=args.scenario, seed=args.seed, duration=args.duration, config=args.config,
+                     overrides=tuple(args.overrides), out=str(out.resolve()))
+    with executors.make(args.executor, min(args.jobs, args.runs), args.scheduler, threads=True) as ex:
+        console.progress(f"hil montecarlo --traffic: {args.runs} lockstep HIL runs on {spec.name}, {args.ships} "
+                         f"ship(s) each, on {ex.description}, seed {args.seed} -> {out}")
+        t0 = time.monotonic()
+        summary = run_campaign(args.scenario, args.runs, args.seed, draw, out, ex, job, progress)
     summary["wall_time_s"] = round(time.monotonic() - t0, 1)
     summary["files"] = {"runs": str(out / "runs.csv"), "summary": str(out / "summary.json")}
     (out / "summary.json").write_text(console.to_json(summary))
@@ -130,11 +142,55 @@ def run_traffic(args: argparse.Namespace) -> int:
     return 0
 
 
+def run_routes(args: argparse.Namespace, argv_scenario: str | None) -> int:
+    """`hil montecarlo --routes`: HIL runs on random sparse routes."""
+    from hil.hilrun import RunOptions, run_loop
+    from hil.route_montecarlo import run_campaign
+
+    name = argv_scenario or "random-route"
+    spec = scenarios.load_spec(name)
+    if spec.kind != "random" or spec.random is None or spec.random.waypoints[1] < 1:
+        raise UsageError(f"--routes needs a random scenario with [random] waypoints (e.g. random-route); "
+                         f"{spec.name!r} has none")
+    duration = 300.0 if args.duration == 240.0 else args.duration
+    if duration <= 0:
+        raise UsageError("--duration must be > 0")
+    cfg = console.load_settings(args)
+    out = args.out or Path("runs") / f"montecarlo-routes-{spec.name}-s{args.seed}"
+    bar = console.ProgressBar(args.runs, "montecarlo routes", every_s=2.0)
+    ok = [0]
+
+    def make(i, path, folder):
+        return RunOptions(scenario=str(path), lockstep=True, duration=duration, seed=args.seed * 1000 + i,
+                          config=args.config, overrides=list(args.overrides), out=folder / "hil", plot=False)
+
+    def progress(done, s):
+        ok[0] += 1 if s["reached_goal"] else 0
+        bar.update(done, f"reached {ok[0]}/{done}")
+
+    console.progress(f"hil montecarlo --routes: {args.runs} lockstep HIL runs on {spec.name}, {args.jobs} at a time, "
+                     f"seed {args.seed} -> {out}")
+    t0 = time.monotonic()
+    summary = run_campaign(name, args.runs, args.seed, out, args.jobs, cfg.planner.safety_radius, cfg.current, make,
+                           lambda o: run_loop(o, cfg), progress)
+    summary["wall_time_s"] = round(time.monotonic() - t0, 1)
+    summary["files"] = {"runs": str(out / "runs.csv"), "summary": str(out / "summary.json")}
+    (out / "summary.json").write_text(console.to_json(summary))
+    console.progress(f"routes: {summary['reached_without_collision']}/{args.runs} reached the goal without collision "
+                     f"(success rate {summary['success_rate']:.3f}); outcomes {summary['outcomes']}")
+    console.emit(args, summary)
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     if args.runs < 1:
         raise UsageError("--runs must be >= 1")
     if args.jobs < 1:
         raise UsageError("--jobs must be >= 1")
+    if args.routes:
+        if args.traffic:
+            raise UsageError("--routes and --traffic are separate campaigns: give one")
+        return run_routes(args, None if args.scenario == "labyrinth" else args.scenario)
     if args.traffic:
         return run_traffic(args)
     if args.seed < 0:
@@ -156,8 +212,9 @@ def run(args: argparse.Namespace) -> int:
     tasks = experiment.make_tasks(args.scenario, args.runs, args.algorithms, args.seed, online_ov, args.config,
                                   args.overrides, args.figure_runs, args.baseline_objective)
     jobs = min(args.jobs, len(tasks))
+    ex = executors.make(args.executor, jobs, args.scheduler)
     console.progress(f"hil montecarlo: {args.runs} runs x {len(args.algorithms)} algorithms on {spec.name}, "
-                     f"{jobs} worker(s), seed {args.seed}, budget/cycle: "
+                     f"on {ex.description}, seed {args.seed}, budget/cycle: "
                      f"{online.local_iterations or '-'} iterations, {online.local_time or '-'} s; "
                      f"cycle {online.cycle_time:g} s -> {out}")
     bar = console.ProgressBar(len(tasks), "montecarlo", every_s=2.0)
@@ -168,7 +225,8 @@ def run(args: argparse.Namespace) -> int:
         bar.update(done, f"failed {failed[0]}")
 
     t0 = time.monotonic()
-    camp = experiment.run_campaign(tasks, jobs, out / "runs.csv", progress=on_row)
+    with ex:
+        camp = experiment.run_campaign(tasks, jobs, out / "runs.csv", progress=on_row, executor=ex)
     wall = time.monotonic() - t0
     if not camp.rows:
         raise RunFailed("interrupted before any run finished" if camp.interrupted else "no run finished")
@@ -187,6 +245,7 @@ def run(args: argparse.Namespace) -> int:
         "scenario": spec.name, "runs_requested": args.runs, "tasks_done": len(camp.rows),
         "runs_done": {a: sum(1 for r in camp.rows if r["algorithm"] == a) for a in args.algorithms},
         "interrupted": camp.interrupted, "algorithms": list(args.algorithms), "jobs": jobs, "seed": args.seed,
+        "executor": "dask" if isinstance(ex, executors.DaskExecutor) else "local", "workers": ex.workers,
         "baseline_objective": args.baseline_objective,
         "online": {"local_iterations": online.local_iterations, "local_time_s": online.local_time,
                    "cycle_time_s": online.cycle_time},
@@ -196,8 +255,14 @@ def run(args: argparse.Namespace) -> int:
         "table3": table,
     }
     (out / "summary.json").write_text(console.to_json(summary))
-    console.progress(experiment.table_markdown(table, title))
-    console.emit(args, summary)
+    markdown = experiment.table_markdown(table, title)
+    if args.json:
+        console.progress(markdown)
+        console.emit(args, summary)
+    else:  # the table itself, as Markdown, is the human summary (the same text as table3.md)
+        print(markdown.rstrip("\n"), flush=True)
+        print(f"\n{len(camp.rows)} runs ({args.runs} per algorithm) in {wall:.0f} s; files in {out} (table3.md, table3.csv, runs.csv"
+              f"{', figures' if figures else ''}, summary.json)", flush=True)
     if camp.interrupted:
         return 130
     return 0

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import signal
 import subprocess
 import sys
@@ -24,7 +25,8 @@ from typing import Any
 from common.mavlink import Codec
 from common.udp import UdpEndpoint
 from hil import processes
-from hil.commands.can_options import add_can_arguments, can_overrides
+from hil.commands.can_options import add_can_arguments, can_overrides, check_can
+from hil.config import config_args
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, RunFailed, UsageError
 
@@ -91,8 +93,7 @@ def sim_command(args: argparse.Namespace, client_port: int, lockstep: bool) -> l
     cmd = [sys.executable, "-m", "hil", "sim", "--json", "--state-to", f"127.0.0.1:{client_port}",
            "--commands-from", f"127.0.0.1:{client_port}",
            "--commands-on", "127.0.0.1:0", "--duration", repr(float(args.duration))]
-    if args.config:
-        cmd += ["--config", args.config]
+    cmd += config_args(args.config)
     for o in args.overrides:
         cmd += ["--set", o]
     if args.seed is not None:
@@ -134,7 +135,8 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                     "constant-thrust controller replaces the autopilot (a steady starboard turn).",
     )
     p.add_argument("--scenario", default="harbour",
-                   help="configs/scenarios/NAME.toml: map, start, goal, reference path, current (default: harbour)")
+                   help="NAME of configs/scenarios/NAME.toml, or a path to a scenario .toml: map, start, goal, "
+                        "reference path, current (default: harbour)")
     p.add_argument("--duration", metavar="SECONDS", type=float, default=None,
                    help="simulated seconds at most (default: 300; --demo: 60)")
     p.add_argument("--seed", type=int, default=None, help="seed of every random process (default: sim.seed)")
@@ -146,7 +148,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--algorithm", choices=("rrt-star", "informed-rrt-star", "ddrrt-star"), default=None,
                    help="local planner (default: planner.algorithm = ddrrt-star)")
     p.add_argument("--out", metavar="DIR", default=None,
-                   help="run folder (default: runs/SCENARIO-seedN-YYYYmmdd-HHMMSS)")
+                   help="run folder (default: runs/NAME-seedN-YYYYmmdd-HHMMSS, NAME the scenario's name key)")
     p.add_argument("--no-plot", action="store_true", help="do not draw plot.png")
     p.add_argument("--wall-timeout", metavar="SECONDS", type=float, default=None,
                    help="end the run after this much wall time whatever happens (default: real time "
@@ -164,14 +166,15 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
 def run(args: argparse.Namespace) -> int:
     if args.duration is None:
         args.duration = 60.0 if args.demo else 300.0
-    if not args.duration > 0:
-        raise ConfigError("--duration: must be > 0 seconds")
-    if args.speedup is not None and not args.speedup > 0:
-        raise ConfigError("--speedup: must be > 0")
-    if args.wall_timeout is not None and not args.wall_timeout > 0:
-        raise ConfigError("--wall-timeout: must be > 0 seconds")
+    if not 0 < args.duration < math.inf:
+        raise ConfigError("--duration: must be a finite number > 0 of seconds")
+    if args.speedup is not None and not 0 < args.speedup < math.inf:
+        raise ConfigError("--speedup: must be a finite number > 0")
+    if args.wall_timeout is not None and not 0 < args.wall_timeout < math.inf:
+        raise ConfigError("--wall-timeout: must be a finite number > 0 of seconds")
     args.overrides = list(args.overrides) + can_overrides(args)
     cfg = load_settings(args)  # fail here, with one line, on a bad configuration
+    check_can(cfg, "hil run")
     previous_term = signal.signal(signal.SIGTERM, _raise_terminated)
     if args.demo and cfg.can.actuators == "can":
         raise UsageError("--demo drives the simulator over MAVLink; --actuators can needs the autopilot (drop --demo)")
@@ -201,7 +204,8 @@ def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
         raise UsageError(f"scenario {args.scenario!r} draws a new map per run; hil run needs a fixed "
                          f"scenario (random ones are for hil montecarlo)")
     seed = cfg.sim.seed if args.seed is None else args.seed
-    out = Path(args.out) if args.out else REPO / "runs" / f"{args.scenario}-seed{seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+    stamp = time.strftime('%Y%m%d-%H%M%S')
+    out = Path(args.out) if args.out else REPO / "runs" / f"{scenarios.folder_name(spec)}-seed{seed}-{stamp}"
     overrides = list(args.overrides)
     if args.algorithm:
         overrides.append(f"planner.algorithm={json.dumps(args.algorithm)}")
@@ -214,14 +218,55 @@ def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
     progress(f"run: scenario {args.scenario}, {'lockstep' if opts.lockstep else f'real time x{opts.speedup:g}'}, "
              f"actuators {cfg.can.actuators}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
     summary = run_loop(opts, cfg)
-    emit(args, summary)
+    emit(args, summary, human_summary(summary))
     if summary["outcome"] == "interrupted":
         progress(f"run: interrupted; summary in {out}")
         return 130
-    if not args.json:
-        progress(f"run: {'goal reached' if summary['reached_goal'] else summary['outcome']}; "
-                 f"plot: {summary.get('plot', 'none')}; folder: {out}")
     return 0 if summary["reached_goal"] else 1
+
+
+# Counters worth a human's attention: something was refused, lost, late, restarted or failed.
+PROBLEM_COUNTER = re.compile(r"reject|refus|drop|overrun|restart|error|lost|loss|fail|stale|resend|timeout|reset|"
+                             r"collision|fallback|malformed|invalid|overflow|kill", re.I)
+
+
+def human_summary(s: dict[str, Any]) -> list[str]:
+    """The run in at most 15 lines: outcome, time, clearance, errors, non-zero problem counters
+    (everything else: --json and summary.json)."""
+    from hil.console import MAX_LINES, clip, fmt, nonzero_counters, wrap_items
+
+    def num(v: Any, unit: str = "", digits: str = ".3g") -> str:
+        return "-" if v is None else f"{v:{digits}}{unit}"
+
+    outcome = "goal reached" if s.get("reached_goal") else str(s.get("outcome", "?")).upper()
+    if s.get("collision_time_s") is not None:
+        outcome += f" at {s['collision_time_s']:.1f} s"
+    lines = [f"outcome: {outcome} (scenario {s.get('scenario')}, seed {s.get('seed')}, {s.get('mode')}, "
+             f"actuators {s.get('actuators')})"]
+    sim_t, wall = s.get("sim_time_s") or 0.0, s.get("wall_time_s") or 0.0
+    lines.append(f"time: {sim_t:.1f} s simulated in {wall:.1f} s wall" + (f" (x{sim_t / wall:.1f})" if wall > 0 else ""))
+    energy = s.get("energy_J")
+    lines.append(f"clearance: min {num(s.get('min_clearance_m'), ' m')}; path {num(s.get('path_length_m'), ' m', '.1f')}"
+                 f"; energy {'-' if energy is None else f'{energy / 1000:.1f} kJ'}")
+    tr, lat = s.get("tracking") or {}, s.get("control_latency_ms") or {}
+    lines.append(f"errors: navigation RMSE {num(s.get('navigation_rmse_m'), ' m')}; cross-track RMS "
+                 f"{num(tr.get('cross_track_rms_m'), ' m')} (max {num(tr.get('cross_track_max_m'), ' m')}); "
+                 f"control latency p99 {num(lat.get('p99'), ' ms')}")
+    lines.append(f"planning: {fmt(s.get('planning_cycles'))} cycles, {fmt(s.get('plans_accepted'))} plans accepted")
+    traffic = s.get("traffic")
+    if isinstance(traffic, dict):
+        shown = {k: v for k, v in traffic.items() if not isinstance(v, (dict, list)) and v is not None}
+        lines.append("traffic: " + ", ".join(f"{k} {fmt(v)}" for k, v in list(shown.items())[:6]))
+    problems = [c for c in nonzero_counters({k: v for k, v in s.items() if k not in ("collisions",)})
+                if PROBLEM_COUNTER.search(c.partition("=")[0])]
+    lines += wrap_items("counters (non-zero)", problems or ["none"], 3)
+    events = s.get("events") or []
+    if events:
+        lines.append(f"events: {len(events)}, last: {fmt(events[-1])}")
+    if s.get("plot_error"):
+        lines.append(f"plot: failed: {s['plot_error']}")
+    lines.append(f"folder: {s.get('run_folder')} (summary.json has everything; --json prints it)")
+    return [clip(line) for line in lines[:MAX_LINES]]
 
 
 def _gcs_args(args: argparse.Namespace) -> list[str]:

@@ -6,8 +6,9 @@ import argparse
 import json
 import signal
 
-from common.udp import UdpEndpoint, parse_hostport
-from hil.commands.can_options import add_can_arguments, can_overrides
+from common import connection
+from common.udp import UdpEndpoint
+from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, UsageError
 from simulator.core import SimulatorCore
@@ -15,12 +16,21 @@ from simulator.rangefinder import WorldMap
 from simulator.server import SimulatorServer
 
 
-def _hostport(text: str) -> str:
-    try:
-        parse_hostport(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return text
+def _endpoint(role):
+    """An argparse type checking a connection string for ``role`` (common.connection)."""
+    def check(text: str) -> str:
+        try:
+            connection.parse(text, role)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return text
+    check.__name__ = "connection string"
+    return check
+
+
+_hostport = _endpoint(connection.RECEIVE_UDP)   # a bound address (kept for older imports)
+sending = _endpoint(connection.SEND_UDP)
+receiving = _endpoint(connection.RECEIVE_UDP)
 
 
 def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
@@ -36,12 +46,12 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                     "simulated seconds or on SIGINT/SIGTERM, printing its summary.",
         epilog="Options given here override the [sim] and [link] configuration keys.",
     )
-    p.add_argument("--state-to", metavar="HOST:PORT", action="append", type=_hostport, default=None,
-                   help="destination of the sensor/truth datagrams; repeatable "
+    p.add_argument("--state-to", metavar="HOST:PORT", action="append", type=sending, default=None,
+                   help="destination of the sensor/truth datagrams, HOST:PORT or udpout:HOST:PORT; repeatable "
                         "(default: link.state_to = 127.0.0.1:14560)")
-    p.add_argument("--commands-on", metavar="HOST:PORT", type=_hostport, default=None,
-                   help="UDP address to receive HIL_ACTUATOR_CONTROLS on; port 0 picks a free port "
-                        "(default: link.commands_on = 127.0.0.1:14561)")
+    p.add_argument("--commands-on", metavar="HOST:PORT", type=receiving, default=None,
+                   help="UDP address to receive HIL_ACTUATOR_CONTROLS on, HOST:PORT or udpin:HOST:PORT (udp: "
+                        "alike); port 0 picks a free port (default: link.commands_on = 127.0.0.1:14561)")
     p.add_argument("--commands-from", metavar="HOST:PORT|learn", default=None,
                    help="take HIL_ACTUATOR_CONTROLS only from this source address ('learn': from the address "
                         "of the first valid command); commands must also carry autopilot.system_id and "
@@ -55,6 +65,12 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                    help="seed of every random process: sensor noise, GPS events, waves (default: sim.seed = 1)")
     p.add_argument("--speedup", metavar="N", type=float, default=None,
                    help="real-time mode: simulated seconds per wall-clock second (default: sim.speedup = 1)")
+    p.add_argument("--scenario", metavar="NAME", default=None,
+                   help="start where `hil run` would on this scenario (configs/scenarios/NAME.toml or a .toml "
+                        "path): its start position and heading, its current, its true obstacle map (chart plus "
+                        "uncharted obstacles) for the range sensor, and its ship traffic. Pair it with `hil autopilot "
+                        "--scenario NAME` (same --lockstep or not, same --seed) for the loop by hand; --set and the "
+                        "options below still override it (default: none: sim.initial, no obstacles, no traffic)")
     p.add_argument("--world", metavar="FILE.npz", default=None,
                    help="the true obstacle map the range sensor scans: an .npz with 'occ' (bool rows x cols, "
                         "row = north / resolution, column = east / resolution) and 'resolution' (m), as "
@@ -86,22 +102,49 @@ def config_overrides(args: argparse.Namespace) -> list[str]:
     return out + can_overrides(args)
 
 
+def scenario_overrides(scen, base_current) -> list[str]:
+    """The ``--set`` overrides that put the simulator where `hil run` starts it on ``scen``: the
+    start (map x east, y north, heading counter-clockwise from east) as NED ``sim.initial`` and the
+    scenario's own ``[current]`` keys."""
+    import math
+
+    from hil.config import to_table
+
+    north, east, psi = scen.start[1], scen.start[0], math.pi / 2.0 - scen.start_heading
+    out = [f"sim.initial.x={north!r}", f"sim.initial.y={east!r}", f"sim.initial.psi={psi!r}"]
+    base, mine = to_table(base_current), to_table(scen.current)
+    out += [f"current.{k}={json.dumps(v)}" for k, v in mine.items() if base.get(k) != v]
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
     source = getattr(args, "commands_from", None)
     if source not in (None, "learn"):
         try:
-            parse_hostport(source)
+            connection.parse(source, connection.SEND_UDP)
         except ValueError as exc:
             raise UsageError(f"--commands-from: {exc}") from None
+    world = None
+    traffic = ()
+    if getattr(args, "scenario", None):
+        from hil import scenario as scenarios
+
+        base = load_settings(args)  # the user's configuration, validated before the scenario is read
+        spec = scenarios.load_spec(args.scenario)
+        if spec.kind != "fixed":
+            raise UsageError(f"--scenario {args.scenario}: draws a new map per run; hil sim needs a fixed scenario")
+        scen = scenarios.instance(spec, None, base.current)
+        args.overrides = scenario_overrides(scen, base.current) + list(args.overrides)
+        world = WorldMap(scen.truth_occ(), scen.resolution)
+        traffic = tuple(scen.traffic)
     args.overrides = list(args.overrides) + config_overrides(args)
     cfg = load_settings(args)
-    world = None
+    check_can(cfg, "hil sim (a process of its own)")
     if args.world is not None:
         try:
             world = WorldMap.load(args.world)
         except (OSError, KeyError, ValueError) as exc:
             raise UsageError(f"--world {args.world}: not a world map ({exc})") from None
-    traffic = ()
     if getattr(args, "traffic", None):
         from hil.scenario import load_traffic
 
