@@ -88,13 +88,14 @@ class CanActuators:
     def service(self, timeout: float = 0.0) -> None:
         """Read every frame queued now: ESC Status and NodeStatus of the ESC nodes."""
         msg = self.bus.recv(timeout)
-        for _ in range(MAX_FRAMES_PER_SERVICE):
+        for k in range(MAX_FRAMES_PER_SERVICE):
             if msg is None:
                 return
             tr = self.receiver.feed(msg)
             if tr is not None:
                 self._on_transfer(tr)
-            msg = self.bus.recv(0.0) if _ < MAX_FRAMES_PER_SERVICE - 1 else None
+            if k + 1 < MAX_FRAMES_PER_SERVICE:  # the rest of a flood waits for the next call
+                msg = self.bus.recv(0.0)
 
     def _on_transfer(self, tr: dc.Transfer) -> None:
         if not self.tracker.observe(tr):

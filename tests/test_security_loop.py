@@ -5,7 +5,6 @@ heading of 1e300."""
 
 from __future__ import annotations
 
-import math
 import os
 import signal
 import socket
@@ -149,6 +148,9 @@ def test_fuzz_of_sensor_and_command_ports_leaves_the_lockstep_result_unchanged(b
     _same_as_baseline(baseline, attacked)
     sec = attacked[0]["security"]
     ap, sim = sec["autopilot"], sec["simulator"]
+    print(f"sensor port: {ap['wrong_source']} refused by address, {ap['kernel_drops']} kernel drops; "
+          f"command port: {sim['wrong_source_address']} refused by address, {sim['kernel_drops']} kernel drops; "
+          f"not sent (own buffer full): {lost}")
     # Every fuzz datagram was refused by source address, or dropped by the kernel (and counted there).
     assert ap["wrong_source"] + ap["kernel_drops"] >= FUZZ_N - lost["sensor"]
     assert sim["wrong_source_address"] + sim["kernel_drops"] >= FUZZ_N - lost["command"]
@@ -182,6 +184,7 @@ def test_sigkill_of_a_child_ends_the_run_promptly_with_what_it_has(child, tmp_pa
 
     summary, truth, _, _ = _run(tmp_path / "run", [_once(2_000_000, attack)], duration=60.0)
     ended = time.monotonic() - killed["at"]
+    print(f"hil run ended {ended:.2f} s after the SIGKILL of the {child} process")
     assert summary["outcome"] == ("autopilot_exited" if child == "ap" else "simulator_exited")
     assert truth and summary["sim_time_s"] >= 2.0
     assert not _group_alive(killed["pgid"]), "a process of the killed child's group survived"
@@ -221,4 +224,3 @@ def test_start_heading_1e300_does_not_hang(tmp_path, hil, repo):
     assert time.monotonic() - t0 < 240
     assert "Traceback" not in r.stderr
     assert r.returncode in (0, 1, 2), r.stderr
-    assert math.isfinite(1e300)
