@@ -150,26 +150,11 @@ def run_task(task: Task) -> dict[str, Any]:
 
 
 def warm_up() -> None:
-    """Run every planner once on a tiny problem, with and without a current field, so numba's
-    compilation (or cache loading) is not counted in the first run's search time."""
-    from planner import make_planner
-    from planner.field import GridField
-    from planner.gridmap import OccupancyGrid
-    from planner.params import PlannerParams
-    from planner.problem import PlanningProblem
-    from planner.termination import Termination
+    """``planner.warm_up()``: every compiled planner function loaded (or compiled) in this
+    process, so numba's work is not counted in the first run's search time."""
+    import planner
 
-    occ = np.zeros((40, 40), dtype=bool)
-    occ[10:30, 19:21] = True
-    grid = OccupancyGrid(occ, 0.5)
-    ref = np.array([[2.0, 10.0], [18.0, 10.0]])
-    for field_ in (None, GridField.uniform(0.3, 0.1)):
-        for alg in ALGORITHMS:
-            params = PlannerParams(algorithm=alg, seed=1, objective="current" if field_ else "length")
-            problem = PlanningProblem(grid=grid, start=(2.0, 10.0), goal=(18.0, 10.0), start_heading=0.0,
-                                      field=field_, reference_path=ref, domain_center=(10.0, 10.0),
-                                      domain_radius=12.0)
-            make_planner(alg, params).solve(problem, Termination.iterations(300))
+    planner.warm_up()
 
 
 def _fmt(v: Any) -> str:

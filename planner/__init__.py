@@ -38,11 +38,20 @@ def make_planner(name: str, params: PlannerParams, seed: int | None = None) -> P
 
 
 def warm_up() -> float:
-    """Load or compile the numba core before time-critical use; returns the seconds spent."""
+    """Load or compile the numba core before time-critical use (once per process: call it in
+    every worker before its first timed solve); returns the seconds spent."""
     from planner.core import warm_up as _warm_up
 
     return _warm_up()
 
 
-__all__ = ["warm_up", "ALGORITHMS", "Planner", "PlannerParams", "PlannerResult", "PlanningProblem", "Termination",
+def warm_up_info():
+    """:func:`warm_up`, returning ``planner.core.WarmUp(seconds, compiled)``: ``compiled`` is
+    True when numba had to compile (a cold cache) rather than load machine code."""
+    from planner.core import warm_up_info as _info
+
+    return _info()
+
+
+__all__ = ["warm_up", "warm_up_info", "ALGORITHMS", "Planner", "PlannerParams", "PlannerResult", "PlanningProblem", "Termination",
            "make_planner"]

@@ -34,12 +34,13 @@ DONE_FULL = 3
 C_STEP, C_MAXTURN, C_GOALTOL, C_GOALBIAS, C_PNGP, C_PNGX, C_PNGY, C_DR, C_DALPHA, C_GAMMA = range(10)
 C_RGAMMA, C_FMIN, C_BUCKET, C_BX0, C_BX1, C_BY0, C_BY1, C_DCX, C_DCY, C_DR_DOM = range(10, 20)
 C_GX, C_GY, C_SX, C_SY, C_RES, C_FRES, C_FOX, C_FOY, C_KGROW = range(20, 29)
-N_FCFG = 29
+C_DD0, C_DDGROW, C_DDSHRINK, C_DDMIN = range(29, 33)
+N_FCFG = 33
 # int config indices
 I_ALGO, I_FIELD, I_K, I_NBX, I_NBY, I_CAP, I_PNG = range(7)
 N_ICFG = 7
 # int state indices
-S_N, S_GOAL, S_ITER, S_REJ, S_CLOSEST, S_FIRST_ITER, S_CHECKS = range(7)
+S_N, S_GOAL, S_ITER, S_REJ, S_CLOSEST, S_FIRST_ITER, S_CHECKS, S_FAILED = range(8)
 N_ISTATE = 8
 # float state indices
 F_CLOSEST_D, F_FIRST_NS = range(2)
@@ -93,7 +94,8 @@ def _insert_bucket(i, X, fc, ic, bucket_head, node_next):
 
 @njit(cache=True)
 def _knn(qx, qy, k, X, fc, ic, bucket_head, node_next, out_i, out_d):
-    """k nearest nodes (Euclidean), ascending; returns how many were found (<= k)."""
+    """k nearest nodes (Euclidean), ascending; returns how many were found (<= k). Squared
+    distances while scanning (no square root per candidate), roots of the k results at the end."""
     cx, cy = _bucket(qx, qy, fc, ic)
     nbx = ic[I_NBX]
     nby = ic[I_NBY]
@@ -110,7 +112,9 @@ def _knn(qx, qy, k, X, fc, ic, bucket_head, node_next, out_i, out_d):
                 if 0 <= bx < nbx:
                     j = bucket_head[by * nbx + bx]
                     while j >= 0:
-                        d = math.hypot(X[j, 0] - qx, X[j, 1] - qy)
+                        ex = X[j, 0] - qx
+                        ey = X[j, 1] - qy
+                        d = ex * ex + ey * ey
                         if m < k or d < out_d[m - 1]:
                             p = m if m < k else k - 1
                             while p > 0 and out_d[p - 1] > d:
@@ -126,8 +130,10 @@ def _knn(qx, qy, k, X, fc, ic, bucket_head, node_next, out_i, out_d):
                     bx += 1
                 else:
                     bx += 2 * ring  # interior rows: only the two edge columns
-        if m == k and out_d[m - 1] <= ring * B:
+        if m == k and out_d[m - 1] <= (ring * B) * (ring * B):
             break
+    for a in range(m):
+        out_d[a] = math.sqrt(out_d[a])
     return m
 
 
@@ -141,12 +147,15 @@ def _near(qx, qy, radius, X, fc, ic, bucket_head, node_next, out_i):
     bx1 = int(math.floor((qx + radius) / B))
     by0 = int(math.floor((qy - radius) / B))
     by1 = int(math.floor((qy + radius) / B))
+    r2 = radius * radius
     m = 0
     for by in range(max(by0, 0), min(by1, nby - 1) + 1):
         for bx in range(max(bx0, 0), min(bx1, nbx - 1) + 1):
             j = bucket_head[by * nbx + bx]
             while j >= 0:
-                if m < NEAR_CAP and math.hypot(X[j, 0] - qx, X[j, 1] - qy) <= radius:
+                ex = X[j, 0] - qx
+                ey = X[j, 1] - qy
+                if m < NEAR_CAP and ex * ex + ey * ey <= r2:
                     out_i[m] = j
                     m += 1
                 j = node_next[j]
@@ -261,11 +270,26 @@ def _reparent(j, p, new_cost, X, parent, cost, head, first_child, next_sib, stac
 
 
 @njit(cache=True)
+def _set_direction(i, x, y, nv, fvx, fvy, fc):
+    """nv[i] = the unit vector of the current at (x, y), or (0, 0) where there is none."""
+    vx, vy = field_at(fvx, fvy, fc[C_FRES], fc[C_FOX], fc[C_FOY], x, y)
+    v = math.hypot(vx, vy)
+    if v < 1e-9:
+        nv[i, 0] = 0.0
+        nv[i, 1] = 0.0
+    else:
+        nv[i, 0] = vx / v
+        nv[i, 1] = vy / v
+
+
+@njit(cache=True)
 def _add_node(x, y, p, c, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head,
-              node_next, st):
+              node_next, st, nv, fvx, fvy):
     i = st[S_N]
     X[i, 0] = x
     X[i, 1] = y
+    if ic[I_FIELD] != 0:
+        _set_direction(i, x, y, nv, fvx, fvy, fc)
     parent[i] = p
     cost[i] = c
     head[i] = math.atan2(y - X[p, 1], x - X[p, 0])
@@ -291,17 +315,13 @@ def _free(occ, fc, st, x0, y0, x1, y1):
 
 
 @njit(cache=True)
-def _esd(i, qx, qy, X, dd, fc, ic, fvx, fvy):
-    """Eq. (11) for node i towards (qx, qy); the current is taken at the node."""
-    second = fc[C_DALPHA] * fc[C_DR]
-    if ic[I_FIELD] != 0:
-        vx, vy = field_at(fvx, fvy, fc[C_FRES], fc[C_FOX], fc[C_FOY], X[i, 0], X[i, 1])
-        dx = qx - X[i, 0]
-        dy = qy - X[i, 1]
-        arg, ok = sigmoid_arg(dx, dy, math.hypot(dx, dy), vx, vy, fc[C_GAMMA])
-        if ok:
-            second = fc[C_DALPHA] * fc[C_DR] / (1.0 + math.exp(-arg))
-    return min(dd[i], second)
+def _dd_failed(i, dd, fc):
+    """A failed (colliding) extension from node i: its dynamic domain becomes bounded (DD0), or,
+    already bounded, shrinks by the adaptive factor (Jaillet et al. 2005), never below DDMIN."""
+    if math.isinf(dd[i]):
+        dd[i] = fc[C_DD0]
+    else:
+        dd[i] = max(dd[i] * fc[C_DDSHRINK], fc[C_DDMIN])
 
 
 @njit(cache=True)
@@ -321,7 +341,7 @@ def _sort_by(keys, idx, m):
 
 @njit(cache=True)
 def _try_goal(i, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head, node_next,
-              st, fs, fvx, fvy, stack, clockbuf):
+              st, fs, fvx, fvy, stack, clockbuf, nv):
     """After node i joined the tree: track the closest node and connect the goal exactly."""
     gx = fc[C_GX]
     gy = fc[C_GY]
@@ -353,7 +373,7 @@ def _try_goal(i, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, 
         if st[S_N] >= ic[I_CAP]:
             return
         g = _add_node(gx, gy, i, c, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head,
-                      node_next, st)
+                      node_next, st, nv, fvx, fvy)
         st[S_GOAL] = g
         st[S_FIRST_ITER] = st[S_ITER]
         fs[F_FIRST_NS] = monotonic_ns(clockbuf)
@@ -382,8 +402,14 @@ def _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, fi
 
 
 @njit(cache=True)
+def node_direction(i, x, y, nv, fvx, fvy, fc):
+    """Entry point for the solve loop: the root's current direction (see _set_direction)."""
+    _set_direction(i, x, y, nv, fvx, fvy, fc)
+
+
+@njit(cache=True)
 def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib, bucket_head, node_next,
-         st, fs, stack, max_iter, deadline_ns, stop_on_exact):
+         st, fs, stack, nv, max_iter, deadline_ns, stop_on_exact):
     """Run up to max_iter iterations; see the module docstring for the return codes."""
     clockbuf = np.zeros(2, np.int64)
     k_min = ic[I_K]
@@ -426,8 +452,19 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
             ne = 0
             for a in range(m):
                 i = kn_i[a]
-                dc = _cost(X[i, 0], X[i, 1], sx, sy, fc, ic, fvx, fvy)
-                if dc <= _esd(i, sx, sy, X, dd, fc, ic, fvx, fvy):
+                ed = kn_d[a]
+                if ed > dd[i]:
+                    continue  # outside the node's dynamic domain (a disc of radius DD, Yershova 2005)
+                # eq. (12) with one alpha_y, the current at q_i (the same alpha_y as eq. (11)'s)
+                dc = ed
+                second = fc[C_DALPHA] * fc[C_DR]
+                if ic[I_FIELD] != 0 and ed > 0.0 and (nv[i, 0] != 0.0 or nv[i, 1] != 0.0):
+                    c = ((sx - X[i, 0]) * nv[i, 0] + (sy - X[i, 1]) * nv[i, 1]) / ed
+                    c = min(1.0, max(-1.0, c))
+                    e = math.exp(c - fc[C_GAMMA] * math.sqrt(max(0.0, 1.0 - c * c)))
+                    dc = min(ed, fc[C_DALPHA] * ed / (1.0 + e))
+                    second = fc[C_DALPHA] * fc[C_DR] * e / (1.0 + e)  # D_alpha DR / (1 + exp(-arg))
+                if dc <= second:
                     ext_i[ne] = i
                     ext_k[ne] = dc
                     ne += 1
@@ -464,11 +501,14 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                     p = i
                     pc = near_c[a]
                     break
-                dd[i] = fc[C_DR]  # a failed extension: the dynamic domain shrinks to DR
+                st[S_FAILED] += 1
+                _dd_failed(i, dd, fc)
             if p < 0:
                 continue
+            if not math.isinf(dd[p]):
+                dd[p] *= fc[C_DDGROW]  # a successful extension grows a bounded domain (adaptive form)
             new = _add_node(nx, ny, p, pc, X, parent, cost, head, dd, first_child, next_sib, fc, ic,
-                            bucket_head, node_next, st)
+                            bucket_head, node_next, st, nv, fvx, fvy)
             # ---- lines 18-21: rewire the other extendable nodes through q_new
             for a in range(ne):
                 j = ext_i[a]
@@ -523,7 +563,7 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
             if p < 0:
                 continue
             new = _add_node(nx, ny, p, pc, X, parent, cost, head, dd, first_child, next_sib, fc, ic,
-                            bucket_head, node_next, st)
+                            bucket_head, node_next, st, nv, fvx, fvy)
             # rewire: the near set again (the buffer was reordered above)
             nn = _near(nx, ny, radius, X, fc, ic, bucket_head, node_next, near_i)
             for a in range(nn):
@@ -533,7 +573,7 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                 _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, first_child, next_sib,
                         stack, max_turn)
         _try_goal(new, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head, node_next,
-                  st, fs, fvx, fvy, stack, clockbuf)
+                  st, fs, fvx, fvy, stack, clockbuf, nv)
         if stop_on_exact and st[S_GOAL] >= 0:
             return DONE_EXACT
     return DONE_ITERATIONS

@@ -32,6 +32,8 @@ from planner.termination import Termination
 
 FIELD_SAMPLE_RESOLUTION = 1.0  # m; a callable current is sampled this finely for the compiled core
 _BIG = 1 << 62
+_NO_FIELD = np.zeros((1, 1))
+_NO_FIELD.flags.writeable = False  # the same array type as a GridField's: one compiled specialisation
 
 
 _CLOCK_OK: bool | None = None
@@ -52,25 +54,64 @@ def compiled_clock_ok() -> bool:
     return _CLOCK_OK
 
 
-def warm_up() -> float:
-    """Load (or compile, the first time on a machine) every compiled function by solving a tiny
-    problem with each strategy; returns the seconds it took. The first solve in a process
-    otherwise pays ~0.2 s of cache loading (~7 s of compilation with a cold cache) inside its
-    time budget."""
+@dataclasses.dataclass(frozen=True)
+class WarmUp:
+    """What :func:`warm_up_info` did: ``seconds`` spent, and whether numba had to compile
+    (``compiled``: a cold or stale cache; otherwise the machine code came from the cache)."""
+
+    seconds: float
+    compiled: bool
+
+
+_WARM: WarmUp | None = None
+
+
+def _cache_misses() -> int:
+    from planner import _kernels
+
+    n = 0
+    for mod in (_tree, _kernels):
+        for obj in vars(mod).values():
+            stats = getattr(obj, "stats", None)
+            if stats is not None and hasattr(stats, "cache_misses"):
+                n += sum(stats.cache_misses.values())
+    return n
+
+
+def warm_up_info() -> WarmUp:
+    """Load (or, with a cold cache, compile) every compiled function by solving tiny problems
+    with each strategy, with and without a current field, as the online loop does (heading,
+    reference path, perceptual domain). Only the first call in a process does work; later calls
+    return the first call's record. The first solve in a process otherwise pays ~0.2 s of cache
+    loading (~7 s of compilation with a cold cache) inside its time budget."""
+    global _WARM
+    if _WARM is not None:
+        return _WARM
     from planner.ddrrt_star import DDRRTStar
-    from planner.field import GridField as _GF
     from planner.informed_rrt_star import InformedRRTStar
     from planner.rrt_star import RRTStar
 
     t0 = time.monotonic()
-    grid = OccupancyGrid(np.zeros((8, 8), dtype=bool), 1.0)
-    params = PlannerParams(max_nodes=64)
-    for cls in (RRTStar, InformedRRTStar, DDRRTStar):
-        for field in (None, _GF.uniform(0.1, 0.0)):
-            cls(params).solve(PlanningProblem(grid, (1.5, 1.5), (6.5, 6.5), start_heading=0.0, field=field),
-                              Termination.iterations(50))
+    misses0 = _cache_misses()
+    occ = np.zeros((40, 40), dtype=bool)
+    occ[10:30, 19:21] = True
+    grid = OccupancyGrid(occ, 0.5)
+    grid.segment_free(1.0, 1.0, 18.0, 18.0)
+    ref = np.array([[2.0, 10.0], [18.0, 10.0]])
+    for objective, field in (("length", None), ("current", GridField.uniform(0.3, 0.1))):
+        params = PlannerParams(max_nodes=2000, objective=objective)
+        for cls in (RRTStar, InformedRRTStar, DDRRTStar):
+            problem = PlanningProblem(grid, (2.0, 10.0), (18.0, 10.0), start_heading=0.0, field=field,
+                                      reference_path=ref, domain_center=(10.0, 10.0), domain_radius=12.0)
+            cls(params).solve(problem, Termination.iterations(300))
     compiled_clock_ok()
-    return time.monotonic() - t0
+    _WARM = WarmUp(seconds=time.monotonic() - t0, compiled=_cache_misses() > misses0)
+    return _WARM
+
+
+def warm_up() -> float:
+    """:func:`warm_up_info`, returning the seconds it took."""
+    return warm_up_info().seconds
 
 
 def _none(reason: str, t0: float, start=None) -> PlannerResult:
@@ -168,6 +209,14 @@ class TreePlanner:
         fc[_tree.C_GAMMA] = p.gamma_alpha
         fc[_tree.C_RGAMMA] = p.rewire_gamma * gamma_star
         fc[_tree.C_KGROW] = p.k_growth
+        if p.dynamic_domain == "off":
+            fc[_tree.C_DD0] = math.inf
+        else:
+            fc[_tree.C_DD0] = p.dynamic_domain_radius
+        adaptive = p.dynamic_domain == "adaptive"
+        fc[_tree.C_DDGROW] = 1.0 + p.dd_alpha if adaptive else 1.0
+        fc[_tree.C_DDSHRINK] = 1.0 - p.dd_alpha if adaptive else 1.0
+        fc[_tree.C_DDMIN] = min(p.dd_min_factor * p.step, p.dynamic_domain_radius)
         fc[_tree.C_FMIN] = min_cost_factor(p.d_alpha, p.gamma_alpha) if field is not None else 1.0
         fc[_tree.C_BUCKET] = bucket
         fc[_tree.C_BX0], fc[_tree.C_BX1], fc[_tree.C_BY0], fc[_tree.C_BY1] = bx0, bx1, by0, by1
@@ -182,7 +231,7 @@ class TreePlanner:
             fc[_tree.C_FRES] = field.resolution
             fc[_tree.C_FOX], fc[_tree.C_FOY] = field.origin
         else:
-            fvx = fvy = np.zeros((1, 1))
+            fvx = fvy = _NO_FIELD
             fc[_tree.C_FRES] = 1.0
         ic = np.zeros(_tree.N_ICFG, dtype=np.int64)
         ic[_tree.I_ALGO] = self.algorithm_code
@@ -206,7 +255,10 @@ class TreePlanner:
         st = np.zeros(_tree.N_ISTATE, dtype=np.int64)
         fs = np.zeros(_tree.N_FSTATE)
         stack = np.empty(cap, dtype=np.int64)
+        nv = np.empty((cap, 2)) if field is not None else np.zeros((1, 2))  # current direction at each node
         X[0] = (sx, sy)
+        if field is not None:
+            _tree.node_direction(0, sx, sy, nv, fvx, fvy, fc)
         parent[0] = -1
         cost[0] = 0.0
         dd[0] = np.inf
@@ -242,7 +294,7 @@ class TreePlanner:
             else:
                 budget = _BIG
             code = _tree.grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib,
-                              bucket_head, node_next, st, fs, stack, budget, deadline_ns, bounds.stop_on_exact)
+                              bucket_head, node_next, st, fs, stack, nv, budget, deadline_ns, bounds.stop_on_exact)
             if code == _tree.DONE_DEADLINE:
                 why = "deadline reached"
                 break
@@ -285,6 +337,7 @@ class TreePlanner:
             diagnostics={"collision_checks": int(st[_tree.S_CHECKS]), "tree_cost": float(cost[end]) if status != "none" else math.inf,
                          "first_solution_iteration": int(st[_tree.S_FIRST_ITER]) if goal >= 0 else None,
                          "algorithm": self.name,
-                         "dynamic_domains": int(np.sum(np.isfinite(dd[:n]))),  # DDRRT* nodes with DD = DR
+                         "dynamic_domains": int(np.sum(np.isfinite(dd[:n]))),  # DDRRT* nodes with a bounded DD
+                         "failed_extensions": int(st[_tree.S_FAILED]),  # DDRRT*: colliding parent attempts
                          },
         )

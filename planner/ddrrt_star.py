@@ -1,12 +1,15 @@
 """DDRRT* (Wen et al. 2019, section 3.5, Figure 6).
 
 Per sample q_s (the PGNode with probability P, else the goal with probability goal_bias, else
-uniform in the perceptual domain): the k nearest nodes are sorted by the cost distance D_C of
-eq. (12); a node is extendable if D_C(q_i, q_s) <= ESD(q_i) of eq. (11); when none is, the sample
-is dropped (lines 10-11). q_new is one step from the best extendable node towards q_s; the
-extendable nodes are tried as parents in order of c(q_i) + D_C(q_i, q_new); a collision on the
-way sets DD(q_i) = DR = 10 v sigma_t (the dynamic domain; DD starts at infinity). Rewiring
-(lines 18-21) tries the other extendable nodes through q_new.
+uniform in the perceptual domain): of the k nearest nodes, q_i is extendable if q_s lies in its
+dynamic domain (Euclidean distance <= DD(q_i), Yershova et al. 2005) and D_C(q_i, q_s) of eq. (12)
+is at most the current term of eq. (11) (one alpha_y, the current at q_i); when none is, the
+sample is dropped (lines 10-11). q_new is one step from the extendable node of least D_C towards
+q_s; the extendable nodes are tried as parents in order of c(q_i) + D_C(q_i, q_new); a collision
+bounds DD(q_i) (DR = 10 v sigma_t at the first failure) and, with the adaptive domain (Jaillet et
+al. 2005), shrinks it at later failures and grows it at successes; DD starts at infinity.
+Rewiring (lines 18-21) tries the other extendable nodes through q_new. docs/planner.md explains
+why this reading of eq. (11) (taken literally, DD never acts at D_alpha = 1).
 
 The PGNode comes from :func:`planner.png.pg_node`: the virtual target is the reference waypoint
 nearest the start, moving along the reference path; the USV covers twice the target's distance

@@ -13,6 +13,12 @@ class DisturbanceField(Protocol):
     def __call__(self, x, y) -> tuple: ...
 
 
+def _frozen(a: np.ndarray) -> np.ndarray:
+    out = np.array(a, dtype=np.float64, order="C", copy=True)
+    out.flags.writeable = False
+    return out
+
+
 class GridField:
     """A field sampled on a regular grid (``vx[row, col]`` at x = origin_x + col * resolution,
     y = origin_y + row * resolution), bilinearly interpolated, clamped at the edges."""
@@ -24,8 +30,10 @@ class GridField:
             raise ValueError("GridField: vx and vy must be 2-D arrays of the same shape")
         if not resolution > 0:
             raise ValueError("GridField: resolution must be > 0")
-        self.vx = np.ascontiguousarray(vx)
-        self.vy = np.ascontiguousarray(vy)
+        # private read-only C copies: one array type for the compiled core (numba compiles a
+        # separate specialisation for writable and read-only arrays)
+        self.vx = _frozen(vx)
+        self.vy = _frozen(vy)
         self.resolution = float(resolution)
         self.origin = (float(origin[0]), float(origin[1]))
 

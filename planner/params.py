@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 ALGORITHM_NAMES = ("rrt-star", "informed-rrt-star", "ddrrt-star")
+DYNAMIC_DOMAINS = ("off", "constant", "adaptive")
 OBJECTIVES = ("length", "current")
 
 
@@ -35,6 +36,16 @@ class PlannerParams:
     sigma_t: float = _p("duration sigma_t of one path extension", "s", gt=0, default=2.0)
     dr_factor: float = _p("DR = dr_factor * v * sigma_t, the dynamic-domain radius of eq. (11)", "",
                           gt=0, default=10.0)
+    dynamic_domain: Literal["off", "constant", "adaptive"] = _p(
+        "DDRRT*'s dynamic domain DD of eq. (11), a disc of radius DD about a node (Yershova et al. 2005): "
+        "'off' keeps DD infinite; 'constant' sets DD = DR at a node's first failed extension (the paper); "
+        "'adaptive' also shrinks DD by (1 - dd_alpha) at every further failure and grows it by (1 + dd_alpha) "
+        "at every success (Jaillet et al. 2005). Samples outside the domains of all k nearest nodes are "
+        "dropped (docs/planner.md)", default="adaptive")
+    dd_alpha: float = _p("adaptive dynamic domain: relative growth on success / shrink on failure", "", ge=0, lt=1,
+                         default=0.1)
+    dd_min_factor: float = _p("adaptive dynamic domain: DD never shrinks below dd_min_factor * step", "", gt=0,
+                              default=1.0)
     d_alpha: float = _p("D_alpha of eqs. (11)-(12)", "", gt=0, default=1.0)
     gamma_alpha: float = _p("gamma_alpha of eqs. (11)-(12)", "", ge=0, default=0.1)
     k_nearest: int = _p("k nearest tree nodes examined per sample by DDRRT* (the least, with k_growth)", "",
@@ -70,6 +81,9 @@ class PlannerParams:
     def __post_init__(self) -> None:
         if self.algorithm not in ALGORITHM_NAMES:
             raise ValueError(f"algorithm: must be one of {', '.join(ALGORITHM_NAMES)} (got {self.algorithm!r})")
+        if self.dynamic_domain not in DYNAMIC_DOMAINS:
+            raise ValueError(f"dynamic_domain: must be one of {', '.join(DYNAMIC_DOMAINS)} "
+                             f"(got {self.dynamic_domain!r})")
         if self.objective not in OBJECTIVES:
             raise ValueError(f"objective: must be one of {', '.join(OBJECTIVES)} (got {self.objective!r})")
 

@@ -91,6 +91,12 @@ def test_bench_planner_quick_json(hil):
             assert r is None or r == "inf" or r >= 1.0 - 1e-9
     assert "disabled" in d["ompl"]
     assert "iter/s" in p.stderr                          # the human table goes to stderr
+    e2e = e["end_to_end"]                                # one `hil plan --deadline B` process per budget
+    assert [r["deadline_s"] for r in e2e] == [0.05, 0.2]
+    for r in e2e:
+        assert r["status"] in ("exact", "approximate", "none")
+        assert r["wall_s"] >= r["search_s"] + r["setup_s"] + r["warm_up_s"] - 1e-6
+        assert r["search_s"] >= r["deadline_s"] * 0.5     # the deadline is spent on the search
 
 
 def test_bench_planner_bad_budget(hil):

@@ -120,3 +120,51 @@ def test_scenario_plot(hil, tmp_path):
     import matplotlib.image as mpimg
     img = mpimg.imread(out)
     assert img.shape[0] > 300 and img.std() > 0.05     # not a blank canvas
+
+
+def _random_discs(seed: int) -> np.ndarray:
+    """A 200 x 200 map (0.5 m cells) of random discs: a map the benchmarks never saw."""
+    rng = np.random.default_rng(seed)
+    occ = np.zeros((200, 200), dtype=bool)
+    yy, xx = (np.mgrid[0:200, 0:200] + 0.5) * 0.5
+    for _ in range(rng.integers(15, 30)):
+        cx, cy, r = rng.uniform(10, 90), rng.uniform(10, 90), rng.uniform(2, 7)
+        occ |= (xx - cx) ** 2 + (yy - cy) ** 2 <= r * r
+    occ[0:12, 0:12] = occ[188:, 188:] = False
+    return occ
+
+
+@pytest.mark.parametrize("algorithm", ["rrt-star", "ddrrt-star"])
+def test_unseen_random_map_against_the_optimum(hil, tmp_path, algorithm):
+    """Set-up (warm-up, inflation, labelling) is reported apart from the search; the path is
+    valid on the inflated map and near the exact optimum (iteration budget: no timing)."""
+    from planner.gridmap import OccupancyGrid
+
+    occ = _random_discs(11)
+    path = tmp_path / "discs.npy"
+    np.save(path, occ)
+    p = hil("plan", "--map", str(path), "--resolution", "0.5", "--start", "3,3", "--goal", "97,97", "--algorithm",
+            algorithm, "--objective", "length", "--deadline", "60", "--iterations", "20000", "--inflate", "1",
+            "--seed", "2", "--json")
+    assert p.returncode == 0, p.stderr
+    d = json.loads(p.stdout)
+    assert d["status"] == "exact"
+    assert d["setup_s"] >= 0 and d["warm_up_s"] >= 0 and d["compiled"] in (True, False)
+    inflated = OccupancyGrid(occ, 0.5).inflate(1.0).occ
+    pts = np.array(d["path"])
+    for a, b in zip(pts[:-1], pts[1:]):
+        assert segment_clear(inflated, 0.5, a[0], a[1], b[0], b[1]), (a, b)
+    opt = shortest_path(inflated, 0.5, (3, 3), (97, 97)).length
+    assert opt - 1e-6 <= d["length"] <= 1.05 * opt
+
+
+def test_cold_cache_compiles_before_the_clock(hil, wall_map, tmp_path):
+    """With an empty numba cache the planner compiles first, says so on stderr, and the search
+    still gets its budget (the first `hil plan` used to return 'none' after 0 iterations)."""
+    path, _ = wall_map
+    p = hil("plan", "--map", str(path), "--resolution", "0.5", "--start", "3,3", "--goal", "17,3", "--deadline", "0.5",
+            "--inflate", "0", "--json", env={"NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}, timeout=900)
+    assert p.returncode == 0, p.stderr
+    assert "compiled the planner (cold numba cache)" in p.stderr
+    d = json.loads(p.stdout)
+    assert d["compiled"] is True and d["status"] == "exact" and d["iterations"] > 0

@@ -8,6 +8,11 @@ and algorithm, in one process, length objective, no inflation, no turning-radius
 * path length at the 0.05, 0.2 and 1 s budgets as a ratio to the optimum (median over seeds),
   the optimum being the visibility-graph shortest path of ``hil.optimum`` on the same grid.
 
+* the end-to-end wait of ``hil plan --scenario MAP --deadline B`` for every budget B: the whole
+  process as a user sees it (interpreter start, imports, loading the compiled planner, set-up,
+  search, output), with the one-off costs reported apart (``warm_up_s``, ``setup_s`` and the
+  rest, ``startup_s``) next to the search time.
+
 If the ``ompl`` Python package is importable, OMPL's geometric RRT* (RealVector(2) space, a
 Python state-validity checker on the same grid, the same range and goal) runs on the same maps
 and budgets, and the report gives our/OMPL ratios. ``ompl`` is not a project dependency
@@ -73,6 +78,8 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--quick", action="store_true",
                    help="CI-size run: 2 seeds, budgets 0.05,0.2 s (overrides --seeds and --budgets)")
     p.add_argument("--no-ompl", action="store_true", help="do not run OMPL even if it is installed")
+    p.add_argument("--no-end-to-end", action="store_true",
+                   help="skip the end-to-end `hil plan --deadline B` processes")
     p.add_argument("--step", type=float, default=None, metavar="M",
                    help="extension length / OMPL range (m, default: [planner] step)")
     p.set_defaults(func=run)
@@ -187,6 +194,31 @@ def _measure(runner, seeds: list[int], budgets: tuple[float, ...], optimum: floa
     }
 
 
+def end_to_end(map_name: str, algorithm: str, budget_s: float, args: argparse.Namespace) -> dict[str, Any]:
+    """Wall time of one `hil plan --scenario MAP --deadline B` process (s), split into the search
+    and the one-off costs the command reports (warm-up, set-up; startup_s = the rest)."""
+    import json
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "hil", "plan", "--scenario", map_name, "--algorithm", algorithm, "--objective",
+           "length", "--inflate", "0", "--deadline", f"{budget_s:g}", "--seed", "1", "--json"]
+    if getattr(args, "config", None):
+        cmd[3:3] = ["--config", str(args.config)]
+    for ov in getattr(args, "overrides", []) or []:
+        cmd[3:3] = ["--set", ov]
+    t0 = time.monotonic()
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    wall = time.monotonic() - t0
+    if proc.returncode not in (0, 1) or not proc.stdout.strip():
+        return {"error": (proc.stderr.strip().splitlines() or ["no output"])[-1], "wall_s": wall}
+    d = json.loads(proc.stdout)
+    search, setup, warm = d["planning_time_s"], d["setup_s"], d["warm_up_s"]
+    return {"algorithm": algorithm, "deadline_s": budget_s, "wall_s": wall, "search_s": search, "setup_s": setup,
+            "warm_up_s": warm, "compiled": d["compiled"], "startup_s": max(0.0, wall - search - setup - warm),
+            "status": d["status"], "length": d["length"]}
+
+
 def run(args: argparse.Namespace) -> int:
     from planner.gridmap import OccupancyGrid
     from planner.problem import PlanningProblem
@@ -241,6 +273,12 @@ def run(args: argparse.Namespace) -> int:
                     }
             except Exception as exc:  # an OMPL API mismatch must not lose our own figures
                 entry["ompl_rrt_star"] = {"error": f"{type(exc).__name__}: {exc}"}
+        if not args.no_end_to_end:
+            alg = "ddrrt-star" if "ddrrt-star" in args.algorithms else args.algorithms[0]
+            entry["end_to_end"] = [end_to_end(name, alg, b, args) for b in budgets]
+            for e2e in entry["end_to_end"]:
+                if "error" not in e2e:
+                    e2e["length_ratio"] = (e2e["length"] / opt.length) if e2e["length"] is not None else None
         report["maps"][name] = entry
     _print_table(report)
     console.emit(args, report)
@@ -273,6 +311,23 @@ def _print_table(report: dict[str, Any]) -> None:
             v = e["rrt_star_vs_ompl"]
             lines.append(f"{'':15} {'ours/OMPL RRT*':18} {_f(v['iterations_per_s'], '9.2f')} {'':>10} "
                          + " ".join(f"{_f(v.get('ratio_' + b), '8.4f')}" for b in budgets))
+    e2e_lines = []
+    for name, e in report["maps"].items():
+        for r in e.get("end_to_end", []):
+            if "error" in r:
+                e2e_lines.append(f"{name:15} error: {r['error']}")
+                continue
+            e2e_lines.append(f"{name:15} {r['algorithm']:12} {r['deadline_s']:8g} {r['wall_s']:8.2f} {r['search_s']:8.3f} "
+                             f"{r['setup_s'] * 1e3:9.1f} {r['warm_up_s']:8.2f} {r['startup_s']:9.2f} "
+                             f"{_f(r.get('length_ratio'), '8.4f')}")
+    if e2e_lines:
+        lines.append("")
+        lines.append(f"{'end to end':15} {'hil plan':12} {'B (s)':>8} {'wall (s)':>8} {'search':>8} {'setup ms':>9} "
+                     f"{'warm-up':>8} {'startup':>9} {'x':>8}")
+        lines.extend(e2e_lines)
+        lines.append("(one `hil plan --scenario MAP --deadline B` process each: wall = what a user waits; search is "
+                     "the budget; set-up, warm-up (numba cache load or compile) and startup (interpreter, imports, "
+                     "output) are one-off costs)")
     lines.append(f"(x@B = path length at budget B / optimum, median over {report['seeds']} seeds, 'unsolved' = no "
                  f"exact solution in most seeds; "
                  f"targets: >= 15000 iter/s, first <= 40 ms on bug trap and maze, <= 1.03 @0.2 s, <= 1.01 @1 s)")
