@@ -166,6 +166,24 @@ def _command_long(cmd: int, *p: float, sysid: int = 245) -> bytes:
     return bytes(mav.command_long_encode(1, 1, cmd, 0, *p).pack(mav))
 
 
+class _VehicleOnly:
+    """The command API (autopilot_bridge.vehicle_api.VehicleApi) over a bare Vehicle, position (0, 0)."""
+
+    def __init__(self, vehicle) -> None:
+        self.v = vehicle
+
+    def set_mode(self, mode):
+        from autopilot_bridge.vehicle_api import Result
+
+        return Result(*self.v.set_mode(mode, (0.0, 0.0)))
+
+    def mission(self):
+        return self.v.mission
+
+    def parameters(self):
+        return []
+
+
 def test_set_mode_with_a_custom_sub_mode_is_refused_not_read_as_a_rover_mode(closing):
     """MAVSDK sets a non-ArduPilot vehicle's mode the PX4 way: DO_SET_MODE param2 = main mode, param3 = sub
     mode; its "start mission" is (4, 4). Rover's custom mode 4 is HOLD: that must be refused (DENIED),
@@ -178,8 +196,8 @@ def test_set_mode_with_a_custom_sub_mode_is_refused_not_read_as_a_rover_mode(clo
     link = GcsLink(params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO)
     closing(link)
     vehicle = Vehicle([Waypoint(10.0, 10.0, 3.0)], armed=True, mode=Mode.MANUAL)
-    link.ap = SimpleNamespace(vehicle=vehicle)
-    link.state = SimpleNamespace(x=0.0, y=0.0)
+    link.attach(_VehicleOnly(vehicle))
+    link.status = SimpleNamespace(position=(0.0, 0.0))
     gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     closing(gcs)
     gcs.bind(("127.0.0.1", 0))
