@@ -65,6 +65,9 @@ from autopilot_bridge.vehicle import Vehicle, Waypoint
 from autopilot_bridge.vehicle_api import Result, VehicleStatus
 
 
+SPEED_RANGE = (0.2, 3.0)   # m/s: speed set-points a GCS may give (3 m/s: the hull's top speed)
+
+
 @dataclass(frozen=True)
 class Propulsion:
     """What the controller knows of the vessel: nominal surge model and the thrusters."""
@@ -401,7 +404,9 @@ class Autopilot:
 
     def speed_setpoint(self) -> float:
         """m/s along the path: DO_CHANGE_SPEED's until the mode changes, else ``cruise_speed``."""
-        return self.vehicle.speed if self.vehicle.speed is not None else self.p.cruise_speed
+        if self.vehicle.speed is None:
+            return self.p.cruise_speed
+        return min(max(self.vehicle.speed, SPEED_RANGE[0]), SPEED_RANGE[1])  # a mission item's, unchecked
 
     def _publish(self, t: float, s: NavState | None, cmd: Thrust | None) -> None:
         """The frame's frozen status, handed to the ground-station link."""
@@ -540,7 +545,7 @@ class Autopilot:
             Param("PLN_PNG_PROB", planner("png_probability"),
                   lambda v: self.set_planner_override("png_probability", v), 0.0, 1.0,
                   "probability of sampling the PNG node (section 3.2)"),
-            Param("CRUISE_SPEED", lambda: self.p.cruise_speed, set_ap("cruise_speed"), 0.2, 3.0,
+            Param("CRUISE_SPEED", lambda: self.p.cruise_speed, set_ap("cruise_speed"), *SPEED_RANGE,
                   "speed set-point along the local path (3 m/s: the hull's top speed)", "m/s"),
             Param("HDG_KP", lambda: self.control_params.heading_kp, set_ctl("heading_kp"), 0.0, 1000.0,
                   "heading PID proportional gain", "N m/rad"),
