@@ -156,18 +156,19 @@ LOITER_S = 5.0
 def qgc_mission(geo: Any) -> list[tuple]:
     """The mission as QGroundControl writes it: (frame, command, p1, p2, p3, p4, lat, lon, alt) per item.
 
-    0 home (NAV_WAYPOINT at the start), 1-2 waypoints ~10 m apart, 3 NAV_LOITER_TIME 5 s, 4 DO_CHANGE_SPEED
+    0 home (NAV_WAYPOINT at the start), 1-2 waypoints ~11 m apart, 3 NAV_LOITER_TIME 5 s, 4 DO_CHANGE_SPEED
     0.7 m/s (frame MISSION, position 0/0, as QGC writes DO items; ArduPilot starts it with item 3), 5
-    NAV_RETURN_TO_LAUNCH (29 m back home). Every leg is shorter than 30 m."""
+    NAV_RETURN_TO_LAUNCH (28 m back home). Open water west of the first pier (clearance >= 7 m on every
+    leg; the scenario's own reference path crosses that pier), every leg shorter than 30 m."""
     def at(x: float, y: float) -> tuple[float, float]:
         return geo.sea_level_to_geodetic(y, x)
 
     rel, mis = M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_MISSION
     return [
         (M.MAV_FRAME_GLOBAL, M.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0, *at(*HOME_MAP), 0.0),
-        (rel, M.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0, *at(28.3, 47.5), 0.0),
-        (rel, M.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0, *at(34.7, 55.0), 0.0),
-        (rel, M.MAV_CMD_NAV_LOITER_TIME, LOITER_S, 0, 0, 0, *at(41.0, 62.5), 0.0),
+        (rel, M.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0, *at(28.0, 50.0), 0.0),
+        (rel, M.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0, *at(30.0, 60.0), 0.0),
+        (rel, M.MAV_CMD_NAV_LOITER_TIME, LOITER_S, 0, 0, 0, *at(26.0, 68.0), 0.0),
         (mis, M.MAV_CMD_DO_CHANGE_SPEED, 1, MISSION_SPEED, -1, 0, 0.0, 0.0, 0.0),
         (rel, M.MAV_CMD_NAV_RETURN_TO_LAUNCH, 0, 0, 0, 0, 0.0, 0.0, 0.0),
     ]

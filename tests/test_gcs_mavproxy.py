@@ -157,7 +157,7 @@ def test_mavproxy_mission_with_speed_loiter_and_return_to_launch(tmp_path):
         assert pos is not None and at_home(pos, GEO), pos
         # Still up, still in AUTO at the mission's end: the next mission (one waypoint) is taken and flown.
         assert proc.poll() is None
-        lat, lon = GEO.sea_level_to_geodetic(47.5, 28.3)
+        lat, lon = GEO.sea_level_to_geodetic(50.0, 28.0)
         ack = watcher.upload([(M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0,
                                int(round(lat * 1e7)), int(round(lon * 1e7)), 0.0)])
         assert ack is not None and ack.type == M.MAV_MISSION_ACCEPTED
