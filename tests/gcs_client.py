@@ -149,7 +149,7 @@ def stop_run(proc: subprocess.Popen, timeout: float = 60.0) -> tuple[str, str]:
 
 # -- the mission every GCS session test flies (issue 12): short legs in the harbour's open water ----------
 HOME_MAP = (22.0, 40.0)                       # the harbour's start, map x east / y north, m
-MISSION_SPEED = 0.7                           # m/s, the DO_CHANGE_SPEED item's
+MISSION_SPEED = 0.75                          # m/s, the DO_CHANGE_SPEED item's (exact in float32, as on the wire)
 LOITER_S = 5.0
 
 
@@ -157,7 +157,7 @@ def qgc_mission(geo: Any) -> list[tuple]:
     """The mission as QGroundControl writes it: (frame, command, p1, p2, p3, p4, lat, lon, alt) per item.
 
     0 home (NAV_WAYPOINT at the start), 1-2 waypoints ~11 m apart, 3 NAV_LOITER_TIME 5 s, 4 DO_CHANGE_SPEED
-    0.7 m/s (frame MISSION, position 0/0, as QGC writes DO items; ArduPilot starts it with item 3), 5
+    0.75 m/s (frame MISSION, position 0/0, as QGC writes DO items; ArduPilot starts it with item 3), 5
     NAV_RETURN_TO_LAUNCH (28 m back home). Open water west of the first pier (clearance >= 7 m on every
     leg; the scenario's own reference path crosses that pier), every leg shorter than 30 m."""
     def at(x: float, y: float) -> tuple[float, float]:

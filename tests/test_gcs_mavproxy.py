@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 import pytest
-from gcs_client import Gcs, at_home, check_mission_session, qgc_mission, qgc_wpl, start_run, stop_run
+from gcs_client import MISSION_SPEED, Gcs, at_home, check_mission_session, qgc_mission, qgc_wpl, start_run, stop_run
 
 from common.geodesy import LocalFrame
 from hil.hilrun import free_udp_port
@@ -144,7 +144,7 @@ def test_mavproxy_mission_with_speed_loiter_and_return_to_launch(tmp_path):
         mp.expect("Saved 6 waypoints")
         got = [ln.split("\t") for ln in (state / "way.txt").read_text().splitlines()[1:]]
         assert [int(r[3]) for r in got] == [16, 16, 16, 19, 178, 20]      # read back as written
-        assert float(got[4][5]) == 0.7 and float(got[3][4]) == 5.0
+        assert float(got[4][5]) == MISSION_SPEED and float(got[3][4]) == 5.0
         watcher = Gcs(f"udpout:127.0.0.1:{port}", sysid=254)
         assert watcher.connect(60) is not None and watcher.recv("GLOBAL_POSITION_INT", 60) is not None
         mp.send("arm throttle")

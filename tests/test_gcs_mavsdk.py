@@ -238,7 +238,9 @@ def test_mavsdk_mission_with_speed_loiter_and_return_to_launch(tmp_path):
                  for i, (fr, cmd, p1, p2, p3, p4, lat, lon, alt) in enumerate(qgc_mission(GEO))]
         assert mission.upload_mission(items) == MissionRawResult.SUCCESS
         got = mission.download_mission()
-        assert len(got) == 6 and all(_same(a, b) for a, b in zip(items, got)), [str(g) for g in got]
+        assert len(got) == 6
+        differ = [(str(a), str(b)) for a, b in zip(items, got) if not _same(a, b)]
+        assert not differ, differ
         assert positions.wait(lambda p: True, 60) is not None
         assert action.arm() is not None
         ack = _set_rover_mode(direct, ROVER_AUTO)
