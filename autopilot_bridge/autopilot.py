@@ -10,13 +10,20 @@ Event-driven by the simulator's sensor frames (one per IMU period). For each new
    end of the cycle's deadline; its answer is collected without blocking (real time), or at
    exactly ``planning_deadline`` later in simulated time (lockstep, where the simulator waits
    for us, so waiting costs no simulated time and runs are repeatable);
-3. behaviour arbitration: follow the newest valid local path; when there is none (planner
-   failure, overrun with nothing usable, vessel inside an inflated obstacle), the reactive
-   avoidance behaviour (:mod:`autopilot_bridge.reactive`) steers until planning succeeds again;
+3. the active Rover mode (:mod:`autopilot_bridge.modes`) says where the thrust comes from; a mode
+   that navigates follows the vehicle's route through the behaviour state machine
+   (:mod:`autopilot_bridge.behaviour`): the newest valid local path (PLANNED); when there is none
+   (planner failure, overrun with nothing usable, vessel inside an inflated obstacle), the reactive
+   avoidance behaviour (:mod:`autopilot_bridge.reactive`) steers until planning succeeds again
+   (FALLBACK); station keeping at the route's end (COMPLETE/RETURNING);
 4. line-of-sight guidance, heading PID and speed pole placement, allocation to the two thrusters
    (:mod:`autopilot_bridge.control`), sent back as HIL_ACTUATOR_CONTROLS answering that frame,
    or as DroneCAN RawCommand (int14) when the actuator back-end is
    :class:`autopilot_bridge.can_actuators.CanActuators`.
+
+Ground stations command it through :class:`autopilot_bridge.vehicle_api.VehicleApi` (arm, set_mode,
+set_param, goto, ...), which this class implements, and read the frozen
+:class:`autopilot_bridge.vehicle_api.VehicleStatus` it publishes with every frame.
 
 A frame that repeats the last one (the simulator re-sends after a lost command) is answered with
 the same command again. Sensor time jumping backwards means the simulator restarted: navigation
@@ -48,21 +55,21 @@ from autopilot_bridge.control import (
 from autopilot_bridge.guidance import GuidanceOutput, LineOfSight
 from autopilot_bridge.hil_link import HilLink, SensorFrame
 from autopilot_bridge.local_planning import CycleInput, LocalPlan, World, map_to_ned_path, ned_to_map
+from autopilot_bridge.mission_commands import MissionCommand
+from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavigationFilter, NavigationParams, NavState
 from autopilot_bridge.obstacle_map import SensedObstacles, path_blocked
+from autopilot_bridge.parameters import Param, ParamTable
 from autopilot_bridge.plan_commitment import CommitmentParams, keep_current
 from autopilot_bridge.planning_worker import PlannerWorker, PlanRequest
 from autopilot_bridge.reactive import ReactiveAvoidance
 from autopilot_bridge.telemetry import Telemetry
 from autopilot_bridge.tracking_stats import TrackingStats
+from autopilot_bridge.vehicle import Vehicle, Waypoint
+from autopilot_bridge.vehicle_api import Result, VehicleStatus
 from common.dronecan_codec import RAW_COMMAND_MAX, quantize
 from common.mavlink import MAV_TYPE as M
 from common.percentiles import StreamingPercentiles
-from autopilot_bridge.mission_commands import MissionCommand
-from autopilot_bridge.modes import MODES, Mode
-from autopilot_bridge.parameters import Param, ParamTable
-from autopilot_bridge.vehicle import Vehicle, Waypoint
-from autopilot_bridge.vehicle_api import Result, VehicleStatus
 
 
 SPEED_RANGE = (0.2, 3.0)   # m/s: speed set-points a GCS may give (3 m/s: the hull's top speed)
