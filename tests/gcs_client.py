@@ -183,11 +183,13 @@ def qgc_wpl(items: list[tuple]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def check_mission_session(tlog: Path, geo: Any, count: int = 6) -> None:
+def check_mission_session(tlog: Path, geo: Any, count: int = 6, speedup: float = 4.0) -> None:
     """What the boat sent during the session (the run's tlog): every item reached, the speed change in
-    VFR_HUD, the STATUSTEXTs of the speed and the loiter."""
+    VFR_HUD, the STATUSTEXTs of the speed and the loiter; and lockstep paced to at most ``speedup`` x wall
+    time while armed (an upper bound: a slow machine only lowers the ratio)."""
     log = mavutil.mavlink_connection(str(tlog), dialect="ardupilotmega")
     reached, texts, speeds, current = [], [], {}, None
+    armed, paced = False, []          # (wall s as the tap stamped it, vehicle s) while armed
     while (m := log.recv_match()) is not None:
         if m.get_srcSystem() != 1 or m.get_srcComponent() != 1:
             continue
@@ -200,7 +202,14 @@ def check_mission_session(tlog: Path, geo: Any, count: int = 6) -> None:
             speeds.setdefault(current, []).append(m.groundspeed)
         elif kind == "STATUSTEXT":
             texts.append(m.text)
+        elif kind == "HEARTBEAT":
+            armed = bool(m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
+        elif kind == "GLOBAL_POSITION_INT" and armed:
+            paced.append((m._timestamp, m.time_boot_ms * 1e-3))
     assert set(range(count)) <= set(reached), reached
+    assert len(paced) > 50
+    sim, wall = paced[-1][1] - paced[0][1], paced[-1][0] - paced[0][0]
+    assert sim <= speedup * 1.1 * wall + 1.0, (sim, wall)
     assert reached.count(5) >= 1 and reached.index(4) < reached.index(3), reached  # DO item starts with item 3
     before = speeds.get(1, []) + speeds.get(2, [])
     rtl = speeds.get(5, [])
