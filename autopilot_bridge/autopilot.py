@@ -676,7 +676,10 @@ class Autopilot:
             frames = self.link.receive(timeout=poll_s)
             received_at = time.perf_counter()
             for f in frames:
-                self.on_frame(f, received_at)
+                try:
+                    self.on_frame(f, received_at)
+                except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+                    self._numeric_fault(f, received_at, exc)
             if not frames and not self.lockstep and self.worker.watchdog():
                 self._event(self.last_t or 0.0, "planner overran its deadline: worker killed and restarted")
                 self.pending_since = None
@@ -684,6 +687,16 @@ class Autopilot:
                 self.telemetry.service()
             if self.actuators is not self.link:
                 self.actuators.service()
+
+    def _numeric_fault(self, f: SensorFrame, received_at: float, exc: BaseException) -> None:
+        """A numeric error escaped a frame (docs/security.md): stop the thrusters for this frame,
+        count it, and restart navigation, which re-initialises on the next GPS fix."""
+        self.link.rejects["control_numeric_fault"] += 1
+        self._event(f.t if math.isfinite(f.t) else 0.0, f"numeric fault ({type(exc).__name__}): stopped, "
+                    "navigation restarts")
+        self.nav = NavigationFilter(self.nav_params)
+        self.last_frame_usec = f.time_usec
+        self._send(f.time_usec, self.zero_thrust, received_at)
 
     def summary(self) -> dict[str, Any]:
         lat = self.stats.latency_ms

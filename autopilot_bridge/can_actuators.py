@@ -8,7 +8,10 @@ Every command is one ``uavcan.equipment.esc.RawCommand`` transfer from the autop
 (cmd[0] port, cmd[1] starboard, int14 in [-8191, 8191], negative = reverse), at high priority.
 The node also sends ``uavcan.protocol.NodeStatus`` at ``node_status_rate_hz`` of frame time, and
 reads ``uavcan.equipment.esc.Status`` and NodeStatus back from the ESC nodes; everything else,
-and anything malformed, is dropped and counted. Frames of its own node ID are ignored.
+and anything malformed, is dropped and counted. Frames of its own node ID are ignored. Status and
+NodeStatus count only from the configured ESC nodes (others: ``unknown_node``), only for the ESC
+index that node owns (``esc_index_mismatch``), and never twice with one transfer ID
+(``duplicate_transfer_id``, a replay). One service() call reads at most MAX_FRAMES_PER_SERVICE frames.
 
 Lockstep: the simulator advances one frame per answer, and a RawCommand carries no frame time,
 so each answer is also sent as HIL_ACTUATOR_CONTROLS (``lockstep_token``) holding exactly the
@@ -27,6 +30,8 @@ import can
 
 from common import dronecan_codec as dc
 from common.can_params import CanParams
+
+MAX_FRAMES_PER_SERVICE = 256
 
 
 class CanActuators:
@@ -83,14 +88,18 @@ class CanActuators:
     def service(self, timeout: float = 0.0) -> None:
         """Read every frame queued now: ESC Status and NodeStatus of the ESC nodes."""
         msg = self.bus.recv(timeout)
-        while msg is not None:
+        for _ in range(MAX_FRAMES_PER_SERVICE):
+            if msg is None:
+                return
             tr = self.receiver.feed(msg)
             if tr is not None:
                 self._on_transfer(tr)
-            msg = self.bus.recv(0.0)
+            msg = self.bus.recv(0.0) if _ < MAX_FRAMES_PER_SERVICE - 1 else None
 
     def _on_transfer(self, tr: dc.Transfer) -> None:
-        self.tracker.observe(tr)
+        if not self.tracker.observe(tr):
+            self.rejects["duplicate_transfer_id"] += 1
+            return
         m = tr.msg
         if tr.full_name == dc.NODE_STATUS:
             self.esc_health[tr.source_node] = int(m.health)

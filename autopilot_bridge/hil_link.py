@@ -11,6 +11,15 @@ AIS_VESSEL reports of other ships (from the simulator's AIS stand-in, or any oth
 link) are decoded into :class:`~autopilot_bridge.ais_tracking.AisReport` and queued for the
 tracker (:meth:`HilLink.take_ais`), stamped with the newest sensor time. AIS_VESSEL from the
 simulator's truth component is the traffic truth: dropped and counted like HIL_STATE_QUATERNION.
+
+Only the simulator, only plausible numbers (docs/security.md): sensor messages count only when
+they carry the simulator's system and component id (``sim_ids``) and, with ``sensors_from``,
+come from the simulator's socket; every value is checked finite and in a physical range before it
+reaches navigation (an implausible measurement is dropped, the rest of the frame kept); and a
+frame's time must move forward by at most ``max_time_step`` from the last accepted one. A frame
+off that timeline is refused unless :data:`TIMELINE_CONFIRM` consecutive frames agree on the new
+timeline (a restarted simulator, or a long gap): one forged future or past frame can neither
+stall lockstep nor reset navigation. Every refusal is counted in :attr:`HilLink.rejects`.
 """
 
 from __future__ import annotations
@@ -26,6 +35,21 @@ from common.udp import UdpEndpoint
 
 TAKEN = ("HIL_SENSOR", "HIL_GPS", "ODOMETRY", "OBSTACLE_DISTANCE", "HIL_STATE_QUATERNION", "AIS_VESSEL")
 UINT16_MAX = 65535
+
+# Plausibility limits of a surface vessel's sensors (far beyond what the hull can do, far below
+# what breaks the filter).
+MAX_YAW_RATE = 10.0           # rad/s, gyro z
+MAX_MAG_GAUSS = 10.0          # magnetometer field magnitude (Earth: ~0.5 gauss)
+MAX_GPS_DISTANCE = 100e3      # m from the NED origin
+MAX_SPEED = 50.0              # m/s, GPS ground speed per axis and DVL velocity
+TIMELINE_CONFIRM = 3          # consecutive consistent frames that establish a new timeline
+MAX_DATAGRAMS_PER_RECEIVE = 256
+
+# Refusal reasons counted in HilLink.rejects besides the codec's framing reasons.
+WRONG_SOURCE_ID = "wrong_source_id"
+TIME_JUMP = "time_jump"            # a frame off the current timeline (forward beyond max_time_step, or back)
+IMPLAUSIBLE = "implausible_"       # + gyro, compass, gps, dvl, range: a value dropped from a frame
+NONFINITE_COMMAND = "nonfinite_command"  # a NaN/inf thruster command replaced by 0 (stop)
 
 
 @dataclass(frozen=True)
@@ -68,9 +92,25 @@ class HilLink:
 
     def __init__(self, listen: str, actuators_to: tuple[str, ...], geo: LocalFrame, *, declination: float = 0.0,
                  system_id: int = 1, component_id: int = 1, send_loss: float = 0.0, recv_loss: float = 0.0,
-                 loss_seed: int = 0, extra_destinations: tuple[str, ...] = (), truth_component_id: int = 52) -> None:
+                 loss_seed: int = 0, extra_destinations: tuple[str, ...] = (), truth_component_id: int = 52,
+                 sim_ids: tuple[int, int] | None = None, sensors_from: str | None = None,
+                 max_time_step: float = 1.0) -> None:
+        """``sim_ids``: (system, component) id of the simulator (None: any); ``sensors_from``:
+        "HOST:PORT" of the simulator's socket (None: any address); ``max_time_step``: largest
+        forward step (s) of sensor time between consecutive accepted frames."""
         self.ep = UdpEndpoint(listen, list(actuators_to) + list(extra_destinations),
                               send_loss=send_loss, recv_loss=recv_loss, loss_seed=loss_seed)
+        if sensors_from:
+            try:
+                self.ep.set_peer(sensors_from)
+            except (ValueError, OSError) as exc:
+                self.ep.close()
+                raise ValueError(f"sensors_from {sensors_from!r}: {exc}") from None
+        self.sim_ids = sim_ids
+        self.max_step_usec = int(round(max_time_step * 1e6))
+        self.last_usec: int | None = None                # time of the last accepted frame
+        self._candidate: tuple[int, int] | None = None   # (last time, frames) of another timeline
+        self.timeline_switches = 0
         self.codec = Codec(system_id, component_id, accept=TAKEN)
         self.geo = geo
         self.declination = declination
@@ -96,6 +136,10 @@ class HilLink:
         ais = []
         for m in msgs:
             kind = m.get_type()
+            if kind != "AIS_VESSEL" and self.sim_ids is not None and \
+                    (m.get_srcSystem(), m.get_srcComponent()) != self.sim_ids:
+                self.rejects[WRONG_SOURCE_ID] += 1
+                continue
             if kind == "AIS_VESSEL":
                 if m.get_srcComponent() == self.truth_component_id:
                     self.truth_ignored += 1
@@ -111,6 +155,10 @@ class HilLink:
                 obstacles = m
             else:  # HIL_STATE_QUATERNION: the truth is for evaluation only
                 self.truth_ignored += 1
+        if sensor is not None and not self._on_timeline(int(sensor.time_usec)):
+            self.rejects[TIME_JUMP] += 1
+            sensor = gps = odo = obstacles = None
+            ais = []
         if sensor is not None:
             self.last_t = sensor.time_usec * 1e-6
         for m in ais:
@@ -121,23 +169,62 @@ class HilLink:
                 self.rejects["frame_without_hil_sensor"] += 1
             return None
         heading = None
-        if math.isfinite(sensor.xmag) and math.isfinite(sensor.ymag) and (sensor.xmag or sensor.ymag):
-            heading = math.atan2(-sensor.ymag, sensor.xmag) + self.declination
-        yaw_rate = float(sensor.zgyro) if math.isfinite(sensor.zgyro) else None
+        mx, my = float(sensor.xmag), float(sensor.ymag)
+        if math.isfinite(mx) and math.isfinite(my) and (mx or my):
+            if math.hypot(mx, my) <= MAX_MAG_GAUSS:
+                heading = math.atan2(-my, mx) + self.declination
+            else:
+                self.rejects[IMPLAUSIBLE + "compass"] += 1
+        elif not (math.isfinite(mx) and math.isfinite(my)):
+            self.rejects[IMPLAUSIBLE + "compass"] += 1
+        yaw_rate = float(sensor.zgyro)
+        if not (math.isfinite(yaw_rate) and abs(yaw_rate) <= MAX_YAW_RATE):
+            self.rejects[IMPLAUSIBLE + "gyro"] += 1
+            yaw_rate = None
         fix, dropout = None, False
         if gps is not None:
             if gps.fix_type >= 3:
-                north, east = self.geo.geodetic_to_sea_level(gps.lat * 1e-7, gps.lon * 1e-7)
-                fix = GpsFix(north, east, gps.vn * 0.01, gps.ve * 0.01)
+                fix = self._gps_fix(gps)
             else:
                 dropout = True
         dvl = None
         if odo is not None and odo.child_frame_id == MAV_TYPE.MAV_FRAME_BODY_FRD:
-            if math.isfinite(odo.vx) and math.isfinite(odo.vy):
-                dvl = (float(odo.vx), float(odo.vy))
+            vx, vy = float(odo.vx), float(odo.vy)
+            if math.isfinite(vx) and math.isfinite(vy) and abs(vx) <= MAX_SPEED and abs(vy) <= MAX_SPEED:
+                dvl = (vx, vy)
+            else:
+                self.rejects[IMPLAUSIBLE + "dvl"] += 1
         scan = self._scan(obstacles) if obstacles is not None else None
         self.frames += 1
         return SensorFrame(int(sensor.time_usec), yaw_rate, heading, fix, dropout, dvl, scan)
+
+    def _on_timeline(self, usec: int) -> bool:
+        """Is a frame at ``usec`` on the current timeline (a repeat, or at most max_time_step ahead)?
+        Off it, frames are refused until TIMELINE_CONFIRM consecutive ones agree on a new one."""
+        last = self.last_usec
+        if last is None or 0 <= usec - last <= self.max_step_usec:
+            self.last_usec, self._candidate = usec, None
+            return True
+        c = self._candidate
+        if c is not None and 0 <= usec - c[0] <= self.max_step_usec:
+            c = (usec, c[1] + 1)
+        else:
+            c = (usec, 1)
+        if c[1] >= TIMELINE_CONFIRM:
+            self.last_usec, self._candidate = usec, None
+            self.timeline_switches += 1
+            return True
+        self._candidate = c
+        return False
+
+    def _gps_fix(self, gps) -> GpsFix | None:
+        lat, lon, vn, ve = gps.lat * 1e-7, gps.lon * 1e-7, gps.vn * 0.01, gps.ve * 0.01
+        if abs(lat) <= 90.0 and abs(lon) <= 180.0 and abs(vn) <= MAX_SPEED and abs(ve) <= MAX_SPEED:
+            north, east = self.geo.geodetic_to_sea_level(lat, lon)
+            if math.isfinite(north) and math.isfinite(east) and math.hypot(north, east) <= MAX_GPS_DISTANCE:
+                return GpsFix(north, east, vn, ve)
+        self.rejects[IMPLAUSIBLE + "gps"] += 1
+        return None
 
     def _scan(self, m) -> RangeScan | None:
         """OBSTACLE_DISTANCE per the MAVLink spec: cm; max_distance + 1 = nothing; UINT16_MAX = unused."""
@@ -145,7 +232,7 @@ class HilLink:
             self.rejects["obstacle_distance_unsupported"] += 1
             return None
         inc = m.increment_f if m.increment_f > 0 else float(m.increment)
-        if inc <= 0:
+        if not (0 < inc <= 360.0 and math.isfinite(m.angle_offset)):
             self.rejects["obstacle_distance_unsupported"] += 1
             return None
         bearings, ranges = [], []
@@ -162,7 +249,7 @@ class HilLink:
         if first is None:
             return []
         out = []
-        for datagram in [first, *self.ep.drain()]:
+        for datagram in [first, *self.ep.drain(limit=MAX_DATAGRAMS_PER_RECEIVE)]:
             frame = self.decode(datagram)
             if frame is not None:
                 out.append(frame)
@@ -175,10 +262,22 @@ class HilLink:
 
     def send_controls(self, time_usec: int, port: float, stdb: float, armed: bool = True) -> None:
         """HIL_ACTUATOR_CONTROLS answering the frame at ``time_usec``: controls[0] port, [1] starboard."""
-        controls = [float(port), float(stdb)] + [0.0] * 14
+        port, stdb = float(port), float(stdb)
+        if not (math.isfinite(port) and math.isfinite(stdb)):
+            self.rejects[NONFINITE_COMMAND] += 1  # a numeric fault upstream: stop rather than send NaN
+            port = stdb = 0.0
+        controls = [port, stdb] + [0.0] * 14
         mode = MAV_TYPE.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0
         self.ep.send(self.codec.encode("hil_actuator_controls", time_usec, controls, mode, 0))
         self.commands_sent += 1
+
+    def summary(self) -> dict:
+        """The link's refusals by reason, its endpoint's (source address, kernel drops) and
+        timeline switches (simulator restarts or long gaps accepted)."""
+        return {"rejects": dict(sorted(self.rejects.items())), "frames": self.frames,
+                "truth_ignored": self.truth_ignored, "timeline_switches": self.timeline_switches,
+                "sensors_from": None if self.ep.peer is None else f"{self.ep.peer[0]}:{self.ep.peer[1]}",
+                **self.ep.counters()}
 
     def send_raw(self, data: bytes) -> None:
         self.ep.send(data)

@@ -14,6 +14,11 @@ time step before updating. Each update is gated by its normalised innovation squ
 against the chi-square quantile of ``gate_probability``: outliers (GPS glitches) are rejected
 and counted. Without GPS the filter dead-reckons from gyro and compass with constant body
 velocity, and its position covariance grows.
+
+Numeric faults never escape: a measurement that is not finite, a singular innovation covariance
+(``LinAlgError``) or an update or prediction that would leave a NaN/inf in the state or its
+covariance is refused, the filter keeps its previous estimate (dead reckoning goes on) and the
+refusal is counted in ``stats.rejected`` as ``numeric_<kind>`` (docs/security.md).
 """
 
 from __future__ import annotations
@@ -91,6 +96,10 @@ class NavigationFilter:
         self._heading: float | None = None
         self._consecutive_gps_rejections = 0
         self._gates: dict[int, float] = {}
+        # Per-frame work reuses these (the control loop runs this 100 times a second): F keeps its
+        # identity entries and only the Jacobian's entries are rewritten; Q depends on dt only.
+        self._F = np.eye(DIM)
+        self._Q: dict[float, np.ndarray] = {}
 
     # -- life cycle ------------------------------------------------------------------------
     @property
@@ -118,10 +127,13 @@ class NavigationFilter:
             return False
         if dt == 0.0:
             return True
+        if not math.isfinite(dt):
+            self._numeric("predict")
+            return False
         x = self.ekf.x
         psi, u, v = x[PSI, 0], x[U, 0], x[V, 0]
         c, s = math.cos(psi), math.sin(psi)
-        F = np.eye(DIM)
+        F = self._F
         F[X, PSI] = (-u * s - v * c) * dt
         F[X, U] = c * dt
         F[X, V] = -s * dt
@@ -129,22 +141,35 @@ class NavigationFilter:
         F[Y, U] = s * dt
         F[Y, V] = c * dt
         F[PSI, R] = dt
-        q_a, q_r, q_b = self.p.accel_noise**2, self.p.yaw_accel_noise**2, self.p.gyro_bias_walk**2
-        # Continuous white acceleration integrated over dt (velocity variance q dt, position q dt^3/3).
-        Q = np.zeros((DIM, DIM))
-        Q[U, U] = Q[V, V] = q_a * dt
-        Q[X, X] = Q[Y, Y] = q_a * dt**3 / 3.0
-        Q[R, R] = q_r * dt
-        Q[PSI, PSI] = q_r * dt**3 / 3.0
-        Q[BG, BG] = q_b * dt
+        Q = self._Q.get(dt)
+        if Q is None:
+            if len(self._Q) > 64:   # irregular time steps: keep the cache small
+                self._Q.clear()
+            q_a, q_r, q_b = self.p.accel_noise**2, self.p.yaw_accel_noise**2, self.p.gyro_bias_walk**2
+            # Continuous white acceleration integrated over dt (velocity variance q dt, position q dt^3/3).
+            Q = np.zeros((DIM, DIM))
+            Q[U, U] = Q[V, V] = q_a * dt
+            Q[X, X] = Q[Y, Y] = q_a * dt**3 / 3.0
+            Q[R, R] = q_r * dt
+            Q[PSI, PSI] = q_r * dt**3 / 3.0
+            Q[BG, BG] = q_b * dt
+            self._Q[dt] = Q
         x_new = x.copy()
         x_new[X, 0] += (u * c - v * s) * dt  # eq. (2)
         x_new[Y, 0] += (u * s + v * c) * dt
         x_new[PSI, 0] = wrap_angle(x[PSI, 0] + x[R, 0] * dt)
+        P_new = F @ self.ekf.P @ F.T + Q
+        if not (np.isfinite(x_new).all() and np.isfinite(P_new).all()):
+            self._numeric("predict")  # keep the last estimate; its time stays, so dt grows next time
+            return False
         self.ekf.x = x_new
-        self.ekf.P = F @ self.ekf.P @ F.T + Q
+        self.ekf.P = P_new
         self.t = t
         return True
+
+    def _numeric(self, kind: str) -> None:
+        key = f"numeric_{kind}"
+        self.stats.rejected[key] = self.stats.rejected.get(key, 0) + 1
 
     # -- generic gated update --------------------------------------------------------------
     def _gate(self, dim: int) -> float:
@@ -156,8 +181,25 @@ class NavigationFilter:
     def _update(self, kind: str, t: float, z: np.ndarray, model: MeasurementModel, Rm: np.ndarray,
                 angle_rows: tuple[int, ...] = ()) -> bool:
         """Predict to ``t``, gate the innovation by NIS, then update. ``model(x) -> (H, h(x))``."""
+        if not (math.isfinite(t) and np.isfinite(z).all()):
+            self._numeric(kind)
+            return False
         if not self.predict_to(t):
             return False
+        x0, P0 = self.ekf.x.copy(), self.ekf.P.copy()
+        try:
+            with np.errstate(all="ignore"):  # overflow is caught below, as a non-finite result
+                ok = self._gated_update(kind, z, model, Rm, angle_rows)
+        except (np.linalg.LinAlgError, ArithmeticError, ValueError):
+            ok = None
+        if ok is None or not (np.isfinite(self.ekf.x).all() and np.isfinite(self.ekf.P).all()):
+            self.ekf.x, self.ekf.P = x0, P0
+            self._numeric(kind)
+            return False
+        return ok
+
+    def _gated_update(self, kind: str, z: np.ndarray, model: MeasurementModel, Rm: np.ndarray,
+                      angle_rows: tuple[int, ...]) -> bool:
         H, hx = model(self.ekf.x)
 
         def residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -168,7 +210,12 @@ class NavigationFilter:
 
         y = residual(z, hx)
         S = H @ self.ekf.P @ H.T + Rm
-        nis = float((y.T @ np.linalg.solve(S, y))[0, 0])
+        if S.shape[0] == 1:   # compass, gyro: most updates; a scalar division instead of a solve
+            nis = float(y[0, 0] * y[0, 0] / S[0, 0])
+        else:
+            nis = float((y.T @ np.linalg.solve(S, y))[0, 0])
+        if not math.isfinite(nis):
+            raise ArithmeticError("innovation not finite")
         if nis > self._gate(z.shape[0]):
             self.stats.rejected[kind] = self.stats.rejected.get(kind, 0) + 1
             return False
@@ -213,6 +260,9 @@ class NavigationFilter:
 
     def update_gps_position(self, t: float, north: float, east: float) -> bool:
         """A GPS fix converted to NED metres. Initialises the filter on the first one."""
+        if not (math.isfinite(t) and math.isfinite(north) and math.isfinite(east)):
+            self._numeric("gps_pos")
+            return False
         if self.t is None:
             self._initialize(t, north, east)
             self.stats.updates["gps_pos"] = 1
@@ -246,6 +296,9 @@ class NavigationFilter:
 
     def update_compass(self, t: float, heading: float) -> bool:
         """Compass heading (rad, true north, clockwise)."""
+        if not math.isfinite(heading):
+            self._numeric("compass")
+            return False
         self._heading = heading
         if self.t is None:
             return False
@@ -271,8 +324,9 @@ class NavigationFilter:
         """The current estimate, or None before the first GPS fix."""
         if self.t is None:
             return None
-        x = self.ekf.x[:, 0]
-        pos_cov = self.ekf.P[:2, :2]
-        return NavState(t=self.t, x=float(x[X]), y=float(x[Y]), psi=float(x[PSI]), u=float(x[U]),
-                        v=float(x[V]), r=float(x[R]), gyro_bias=float(x[BG]),
-                        position_std=float(math.sqrt(max(np.linalg.eigvalsh(pos_cov)[-1], 0.0))))
+        x = self.ekf.x[:, 0].tolist()
+        P = self.ekf.P
+        a, b, d = float(P[X, X]), float(P[X, Y]), float(P[Y, Y])
+        largest = 0.5 * (a + d) + math.hypot(0.5 * (a - d), b)   # of the symmetric 2x2 position covariance
+        return NavState(t=self.t, x=x[X], y=x[Y], psi=x[PSI], u=x[U], v=x[V], r=x[R], gyro_bias=x[BG],
+                        position_std=math.sqrt(max(largest, 0.0)))

@@ -4,12 +4,21 @@ The socket is bound to ``bind`` ("HOST:PORT"; port 0 picks a free port, see :att
 and sends every datagram to each destination, from that same socket, so a peer can answer to
 the source address. Only the latest datagram matters on these links, hence :meth:`drain_latest`.
 Optional seeded loss injection per direction simulates a lossy link (both ends can use it).
+
+Only the peer: :meth:`UdpEndpoint.set_peer` makes the endpoint drop, unread by its caller, every
+datagram whose source address is not the peer's (counted in :attr:`UdpEndpoint.wrong_source`).
+An unprivileged local process cannot send from a port another socket holds, so the source
+address is the one thing on loopback that a forger cannot fake (docs/security.md). Reads are
+bounded per call (:attr:`UdpEndpoint.READ_BUDGET`), and :meth:`UdpEndpoint.kernel_drops` reports
+what the kernel dropped because the socket's buffer was full.
 """
 
 from __future__ import annotations
 
+import os
 import select
 import socket
+import time
 
 import numpy as np
 
@@ -36,6 +45,7 @@ class UdpEndpoint:
     """
 
     MAX_DATAGRAM = 65535
+    READ_BUDGET = 4096  # datagrams one recv()/drain() reads at most (refused ones included)
 
     def __init__(self, bind: str = "127.0.0.1:0", destinations: list[str] | tuple[str, ...] = (),
                  send_loss: float = 0.0, recv_loss: float = 0.0, loss_seed: int = 0,
@@ -57,6 +67,31 @@ class UdpEndpoint:
         self._rng = np.random.default_rng(loss_seed)
         self.sent = self.recv_count = self.dropped_out = self.dropped_in = 0
         self.last_sender: tuple[str, int] | None = None
+        self.peer: tuple[str, int] | None = None
+        self.wrong_source = 0     # datagrams dropped: not from the peer
+        self.budget_stops = 0     # drain() calls that stopped at READ_BUDGET with more queued
+
+    def set_peer(self, addr: tuple[str, int] | str | None) -> None:
+        """Accept datagrams only from ``addr`` ("HOST:PORT" or (host, port); None: from anyone)."""
+        if isinstance(addr, str):
+            host, port = parse_hostport(addr)
+            addr = (socket.gethostbyname(host), port)
+        self.peer = None if addr is None else (addr[0], int(addr[1]))
+
+    def kernel_drops(self) -> int | None:
+        """Datagrams the kernel dropped for this socket (receive buffer full), from /proc/net/udp
+        on Linux; None where that is not available."""
+        try:
+            inode = os.fstat(self.sock.fileno()).st_ino
+            with open("/proc/net/udp") as fh:
+                next(fh)
+                for line in fh:
+                    f = line.split()
+                    if len(f) >= 13 and f[9] == str(inode):
+                        return int(f[12])
+        except (OSError, ValueError, StopIteration):
+            return None
+        return None
 
     @property
     def address(self) -> tuple[str, int]:
@@ -79,13 +114,18 @@ class UdpEndpoint:
             except (BlockingIOError, ConnectionRefusedError, OSError):
                 self.dropped_out += 1
 
-    def _read_one(self) -> bytes | None:
-        while True:
+    def _read_one(self, budget: list[int] | None = None) -> bytes | None:
+        budget = budget if budget is not None else [self.READ_BUDGET]
+        while budget[0] > 0:
+            budget[0] -= 1
             try:
                 data, sender = self.sock.recvfrom(self.MAX_DATAGRAM)
             except (BlockingIOError, InterruptedError):
                 return None
             except ConnectionRefusedError:  # ICMP from an earlier send on some platforms
+                continue
+            if self.peer is not None and sender != self.peer:
+                self.wrong_source += 1
                 continue
             if self.recv_loss and self._rng.random() < self.recv_loss:
                 self.dropped_in += 1
@@ -93,28 +133,53 @@ class UdpEndpoint:
             self.recv_count += 1
             self.last_sender = sender
             return data
+        return None
 
     def recv(self, timeout: float | None = 0.0) -> bytes | None:
         """The next datagram, waiting at most ``timeout`` seconds (None: forever); None if none."""
-        data = self._read_one()
+        budget = [self.READ_BUDGET]
+        data = self._read_one(budget)
         if data is not None or timeout == 0.0:
             return data
-        ready, _, _ = select.select([self.sock], [], [], timeout)
-        return self._read_one() if ready else None
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while budget[0] > 0:  # datagrams refused by source do not end the wait
+            left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            ready, _, _ = select.select([self.sock], [], [], left)
+            if not ready:
+                return None
+            data = self._read_one(budget)
+            if data is not None or (deadline is not None and time.monotonic() >= deadline):
+                return data
+        return None
 
-    def drain(self) -> list[bytes]:
-        """Every datagram queued now, oldest first (bounded by what the socket holds)."""
-        out = []
-        while (data := self._read_one()) is not None:
+    def drain(self, limit: int | None = None) -> list[bytes]:
+        """The datagrams queued now, oldest first: at most ``limit`` accepted ones and
+        READ_BUDGET reads in all (the rest stays queued for the next call)."""
+        out: list[bytes] = []
+        budget = [self.READ_BUDGET]
+        while limit is None or len(out) < limit:
+            data = self._read_one(budget)
+            if data is None:
+                if budget[0] <= 0:
+                    self.budget_stops += 1
+                return out
             out.append(data)
+        self.budget_stops += 1
         return out
 
     def drain_latest(self) -> bytes | None:
-        """Read everything queued and return only the newest datagram (None if nothing queued)."""
+        """Read what is queued (READ_BUDGET at most) and return only the newest datagram."""
         latest = None
-        while (data := self._read_one()) is not None:
+        budget = [self.READ_BUDGET]
+        while (data := self._read_one(budget)) is not None:
             latest = data
         return latest
+
+    def counters(self) -> dict[str, int | None]:
+        """What this endpoint refused or lost: ``wrong_source`` (not from the peer),
+        ``budget_stops`` and ``kernel_drops`` (receive buffer full; None: unknown)."""
+        return {"wrong_source": self.wrong_source, "budget_stops": self.budget_stops,
+                "kernel_drops": self.kernel_drops()}
 
     def close(self) -> None:
         self.sock.close()

@@ -149,13 +149,6 @@ def run_task(task: Task) -> dict[str, Any]:
     return row
 
 
-def worker_init() -> None:
-    """Workers ignore Ctrl-C (the parent decides, terminates them and keeps finished runs) and
-    compile the planners before the first timed run."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    warm_up()
-
-
 def warm_up() -> None:
     """Run every planner once on a tiny problem, with and without a current field, so numba's
     compilation (or cache loading) is not counted in the first run's search time."""
@@ -357,14 +350,19 @@ def make_tasks(scenario: str, runs: int, algorithms: Sequence[str], seed: int, o
             for i in range(runs) for alg in algorithms]
 
 
-def run_campaign(tasks: Sequence[Task], jobs: int, out_csv: Path | None = None, progress=None) -> Campaign:
-    """Run ``tasks`` on ``jobs`` worker processes (spawn context; ``jobs == 1`` runs in-process).
+def run_campaign(tasks: Sequence[Task], jobs: int, out_csv: Path | None = None, progress=None,
+                 executor=None) -> Campaign:
+    """Run ``tasks`` on ``executor`` (default: ``jobs`` local spawned processes; ``jobs == 1`` runs
+    in-process; see :mod:`hil.executors` for Dask).
 
-    Rows are appended to ``out_csv`` as they finish. Ctrl-C terminates the workers and returns
-    what finished, with ``interrupted`` set.
+    Rows are appended to ``out_csv`` as they finish. Ctrl-C (or SIGTERM) cancels the outstanding
+    work and returns what finished, with ``interrupted`` set.
     """
+    from hil.executors import LocalProcesses
+
     camp = Campaign()
     writer = RunsWriter(out_csv) if out_csv else None
+    ex = executor if executor is not None else LocalProcesses(jobs)
 
     def take(row: dict[str, Any]) -> None:
         det = row.pop("_detail", None)
@@ -384,23 +382,15 @@ def run_campaign(tasks: Sequence[Task], jobs: int, out_csv: Path | None = None, 
 
     previous = signal.signal(signal.SIGTERM, on_term)
     try:
-        if jobs <= 1:
-            warm_up()
-            for t in tasks:
-                take(run_task(t))
-        else:
-            import multiprocessing as mp
-            ctx = mp.get_context("spawn")
-            pool = ctx.Pool(jobs, initializer=worker_init)
-            try:
-                for row in pool.imap_unordered(run_task, tasks, chunksize=1):
-                    take(row)
-                pool.close()
-            except KeyboardInterrupt:
-                pool.terminate()
-                raise
-            finally:
-                pool.join()
+        try:
+            for _i, row in ex.map_unordered(run_task, tasks, warm_up=warm_up):
+                take(row)
+        except KeyboardInterrupt:
+            ex.cancel()
+            raise
+        finally:
+            if executor is None:
+                ex.close()
     except KeyboardInterrupt:
         camp.interrupted = True
     finally:

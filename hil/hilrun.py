@@ -9,13 +9,21 @@ path length, energy, and the navigation error of the autopilot's own estimate
 (LOCAL_POSITION_NED). The run ends when the vessel reaches the goal, collides, or the simulated
 time is up; both processes are then stopped with SIGTERM (their summaries are collected), also
 on Ctrl-C, and never left behind.
+
+Each end takes only its peer (docs/security.md): the simulator takes commands only from the
+autopilot's socket (``--commands-from``), the autopilot sensor frames only from the simulator's
+(``--sensors-from``), and the tap takes the truth only from the simulator's socket and commands
+only from the autopilot's; what it refuses is counted (``security.tap`` of summary.json) and not
+written to the .tlog.
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
+import tempfile
 import signal
 import socket
 import struct
@@ -40,10 +48,11 @@ REPO = Path(__file__).resolve().parent.parent
 
 
 def free_udp_port() -> int:
-    """A currently free UDP port on 127.0.0.1 (chosen by the kernel)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    """A free UDP port on 127.0.0.1, reserved host-wide so that parallel runs never share it
+    (:mod:`hil.ports`; :meth:`HilRun.execute` releases a run's ports when it ends)."""
+    from hil.ports import reserve_udp_port
+
+    return reserve_udp_port()
 
 
 @dataclass
@@ -99,6 +108,14 @@ class Tap:
         self._segment = {"truth": 0, "estimate": 0, "commands": 0}
         # (segment, time_usec) -> (n, e, run time usec)
         self.truth_raw: dict[tuple[int, int], tuple[float, float, int]] = {}
+        # Source addresses of the two processes (HilRun sets them once the ports are chosen):
+        # truth only from the simulator, commands only from the autopilot's HIL socket.
+        self.sim_addr: tuple[str, int] | None = None
+        self.ap_addr: tuple[str, int] | None = None
+        self.sim_ids: tuple[int, int] | None = None
+        self.refused: dict[str, int] = {}
+        self.write_error: OSError | None = None   # the .tlog could not be written (a full disk)
+        self.counters_at_close: dict[str, Any] | None = None
 
     def _monotonic(self, stream: str, t: int, back_gap: int) -> int:
         if t + back_gap < self._last[stream]:
@@ -117,16 +134,48 @@ class Tap:
         data = self.ep.recv(timeout=timeout)
         while data is not None:
             n += 1
-            self._handle(data)
+            self._handle(data, self.ep.last_sender)
+            if n >= UdpEndpoint.READ_BUDGET:
+                break
             data = self.ep.recv(timeout=0.0)
         return n
 
-    def _handle(self, data: bytes) -> None:
+    def _refuse(self, reason: str) -> None:
+        self.refused[reason] = self.refused.get(reason, 0) + 1
+
+    def _allowed(self, m: Any, sender: tuple[str, int] | None) -> bool:
+        """Truth only from the simulator's socket and ids; commands only from the autopilot's socket."""
+        kind = m.get_type()
+        truth = kind == "HIL_STATE_QUATERNION" or (kind == "AIS_VESSEL" and
+                                                   m.get_srcComponent() == self.truth_component_id)
+        if truth:
+            if self.sim_addr is not None and sender != self.sim_addr:
+                self._refuse("truth_wrong_source_address")
+                return False
+            if self.sim_ids is not None and m.get_srcSystem() != self.sim_ids[0]:
+                self._refuse("truth_wrong_source_id")
+                return False
+        elif kind == "HIL_ACTUATOR_CONTROLS" and self.ap_addr is not None and sender != self.ap_addr:
+            self._refuse("command_wrong_source_address")
+            return False
+        return True
+
+    def _write(self, data: bytes) -> None:
+        if self.write_error is not None:
+            return
+        try:
+            self.tlog.write(data)
+        except OSError as exc:  # a full disk: the run stops and says so (HilRun.execute)
+            self.write_error = exc
+
+    def _handle(self, data: bytes, sender: tuple[str, int] | None = None) -> None:
         msgs, _ = self.codec.decode(data)
         stamp = struct.pack(">Q", int(time.time() * 1e6))
         own = None
         for m in msgs:
-            self.tlog.write(stamp + bytes(m.get_msgbuf()))
+            if not self._allowed(m, sender):
+                continue
+            self._write(stamp + bytes(m.get_msgbuf()))
             self.frames += 1
             kind = m.get_type()
             if kind == "HIL_STATE_QUATERNION":
@@ -158,9 +207,15 @@ class Tap:
             elif kind == "MISSION_ITEM_REACHED":
                 self.mission_reached = True
 
+    def counters(self) -> dict[str, Any]:
+        """What the tap refused, by reason, and its socket's counters (kernel drops)."""
+        return {"refused": dict(sorted(self.refused.items())), **self.ep.counters()}
+
     def close(self) -> None:
-        self.tlog.flush()
-        self.tlog.close()
+        try:
+            self.tlog.close()
+        except OSError as exc:
+            self.write_error = self.write_error or exc
         self.ep.close()
 
 
@@ -216,6 +271,10 @@ class HilRun:
             self.traffic_file.write_text(json.dumps([to_table(s) for s in self.scen.traffic], indent=1))
         self.ap_port = free_udp_port()
         self.sim_port = free_udp_port()
+        self.tap.sim_addr, self.tap.ap_addr = ("127.0.0.1", self.sim_port), ("127.0.0.1", self.ap_port)
+        self.tap.sim_ids = (cfg.link.system_id, cfg.link.component_id)
+        self.warnings: list[str] = []
+        self._sysid_lock: Any = None
         self.sim: subprocess.Popen | None = None
         self.ap: subprocess.Popen | None = None
         self.sim_restarts = 0
@@ -237,7 +296,8 @@ class HilRun:
         cur = self.scen.current
         args = [sys.executable, "-m", "hil", "sim", *self._common_args(),
                 "--state-to", f"127.0.0.1:{self.ap_port}", "--state-to", f"127.0.0.1:{self.tap.port}",
-                "--commands-on", f"127.0.0.1:{self.sim_port}", "--seed", str(self.opts.seed),
+                "--commands-on", f"127.0.0.1:{self.sim_port}", "--commands-from", f"127.0.0.1:{self.ap_port}",
+                "--seed", str(self.opts.seed),
                 "--duration", repr(float(self.opts.duration) + 5.0), "--json", "--world", str(self.world_file),
                 "--set", f"sim.initial.x={north!r}", "--set", f"sim.initial.y={east!r}",
                 "--set", f"sim.initial.psi={psi!r}"]
@@ -257,7 +317,7 @@ class HilRun:
 
     def autopilot_command(self) -> list[str]:
         args = [sys.executable, "-m", "hil", "autopilot", *self._common_args(), "--scenario", self.opts.scenario,
-                "--listen", f"127.0.0.1:{self.ap_port}",
+                "--listen", f"127.0.0.1:{self.ap_port}", "--sensors-from", f"127.0.0.1:{self.sim_port}",
                 "--actuators-to", f"127.0.0.1:{self.sim_port}", "--actuators-to", f"127.0.0.1:{self.tap.port}",
                 "--telemetry-to", f"127.0.0.1:{self.tap.port}",
                 "--seed", str(self.opts.seed), "--summary-out", str(self.out / "autopilot.json"), "--json",
@@ -287,7 +347,7 @@ class HilRun:
             if self.ap.poll() is not None:
                 raise RunFailed(f"the autopilot exited during start-up (see {log})")
             if time.monotonic() > deadline:
-                raise RunFailed(f"the autopilot was not ready after {ready_timeout:g} s (see {log})")
+                raise _NotReady(f"the autopilot was not ready after {ready_timeout:g} s (see {log})")
             self.tap.pump(timeout=0.05)
         self.sim = self._spawn(self.sim_command(), "sim")
 
@@ -301,20 +361,52 @@ class HilRun:
             initial = (last[0], last[1], math.atan2(last[3], last[2]) if math.hypot(last[2], last[3]) > 0.2 else 0.0)
         self.sim = self._spawn(self.sim_command(initial), f"sim-restart{self.sim_restarts}")
 
+    def claim_system_id(self) -> None:
+        """Warn when another `hil run` on this machine streams to ground stations with the same
+        system id (they would show one vehicle jumping between two boats)."""
+        if not self.cfg.gcs.endpoints:
+            return
+        import fcntl
+
+        sysid = self.cfg.autopilot.system_id
+        path = Path(tempfile.gettempdir()) / f"usv-hil-sysid-{sysid}.lock"
+        try:
+            fh = open(path, "a")
+        except OSError:
+            return
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            self._sysid_lock = fh
+        except OSError:
+            fh.close()
+            msg = (f"another hil run streams to ground stations with system id {sysid}; give this one "
+                   f"another (--set autopilot.system_id=N) or ground stations see one vehicle for two boats")
+            self.warnings.append(msg)
+            self.opts.on_progress("warning: " + msg)
+
     @staticmethod
     def _stop(proc: subprocess.Popen | None, kill: bool = False) -> dict[str, Any] | None:
         if proc is None:
             return None
-        if proc.poll() is None:
-            try:
-                os.killpg(proc.pid, signal.SIGKILL if kill else signal.SIGTERM)
-            except ProcessLookupError:
-                pass
+        dead = proc.poll() is not None
         try:
-            out, _ = proc.communicate(timeout=20.0)
+            # The whole process group, also when its leader is already dead: a SIGKILLed autopilot
+            # leaves its planner worker behind, holding the stdout pipe open.
+            os.killpg(proc.pid, signal.SIGKILL if (kill or dead) else signal.SIGTERM)
+        except (ProcessLookupError, PermissionError):
+            pass
+        try:
+            out, _ = proc.communicate(timeout=1.0 if dead else 20.0)
         except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            out, _ = proc.communicate()
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)
+            except (ProcessLookupError, PermissionError):
+                pass
+            try:
+                out, _ = proc.communicate(timeout=1.0)
+            except subprocess.TimeoutExpired:  # a grandchild outside the group holds the pipe
+                proc.kill()
+                out = b""
         if kill:
             return None
         lines = (out or b"").decode(errors="replace").strip().splitlines()
@@ -331,7 +423,13 @@ class HilRun:
         min_clearance, last_report = math.inf, wall0
         decided: int | None = None  # truth time (usec) of the sample that decided the outcome
         try:
-            self.start()
+            self.claim_system_id()
+            try:
+                self.start(ready_timeout=min(180.0, max(0.0, opts.wall_timeout)))
+            except _NotReady:
+                if opts.wall_timeout >= 180.0:
+                    raise
+                raise _WallTimeout() from None
             checked = 0
             while True:
                 self.tap.pump(timeout=0.05)
@@ -359,6 +457,10 @@ class HilRun:
                 if time.monotonic() - wall0 > opts.wall_timeout:
                     outcome = "wall_timeout"
                     break
+                if self.tap.write_error is not None:
+                    outcome = "disk_full" if self.tap.write_error.errno in (errno.ENOSPC, errno.EDQUOT) \
+                        else "write_error"
+                    break
                 if self.ap.poll() is not None:
                     outcome = "autopilot_exited"
                     break
@@ -371,15 +473,23 @@ class HilRun:
                     last_report = time.monotonic()
                     opts.on_progress(f"run: t={t_sim:.1f} s simulated, {time.monotonic() - wall0:.1f} s wall, "
                                      f"clearance min {min_clearance:.2f} m")
+        except _WallTimeout:
+            outcome = "wall_timeout"
         except KeyboardInterrupt:
             if not opts.summary_on_interrupt:
                 raise
             outcome = "interrupted"
         finally:
+            if self._sysid_lock is not None:
+                self._sysid_lock.close()
             ap_summary = self._stop(self.ap)
             sim_summary = self._stop(self.sim)
             self.tap.pump(timeout=0.0)
+            self.tap.counters_at_close = self.tap.counters()
             self.tap.close()
+            from hil.ports import release
+
+            release(self.ap_port, self.sim_port)
             if self.can_recorder is not None:
                 self.can_log = self.can_recorder.close()
         wall = time.monotonic() - wall0
@@ -424,11 +534,21 @@ class HilRun:
             "simulator": None if sim is None else {k: sim.get(k) for k in (
                 "steps", "commands_received", "malformed_dropped", "stale_command_events", "lockstep_resends",
                 "jitter_ms")},
+            # Every refused frame by reason, per endpoint, with the kernel's drops (docs/security.md).
+            "security": {
+                "simulator": None if sim is None else {"rejects": sim.get("rejects"), **(sim.get("command_port") or {})},
+                "autopilot": ap.get("link"),
+                "autopilot_navigation_numeric": {k: v for k, v in ((ap.get("navigation") or {}).get("rejected") or {}).items()
+                                                 if k.startswith("numeric_")},
+                "tap": self.tap.counters_at_close,
+            },
             "tlog": str(self.out / "run.tlog"),
             "tlog_messages": self.tap.frames,
             "events": ap.get("events", []),
             "actuators": self.cfg.can.actuators,
         }
+        if self.warnings:
+            summary["warnings"] = list(self.warnings)
         if ap.get("gcs") is not None:
             # The ground-station link's counters (datagrams, rejects, missions, command acks, signing,
             # failsafe): what a GCS did during the run. Wall-clock dependent (heartbeats per wall second).
@@ -479,14 +599,51 @@ class HilRun:
         return math.sqrt(float(np.mean(errs))) if errs else None
 
 
-def run_loop(opts: RunOptions, cfg: Any) -> dict[str, Any]:
-    """Run the HIL loop and write the run folder (tlog, summary.json, plot.png); returns the summary."""
-    from hil.commands.autopilot import write_json_atomic
+class _NotReady(RunFailed):
+    """The autopilot did not start listening in time."""
 
+
+class _WallTimeout(Exception):
+    """--wall-timeout passed before the run started."""
+
+
+def _disk_full(out: Path, exc: OSError) -> RunFailed:
+    return RunFailed(f"run folder {out}: {exc.strerror or exc} (errno {exc.errno}); the run was stopped, "
+                     f"nothing complete was written")
+
+
+def _remove_partial(out: Path, names: tuple[str, ...] = ("summary.json", "plot.png", "world.npz")) -> None:
+    """After a write failure: remove temporary files and half-written outputs of the run folder."""
+    for p in list(out.glob(".*.tmp")) + [out / n for n in names]:
+        try:
+            p.unlink()
+        except OSError:
+            pass
+
+
+def run_loop(opts: RunOptions, cfg: Any) -> dict[str, Any]:
+    """Run the HIL loop and write the run folder (tlog, summary.json, plot.png); returns the summary.
+
+    A folder that cannot be written (a full disk) ends the run with one line (RunFailed, exit 1)
+    and no temporary files left behind."""
     if not scenarios.scenario_path(opts.scenario).exists():
         raise UsageError(f"unknown scenario {opts.scenario!r} (available: {', '.join(scenarios.available())})")
+    try:
+        return _run_loop(opts, cfg)
+    except OSError as exc:
+        if exc.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO):
+            raise
+        _remove_partial(opts.out)
+        raise _disk_full(opts.out, exc) from None
+
+
+def _run_loop(opts: RunOptions, cfg: Any) -> dict[str, Any]:
+    from hil.commands.autopilot import write_json_atomic
+
     run = HilRun(opts, cfg)
     summary = run.execute()
+    if run.tap.write_error is not None:
+        raise run.tap.write_error
     summary["run_folder"] = str(opts.out)
     if opts.plot:
         try:

@@ -22,6 +22,33 @@ import numpy as np
 
 MAP_DIR = Path(__file__).resolve().parent.parent / "configs" / "maps"
 RESOLUTION = 0.5  # m per cell for every committed map
+MAX_MAP_CELLS = 64_000_000  # 8000 x 8000 cells (4 km square at 0.5 m): 64 MB as bool; larger is refused
+
+
+def check_npy_header(path: Path, max_cells: int = MAX_MAP_CELLS) -> None:
+    """Refuse, before anything is allocated, a ``.npy`` map whose header claims more than
+    ``max_cells`` cells or more bytes than the file holds (ValueError with a one-line reason)."""
+    from numpy.lib import format as npf
+
+    with open(path, "rb") as fh:
+        try:
+            version = npf.read_magic(fh)
+            read = npf.read_array_header_1_0 if version == (1, 0) else npf.read_array_header_2_0
+            shape, _fortran, dtype = read(fh)
+        except (ValueError, SyntaxError, EOFError) as exc:
+            raise ValueError(f"not a .npy array ({exc})") from None
+        offset = fh.tell()
+    if dtype.hasobject:
+        raise ValueError("a .npy of Python objects is not a map")
+    cells = 1
+    for n in shape:
+        cells *= int(n)
+    if cells > max_cells:
+        dims = " x ".join(str(int(n)) for n in shape)
+        raise ValueError(f"header claims {dims} = {cells} cells, more than the {max_cells} a map may have")
+    size = path.stat().st_size - offset
+    if cells * dtype.itemsize > size:
+        raise ValueError(f"header claims {cells * dtype.itemsize} bytes of data, the file holds {size}")
 
 
 class Canvas:

@@ -212,6 +212,13 @@ def _current_params(base_current: Any, overrides: dict[str, Any], source: str) -
 def load_occupancy(path: Path, resolution: float) -> np.ndarray:
     """A map file's obstacle array, bool [rows, cols], via the planner's loader (MapError -> UsageError)."""
     from planner.gridmap import MapError, OccupancyGrid
+    if Path(path).suffix.lower() == ".npy" and Path(path).is_file():
+        from hil.maps import check_npy_header
+
+        try:
+            check_npy_header(Path(path))
+        except (ValueError, OSError) as exc:
+            raise UsageError(f"{path}: {exc}") from None
     try:
         return OccupancyGrid.load(path, resolution).occ
     except MapError as exc:

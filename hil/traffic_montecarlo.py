@@ -21,7 +21,6 @@ from __future__ import annotations
 import csv
 import json
 import math
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -75,33 +74,54 @@ def draw_ships(reference_path: np.ndarray, draw: TrafficDraw, seed: int, run: in
     return tuple(ships)
 
 
-def run_campaign(scenario: str, runs: int, seed: int, draw: TrafficDraw, out: Path, jobs: int,
-                 make_options: Callable[[int, tuple[ShipSpec, ...], Path], Any], run_one: Callable[[Any], dict],
+@dataclass(frozen=True)
+class TrafficJob:
+    """One whole lockstep HIL run of a traffic campaign, picklable for any executor: called with
+    ``(run, ships)`` it returns the run's summary. The run folder is ``out/runNNNN`` on the host
+    that runs it. Each run picks its own UDP ports (:func:`hil.hilrun.free_udp_port` reserves them
+    host-wide), so runs sharing a host never collide."""
+
+    scenario: str
+    seed: int
+    duration: float            # s of simulated time at most
+    config: str | None
+    overrides: tuple[str, ...]
+    out: str                   # campaign folder
+
+    def __call__(self, item: tuple[int, tuple[ShipSpec, ...]]) -> dict:
+        from hil import settings
+        from hil.hilrun import RunOptions, run_loop
+
+        i, ships = item
+        opts = RunOptions(scenario=self.scenario, lockstep=True, duration=self.duration, seed=self.seed * 1000 + i,
+                          config=self.config, overrides=list(self.overrides), out=Path(self.out) / f"run{i:04d}",
+                          plot=False, traffic=ships)
+        return run_loop(opts, settings.load(self.config, list(self.overrides)))
+
+
+def run_campaign(scenario: str, runs: int, seed: int, draw: TrafficDraw, out: Path, executor: Any,
+                 run_one: Callable[[tuple[int, tuple[ShipSpec, ...]]], dict],
                  progress: Callable[[int, dict], None] = lambda _i, _s: None) -> dict[str, Any]:
-    """``runs`` HIL runs; returns the campaign summary and writes ``runs.csv`` and ``summary.json``."""
+    """``runs`` HIL runs of ``run_one((run, ships))`` on ``executor`` (:mod:`hil.executors`);
+    returns the campaign summary and writes ``runs.csv`` and ``summary.json``."""
     from hil import scenario as scenarios
 
     scen = scenarios.load(scenario)
     plans = [(i, draw_ships(scen.reference_path, draw, seed, i)) for i in range(runs)]
     results: dict[int, dict] = {}
-
-    def one(item):
-        i, ships = item
-        s = run_one(make_options(i, ships, out / f"run{i:04d}"))
-        return i, ships, s
-
+    for done, (i, s) in enumerate(executor.map_unordered(run_one, plans), start=1):
+        results[i] = s
+        progress(done, s)
     rows = []
-    with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
-        for done, (i, ships, s) in enumerate(pool.map(one, plans), start=1):
-            results[i] = s
-            for e in s.get("encounters", []):
-                spec = next(sh for sh in ships if sh.mmsi == e["mmsi"])
-                rows.append({"run": i, "outcome": s["outcome"], "mmsi": e["mmsi"], "start_x": round(spec.start[0], 2),
-                             "start_y": round(spec.start[1], 2), "speed": round(spec.speed, 3),
-                             "course_deg": round(spec.course, 1), "type": e.get("type"), "cpa_m": e.get("cpa_m"),
-                             "action": e.get("action"), "collision": e.get("collision"),
-                             "compliant": e.get("compliant"), "note": e.get("note", "")})
-            progress(done, s)
+    for i in sorted(results):       # the same rows in the same order whatever the executor
+        s, ships = results[i], plans[i][1]
+        for e in s.get("encounters", []):
+            spec = next(sh for sh in ships if sh.mmsi == e["mmsi"])
+            rows.append({"run": i, "outcome": s["outcome"], "mmsi": e["mmsi"], "start_x": round(spec.start[0], 2),
+                         "start_y": round(spec.start[1], 2), "speed": round(spec.speed, 3),
+                         "course_deg": round(spec.course, 1), "type": e.get("type"), "cpa_m": e.get("cpa_m"),
+                         "action": e.get("action"), "collision": e.get("collision"),
+                         "compliant": e.get("compliant"), "note": e.get("note", "")})
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "runs.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]) if rows else ["run"])

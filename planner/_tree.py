@@ -57,6 +57,8 @@ def seed_rng(seed):
 
 @njit(cache=True)
 def _wrap(a):
+    if a > 8.0 * math.pi or a < -8.0 * math.pi:  # a huge angle (1e300): one modulo, never a long loop
+        a = a % TWO_PI  # numba has no math.fmod; % gives [0, 2 pi), inf gives nan
     while a > math.pi:
         a -= TWO_PI
     while a < -math.pi:

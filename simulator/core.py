@@ -26,6 +26,7 @@ from simulator.waves import WaveModel
 # Rejections counted by the simulator besides the codec's framing reasons.
 INVALID_CONTROLS = "invalid_controls"      # NaN/inf control: previous command kept
 OUT_OF_STEP = "out_of_step_command"        # lockstep: time_usec is not the current frame's
+WRONG_SOURCE_ID = "wrong_source_id"        # a command not from the autopilot's system/component id
 
 HIL_SENSOR_FIELDS = 0x1FF  # bits 0-8: x/y/z acc, x/y/z gyro, x/y/z mag
 
@@ -84,6 +85,8 @@ class SimulatorCore:
                             if world is not None and s.rangefinder.enabled else None)
         self.rangefinder_due = _Schedule(s.rangefinder.rate_hz, self.frame_dt)
         self.codec = Codec(cfg.link.system_id, cfg.link.component_id, accept=("HIL_ACTUATOR_CONTROLS",))
+        # The only peer whose commands count: the vessel computer's ids from the same configuration.
+        self.peer_ids = (cfg.autopilot.system_id, cfg.autopilot.component_id)
         i = cfg.sim.initial
         self.state: tuple[float, ...] = (i.x, i.y, i.psi, i.u, i.v, i.r)
         self.n = 0
@@ -122,12 +125,16 @@ class SimulatorCore:
     # -- commands --------------------------------------------------------------------------
     def receive(self, datagram: bytes) -> list[Command]:
         """Valid commands in one datagram. A datagram with any invalid part counts as one reject
-        (by the first reason); valid commands in it are still returned."""
+        (by the first reason); valid commands in it are still returned. Only commands from the
+        autopilot's system and component id (``autopilot.system_id``/``component_id``) count."""
         msgs, rejects = self.codec.decode(datagram)
         if rejects:
             self.rejects[rejects[0]] += 1
         out = []
         for m in msgs:
+            if (m.get_srcSystem(), m.get_srcComponent()) != self.peer_ids:
+                self.rejects[WRONG_SOURCE_ID] += 1
+                continue
             c = m.controls
             port, stdb = float(c[0]), float(c[1])
             if not (math.isfinite(port) and math.isfinite(stdb)):

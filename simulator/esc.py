@@ -10,7 +10,10 @@ results (rpm from thrust ~ rpm^2, power ~ rpm^3).
 
 Bad input never reaches the thrusters: frames and transfers rejected by the transport layer are
 counted by :class:`common.dronecan_codec.TransferReceiver`, and RawCommands that lack an ESC's
-index or hold a value outside [-8191, 8191] are rejected whole and counted here.
+index or hold a value outside [-8191, 8191] are rejected whole and counted here. RawCommand
+counts only from the autopilot's node (``[can] autopilot_node_id``; others are counted as
+``unknown_node``), and a transfer that repeats its source's previous transfer ID is a replay:
+dropped and counted (``duplicate_transfer_id``). A poll reads at most MAX_FRAMES_PER_POLL frames.
 """
 
 from __future__ import annotations
@@ -28,6 +31,8 @@ from common.can_params import CanParams
 
 RAW_COMMAND_OUT_OF_RANGE = "raw_command_out_of_range"
 RAW_COMMAND_MISSING_INDEX = "raw_command_missing_index"
+DUPLICATE_TRANSFER = "duplicate_transfer_id"  # a transfer repeating its source's previous transfer ID (a replay)
+MAX_FRAMES_PER_POLL = 256  # CAN frames one poll() reads at most (a flood waits in the socket)
 
 
 class EscBank:
@@ -57,6 +62,7 @@ class EscBank:
         self.applied_tid = array("b")               # latency records: transfer ID and wall time applied
         self.applied_at = array("d")
         self.record = False
+        self.budget_stops = 0
 
     # -- receive ---------------------------------------------------------------------------
     def poll(self, timeout: float = 0.0) -> int:
@@ -64,15 +70,24 @@ class EscBank:
         number of valid RawCommands applied."""
         applied = 0
         msg = self.bus.recv(timeout)
-        while msg is not None:
+        for _ in range(MAX_FRAMES_PER_POLL):
+            if msg is None:
+                return applied
             tr = self.receiver.feed(msg)
             if tr is not None:
                 applied += self._on_transfer(tr)
             msg = self.bus.recv(0.0)
+        if msg is not None:  # over budget: the frame read last still counts
+            tr = self.receiver.feed(msg)
+            if tr is not None:
+                applied += self._on_transfer(tr)
+            self.budget_stops += 1
         return applied
 
     def _on_transfer(self, tr: dc.Transfer) -> int:
-        self.tracker.observe(tr)
+        if not self.tracker.observe(tr):
+            self.rejects[DUPLICATE_TRANSFER] += 1
+            return 0
         if tr.full_name == dc.NODE_STATUS:
             self.autopilot_health = int(tr.msg.health)
             return 0
@@ -147,4 +162,5 @@ class EscBank:
             "send_errors": self.send_errors,
             "rejects": dict(sorted((self.receiver.rejects + self.rejects).items())),
             "autopilot_health": self.autopilot_health,
+            "budget_stops": self.budget_stops,
         }

@@ -16,6 +16,8 @@ from common.udp import UdpEndpoint
 from simulator.core import OUT_OF_STEP, Command, SimulatorCore
 
 POLL_S = 0.05  # longest wait before the stop flag is looked at again (wall seconds)
+MAX_DATAGRAMS_PER_STEP = 64  # real time: command datagrams read per step at most (a flood waits in the socket)
+LEARN = "learn"
 
 
 class SimulatorServer:
@@ -24,8 +26,13 @@ class SimulatorServer:
     def __init__(self, core: SimulatorCore, endpoint: UdpEndpoint, *, lockstep: bool, duration: float,
                  speedup: float = 1.0, lockstep_resend: float = 1.0,
                  progress: Callable[[str], None] | None = None, progress_every_s: float = 5.0,
-                 esc: Any | None = None, can_lockstep_wait: float = 1.0) -> None:
+                 esc: Any | None = None, can_lockstep_wait: float = 1.0, command_source: str | None = None) -> None:
+        """``command_source``: None takes commands from any address, "HOST:PORT" only from there,
+        "learn" only from the address of the first valid command (docs/security.md)."""
         self.core, self.ep = core, endpoint
+        self.learn_source = command_source == LEARN
+        if command_source and not self.learn_source:
+            endpoint.set_peer(command_source)
         # CAN actuators (a simulator.esc.EscBank): thrust comes from the ESC nodes' RawCommands;
         # in lockstep the HIL_ACTUATOR_CONTROLS answer is only the clock (docs/can.md).
         self.esc, self.can_lockstep_wait = esc, can_lockstep_wait
@@ -36,6 +43,7 @@ class SimulatorServer:
         self.progress, self.progress_every_s = progress, progress_every_s
         self.end_frame = int(round(duration / core.frame_dt)) if duration > 0 else None
         self.lockstep_resends = 0
+        self.budget_stops = 0
         self.datagrams_sent = 0
         self.lateness = StreamingPercentiles()  # real time: lateness of each step vs its ideal wall time (ms)
         self._stop = False
@@ -90,6 +98,7 @@ class SimulatorServer:
                 continue
             stepped = False
             for cmd in core.receive(data):
+                self._learn()
                 if not stepped and cmd.time_usec == core.time_usec:
                     if self.esc is None:
                         core.apply(cmd)
@@ -105,6 +114,11 @@ class SimulatorServer:
                 last_send = time.monotonic()
                 if core.n % 1000 == 0:
                     self._maybe_progress(start, last_progress)
+
+    def _learn(self) -> None:
+        """--commands-from learn: the first valid command's address becomes the only source."""
+        if self.learn_source and self.ep.peer is None and self.ep.last_sender is not None:
+            self.ep.set_peer(self.ep.last_sender)
 
     def _apply_can(self, token: Command) -> None:
         """Lockstep over CAN: apply the ESCs' RawCommand that ``token`` announces (bounded wait)."""
@@ -137,10 +151,16 @@ class SimulatorServer:
                 time.sleep(min(remaining, POLL_S))
             self.lateness.add(max(0.0, (time.perf_counter() - ideal) * 1e3))
             newest = None
-            for data in self.ep.drain():
+            for _ in range(MAX_DATAGRAMS_PER_STEP):
+                data = self.ep.recv(0.0)
+                if data is None:
+                    break
                 cmds = core.receive(data)
                 if cmds:
                     newest = cmds[-1]
+                    self._learn()
+            else:
+                self.budget_stops += 1
             if self.esc is not None:
                 self.mavlink_commands_ignored += newest is not None
                 newest = None
@@ -178,6 +198,11 @@ class SimulatorServer:
             "clamped_controls": c.clamped_controls,
             "stale_command_events": c.stale_command_events,
             "lockstep_resends": self.lockstep_resends,
+            "command_port": {"source": None if self.ep.peer is None else f"{self.ep.peer[0]}:{self.ep.peer[1]}",
+                             "wrong_source_address": self.ep.wrong_source,
+                             "wrong_source_id": c.rejects.get("wrong_source_id", 0),
+                             "budget_stops": self.budget_stops + self.ep.budget_stops,
+                             "kernel_drops": self.ep.kernel_drops()},
             "jitter_ms": self.jitter_ms(),
             "gps": {"fixes": c.gps.fixes, "dropout_fixes": c.gps.dropout_fixes, "glitches": c.gps.glitches},
             "distance_m": c.distance,

@@ -91,7 +91,7 @@ def test_fuzzed_command_port_keeps_stepping_and_counts_every_rejection():
     steps = 400
     client = HilClient()
     proc = start_sim(client.port, "--lockstep", "--duration", repr(steps / 100.0))
-    other = Codec(200, 1)
+    other = Codec(1, 1)  # the autopilot's ids (autopilot.system_id/component_id): junk from the peer itself
     heartbeat = other.encode("heartbeat", 6, 8, 0, 0, 0)
     sent = {"random": 0, "truncated": 0, "bitflip": 0, "unwanted_message": 0, "nan": 0, "old": 0}
     try:

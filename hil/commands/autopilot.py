@@ -74,6 +74,10 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                    help="where sensor frames arrive (default: autopilot.listen = 127.0.0.1:14560)")
     p.add_argument("--actuators-to", metavar="HOST:PORT", type=_hostport, action="append", default=None,
                    help="where HIL_ACTUATOR_CONTROLS go; repeatable (default: autopilot.actuators_to = 127.0.0.1:14561)")
+    p.add_argument("--sensors-from", metavar="HOST:PORT", type=_hostport, default=None,
+                   help="take sensor frames only from this source address, the simulator's socket (its "
+                        "--commands-on; default: any address). Frames must also carry link.system_id and "
+                        "link.component_id")
     p.add_argument("--telemetry-to", metavar="HOST:PORT", type=_hostport, action="append", default=None,
                    help="where a copy of all ground-station traffic in and out goes (a recorder); repeatable "
                         "(default: autopilot.telemetry_to, none)")
@@ -121,12 +125,20 @@ def write_json_atomic(path: str | Path, data: dict) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        fh.write(to_json(data) + "\n")
-    os.replace(tmp, path)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(to_json(data) + "\n")
+        os.replace(tmp, path)
+    except BaseException:  # a full disk, an interrupt: never leave the temporary file behind
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
 
 
-def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None = None):
+def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None = None,
+          sensors_from: str | None = None):
     """The autopilot and its parts from a configuration and a scenario (used by `hil run` too)."""
     from autopilot_bridge.autopilot import Autopilot, Propulsion
     from autopilot_bridge.control import SurgeModel
@@ -152,7 +164,9 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
         link = HilLink(ap.listen, ap.actuators_to, geo, declination=cfg.sensors.compass.declination,
                        system_id=ap.system_id, component_id=ap.component_id, send_loss=ap.send_loss,
                        recv_loss=ap.recv_loss, loss_seed=cfg.sim.seed + 7,
-                       truth_component_id=cfg.traffic.truth_component_id)
+                       truth_component_id=cfg.traffic.truth_component_id,
+                       sim_ids=(cfg.link.system_id, cfg.link.component_id), sensors_from=sensors_from,
+                       max_time_step=_max_time_step(cfg, lockstep))
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     actuators = None
@@ -209,10 +223,17 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     return autopilot
 
 
+def _max_time_step(cfg, lockstep: bool) -> float:
+    """Largest forward step (s) of sensor time the link accepts: lockstep advances exactly one IMU
+    period per frame; real time skips lost datagrams (0.25 s: 25 in a row at 100 Hz)."""
+    period = 1.0 / cfg.sensors.imu.rate_hz
+    return 1.5 * period if lockstep else max(0.25, 3.0 * period)
+
+
 def run(args: argparse.Namespace) -> int:
     args.overrides = list(args.overrides) + _overrides(args)
     cfg = load_settings(args)
-    autopilot = build(cfg, args.scenario, args.lockstep, args.planner_factory)
+    autopilot = build(cfg, args.scenario, args.lockstep, args.planner_factory, getattr(args, "sensors_from", None))
     stop = {"flag": False}
     if args.can_record and autopilot.actuators is not autopilot.link:
         autopilot.actuators.record = True
@@ -237,6 +258,7 @@ def run(args: argparse.Namespace) -> int:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
         autopilot.worker.close()
+        link_summary = autopilot.link.summary()
         autopilot.link.close()
         if autopilot.actuators is not autopilot.link:
             autopilot.actuators.close()
@@ -245,6 +267,7 @@ def run(args: argparse.Namespace) -> int:
         if autopilot.telemetry is not None:
             autopilot.telemetry.close()
     summary = autopilot.summary()
+    summary["link"] = link_summary  # refusals by reason, source address, kernel drops (docs/security.md)
     if autopilot.telemetry is not None:
         summary["gcs"] = autopilot.telemetry.summary()
     summary["local_paths"] = autopilot.local_paths

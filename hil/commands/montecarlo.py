@@ -8,7 +8,7 @@ import math
 import time
 from pathlib import Path
 
-from hil import console, experiment, scenario as scenarios
+from hil import console, executors, experiment, scenario as scenarios
 from hil.errors import RunFailed, UsageError
 
 
@@ -45,6 +45,14 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--jobs", "-j", metavar="J", type=int, default=experiment.default_jobs(),
                    help=f"worker processes (default: the CPUs available, {experiment.default_jobs()})")
     p.add_argument("--seed", metavar="S", type=int, default=1, help="master seed (default 1)")
+    p.add_argument("--executor", choices=executors.EXECUTORS, default="local",
+                   help="where the runs execute: 'local' (default) = J processes of this machine (threads with "
+                        "--traffic); 'dask' = a Dask cluster, a LocalCluster of J single-threaded worker processes "
+                        f"unless --scheduler names one (needs the optional extra: {executors.DASK_HINT})")
+    p.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                   help="address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (implies --executor dask; "
+                        "--jobs is then ignored: the cluster's workers run the campaign). Results are the same "
+                        "as with local processes for the same seed")
     p.add_argument("--out", metavar="DIR", type=Path, default=None,
                    help="output folder (default runs/montecarlo-SCENARIO-sSEED)")
     g = p.add_argument_group("online process (defaults: planner.online.OnlineParams, then the scenario's [online])")
@@ -91,8 +99,7 @@ def _range(text: str) -> tuple[float, float]:
 
 def run_traffic(args: argparse.Namespace) -> int:
     """`hil montecarlo --traffic`: HIL runs over randomised ship traffic."""
-    from hil.hilrun import RunOptions, run_loop
-    from hil.traffic_montecarlo import TrafficDraw, run_campaign
+    from hil.traffic_montecarlo import TrafficDraw, TrafficJob, run_campaign
 
     if args.ships < 1:
         raise UsageError("--ships must be >= 1")
@@ -108,19 +115,17 @@ def run_traffic(args: argparse.Namespace) -> int:
     bar = console.ProgressBar(args.runs, "montecarlo traffic", every_s=2.0)
     bad = [0]
 
-    def make(i, ships, folder):
-        return RunOptions(scenario=args.scenario, lockstep=True, duration=args.duration, seed=args.seed * 1000 + i,
-                          config=args.config, overrides=list(args.overrides), out=folder, plot=False, traffic=ships)
-
     def progress(done, s):
         bad[0] += 1 if s["collisions"] else 0
         bar.update(done, f"collisions {bad[0]}")
 
-    console.progress(f"hil montecarlo --traffic: {args.runs} lockstep HIL runs on {spec.name}, {args.ships} ship(s) "
-                     f"each, {args.jobs} at a time, seed {args.seed} -> {out}")
-    t0 = time.monotonic()
-    summary = run_campaign(args.scenario, args.runs, args.seed, draw, out, args.jobs, make,
-                           lambda o: run_loop(o, cfg), progress)
+    job = TrafficJob(scenario=args.scenario, seed=args.seed, duration=args.duration, config=args.config,
+                     overrides=tuple(args.overrides), out=str(out.resolve()))
+    with executors.make(args.executor, min(args.jobs, args.runs), args.scheduler, threads=True) as ex:
+        console.progress(f"hil montecarlo --traffic: {args.runs} lockstep HIL runs on {spec.name}, {args.ships} "
+                         f"ship(s) each, on {ex.description}, seed {args.seed} -> {out}")
+        t0 = time.monotonic()
+        summary = run_campaign(args.scenario, args.runs, args.seed, draw, out, ex, job, progress)
     summary["wall_time_s"] = round(time.monotonic() - t0, 1)
     summary["files"] = {"runs": str(out / "runs.csv"), "summary": str(out / "summary.json")}
     (out / "summary.json").write_text(console.to_json(summary))
@@ -156,8 +161,9 @@ def run(args: argparse.Namespace) -> int:
     tasks = experiment.make_tasks(args.scenario, args.runs, args.algorithms, args.seed, online_ov, args.config,
                                   args.overrides, args.figure_runs, args.baseline_objective)
     jobs = min(args.jobs, len(tasks))
+    ex = executors.make(args.executor, jobs, args.scheduler)
     console.progress(f"hil montecarlo: {args.runs} runs x {len(args.algorithms)} algorithms on {spec.name}, "
-                     f"{jobs} worker(s), seed {args.seed}, budget/cycle: "
+                     f"on {ex.description}, seed {args.seed}, budget/cycle: "
                      f"{online.local_iterations or '-'} iterations, {online.local_time or '-'} s; "
                      f"cycle {online.cycle_time:g} s -> {out}")
     bar = console.ProgressBar(len(tasks), "montecarlo", every_s=2.0)
@@ -168,7 +174,8 @@ def run(args: argparse.Namespace) -> int:
         bar.update(done, f"failed {failed[0]}")
 
     t0 = time.monotonic()
-    camp = experiment.run_campaign(tasks, jobs, out / "runs.csv", progress=on_row)
+    with ex:
+        camp = experiment.run_campaign(tasks, jobs, out / "runs.csv", progress=on_row, executor=ex)
     wall = time.monotonic() - t0
     if not camp.rows:
         raise RunFailed("interrupted before any run finished" if camp.interrupted else "no run finished")
@@ -187,6 +194,7 @@ def run(args: argparse.Namespace) -> int:
         "scenario": spec.name, "runs_requested": args.runs, "tasks_done": len(camp.rows),
         "runs_done": {a: sum(1 for r in camp.rows if r["algorithm"] == a) for a in args.algorithms},
         "interrupted": camp.interrupted, "algorithms": list(args.algorithms), "jobs": jobs, "seed": args.seed,
+        "executor": "dask" if isinstance(ex, executors.DaskExecutor) else "local", "workers": ex.workers,
         "baseline_objective": args.baseline_objective,
         "online": {"local_iterations": online.local_iterations, "local_time_s": online.local_time,
                    "cycle_time_s": online.cycle_time},

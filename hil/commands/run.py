@@ -50,7 +50,8 @@ class HilClient:
 
     ACCEPT = ("HIL_SENSOR", "HIL_GPS", "HIL_STATE_QUATERNION", "ODOMETRY")
 
-    def __init__(self, bind: str = "127.0.0.1:0", system_id: int = 1, component_id: int = 191) -> None:
+    def __init__(self, bind: str = "127.0.0.1:0", system_id: int = 1, component_id: int = 1) -> None:
+        """``system_id``/``component_id``: the autopilot's (the simulator takes commands only from those)."""
         self.ep = UdpEndpoint(bind)
         self.codec = Codec(system_id, component_id, accept=self.ACCEPT)
         self.frames = self.commands = self.rejects = 0
@@ -88,6 +89,7 @@ class HilClient:
 
 def sim_command(args: argparse.Namespace, client_port: int, lockstep: bool) -> list[str]:
     cmd = [sys.executable, "-m", "hil", "sim", "--json", "--state-to", f"127.0.0.1:{client_port}",
+           "--commands-from", f"127.0.0.1:{client_port}",
            "--commands-on", "127.0.0.1:0", "--duration", repr(float(args.duration))]
     if args.config:
         cmd += ["--config", args.config]
@@ -177,7 +179,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--demo drives the simulator over MAVLink; --actuators can needs the autopilot (drop --demo)")
     try:
         if args.demo:
-            client = HilClient(component_id=191)
+            client = HilClient(system_id=cfg.autopilot.system_id, component_id=cfg.autopilot.component_id)
             return _run_loop(args, client, args.speedup is None)
         return _run_hil(args, cfg)
     finally:

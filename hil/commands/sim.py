@@ -42,6 +42,10 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--commands-on", metavar="HOST:PORT", type=_hostport, default=None,
                    help="UDP address to receive HIL_ACTUATOR_CONTROLS on; port 0 picks a free port "
                         "(default: link.commands_on = 127.0.0.1:14561)")
+    p.add_argument("--commands-from", metavar="HOST:PORT|learn", default=None,
+                   help="take HIL_ACTUATOR_CONTROLS only from this source address ('learn': from the address "
+                        "of the first valid command); commands must also carry autopilot.system_id and "
+                        "autopilot.component_id (default: any address)")
     p.add_argument("--lockstep", action="store_true", default=None,
                    help="advance exactly one IMU period per HIL_ACTUATOR_CONTROLS whose time_usec equals "
                         "the current frame's, instead of following the wall clock (default: sim.lockstep = false)")
@@ -83,6 +87,12 @@ def config_overrides(args: argparse.Namespace) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    source = getattr(args, "commands_from", None)
+    if source not in (None, "learn"):
+        try:
+            parse_hostport(source)
+        except ValueError as exc:
+            raise UsageError(f"--commands-from: {exc}") from None
     args.overrides = list(args.overrides) + config_overrides(args)
     cfg = load_settings(args)
     world = None
@@ -117,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(str(exc)) from None
     server = SimulatorServer(core, endpoint, lockstep=cfg.sim.lockstep, duration=cfg.sim.duration,
                              speedup=cfg.sim.speedup, lockstep_resend=cfg.sim.lockstep_resend, progress=progress,
-                             esc=esc, can_lockstep_wait=cfg.can.lockstep_wait)
+                             esc=esc, can_lockstep_wait=cfg.can.lockstep_wait, command_source=source)
     previous = {sig: signal.signal(sig, lambda *_: server.stop()) for sig in (signal.SIGINT, signal.SIGTERM)}
     host, port = endpoint.address
     mode = "lockstep" if cfg.sim.lockstep else f"real time x{cfg.sim.speedup:g}"
