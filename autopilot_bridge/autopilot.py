@@ -10,13 +10,20 @@ Event-driven by the simulator's sensor frames (one per IMU period). For each new
    end of the cycle's deadline; its answer is collected without blocking (real time), or at
    exactly ``planning_deadline`` later in simulated time (lockstep, where the simulator waits
    for us, so waiting costs no simulated time and runs are repeatable);
-3. behaviour arbitration: follow the newest valid local path; when there is none (planner
-   failure, overrun with nothing usable, vessel inside an inflated obstacle), the reactive
-   avoidance behaviour (:mod:`autopilot_bridge.reactive`) steers until planning succeeds again;
+3. the active Rover mode (:mod:`autopilot_bridge.modes`) says where the thrust comes from; a mode
+   that navigates follows the vehicle's route through the behaviour state machine
+   (:mod:`autopilot_bridge.behaviour`): the newest valid local path (PLANNED); when there is none
+   (planner failure, overrun with nothing usable, vessel inside an inflated obstacle), the reactive
+   avoidance behaviour (:mod:`autopilot_bridge.reactive`) steers until planning succeeds again
+   (FALLBACK); station keeping at the route's end (COMPLETE/RETURNING);
 4. line-of-sight guidance, heading PID and speed pole placement, allocation to the two thrusters
    (:mod:`autopilot_bridge.control`), sent back as HIL_ACTUATOR_CONTROLS answering that frame,
    or as DroneCAN RawCommand (int14) when the actuator back-end is
    :class:`autopilot_bridge.can_actuators.CanActuators`.
+
+Ground stations command it through :class:`autopilot_bridge.vehicle_api.VehicleApi` (arm, set_mode,
+set_param, goto, ...), which this class implements, and read the frozen
+:class:`autopilot_bridge.vehicle_api.VehicleStatus` it publishes with every frame.
 
 A frame that repeats the last one (the simulator re-sends after a lost command) is answered with
 the same command again. Sensor time jumping backwards means the simulator restarted: navigation
@@ -29,11 +36,12 @@ import math
 import time
 from array import array
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import numpy as np
 
+from autopilot_bridge.behaviour import STATION, Behaviour, BehaviourMachine
 from autopilot_bridge.config import AutopilotParams
 from autopilot_bridge.control import (
     ControlParams,
@@ -47,19 +55,25 @@ from autopilot_bridge.control import (
 from autopilot_bridge.guidance import GuidanceOutput, LineOfSight
 from autopilot_bridge.hil_link import HilLink, SensorFrame
 from autopilot_bridge.local_planning import CycleInput, LocalPlan, World, map_to_ned_path, ned_to_map
+from autopilot_bridge.mission_commands import MissionCommand
+from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavigationFilter, NavigationParams, NavState
 from autopilot_bridge.obstacle_map import SensedObstacles, path_blocked
+from autopilot_bridge.parameters import Param, ParamTable
 from autopilot_bridge.plan_commitment import CommitmentParams, keep_current
 from autopilot_bridge.planning_worker import PlannerWorker, PlanRequest
 from autopilot_bridge.reactive import ReactiveAvoidance
-from autopilot_bridge.route_planning import RouteKeeper
+from autopilot_bridge.route_planning import RouteKeeper, check_mission_items
 from autopilot_bridge.telemetry import Telemetry
 from autopilot_bridge.tracking_stats import TrackingStats
+from autopilot_bridge.vehicle import Vehicle, Waypoint
+from autopilot_bridge.vehicle_api import Result, VehicleStatus
 from common.dronecan_codec import RAW_COMMAND_MAX, quantize
+from common.mavlink import MAV_TYPE as M
 from common.percentiles import StreamingPercentiles
-from autopilot_bridge.vehicle import Mode, Vehicle, Waypoint
 
-PLANNED, FALLBACK, COMPLETE, WAITING = "planned", "fallback", "complete", "waiting_for_navigation"
+
+SPEED_RANGE = (0.2, 3.0)   # m/s: speed set-points a GCS may give (3 m/s: the hull's top speed)
 
 
 @dataclass(frozen=True)
@@ -96,7 +110,8 @@ class Autopilot:
                  propulsion: Propulsion, world: World, link: HilLink, worker: PlannerWorker,
                  telemetry: Telemetry | None = None, *, lockstep: bool, seed: int,
                  log: Callable[[str], None] | None = None, traffic: Any = None, actuators: Any | None = None,
-                 int14_commands: bool = False, wait_for_arm: bool = False) -> None:
+                 int14_commands: bool = False, wait_for_arm: bool = False,
+                 pace_speedup: float | None = None) -> None:
         self.p, self.nav_params, self.control_params = params, nav, control
         self.prop, self.world, self.link, self.worker = propulsion, world, link, worker
         self.zero_thrust = allocate(0.0, 0.0, propulsion.B_u, propulsion.T_max, propulsion.T_min)
@@ -136,16 +151,20 @@ class Autopilot:
         self._route_version = 0
         self._world_version = 0
         self._stale_cycle = 0        # plans of cycles up to this one were for an older route
-        self._idle = False
-        self._pace_anchor: tuple[float, float] | None = None
+        # Lockstep with a ground station attached: simulated time passes at most pace_speedup x wall
+        # time (None: only while disarmed, at 1x), so that a person can follow the boat.
+        self.pace_speedup = pace_speedup
+        self._pace_anchor: tuple[float, float, float] | None = None
+        self._status: VehicleStatus | None = None
         self._reset()
+        self.param_table = ParamTable(self.parameters())
 
     # -- state ---------------------------------------------------------------------------------
     def _reset(self) -> None:
         self.nav = NavigationFilter(self.nav_params)
         self.heading_pid = HeadingPID(self.control_params)
         self.speed_ctl = SpeedController(self.control_params, self.prop.surge)
-        self.mode = WAITING
+        self.behaviour = BehaviourMachine()
         self.los: LineOfSight | None = None
         self.next_plan_t = 0.0
         self.cycle = 0
@@ -155,7 +174,6 @@ class Autopilot:
         self.last_command: Thrust | None = None
         self.last_t: float | None = None
         self.complete_t: float | None = None
-        self._returning = False            # loiter: on the way back to the final goal
         self.target = self.goal_ned
         self.speed_factor = 1.0
         self._path_invalid = False   # the followed path is blocked (sensed) or traffic asks for a new one
@@ -163,11 +181,11 @@ class Autopilot:
         if self.traffic is not None:
             self.traffic.reset()
 
-    def _event(self, t: float, text: str) -> None:
+    def _event(self, t: float, text: str, warning: bool = False) -> None:
         self.stats.events.append((t, text))
         self.log(f"autopilot t={t:.2f}s: {text}")
         if self.telemetry is not None:
-            self.telemetry.statustext(text)
+            self.telemetry.statustext(text, M.MAV_SEVERITY_WARNING if warning else M.MAV_SEVERITY_INFO)
 
     # -- navigation ----------------------------------------------------------------------------
     def _fuse(self, f: SensorFrame) -> None:
@@ -277,7 +295,7 @@ class Autopilot:
         obstacle (autopilot_bridge/plan_commitment.py) - unless it is blocked, traffic is being
         planned for, the followed path is not an exact one, or the vessel is off it by more than the
         look-ahead."""
-        if self.mode != PLANNED or self.los is None or self._path_invalid or self._traffic_planned:
+        if self.behaviour.state is not Behaviour.PLANNED or self.los is None or self._path_invalid or self._traffic_planned:
             return False
         if self.local_paths and self.local_paths[-1]["status"] != "exact":
             # The followed path stopped short of its subgoal (the tree found no way there): it may
@@ -313,8 +331,8 @@ class Autopilot:
         if s is None:
             self._send(f.time_usec, self.zero_thrust, received_at)
             return
-        if self.mode == WAITING:
-            self.mode = FALLBACK
+        if self.behaviour.state is Behaviour.WAITING:
+            self.behaviour.to(Behaviour.IDLE)      # navigation is ready
             self.next_plan_t = t
         if f.scan is not None and self.p.sensed_obstacles:
             self._sense(t, f, s)
@@ -322,63 +340,103 @@ class Autopilot:
             texts, replan = self.traffic.on_frame(t, s, self.link.take_ais(), self.telemetry)
             for text in texts:
                 self._event(t, text)
-            if replan and self.mode != COMPLETE:
+            if replan and self.behaviour.state not in STATION:
                 self.next_plan_t = t  # a new encounter: plan now, not at the next period
                 self._path_invalid = True
         if self.stats.frames % 10 == 0:  # the estimated track at 10 Hz, for the run's plot
             self.track.extend((t, s.x, s.y, s.psi))
 
-        self.vehicle.update(s.x, s.y)
+        self.vehicle.update(s.x, s.y, t)
         self._apply_route(t)
-        active = self.vehicle.wants_thrust()
-        if active and self.mode != COMPLETE and \
-                math.hypot(self.goal_ned[0] - s.x, self.goal_ned[1] - s.y) <= self.goal_radius:
-            self.mode = COMPLETE
-            self.complete_t = t
-            if self.vehicle.mode == Mode.AUTO:
-                self.vehicle.finish()
-                self._event(t, "mission complete: final goal reached")
-            else:
-                self._event(t, f"{self.vehicle.mode.name}: destination reached, holding")
-
-        if not active:
-            # Disarmed, HOLD (drift), MANUAL, GUIDED without a target, AUTO without a mission.
-            self._idle = True
-            cmd = self._manual_command() if (self.vehicle.armed and self.vehicle.mode == Mode.MANUAL) else \
-                self.zero_thrust
-        elif self.mode == COMPLETE:
-            cmd = self._station_keep(s, dt)
-        else:
-            if self._idle:  # back under control: the controllers start from the present state
-                self._idle = False
-                self._reset_controllers(s)
-            plan = self._collect_plan(t)
-            if plan is not None:
-                if self._accept(plan, s):
-                    if self.mode != PLANNED:
-                        self._event(t, f"following local path (cycle {plan.cycle}, {plan.status})")
-                    self.mode = PLANNED
-                elif self.los is None:
-                    self._to_fallback(t, f"no valid local path ({plan.reason or plan.status})")
-            if self.pending_since is None and t + 1e-9 >= self.next_plan_t:
-                self.next_plan_t = t + self.p.planning_period
-                self._submit_plan(s)
-            preview = max(self.p.lookahead, 3.0 * self.p.cruise_speed)  # ~3 s of travel
-            guidance = self.los.update(s.x, s.y, preview) if (self.mode == PLANNED and self.los is not None) else None
-            if guidance is not None and guidance.finished and \
-                    math.hypot(self.goal_ned[0] - s.x, self.goal_ned[1] - s.y) > self.p.goal_tolerance:
-                self._to_fallback(t, "local path finished before a new one arrived")
-                guidance = None
-            cmd = self._control(s, dt, guidance)
-        if self.lockstep and not self.vehicle.armed:
-            self._pace(t)
+        v = self.vehicle
+        # The active mode decides where the thrust comes from (autopilot_bridge.modes); disarmed: none.
+        cmd = v.active.output(self, v, s, dt) if v.armed else self.idle()
+        if self.lockstep and (self.pace_speedup is not None or not v.armed):
+            self._pace(t, self.pace_speedup if (self.pace_speedup is not None and v.armed) else 1.0)
         else:
             self._pace_anchor = None
         self._send(f.time_usec, cmd, received_at)
+        self._publish(t, s, cmd)
+
+    # -- Driver (autopilot_bridge.modes): where a mode's thrust comes from -------------------------
+    def idle(self) -> Thrust:
+        """Thrusters at zero (disarmed, HOLD, a mode without a route)."""
+        self.behaviour.pause()
+        return self.zero_thrust
+
+    def manual(self, stick: tuple[float, float, float] | None) -> Thrust:
+        """MANUAL_CONTROL x (surge) and r (yaw), each -1..1, given at wall time stick[2]; zero when older than 1 s."""
+        self.behaviour.pause()
+        if stick is None or time.monotonic() - stick[2] > 1.0:
+            return self.zero_thrust
+        x, r = stick[0], stick[1]
+        tau_u = x * 2.0 * (self.prop.T_max if x >= 0 else -self.prop.T_min)
+        tau_r = r * 0.5 * (self.prop.T_max - self.prop.T_min) * self.prop.B_u
+        return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
+
+    def navigate(self, s: NavState, dt: float) -> Thrust:
+        """Follow the vehicle's route: plan online, follow the local path or avoid reactively, and keep
+        station at its end."""
+        t = s.t if self.last_t is None else self.last_t
+        b = self.behaviour
+        if b.state is Behaviour.IDLE:     # back under control: the controllers start from the present state
+            b.resume()
+            self._reset_controllers(s)
+        if b.state not in STATION and math.hypot(self.goal_ned[0] - s.x, self.goal_ned[1] - s.y) <= self.goal_radius:
+            b.to(Behaviour.COMPLETE)
+            v = self.vehicle
+            if v.mode == Mode.AUTO:
+                v.finish()
+                if v.complete:
+                    self.complete_t = t
+                    self._event(t, "mission complete: final goal reached")
+            else:
+                self.complete_t = t
+                self._event(t, f"{v.mode.name}: destination reached, holding")
+        if b.state in STATION:
+            return self._station_keep(s, dt)
+        plan = self._collect_plan(t)
+        if plan is not None:
+            if self._accept(plan, s):
+                if b.to(Behaviour.PLANNED):
+                    self._event(t, f"following local path (cycle {plan.cycle}, {plan.status})")
+            elif self.los is None:
+                self._to_fallback(t, f"no valid local path ({plan.reason or plan.status})")
+        if self.pending_since is None and t + 1e-9 >= self.next_plan_t:
+            self.next_plan_t = t + self.p.planning_period
+            self._submit_plan(s)
+        preview = max(self.p.lookahead, 3.0 * self.speed_setpoint())  # ~3 s of travel
+        following = b.state is Behaviour.PLANNED and self.los is not None
+        guidance = self.los.update(s.x, s.y, preview) if following else None
+        if guidance is not None and guidance.finished and \
+                math.hypot(self.goal_ned[0] - s.x, self.goal_ned[1] - s.y) > self.p.goal_tolerance:
+            self._to_fallback(t, "local path finished before a new one arrived")
+            guidance = None
+        return self._control(s, dt, guidance)
+
+    def speed_setpoint(self) -> float:
+        """m/s along the path: DO_CHANGE_SPEED's until the mode changes, else ``cruise_speed``."""
+        if self.vehicle.speed is None:
+            return self.p.cruise_speed
+        return min(max(self.vehicle.speed, SPEED_RANGE[0]), SPEED_RANGE[1])  # a mission item's, unchecked
+
+    def _publish(self, t: float, s: NavState | None, cmd: Thrust | None) -> None:
+        """The frame's frozen status, handed to the ground-station link."""
+        v = self.vehicle
+        for text, warning in v.take_notes():   # the mission executor's and the modes' messages
+            self._event(t, text, warning)
+        last = self.local_paths[-1]["path_ned"] if self.local_paths else ()
+        status = VehicleStatus(
+            t=t, armed=v.armed, mode=v.mode, mode_flags=v.active.flags, behaviour=self.behaviour.state, nav=s,
+            home=v.home, mission_count=len(v.mission), mission_current=v.current, mission_complete=v.complete,
+            speed_setpoint=self.speed_setpoint(),
+            thrust=None if cmd is None else (float(cmd.port_cmd), float(cmd.stdb_cmd)),
+            local_paths=len(self.local_paths), local_path=tuple((float(n), float(e)) for n, e in last),
+            reached=tuple(v.take_reached()), changed=v.changed)
+        v.changed = False
+        self._status = status
         if self.telemetry is not None:
-            self.telemetry.on_frame(t, s, self.mode, cmd)
-        elif self.vehicle.reached:
-            self.vehicle.take_reached()
+            self.telemetry.on_frame(status)
 
     # -- ground-station hooks ---------------------------------------------------------------------
     def _apply_route(self, t: float) -> None:
@@ -392,8 +450,7 @@ class Autopilot:
         self.goal_radius = r.goal_radius
         self.target = self.goal_ned
         self.los = None
-        if self.mode in (PLANNED, COMPLETE):
-            self.mode = FALLBACK
+        self.behaviour.new_route()
         self.complete_t = None
         self._stale_cycle = self.cycle   # whatever the worker is planning now is for the old route
         self.next_plan_t = t
@@ -413,28 +470,125 @@ class Autopilot:
         self.planner_overrides[name] = value
         self._world_version += 1
 
-    def _pace(self, t: float) -> None:
-        """Lockstep while disarmed: let simulated time pass no faster than wall time.
+    # -- command API (autopilot_bridge.vehicle_api.VehicleApi) ------------------------------------
+    def _position(self) -> tuple[float, float] | None:
+        st = self._status
+        return None if st is None else st.position
+
+    def status(self) -> VehicleStatus | None:
+        """The newest frame's status (None before the first navigation fix)."""
+        return self._status
+
+    def arm(self, on: bool) -> Result:
+        if on and self._position() is None:
+            return Result(False, "arm: no navigation fix yet", temporary=True)
+        return Result(*self.vehicle.arm(on))
+
+    def set_mode(self, mode: Mode) -> Result:
+        return Result(*self.vehicle.set_mode(mode, self._position()))
+
+    def set_param(self, name: str, value: float) -> Result:
+        return Result(*self.param_table.set(name, value))
+
+    def goto(self, north: float, east: float) -> Result:
+        return Result(*self.vehicle.reposition((float(north), float(east)), self._position()))
+
+    def set_speed(self, speed: float) -> Result:
+        p = self.param_table.get("CRUISE_SPEED")
+        if not math.isfinite(speed) or not p.lo <= speed <= p.hi:
+            return Result(False, f"speed {speed:g} m/s outside {p.lo:g}..{p.hi:g}")
+        self.vehicle.speed = float(speed)
+        return Result(True, f"speed {speed:g} m/s")
+
+    def start_mission(self, first: int) -> Result:
+        if not self.vehicle.armed:
+            return Result(False, "mission start: not armed")
+        return Result(*self.vehicle.mission_start(first, self._position()))
+
+    def set_mission_current(self, seq: int) -> Result:
+        ok = self.vehicle.set_current(seq, self._position())
+        return Result(ok, "" if ok else f"no mission item {seq}")
+
+    def replace_mission(self, commands: tuple[MissionCommand, ...]) -> None:
+        self.vehicle.replace_mission(commands, self._position())
+
+    def mission(self) -> tuple[MissionCommand, ...]:
+        return self.vehicle.mission
+
+    def check_mission(self, items: tuple[Any, ...],
+                      to_ned: Callable[[float, float], tuple[float, float]]) -> tuple[int, int, str] | None:
+        return check_mission_items(items, to_ned, self.grid, self.world.params.safety_radius, self._position())
+
+    def manual_input(self, x: float, r: float, wall_time: float) -> None:
+        self.vehicle.manual = (x, r, wall_time)
+
+    def record_event(self, text: str) -> None:
+        self.stats.events.append((self.last_t or 0.0, text))
+
+    def esc_telemetry(self) -> list[dict[str, Any]]:
+        esc = getattr(self.actuators, "esc_telemetry", None)
+        return esc() if callable(esc) else []
+
+    def parameters(self) -> list[Param]:
+        """The tunables this vessel computer owns (the GCS parameter service lists them)."""
+
+        def set_ap(key: str) -> Callable[[float], None]:
+            def f(v: float) -> None:
+                self.p = replace(self.p, **{key: v})  # AutopilotParams.__post_init__ checks deadline < period
+            return f
+
+        def set_ctl(key: str) -> Callable[[float], None]:
+            def f(v: float) -> None:
+                self.control_params = replace(self.control_params, **{key: v})
+                self.heading_pid.p = self.control_params
+                self.speed_ctl.p = self.control_params
+            return f
+
+        def planner(key: str) -> Callable[[], float]:
+            return lambda: float(self.planner_overrides.get(key, getattr(self.world.params, key)))
+
+        def set_radius(v: float) -> None:
+            self.vehicle.default_radius = v
+            self.vehicle.executor.default_radius = v
+
+        period = self.p.planning_period
+        return [
+            Param("PLN_DEADLINE", lambda: self.p.planning_deadline, set_ap("planning_deadline"), 0.05, 0.95 * period,
+                  "hard deadline of one local planning cycle", "s"),
+            Param("PLN_PERCEPT_RAD", planner("perceptual_radius"),
+                  lambda v: self.set_planner_override("perceptual_radius", v), 5.0, 200.0,
+                  "radius of the perceptual domain (33 m in section 4.2)", "m"),
+            Param("PLN_PNG_PROB", planner("png_probability"),
+                  lambda v: self.set_planner_override("png_probability", v), 0.0, 1.0,
+                  "probability of sampling the PNG node (section 3.2)"),
+            Param("CRUISE_SPEED", lambda: self.p.cruise_speed, set_ap("cruise_speed"), *SPEED_RANGE,
+                  "speed set-point along the local path (3 m/s: the hull's top speed)", "m/s"),
+            Param("HDG_KP", lambda: self.control_params.heading_kp, set_ctl("heading_kp"), 0.0, 1000.0,
+                  "heading PID proportional gain", "N m/rad"),
+            Param("HDG_KI", lambda: self.control_params.heading_ki, set_ctl("heading_ki"), 0.0, 200.0,
+                  "heading PID integral gain", "N m/(rad s)"),
+            Param("HDG_KD", lambda: self.control_params.heading_kd, set_ctl("heading_kd"), 0.0, 500.0,
+                  "heading PID derivative gain", "N m s/rad"),
+            Param("SPD_BANDWIDTH", lambda: self.control_params.speed_bandwidth, set_ctl("speed_bandwidth"), 0.05, 5.0,
+                  "speed loop natural frequency", "rad/s"),
+            Param("WP_RADIUS", lambda: self.vehicle.default_radius, set_radius, 0.5, 50.0,
+                  "acceptance radius of items that give none (and of RTL/GUIDED)", "m"),
+        ]
+
+    def _pace(self, t: float, speedup: float) -> None:
+        """Lockstep with a person watching: let simulated time pass no faster than ``speedup`` x wall time.
 
         A boat waiting for its operator (``--wait-for-arm``) drifts with the current; at lockstep
-        speed (~15x) a minute at the ground station would be a quarter of an hour adrift."""
+        speed (~15x) a minute at the ground station would be a quarter of an hour adrift. Armed, a
+        GCS session runs at ``pace_speedup`` (``hil run --speedup``, default 1)."""
         now = time.monotonic()
-        if self._pace_anchor is None:
-            self._pace_anchor = (t, now)
+        if self._pace_anchor is None or self._pace_anchor[2] != speedup:
+            self._pace_anchor = (t, now, speedup)
             return
-        ahead = (t - self._pace_anchor[0]) - (now - self._pace_anchor[1])
+        ahead = (t - self._pace_anchor[0]) / speedup - (now - self._pace_anchor[1])
         if ahead > 0.0:
             time.sleep(min(ahead, 0.1))
             self._waited = True  # a paced frame measures the pacing, not the control loop
-
-    def _manual_command(self) -> Thrust:
-        m = self.vehicle.manual
-        if m is None or time.monotonic() - m[2] > 1.0:
-            return self.zero_thrust
-        x, r = m[0], m[1]
-        tau_u = x * 2.0 * (self.prop.T_max if x >= 0 else -self.prop.T_min)
-        tau_r = r * 0.5 * (self.prop.T_max - self.prop.T_min) * self.prop.B_u
-        return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
 
     def _sense(self, t: float, f: SensorFrame, s: NavState) -> None:
         """Add a range scan's new obstacles to the map; replan at once if they are near the path ahead."""
@@ -448,7 +602,7 @@ class Autopilot:
             self.reference_ned = replanned
             self._world_version += 1
             self._event(t, "sensed obstacle on the global route: route re-planned")
-        if self.mode == PLANNED and self.los is not None:
+        if self.behaviour.state is Behaviour.PLANNED and self.los is not None:
             ahead = self.los.path[self.los.index:]
             if path_blocked(ahead, new, self.grid.resolution, self.p.sensed_path_clearance):
                 self.stats.sensed_replans += 1
@@ -457,10 +611,9 @@ class Autopilot:
                 self._path_invalid = True
 
     def _to_fallback(self, t: float, why: str) -> None:
-        if self.mode != FALLBACK:
+        if self.behaviour.to(Behaviour.FALLBACK):
             self.stats.fallback_activations += 1
             self._event(t, f"reactive avoidance engaged: {why}")
-        self.mode = FALLBACK
         self.los = None
 
     def _control(self, s: NavState, dt: float, g: GuidanceOutput | None) -> Thrust:
@@ -469,7 +622,7 @@ class Autopilot:
             # (current, sway in turns) away from it. Uncompensated, each cycle's new path (starting
             # where the vessel is) forgave the drift, and a cross-current set the boat onto walls.
             beta = math.atan2(s.v, s.u) if s.u > self.p.min_turn_speed else 0.0
-            psi_ref, u_ref = g.heading - beta, self.p.cruise_speed * self.speed_factor
+            psi_ref, u_ref = g.heading - beta, self.speed_setpoint() * self.speed_factor
             self.tracking.add(g.cross_track, psi_ref, s.psi)
             r_ref = max(s.u, 0.0) * g.curvature   # the path turns at u kappa: feed it forward
             # Slow down for sharp turns ahead so the yaw rate they need (u kappa) stays within reach.
@@ -477,7 +630,7 @@ class Autopilot:
                 u_ref = min(u_ref, max(self.p.min_turn_speed, self.p.max_turn_rate / g.curvature_ahead))
             u_ref = min(u_ref, self._near_obstacle_speed(s))
             if g.remaining < 2.0 * self.p.lookahead and self.los.path[-1].tolist() == list(self.goal_ned):
-                u_ref = max(0.5, self.p.cruise_speed * g.remaining / (2.0 * self.p.lookahead))
+                u_ref = max(0.5, self.speed_setpoint() * g.remaining / (2.0 * self.p.lookahead))
         else:
             a = self.reactive.command(s.x, s.y, s.psi, self.target)
             psi_ref, u_ref, r_ref = a.heading, a.speed, 0.0
@@ -507,12 +660,14 @@ class Autopilot:
         beyond it, steer straight back at ``loiter_speed`` until within half the radius. The way back
         is the water the boat has just drifted across, so it needs no planning."""
         d = math.hypot(self.goal_ned[0] - s.x, self.goal_ned[1] - s.y)
-        if self.p.mission_done == "hold" or d <= 0.5 * self.p.loiter_radius or \
-                (not self._returning and d <= self.p.loiter_radius):
-            self._returning = False
+        route = self.vehicle.route
+        loiter = self.p.mission_done == "loiter" or (route is not None and route.loiter)
+        b = self.behaviour
+        if not loiter or d <= 0.5 * self.p.loiter_radius or \
+                (b.state is Behaviour.COMPLETE and d <= self.p.loiter_radius):
+            b.to(Behaviour.COMPLETE)
             return self.zero_thrust
-        if not self._returning:
-            self._returning = True
+        if b.to(Behaviour.RETURNING):
             self._reset_controllers(s)
         psi_ref = math.atan2(self.goal_ned[1] - s.y, self.goal_ned[0] - s.x)
         return self._drive(s, dt, psi_ref, min(self.p.loiter_speed, max(0.3, 0.5 * d)))
@@ -561,7 +716,8 @@ class Autopilot:
         lat = self.stats.latency_ms
         w = self.worker.stats
         return {
-            "mode": self.mode,
+            "mode": self.behaviour.state.value,
+            "vehicle_mode": self.vehicle.mode.name,
             "mission_complete": self.complete_t is not None,
             "complete_time_s": self.complete_t,
             "frames": self.stats.frames,

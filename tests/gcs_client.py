@@ -145,3 +145,82 @@ def stop_run(proc: subprocess.Popen, timeout: float = 60.0) -> tuple[str, str]:
         os.killpg(proc.pid, signal.SIGKILL)
         out, err = proc.communicate()
     return out.decode(errors="replace"), err.decode(errors="replace")
+
+
+# -- the mission every GCS session test flies (issue 12): short legs in the harbour's open water ----------
+HOME_MAP = (22.0, 40.0)                       # the harbour's start, map x east / y north, m
+MISSION_SPEED = 0.75                          # m/s, the DO_CHANGE_SPEED item's (exact in float32, as on the wire)
+LOITER_S = 5.0
+
+
+def qgc_mission(geo: Any) -> list[tuple]:
+    """The mission as QGroundControl writes it: (frame, command, p1, p2, p3, p4, lat, lon, alt) per item.
+
+    0 home (NAV_WAYPOINT at the start), 1-2 waypoints ~11 m apart, 3 NAV_LOITER_TIME 5 s, 4 DO_CHANGE_SPEED
+    0.75 m/s (frame MISSION, position 0/0, as QGC writes DO items; ArduPilot starts it with item 3), 5
+    NAV_RETURN_TO_LAUNCH (28 m back home). Open water west of the first pier (clearance >= 7 m on every
+    leg; the scenario's own reference path crosses that pier), every leg shorter than 30 m."""
+    def at(x: float, y: float) -> tuple[float, float]:
+        return geo.sea_level_to_geodetic(y, x)
+
+    rel, mis = M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_MISSION
+    return [
+        (M.MAV_FRAME_GLOBAL, M.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0, *at(*HOME_MAP), 0.0),
+        (rel, M.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0, *at(28.0, 50.0), 0.0),
+        (rel, M.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0, *at(30.0, 60.0), 0.0),
+        (rel, M.MAV_CMD_NAV_LOITER_TIME, LOITER_S, 0, 0, 0, *at(26.0, 68.0), 0.0),
+        (mis, M.MAV_CMD_DO_CHANGE_SPEED, 1, MISSION_SPEED, -1, 0, 0.0, 0.0, 0.0),
+        (rel, M.MAV_CMD_NAV_RETURN_TO_LAUNCH, 0, 0, 0, 0, 0.0, 0.0, 0.0),
+    ]
+
+
+def qgc_wpl(items: list[tuple]) -> str:
+    """A QGC WPL 110 .waypoints file (MAVProxy `wp load`, QGroundControl's legacy export)."""
+    lines = ["QGC WPL 110"]
+    for i, (frame, cmd, p1, p2, p3, p4, lat, lon, alt) in enumerate(items):
+        lines.append(f"{i}\t{int(i == 0)}\t{frame}\t{cmd}\t{p1:.8f}\t{p2:.8f}\t{p3:.8f}\t{p4:.8f}\t"
+                     f"{lat:.8f}\t{lon:.8f}\t{alt:.6f}\t1")
+    return "\n".join(lines) + "\n"
+
+
+def check_mission_session(tlog: Path, geo: Any, count: int = 6, speedup: float = 4.0) -> None:
+    """What the boat sent during the session (the run's tlog): every item reached, the speed change in
+    VFR_HUD, the STATUSTEXTs of the speed and the loiter; and lockstep paced to at most ``speedup`` x wall
+    time while armed (an upper bound: a slow machine only lowers the ratio)."""
+    log = mavutil.mavlink_connection(str(tlog), dialect="ardupilotmega")
+    reached, texts, speeds, current = [], [], {}, None
+    armed, paced = False, []          # (wall s as the tap stamped it, vehicle s) while armed
+    while (m := log.recv_match()) is not None:
+        if m.get_srcSystem() != 1 or m.get_srcComponent() != 1:
+            continue
+        kind = m.get_type()
+        if kind == "MISSION_ITEM_REACHED":
+            reached.append(m.seq)
+        elif kind == "MISSION_CURRENT":
+            current = m.seq
+        elif kind == "VFR_HUD" and current is not None and len(set(reached)) < count:
+            speeds.setdefault(current, []).append(m.groundspeed)
+        elif kind == "STATUSTEXT":
+            texts.append(m.text)
+        elif kind == "HEARTBEAT":
+            armed = bool(m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
+        elif kind == "GLOBAL_POSITION_INT" and armed:
+            paced.append((m._timestamp, m.time_boot_ms * 1e-3))
+    assert set(range(count)) <= set(reached), reached
+    assert len(paced) > 50
+    sim, wall = paced[-1][1] - paced[0][1], paced[-1][0] - paced[0][0]
+    assert sim <= speedup * 1.1 * wall + 1.0, (sim, wall)
+    assert reached.count(5) >= 1 and reached.index(4) < reached.index(3), reached  # DO item starts with item 3
+    before = speeds.get(1, []) + speeds.get(2, [])
+    rtl = speeds.get(5, [])
+    assert before and max(before) > 1.0, before            # cruise (1.5 m/s) before the change
+    assert len(rtl) >= 8, rtl
+    settled = sorted(rtl[len(rtl) // 2:])                   # the second half of the way home
+    assert max(settled) <= MISSION_SPEED + 0.25 and abs(settled[len(settled) // 2] - MISSION_SPEED) <= 0.15, rtl
+    assert any(f"speed {MISSION_SPEED:g} m/s" in t for t in texts), texts
+    assert any(f"loiter {LOITER_S:g} s" in t for t in texts), texts
+
+
+def at_home(p: Any, geo: Any, tol: float = 4.0) -> bool:
+    n, e = geo.geodetic_to_sea_level(p.lat * 1e-7, p.lon * 1e-7)
+    return abs(n - HOME_MAP[1]) <= tol and abs(e - HOME_MAP[0]) <= tol

@@ -167,6 +167,29 @@ def _command_long(cmd: int, *p: float, sysid: int = 245) -> bytes:
     return bytes(mav.command_long_encode(1, 1, cmd, 0, *p).pack(mav))
 
 
+class _VehicleOnly:
+    """The command API (autopilot_bridge.vehicle_api.VehicleApi) over a bare Vehicle, position (0, 0)."""
+
+    def __init__(self, vehicle) -> None:
+        self.v = vehicle
+
+    def set_mode(self, mode):
+        from autopilot_bridge.vehicle_api import Result
+
+        return Result(*self.v.set_mode(mode, (0.0, 0.0)))
+
+    def goto(self, north, east):
+        from autopilot_bridge.vehicle_api import Result
+
+        return Result(*self.v.reposition((north, east), (0.0, 0.0)))
+
+    def mission(self):
+        return self.v.mission
+
+    def parameters(self):
+        return []
+
+
 def test_set_mode_with_a_custom_sub_mode_is_refused_not_read_as_a_rover_mode(closing):
     """MAVSDK sets a non-ArduPilot vehicle's mode the PX4 way: DO_SET_MODE param2 = main mode, param3 = sub
     mode; its "start mission" is (4, 4). Rover's custom mode 4 is HOLD: that must be refused (DENIED),
@@ -179,8 +202,8 @@ def test_set_mode_with_a_custom_sub_mode_is_refused_not_read_as_a_rover_mode(clo
     link = GcsLink(params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO)
     closing(link)
     vehicle = Vehicle([Waypoint(10.0, 10.0, 3.0)], armed=True, mode=Mode.MANUAL)
-    link.ap = SimpleNamespace(vehicle=vehicle)
-    link.state = SimpleNamespace(x=0.0, y=0.0)
+    link.attach(_VehicleOnly(vehicle))
+    link.status = SimpleNamespace(position=(0.0, 0.0))
     gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     closing(gcs)
     gcs.bind(("127.0.0.1", 0))
@@ -219,3 +242,47 @@ def test_a_ping_request_is_answered_to_its_sender(closing):
     # A response (target set) is not answered again.
     gcs.sendto(bytes(mav.ping_encode(5, 6, 1, 1).pack(mav)), ("127.0.0.1", port))
     assert read_until(gcs, "PING", link, timeout=0.5) is None
+
+
+def test_guided_goto_by_position_target_and_by_reposition(closing):
+    """SET_POSITION_TARGET_GLOBAL_INT (position bits used) and MAV_CMD_DO_REPOSITION (COMMAND_INT) both put the
+    boat in GUIDED with a route to the target; a target off the chart is refused with a STATUSTEXT."""
+    from types import SimpleNamespace
+
+    from autopilot_bridge.vehicle import Mode, Vehicle, Waypoint
+
+    port = free_udp_port()
+    link = GcsLink(params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO, chart_size=(150.0, 200.0))
+    closing(link)
+    vehicle = Vehicle([Waypoint(10.0, 10.0, 3.0)], armed=True, mode=Mode.HOLD)
+    link.attach(_VehicleOnly(vehicle))
+    link.status = SimpleNamespace(position=(0.0, 0.0))
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    closing(gcs)
+    gcs.bind(("127.0.0.1", 0))
+    mav = mavlink2.MAVLink(None, 245, 190)
+    lat, lon = GEO.sea_level_to_geodetic(40.0, 25.0)
+    ignore_velocity_etc = 0b0000_1111_1111_1000
+    gcs.sendto(bytes(mav.set_position_target_global_int_encode(
+        0, 1, 1, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, ignore_velocity_etc, int(round(lat * 1e7)),
+        int(round(lon * 1e7)), 0.0, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav)), ("127.0.0.1", port))
+    deadline = time.monotonic() + 5.0
+    while vehicle.mode != Mode.GUIDED and time.monotonic() < deadline:
+        link.service()
+        time.sleep(0.01)
+    assert vehicle.mode == Mode.GUIDED
+    assert vehicle.route.path[-1] == pytest.approx([40.0, 25.0], abs=0.01)
+    lat, lon = GEO.sea_level_to_geodetic(12.0, 30.0)
+    gcs.sendto(bytes(mav.command_int_encode(1, 1, M.MAV_FRAME_GLOBAL_INT, M.MAV_CMD_DO_REPOSITION, 0, 0, -1, 0, 0, 0,
+                                            int(round(lat * 1e7)), int(round(lon * 1e7)), 0.0).pack(mav)),
+               ("127.0.0.1", port))
+    ack = read_until(gcs, "COMMAND_ACK", link)
+    assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
+    assert vehicle.route.path[-1] == pytest.approx([12.0, 30.0], abs=0.01)
+    lat, lon = GEO.sea_level_to_geodetic(400.0, 30.0)   # north of the 150 m chart
+    gcs.sendto(bytes(mav.set_position_target_global_int_encode(
+        0, 1, 1, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, ignore_velocity_etc, int(round(lat * 1e7)),
+        int(round(lon * 1e7)), 0.0, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav)), ("127.0.0.1", port))
+    text = read_until(gcs, "STATUSTEXT", link)
+    assert text is not None and "off the chart" in text.text
+    assert vehicle.route.path[-1] == pytest.approx([12.0, 30.0], abs=0.01)

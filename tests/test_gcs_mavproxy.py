@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 import pytest
-from gcs_client import Gcs, start_run, stop_run
+from gcs_client import MISSION_SPEED, Gcs, at_home, check_mission_session, qgc_mission, qgc_wpl, start_run, stop_run
 
 from common.geodesy import LocalFrame
 from hil.hilrun import free_udp_port
@@ -117,3 +117,56 @@ def test_mavproxy_session(tmp_path):
     finally:
         mp.close()
         stop_run(proc)
+
+
+def test_mavproxy_mission_with_speed_loiter_and_return_to_launch(tmp_path):
+    """Issue 12: a QGC WPL 110 mission with DO_CHANGE_SPEED, NAV_LOITER_TIME and NAV_RETURN_TO_LAUNCH, loaded by
+    MAVProxy (`wp load`) and flown in AUTO; the boat comes home, stays up and takes the next mission."""
+    from common.mavlink import MAV_TYPE as M
+
+    wp = tmp_path / "mission.waypoints"
+    wp.write_text(qgc_wpl(qgc_mission(GEO)))
+    port = free_udp_port()
+    out = tmp_path / "run"
+    # Lockstep paced to 4x wall time (a GCS is attached); the session ends with Ctrl-C, not at a goal.
+    proc = start_run(out, "--scenario", "harbour", "--duration", "5000", "--wait-for-arm", "--speedup", "4",
+                     "--gcs", f"udpin:127.0.0.1:{port}")
+    state = tmp_path / "mavproxy"
+    mp = Console([MAVPROXY, f"--master=udpout:127.0.0.1:{port}", "--source-system=255",
+                  "--default-modules=wp,param,mode,arm,cmdlong,log", f"--state-basedir={state}"], tmp_path)
+    watcher = None
+    try:
+        mp.expect("Detected vehicle 1:1", timeout=240)
+        mp.expect("Mode HOLD")
+        mp.send(f"wp load {wp}")
+        mp.expect("Got MISSION_ACK: TYPE_MISSION: ACCEPTED")
+        mp.send("wp list")
+        mp.expect("Saved 6 waypoints")
+        got = [ln.split("\t") for ln in (state / "way.txt").read_text().splitlines()[1:]]
+        assert [int(r[3]) for r in got] == [16, 16, 16, 19, 178, 20]      # read back as written
+        assert float(got[4][5]) == MISSION_SPEED and float(got[3][4]) == 5.0
+        watcher = Gcs(f"udpout:127.0.0.1:{port}", sysid=254)
+        assert watcher.connect(60) is not None and watcher.recv("GLOBAL_POSITION_INT", 60) is not None
+        mp.send("arm throttle")
+        mp.expect("COMPONENT_ARM_DISARM: ACCEPTED")
+        mp.send("mode AUTO")
+        mp.expect("DO_SET_MODE: ACCEPTED")
+        done = watcher.recv("MISSION_ITEM_REACHED", 300, lambda m: m.seq == 5)
+        assert done is not None, "RTL (item 5) never reached"
+        pos = watcher.recv("GLOBAL_POSITION_INT", 10)
+        assert pos is not None and at_home(pos, GEO), pos
+        # Still up, still in AUTO at the mission's end: the next mission (one waypoint) is taken and flown.
+        assert proc.poll() is None
+        lat, lon = GEO.sea_level_to_geodetic(50.0, 28.0)
+        ack = watcher.upload([(M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0,
+                               int(round(lat * 1e7)), int(round(lon * 1e7)), 0.0)])
+        assert ack is not None and ack.type == M.MAV_MISSION_ACCEPTED
+        assert watcher.recv("MISSION_ITEM_REACHED", 120, lambda m: m.seq == 0) is not None
+        mp.send("mode HOLD")
+        mp.expect("DO_SET_MODE: ACCEPTED")
+    finally:
+        if watcher is not None:
+            watcher.close()
+        mp.close()
+        stop_run(proc)
+    check_mission_session(out / "run.tlog", GEO)

@@ -27,7 +27,7 @@ import time
 from typing import Any, Callable
 
 import pytest
-from gcs_client import start_run, stop_run
+from gcs_client import HOME_MAP, check_mission_session, qgc_mission, start_run, stop_run
 
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE as M
@@ -211,3 +211,54 @@ def test_mavsdk_session(tmp_path):
     assert {"HEARTBEAT", "MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_REQUEST_LIST", "PARAM_SET",
             "COMMAND_LONG"} <= from_mavsdk, from_mavsdk
     assert pongs >= 1
+
+
+def test_mavsdk_mission_with_speed_loiter_and_return_to_launch(tmp_path):
+    """Issue 12: the same QGroundControl-style mission (DO_CHANGE_SPEED, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH)
+    uploaded with MissionRaw, read back exactly, flown in AUTO: every item reached, the boat home and still
+    connected afterwards."""
+    port = free_udp_port()
+    sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+    proc = None
+    out = tmp_path / "run"
+    try:
+        assert sdk.add_any_connection(f"udpin://127.0.0.1:{port}") == ConnectionResult.SUCCESS
+        proc = start_run(out, "--scenario", "harbour", "--duration", "5000", "--wait-for-arm", "--speedup", "4",
+                         "--gcs", f"udpout:127.0.0.1:{port}")
+        boat = sdk.first_autopilot(240.0)
+        assert boat is not None
+        direct, telemetry, mission, action = MavlinkDirect(boat), Telemetry(boat), MissionRaw(boat), Action(boat)
+        heartbeats, positions, reached = Watch(), Watch(), Watch()
+        direct.subscribe_message("HEARTBEAT", lambda m, ud: heartbeats(json.loads(m.fields_json)))
+        direct.subscribe_message("MISSION_ITEM_REACHED", lambda m, ud: reached(json.loads(m.fields_json)["seq"]))
+        telemetry.subscribe_position(positions)
+        items = [MissionItem(seq=i, frame=fr, command=cmd, current=int(i == 0), autocontinue=1, param1=float(p1),
+                             param2=float(p2), param3=float(p3), param4=float(p4), x=int(round(lat * 1e7)),
+                             y=int(round(lon * 1e7)), z=float(alt), mission_type=0)
+                 for i, (fr, cmd, p1, p2, p3, p4, lat, lon, alt) in enumerate(qgc_mission(GEO))]
+        assert mission.upload_mission(items) == MissionRawResult.SUCCESS
+        got = mission.download_mission()
+        assert len(got) == 6
+        differ = [(str(a), str(b)) for a, b in zip(items, got) if not _same(a, b)]
+        assert not differ, differ
+        assert positions.wait(lambda p: True, 60) is not None
+        assert action.arm() is not None
+        ack = _set_rover_mode(direct, ROVER_AUTO)
+        assert ack["result"] == M.MAV_RESULT_ACCEPTED
+        assert reached.wait(lambda seq: seq == 5, 300) is not None, reached.values
+        assert set(range(6)) <= set(reached.values)
+        home = positions.last()
+        n, e = _ned(home)
+        assert math.hypot(n - HOME_MAP[1], e - HOME_MAP[0]) <= 4.0, (n, e)
+        # Still connected and up: heartbeats go on in AUTO, armed, and a mode change is acknowledged.
+        seen = len(heartbeats.values)
+        assert heartbeats.wait(lambda h: len(heartbeats.values) >= seen + 2, 10) is not None
+        last = heartbeats.last()
+        assert last["custom_mode"] == ROVER_AUTO and last["base_mode"] & M.MAV_MODE_FLAG_SAFETY_ARMED, last
+        assert _set_rover_mode(direct, ROVER_HOLD)["result"] == M.MAV_RESULT_ACCEPTED
+        assert proc.poll() is None
+    finally:
+        sdk.destroy()
+        if proc is not None:
+            stop_run(proc)
+    check_mission_session(out / "run.tlog", GEO)

@@ -18,6 +18,9 @@ class GcsParams:
         default=("udpout:127.0.0.1:14550",))
     wait_for_arm: bool = param("start disarmed in HOLD and wait for a GCS to arm and start the mission",
                                default=False)
+    pace_speedup: float = param(
+        "lockstep with wait_for_arm (a ground station attached): simulated time passes at most this many times "
+        "as fast as wall time, so a person can follow the boat (hil run --speedup)", gt=0, default=1.0)
     failsafe_timeout: float = param("in AUTO, no GCS heartbeat for this long (wall time) triggers the failsafe", "s",
                                     gt=0, default=5.0)
     failsafe_action: Literal["hold", "rtl", "none"] = param("what the GCS failsafe does: hold, rtl or none",

@@ -31,9 +31,15 @@ from typing import Any, Callable
 
 from autopilot_bridge.gcs.config import GcsParams
 from autopilot_bridge.gcs.mission import MissionItem, MissionServer
-from autopilot_bridge.gcs.params import ParamTable, autopilot_params
+from autopilot_bridge import mission_commands as mc
+from autopilot_bridge.behaviour import Behaviour
+from autopilot_bridge.gcs.mission import has_position
+from autopilot_bridge.gcs.params import ParamTable, collect
 from autopilot_bridge.gcs.transport import open_endpoint
-from autopilot_bridge.vehicle import Mode, Waypoint
+from autopilot_bridge.mission_commands import MissionCommand
+from autopilot_bridge.modes import Mode
+from autopilot_bridge.parameters import Param
+from autopilot_bridge.vehicle_api import Result, VehicleApi, VehicleStatus
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE as M
 from common.mavlink import Codec, mavlink2
@@ -61,7 +67,10 @@ ON_REQUEST = {getattr(mavlink2, "MAVLINK_MSG_ID_AUTOPILOT_VERSION"): "AUTOPILOT_
 
 # Messages that change the vessel: signing and the allow-list apply to these.
 WRITES = frozenset({"COMMAND_LONG", "COMMAND_INT", "SET_MODE", "MISSION_COUNT", "MISSION_ITEM", "MISSION_ITEM_INT",
-                    "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT", "PARAM_SET", "MANUAL_CONTROL"})
+                    "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT", "PARAM_SET", "MANUAL_CONTROL",
+                    "SET_POSITION_TARGET_GLOBAL_INT"})
+# SET_POSITION_TARGET_GLOBAL_INT type_mask bits: position ignored (x, y, z)
+POSITION_IGNORED = 0b111
 MISSION_WRITES = frozenset({"MISSION_COUNT", "MISSION_ITEM", "MISSION_ITEM_INT", "MISSION_CLEAR_ALL"})
 SIGNING_EPOCH = 1420070400  # 2015-01-01 00:00:00 UTC, the MAVLink 2 signing timestamp origin
 FIRMWARE_VERSION = (0 << 24) | (6 << 16) | (0 << 8) | 255  # 0.6.0 official
@@ -91,6 +100,10 @@ def load_signing_key(path: str) -> bytes:
 def _enum_name(enum: str, value: int) -> str:
     entry = mavlink2.enums.get(enum, {}).get(int(value))
     return entry.name if entry is not None else f"{enum}_{int(value)}"
+
+
+def _finite(x: Any) -> bool:
+    return x is not None and math.isfinite(x)
 
 
 def _text(v: Any) -> str:
@@ -189,11 +202,10 @@ class GcsLink:
         self.intervals = dict(DEFAULT_INTERVALS)
         self.next_due: dict[str, float] = {k: 0.0 for k in DEFAULT_INTERVALS}
         self.last_wall_heartbeat = -math.inf
-        self.ap: Any = None
+        self.api: VehicleApi | None = None
         self.mission: MissionServer | None = None
         self.params_table: ParamTable | None = None
-        self.state: Any = None
-        self.cmd: Any = None
+        self.status: VehicleStatus | None = None   # the newest frame's (published by the vehicle)
         self.t = 0.0
         self._paths_sent = 0
         self.sent = 0
@@ -209,30 +221,48 @@ class GcsLink:
         self.encode_errors: Counter = Counter()
 
     # -- wiring ---------------------------------------------------------------------------------
-    def attach(self, autopilot: Any) -> None:
-        """Connect to the autopilot: its vehicle state, mission and tunables."""
-        self.ap = autopilot
-        items = tuple(self._item(w) for w in autopilot.vehicle.mission)
+    def attach(self, api: VehicleApi) -> None:
+        """Connect to the vessel through its command API: its mission, its parameters and ours."""
+        self.api = api
+        items = tuple(self._item(c) for c in api.mission())
         self.mission = MissionServer(items, system_id=self.sysid, component_id=self.compid,
                                      max_items=self.params.max_mission_items, item_timeout=self.params.mission_timeout,
                                      retries=self.params.mission_retries, position_check=self._on_chart,
                                      mission_check=self._check_mission)
-        self.params_table = autopilot_params(autopilot, self)
+        self.params_table = collect(api.parameters(), self.parameters())
 
-    def _item(self, w: Waypoint) -> MissionItem:
-        lat, lon = self.geo.sea_level_to_geodetic(w.north, w.east)
-        return MissionItem(M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_NAV_WAYPOINT, 1, 0.0, float(w.radius), 0.0,
-                           0.0, int(round(lat * 1e7)), int(round(lon * 1e7)), 0.0)
+    def parameters(self) -> list[Param]:
+        """The link's own tunables: the GCS failsafe."""
+
+        def set_fs_action(v: float) -> None:
+            if v != int(v):
+                raise ValueError("must be 0, 1 or 2")
+            self.failsafe_action = ("none", "hold", "rtl")[int(round(v))]
+
+        return [
+            Param("FS_GCS_TIMEOUT", lambda: self.failsafe_timeout, lambda v: setattr(self, "failsafe_timeout", v),
+                  1.0, 120.0, "no GCS heartbeat for this long in AUTO triggers the failsafe", "s"),
+            Param("FS_GCS_ACTION", lambda: float(("none", "hold", "rtl").index(self.failsafe_action)), set_fs_action,
+                  0.0, 2.0, "GCS failsafe action: 0 none, 1 hold, 2 return to launch"),
+        ]
+
+    def _item(self, c: MissionCommand) -> MissionItem:
+        """A stored command as a MISSION_ITEM_INT (for a mission the vessel started with)."""
+        lat = lon = 0.0
+        if c.position is not None:
+            lat, lon = self.geo.sea_level_to_geodetic(c.north, c.east)
+        return MissionItem(M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, c.command, 1, c.p1, c.p2, c.p3, c.p4,
+                           int(round(lat * 1e7)), int(round(lon * 1e7)), 0.0)
+
+    def _command_of(self, it: MissionItem) -> MissionCommand:
+        north = east = None
+        if has_position(it):
+            north, east = self.geo.geodetic_to_sea_level(it.lat, it.lon)
+        return MissionCommand(it.command, north, east, it.param1, it.param2, it.param3, it.param4)
 
     def _check_mission(self, items: tuple[MissionItem, ...]) -> tuple[int, int, str] | None:
-        """A complete upload's route through the chart (autopilot_bridge/route_planning.py)."""
-        from autopilot_bridge.route_planning import check_mission_items
-
-        grid = getattr(self.ap, "grid", None)
-        if grid is None:
-            return None
-        return check_mission_items(items, self.geo.geodetic_to_sea_level, grid, self.ap.world.params.safety_radius,
-                                   self._position())
+        """A complete upload's route through the chart: ``(seq, MAV_MISSION_RESULT, reason)`` or None."""
+        return self.api.check_mission(items, self.geo.geodetic_to_sea_level)
 
     def _on_chart(self, lat: float, lon: float) -> tuple[int, str] | None:
         if self.chart_size is None:
@@ -280,31 +310,25 @@ class GcsLink:
 
     # -- telemetry ------------------------------------------------------------------------------
     def _position(self) -> tuple[float, float] | None:
-        s = self.state
-        return None if s is None else (s.x, s.y)
+        return None if self.status is None else self.status.position
 
     def heartbeat(self) -> None:
-        v = self.ap.vehicle if self.ap is not None else None
+        st = self.status
         base = MODE_FLAGS
         custom, status = int(Mode.HOLD), M.MAV_STATE_STANDBY
-        if v is not None:
-            custom = int(v.mode)
-            if v.armed:
+        if st is not None:
+            custom = int(st.mode)
+            base |= st.mode_flags
+            if st.armed:
                 base |= M.MAV_MODE_FLAG_SAFETY_ARMED
                 status = M.MAV_STATE_ACTIVE
-            if v.mode in (Mode.AUTO, Mode.RTL):
-                base |= M.MAV_MODE_FLAG_AUTO_ENABLED | M.MAV_MODE_FLAG_GUIDED_ENABLED | M.MAV_MODE_FLAG_STABILIZE_ENABLED
-            elif v.mode == Mode.GUIDED:
-                base |= M.MAV_MODE_FLAG_GUIDED_ENABLED | M.MAV_MODE_FLAG_STABILIZE_ENABLED
-            elif v.mode == Mode.MANUAL:
-                base |= M.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
             if self.failsafe_active:
                 status = M.MAV_STATE_CRITICAL
         self._send("heartbeat", M.MAV_TYPE_SURFACE_BOAT, M.MAV_AUTOPILOT_GENERIC, base, custom, status)
         self.last_wall_heartbeat = self.clock()
 
     def _emit(self, name: str) -> None:
-        s, t_ms = self.state, int(round(self.t * 1000))
+        s, t_ms = (None if self.status is None else self.status.nav), int(round(self.t * 1000))
         own = {"HEARTBEAT": self.heartbeat, "MISSION_CURRENT": self._mission_current, "SYS_STATUS": self._sys_status,
                "HOME_POSITION": self._home, "ESC_TELEMETRY_1_TO_4": self._esc_telemetry}.get(name)
         if own is not None:  # messages that need no navigation state
@@ -331,20 +355,21 @@ class GcsLink:
                            int(round(self.geo.alt0 * 1000)), eph, 65535, int(round(math.hypot(vn, ve) * 100)), cog, 255)
         elif name == "VFR_HUD":
             thr = 0  # VFR_HUD's throttle is 0-100 %: the mean of the two thrusters' magnitudes
-            if self.cmd is not None:
-                thr = int(round(50.0 * (abs(self.cmd.port_cmd) + abs(self.cmd.stdb_cmd))))
+            cmd = self.status.thrust
+            if cmd is not None:
+                thr = int(round(50.0 * (abs(cmd[0]) + abs(cmd[1]))))
             self._send("vfr_hud", 0.0, math.hypot(vn, ve), int(round(math.degrees(s.psi) % 360.0)) % 360,
                        max(0, min(100, thr)), 0.0, 0.0)
         elif name == "ACTUATOR_OUTPUT_STATUS":
-            if self.cmd is not None:
-                act = [float(self.cmd.port_cmd), float(self.cmd.stdb_cmd)] + [0.0] * 30
+            cmd = self.status.thrust
+            if cmd is not None:
+                act = [cmd[0], cmd[1]] + [0.0] * 30
                 self._send("actuator_output_status", int(round(self.t * 1e6)), 0b11, act)
 
     def _esc_telemetry(self) -> None:
         """ESC_TELEMETRY_1_TO_4 from the newest ESC Status of each thruster (CAN path only), in the
         message's units: degC, cV, cA, mAh, rpm (magnitude), Status transfers received."""
-        esc = getattr(getattr(self.ap, "actuators", None), "esc_telemetry", None)
-        rows = esc() if callable(esc) else []
+        rows = self.api.esc_telemetry() if self.api is not None else []
         if not rows:
             return
         rows = (rows + [None] * 4)[:4]
@@ -357,20 +382,27 @@ class GcsLink:
                    [0 if r is None else int(r["count"]) % 65536 for r in rows])
 
     def _mission_current(self) -> None:
-        v = self.ap.vehicle
-        total = len(v.mission)
+        st = self.status
+        if st is None:
+            total = len(self.mission.items) if self.mission is not None else 0
+            state = M.MISSION_STATE_NOT_STARTED if total else M.MISSION_STATE_NO_MISSION
+            self._send("mission_current", 0, total, state, 0)
+            return
+        total = st.mission_count
+        auto = st.mode == Mode.AUTO
         if total == 0:
             state = M.MISSION_STATE_NO_MISSION
-        elif v.complete and v.mode == Mode.AUTO:
+        elif st.mission_complete and auto:
             state = M.MISSION_STATE_COMPLETE
-        elif v.mode == Mode.AUTO and v.armed:
+        elif auto and st.armed:
             state = M.MISSION_STATE_ACTIVE
         else:
-            state = M.MISSION_STATE_PAUSED if v.current > 0 else M.MISSION_STATE_NOT_STARTED
-        self._send("mission_current", min(v.current, max(total - 1, 0)), total, state, 1 if v.mode == Mode.AUTO else 0)
+            state = M.MISSION_STATE_PAUSED if st.mission_current > 0 else M.MISSION_STATE_NOT_STARTED
+        self._send("mission_current", min(st.mission_current, max(total - 1, 0)), total, state, 1 if auto else 0)
 
     def _sys_status(self) -> None:
-        ap, s = self.ap, self.state
+        st = self.status
+        s = None if st is None else st.nav
         present = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_MAG | M.MAV_SYS_STATUS_SENSOR_GPS
                    | M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL | M.MAV_SYS_STATUS_AHRS
                    | M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)
@@ -379,27 +411,27 @@ class GcsLink:
             health |= M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_MAG | M.MAV_SYS_STATUS_AHRS
             if s.position_std < 3.0:
                 health |= M.MAV_SYS_STATUS_SENSOR_GPS
-        if ap is not None and ap.mode in ("planned", "complete"):
+        if st is not None and st.behaviour in (Behaviour.PLANNED, Behaviour.COMPLETE, Behaviour.RETURNING):
             health |= M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL  # the planner delivers local paths
         health |= M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
         errors = min(sum(self.rejects.values()), 65535)
         self._send("sys_status", present, present, health, 0, 0, -1, -1, 0, errors, 0, 0, 0, 0)
 
     def _home(self) -> None:
-        v = self.ap.vehicle if self.ap is not None else None
-        if v is None or v.home is None:
+        home = None if self.status is None else self.status.home
+        if home is None:
             return
-        lat, lon = self.geo.sea_level_to_geodetic(*v.home)
+        lat, lon = self.geo.sea_level_to_geodetic(*home)
         self._send("home_position", int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(self.geo.alt0 * 1000)),
-                   float(v.home[0]), float(v.home[1]), 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
+                   float(home[0]), float(home[1]), 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
                    int(round(self.t * 1e6)))
 
     def _trajectory(self) -> None:
-        paths = self.ap.local_paths
-        if len(paths) == self._paths_sent:
+        st = self.status
+        if st is None or st.local_paths == self._paths_sent or not st.local_path:
             return
-        self._paths_sent = len(paths)
-        pts = paths[-1]["path_ned"]
+        self._paths_sent = st.local_paths
+        pts = st.local_path
         # Five points along the local path (the message's capacity), first and last included.
         idx = [round(i * (len(pts) - 1) / 4) for i in range(5)] if len(pts) >= 5 else list(range(len(pts)))
         n = len(idx)
@@ -409,10 +441,10 @@ class GcsLink:
         self._send("trajectory_representation_waypoints", int(round(self.t * 1e6)), n, xs, ys, [0.0] * n + [math.nan] * (5 - n),
                    nan5, nan5, nan5, nan5, nan5, nan5, nan5, nan5, [M.MAV_CMD_NAV_WAYPOINT] * n + [65535] * (5 - n))
 
-    def on_frame(self, t: float, s: Any, mode: str, cmd: Any) -> None:
-        """Per control frame: the streams that are due at simulated time ``t``, progress events."""
+    def on_frame(self, status: VehicleStatus) -> None:
+        """Per control frame: the streams that are due at the frame's simulated time, progress events."""
         try:
-            self._on_frame(t, s, mode, cmd)
+            self._on_frame(status)
         except Exception as exc:  # telemetry must never stop the control loop
             self._internal_error("on_frame", exc)
 
@@ -421,25 +453,22 @@ class GcsLink:
         if self.encode_errors[where] == 1:
             self.log(f"gcs: {where}: {type(exc).__name__}: {exc}")
 
-    def _on_frame(self, t: float, s: Any, mode: str, cmd: Any) -> None:
-        self.t, self.state, self.cmd = t, s, cmd
-        v = self.ap.vehicle if self.ap is not None else None
-        if v is not None:
-            for seq in v.take_reached():
-                self.mission_item_reached(seq)
-                self._mission_current()
-            if v.changed:
-                v.changed = False
-                self.heartbeat()
-                self._mission_current()
+    def _on_frame(self, status: VehicleStatus) -> None:
+        self.t, self.status = status.t, status
+        t = status.t
+        for seq in status.reached:
+            self.mission_item_reached(seq)
+            self._mission_current()
+        if status.changed:
+            self.heartbeat()
+            self._mission_current()
         for name, interval in self.intervals.items():
             if interval <= 0:
                 continue
             if t + 1e-9 >= self.next_due[name] or self.next_due[name] - t > interval + 1.0:
                 self.next_due[name] = t + interval
                 self._emit(name)
-        if self.ap is not None:
-            self._trajectory()
+        self._trajectory()
 
     # -- receiving ------------------------------------------------------------------------------
     def service(self) -> None:
@@ -484,7 +513,7 @@ class GcsLink:
                 self._send(out.name, *out.args)
             self._mission_events()
         self._failsafe(now)
-        if self.ap is not None and now - self.last_wall_heartbeat >= 1.0:
+        if self.api is not None and now - self.last_wall_heartbeat >= 1.0:
             self.heartbeat()
 
     def _allowed(self, m: Any, kind: str) -> bool:
@@ -530,9 +559,12 @@ class GcsLink:
         elif kind.startswith("PARAM_"):
             self._param(m, kind)
         elif kind == "MANUAL_CONTROL":
-            if m.target in (0, self.sysid) and self.ap is not None:
+            if m.target in (0, self.sysid) and self.api is not None:
                 clip = lambda v: max(-1.0, min(1.0, v / 1000.0))  # noqa: E731
-                self.ap.vehicle.manual = (clip(m.x), clip(m.r), now)
+                self.api.manual_input(clip(m.x), clip(m.r), now)
+        elif kind == "SET_POSITION_TARGET_GLOBAL_INT":
+            if m.target_system in (0, self.sysid) and self.api is not None:
+                self._position_target(m)
         elif kind == "PING":
             # The ping protocol (mavlink.io/en/services/ping.html): a request has target 0/0; the reply
             # echoes time_usec and seq, addressed to the sender.
@@ -545,15 +577,15 @@ class GcsLink:
     def _mission_events(self) -> None:
         for ev in self.mission.take_events():
             if ev.kind == "replaced":
-                wps = []
-                for it in ev.items:
-                    n, e = self.geo.geodetic_to_sea_level(it.lat, it.lon)
-                    wps.append(Waypoint(n, e, it.acceptance_radius(self.ap.vehicle.default_radius)))
-                self.ap.vehicle.replace_mission(wps, self._position())
-                self.statustext(f"mission: {len(wps)} items accepted" if wps else "mission cleared")
+                commands = tuple(self._command_of(it) for it in ev.items)
+                self.api.replace_mission(commands)
+                skipped = sum(c.command in mc.STORED_ONLY for c in commands)
+                self.statustext((f"mission: {len(commands)} items accepted"
+                                 + (f" ({skipped} stored, not executed)" if skipped else ""))
+                                if commands else "mission cleared")
                 self._mission_current()
             elif ev.kind == "set_current":
-                self.ap.vehicle.set_current(ev.seq, self._position())
+                self.api.set_mission_current(ev.seq)
                 self._mission_current()
             elif ev.kind == "rejected" and self.mission.last_reject is not None:
                 seq, why = self.mission.last_reject
@@ -565,7 +597,8 @@ class GcsLink:
             mode = Mode(int(custom_mode))
         except (ValueError, OverflowError):
             return M.MAV_RESULT_DENIED, f"unknown mode {custom_mode}"
-        ok, why = self.ap.vehicle.set_mode(mode, self._position())
+        r = self.api.set_mode(mode)
+        ok, why = r.ok, r.text
         if ok:
             self.failsafe_active = False
             self.statustext(f"mode {mode.name}")
@@ -585,99 +618,134 @@ class GcsLink:
         if result != M.MAV_RESULT_ACCEPTED and why:
             self.statustext(why, M.MAV_SEVERITY_WARNING)
 
+    @staticmethod
+    def _ack_of(r: Result) -> tuple[int, str]:
+        if r.ok:
+            return M.MAV_RESULT_ACCEPTED, r.text
+        return (M.MAV_RESULT_TEMPORARILY_REJECTED if r.temporary else M.MAV_RESULT_DENIED), r.text
+
     def _execute(self, cmd: int, p: list[float], x5: float, y6: float) -> tuple[int, str]:
-        v = self.ap.vehicle
-        pos = self._position()
-        ok = M.MAV_RESULT_ACCEPTED
+        """One COMMAND_LONG/COMMAND_INT: (MAV_RESULT, why) from the handler registered for its id."""
+        handler = self._COMMANDS.get(cmd)
+        if handler is None or self.api is None:
+            return M.MAV_RESULT_UNSUPPORTED, ""
+        return handler(self, p, x5, y6)
 
-        def finite(x: float) -> bool:
-            return x is not None and math.isfinite(x)
+    def _cmd_arm(self, p: list[float], x5: float, y6: float) -> tuple[int, str]:
+        if not _finite(p[0]) or p[0] not in (0.0, 1.0):
+            return M.MAV_RESULT_DENIED, "arm: param1 must be 0 or 1"
+        r = self.api.arm(p[0] == 1.0)
+        if r.ok:
+            self.statustext(r.text)
+        return self._ack_of(r)
 
-        if cmd == M.MAV_CMD_COMPONENT_ARM_DISARM:
-            if not finite(p[0]) or p[0] not in (0.0, 1.0):
-                return M.MAV_RESULT_DENIED, "arm: param1 must be 0 or 1"
-            if p[0] == 1.0 and pos is None:
-                return M.MAV_RESULT_TEMPORARILY_REJECTED, "arm: no navigation fix yet"
-            _, why = v.arm(p[0] == 1.0)
-            self.statustext(why)
-            return ok, why
-        if cmd == M.MAV_CMD_DO_SET_MODE:
-            if not finite(p[0]) or not finite(p[1]) or not int(p[0]) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-                return M.MAV_RESULT_DENIED, "set mode: custom mode flag (param1) and mode (param2) needed"
-            if finite(p[2]) and p[2] != 0.0:
-                # Our modes have no sub-mode. A (main, sub) pair is another autopilot's numbering (PX4's
-                # AUTO.MISSION is (4, 4), as MAVSDK sends to a non-ArduPilot vehicle): read as Rover's
-                # custom mode 4 it would silently mean HOLD, so refuse it.
-                return M.MAV_RESULT_DENIED, f"set mode: no sub-mode {p[2]:g} (Rover modes: param2 only)"
-            return self._set_mode(p[1])
-        if cmd == M.MAV_CMD_MISSION_START:
-            first = int(p[0]) if finite(p[0]) else 0
-            if not v.armed:
-                return M.MAV_RESULT_DENIED, "mission start: not armed"
-            good, why = v.mission_start(first, pos)
-            if good:
-                self.failsafe_active = False
-            return (ok if good else M.MAV_RESULT_DENIED), why
-        if cmd == M.MAV_CMD_DO_PAUSE_CONTINUE:
-            mode = Mode.HOLD if (finite(p[0]) and p[0] == 0.0) else Mode.AUTO
-            return self._set_mode(mode)
-        if cmd == M.MAV_CMD_NAV_LOITER_UNLIM:
-            return self._set_mode(Mode.HOLD)
-        if cmd == M.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-            return self._set_mode(Mode.RTL)
-        if cmd == M.MAV_CMD_DO_CHANGE_SPEED:
-            speed = p[1]
-            if not finite(speed) or speed == -1.0:
-                return ok, "speed unchanged"
-            good, why = self.params_table.set("CRUISE_SPEED", float(speed))
-            return (ok if good else M.MAV_RESULT_DENIED), why
-        if cmd == M.MAV_CMD_DO_REPOSITION:
-            if not (finite(x5) and finite(y6)) or not -90 <= x5 <= 90 or not -180 <= y6 <= 180:
-                return M.MAV_RESULT_DENIED, "reposition: bad latitude/longitude"
-            if self._on_chart(x5, y6) is not None:
-                return M.MAV_RESULT_DENIED, "reposition: target off the chart"
-            good, why = v.reposition(self.geo.geodetic_to_sea_level(x5, y6), pos)
-            return (ok if good else M.MAV_RESULT_DENIED), why
-        if cmd == M.MAV_CMD_DO_SET_MISSION_CURRENT:
-            seq = int(p[0]) if finite(p[0]) else -1
-            good = v.set_current(seq, pos)
-            self._mission_current()
-            return (ok if good else M.MAV_RESULT_DENIED), "" if good else f"no mission item {seq}"
-        if cmd == M.MAV_CMD_SET_MESSAGE_INTERVAL:
-            name = ID_NAMES.get(int(p[0])) if finite(p[0]) else None
-            if name is None or not finite(p[1]):
-                return M.MAV_RESULT_DENIED, "message interval: message not streamed here"
-            us = p[1]
-            if us == -1:
-                self.intervals[name] = 0.0
-            elif us == 0:
-                self.intervals[name] = DEFAULT_INTERVALS[name]
-            elif us > 0:
-                self.intervals[name] = max(us * 1e-6, 0.01)  # at most once per IMU frame
-            else:
-                return M.MAV_RESULT_DENIED, "message interval: negative interval"
-            self.next_due[name] = self.t
-            return ok, ""
-        if cmd == M.MAV_CMD_GET_MESSAGE_INTERVAL:
-            name = ID_NAMES.get(int(p[0])) if finite(p[0]) else None
-            if name is None:
-                return M.MAV_RESULT_DENIED, ""
-            iv = self.intervals[name]
-            self._send("message_interval", MSG_IDS[name], int(iv * 1e6) if iv > 0 else -1)
-            return ok, ""
-        if cmd == M.MAV_CMD_REQUEST_MESSAGE:
-            name = ON_REQUEST.get(int(p[0])) if finite(p[0]) else None
-            if name is None:
-                return M.MAV_RESULT_DENIED, "request message: not available"
-            self._on_request(name)
-            return ok, ""
-        if cmd == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
-            self._on_request("AUTOPILOT_VERSION")
-            return ok, ""
-        if cmd == M.MAV_CMD_GET_HOME_POSITION:
-            self._home()
-            return ok, ""
-        return M.MAV_RESULT_UNSUPPORTED, ""
+    def _cmd_set_mode(self, p: list[float], x5: float, y6: float) -> tuple[int, str]:
+        if not _finite(p[0]) or not _finite(p[1]) or not int(p[0]) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            return M.MAV_RESULT_DENIED, "set mode: custom mode flag (param1) and mode (param2) needed"
+        if _finite(p[2]) and p[2] != 0.0:
+            # Our modes have no sub-mode. A (main, sub) pair is another autopilot's numbering (PX4's
+            # AUTO.MISSION is (4, 4), as MAVSDK sends to a non-ArduPilot vehicle): read as Rover's
+            # custom mode 4 it would silently mean HOLD, so refuse it.
+            return M.MAV_RESULT_DENIED, f"set mode: no sub-mode {p[2]:g} (Rover modes: param2 only)"
+        return self._set_mode(p[1])
+
+    def _cmd_mission_start(self, p: list[float], x5: float, y6: float) -> tuple[int, str]:
+        r = self.api.start_mission(int(p[0]) if _finite(p[0]) else 0)
+        if r.ok:
+            self.failsafe_active = False
+        return self._ack_of(r)
+
+    def _cmd_pause_continue(self, p: list[float], x5: float, y6: float) -> tuple[int, str]:
+        return self._set_mode(Mode.HOLD if (_finite(p[0]) and p[0] == 0.0) else Mode.AUTO)
+
+    def _cmd_change_speed(self, p: list[float], x5: float, y6: float) -> tuple[int, str]:
+        speed = p[1]
+        if not _finite(speed) or speed == -1.0:
+            return M.MAV_RESULT_ACCEPTED, "speed unchanged"
+        return self._ack_of(self.api.set_speed(float(speed)))
+
+    def _goto(self, lat: float, lon: float, what: str) -> tuple[int, str]:
+        if not (_finite(lat) and _finite(lon)) or not -90 <= lat <= 90 or not -180 <= lon <= 180 or \
+                (lat == 0.0 and lon == 0.0):
+            return M.MAV_RESULT_DENIED, f"{what}: bad latitude/longitude"
+        if self._on_chart(lat, lon) is not None:
+            return M.MAV_RESULT_DENIED, f"{what}: target off the chart"
+        r = self.api.goto(*self.geo.geodetic_to_sea_level(lat, lon))
+        if r.ok:
+            self.failsafe_active = False
+        return self._ack_of(r)
+
+    def _cmd_reposition(self, p: list[float], x5: float, y6: float) -> tuple[int, str]:
+        return self._goto(x5, y6, "reposition")
+
+    def _position_target(self, m: Any) -> None:
+        """SET_POSITION_TARGET_GLOBAL_INT: a GUIDED goto (position only; velocity/acceleration ignored)."""
+        if m.type_mask & POSITION_IGNORED == POSITION_IGNORED:
+            return
+        code, why = self._goto(m.lat_int * 1e-7, m.lon_int * 1e-7, "position target")
+        if code != M.MAV_RESULT_ACCEPTED and why:
+            self.statustext(why, M.MAV_SEVERITY_WARNING)
+
+    def _cmd_set_current(self, p: list[float], x5: float, y6: float) -> tuple[int, str]:
+        r = self.api.set_mission_current(int(p[0]) if _finite(p[0]) else -1)
+        self._mission_current()
+        return self._ack_of(r)
+
+    def _cmd_message_interval(self, p: list[float], x5: float, y6: float) -> tuple[int, str]:
+        name = ID_NAMES.get(int(p[0])) if _finite(p[0]) else None
+        if name is None or not _finite(p[1]):
+            return M.MAV_RESULT_DENIED, "message interval: message not streamed here"
+        us = p[1]
+        if us == -1:
+            self.intervals[name] = 0.0
+        elif us == 0:
+            self.intervals[name] = DEFAULT_INTERVALS[name]
+        elif us > 0:
+            self.intervals[name] = max(us * 1e-6, 0.01)  # at most once per IMU frame
+        else:
+            return M.MAV_RESULT_DENIED, "message interval: negative interval"
+        self.next_due[name] = self.t
+        return M.MAV_RESULT_ACCEPTED, ""
+
+    def _cmd_get_interval(self, p: list[float], x5: float, y6: float) -> tuple[int, str]:
+        name = ID_NAMES.get(int(p[0])) if _finite(p[0]) else None
+        if name is None:
+            return M.MAV_RESULT_DENIED, ""
+        iv = self.intervals[name]
+        self._send("message_interval", MSG_IDS[name], int(iv * 1e6) if iv > 0 else -1)
+        return M.MAV_RESULT_ACCEPTED, ""
+
+    def _cmd_request_message(self, p: list[float], x5: float, y6: float) -> tuple[int, str]:
+        name = ON_REQUEST.get(int(p[0])) if _finite(p[0]) else None
+        if name is None:
+            return M.MAV_RESULT_DENIED, "request message: not available"
+        self._on_request(name)
+        return M.MAV_RESULT_ACCEPTED, ""
+
+    def _cmd_capabilities(self, p: list[float], x5: float, y6: float) -> tuple[int, str]:
+        self._on_request("AUTOPILOT_VERSION")
+        return M.MAV_RESULT_ACCEPTED, ""
+
+    def _cmd_home(self, p: list[float], x5: float, y6: float) -> tuple[int, str]:
+        self._home()
+        return M.MAV_RESULT_ACCEPTED, ""
+
+    _COMMANDS: dict[int, Callable[..., tuple[int, str]]] = {
+        M.MAV_CMD_COMPONENT_ARM_DISARM: _cmd_arm,
+        M.MAV_CMD_DO_SET_MODE: _cmd_set_mode,
+        M.MAV_CMD_MISSION_START: _cmd_mission_start,
+        M.MAV_CMD_DO_PAUSE_CONTINUE: _cmd_pause_continue,
+        M.MAV_CMD_NAV_LOITER_UNLIM: lambda self, *_: self._set_mode(Mode.LOITER),
+        M.MAV_CMD_NAV_RETURN_TO_LAUNCH: lambda self, *_: self._set_mode(Mode.RTL),
+        M.MAV_CMD_DO_CHANGE_SPEED: _cmd_change_speed,
+        M.MAV_CMD_DO_REPOSITION: _cmd_reposition,
+        M.MAV_CMD_DO_SET_MISSION_CURRENT: _cmd_set_current,
+        M.MAV_CMD_SET_MESSAGE_INTERVAL: _cmd_message_interval,
+        M.MAV_CMD_GET_MESSAGE_INTERVAL: _cmd_get_interval,
+        M.MAV_CMD_REQUEST_MESSAGE: _cmd_request_message,
+        M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: _cmd_capabilities,
+        M.MAV_CMD_GET_HOME_POSITION: _cmd_home,
+    }
 
     def _on_request(self, name: str) -> None:
         if name == "AUTOPILOT_VERSION":
@@ -724,24 +792,23 @@ class GcsLink:
 
     # -- failsafe -------------------------------------------------------------------------------
     def _failsafe(self, now: float) -> None:
-        if self.ap is None or self.last_gcs_heartbeat is None or self.failsafe_action == "none":
+        st = self.status
+        if self.api is None or st is None or self.last_gcs_heartbeat is None or self.failsafe_action == "none":
             return
-        v = self.ap.vehicle
         lost = now - self.last_gcs_heartbeat > self.failsafe_timeout
         if not lost:
             return
-        if self.failsafe_active or not v.armed or v.mode != Mode.AUTO:
+        if self.failsafe_active or not st.armed or st.mode != Mode.AUTO:
             return
         self.failsafe_active = True
         self.failsafe_events += 1
-        target = Mode.RTL if self.failsafe_action == "rtl" and v.home is not None else Mode.HOLD
-        v.set_mode(target, self._position())
+        target = Mode.RTL if self.failsafe_action == "rtl" and st.home is not None else Mode.HOLD
+        self.api.set_mode(target)
         self.failsafe_active = True
         msg = f"GCS failsafe: no heartbeat {now - self.last_gcs_heartbeat:.1f}s: {target.name}"
         self.log(f"gcs: {msg}")
         self.statustext(msg, M.MAV_SEVERITY_CRITICAL)
-        if self.ap is not None:
-            self.ap.stats.events.append((self.t, msg))
+        self.api.record_event(msg)
 
     # -- end ------------------------------------------------------------------------------------
     def summary(self) -> dict[str, Any]:

@@ -8,10 +8,10 @@ Follows https://mavlink.io/en/services/mission.html:
   (MISSION_ACK MAV_MISSION_OPERATION_CANCELLED). An out-of-sequence item is dropped and the expected
   one re-requested (the spec: recoverable); an item beyond the announced count is
   MAV_MISSION_INVALID_SEQUENCE. Every item is validated (frame, command, coordinates, acceptance
-  radius); the first bad one ends the upload with its MAV_MISSION_RESULT code. Only a complete,
+  radius, per command: :mod:`autopilot_bridge.mission_commands`); the first bad one ends the upload with its MAV_MISSION_RESULT code. Only a complete,
   valid upload replaces the mission, atomically; any error or timeout leaves the old one untouched.
 * download: MISSION_REQUEST_LIST -> MISSION_COUNT, then each MISSION_REQUEST_INT is answered with
-  MISSION_ITEM_INT exactly as uploaded.
+  MISSION_ITEM_INT exactly as uploaded (commands stored but not executed included).
 * legacy: MISSION_ITEM is accepted like MISSION_ITEM_INT (float degrees); a GCS that uploads with
   it is asked with MISSION_REQUEST, and MISSION_REQUEST is answered with MISSION_ITEM.
 * MISSION_CLEAR_ALL (and an upload of count 0) clears; MISSION_SET_CURRENT selects the item to go to.
@@ -29,12 +29,13 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
+from autopilot_bridge import mission_commands as mc
 from common.mavlink import MAV_TYPE as M
 
 MISSION = M.MAV_MISSION_TYPE_MISSION
 SUPPORTED_FRAMES = (M.MAV_FRAME_GLOBAL, M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_INT,
                     M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
-SUPPORTED_COMMANDS = (M.MAV_CMD_NAV_WAYPOINT,)
+SUPPORTED_COMMANDS = tuple(sorted(mc.ACCEPTED))   # executed or stored-and-skipped: see mission_commands
 
 
 @dataclass(frozen=True)
@@ -101,20 +102,45 @@ MissionCheck = Callable[[tuple["MissionItem", ...]], "tuple[int, int, str] | Non
 
 
 def validate_item(item: MissionItem, position_check: PositionCheck | None = None) -> tuple[int, str] | None:
+    """Frame, command, coordinates and parameters of one item (mission_commands says which commands)."""
+    cmd = item.command
+    if cmd not in mc.ACCEPTED:
+        return M.MAV_MISSION_UNSUPPORTED, f"command {cmd} not supported"
+    if cmd == mc.DO_JUMP:
+        if not math.isfinite(item.param1) or item.param1 < 0:
+            return M.MAV_MISSION_INVALID_PARAM1, f"DO_JUMP target {item.param1} is not an item number"
+        if not math.isfinite(item.param2) or item.param2 < -1:
+            return M.MAV_MISSION_INVALID_PARAM2, f"DO_JUMP repeat count {item.param2} (-1: for ever)"
+    if cmd == mc.NAV_LOITER_TIME and not (math.isfinite(item.param1) and item.param1 >= 0.0):
+        return M.MAV_MISSION_INVALID_PARAM1, f"loiter time {item.param1} s must be >= 0"
+    if cmd == mc.NAV_WAYPOINT and math.isfinite(item.param1) and item.param1 < 0.0:
+        return M.MAV_MISSION_INVALID_PARAM1, f"hold time {item.param1} s must be >= 0"
+    if not has_position(item):
+        return None
     if item.frame not in SUPPORTED_FRAMES:
         return M.MAV_MISSION_UNSUPPORTED_FRAME, f"frame {item.frame} not supported (global frames only)"
-    if item.command not in SUPPORTED_COMMANDS:
-        return M.MAV_MISSION_UNSUPPORTED, f"command {item.command} not supported (NAV_WAYPOINT only)"
     if not -90.0 <= item.lat <= 90.0 or (item.x == 0 and item.y == 0):
         return M.MAV_MISSION_INVALID_PARAM5_X, f"latitude {item.lat:.7f} out of range"
     if not -180.0 <= item.lon <= 180.0:
         return M.MAV_MISSION_INVALID_PARAM6_Y, f"longitude {item.lon:.7f} out of range"
     r = item.param2
-    if not math.isnan(r) and (r < 0.0 or not math.isfinite(r) or r > 1000.0):
+    if cmd == mc.NAV_WAYPOINT and not math.isnan(r) and (r < 0.0 or not math.isfinite(r) or r > 1000.0):
         return M.MAV_MISSION_INVALID_PARAM2, f"acceptance radius {r} out of range 0-1000 m"
     if position_check is not None:
         return position_check(item.lat, item.lon)
     return None
+
+
+def has_position(item: MissionItem) -> bool:
+    """Whether the item's x/y are a position the vehicle goes to or uses: always for NAV_WAYPOINT; for
+    loiters and DO_SET_HOME unless 0/0 ("here") or DO_SET_HOME param1 = 1; never for the others."""
+    if item.command in mc.NEEDS_POSITION:
+        return True
+    if item.command in (mc.NAV_LOITER_UNLIM, mc.NAV_LOITER_TIME):
+        return not (item.x == 0 and item.y == 0)
+    if item.command == mc.DO_SET_HOME:
+        return item.param1 != 1.0 and not (item.x == 0 and item.y == 0)
+    return False
 
 
 class MissionServer:

@@ -42,7 +42,9 @@ def add_gcs_arguments(p: argparse.ArgumentParser) -> None:
                         "'none' turns the link off")
     p.add_argument("--wait-for-arm", action="store_true",
                    help="start disarmed in HOLD: a ground station uploads a mission (or keeps the scenario's), "
-                        "arms and sets AUTO (custom mode 10) or sends MISSION_START")
+                        "arms and sets AUTO (custom mode 10) or sends MISSION_START. The vehicle stays up: at the "
+                        "end of a mission it keeps station and takes the next one. In lockstep, simulated time "
+                        "then passes at wall-clock speed (hil run: x --speedup) so a person can follow it")
 
 
 def gcs_overrides(args: argparse.Namespace) -> list[str]:
@@ -220,7 +222,8 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     autopilot = Autopilot(ap, cfg.navigation, cfg.control, propulsion, world, link, worker, telemetry,
                           lockstep=lockstep, seed=cfg.sim.seed, log=progress, traffic=traffic, actuators=actuators,
                           int14_commands=cfg.esc.int14_resolution or cfg.can.actuators == "can",
-                          wait_for_arm=cfg.gcs.wait_for_arm)
+                          wait_for_arm=cfg.gcs.wait_for_arm,
+                          pace_speedup=cfg.gcs.pace_speedup if cfg.gcs.wait_for_arm else None)
     telemetry.attach(autopilot)
     return autopilot
 

@@ -144,7 +144,9 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     mode.add_argument("--lockstep", dest="speedup", action="store_const", const=None,
                       help="advance the simulator one IMU period per command: repeatable runs (the default)")
     mode.add_argument("--speedup", metavar="N", type=float, default=None,
-                      help="real-time mode instead: N simulated seconds per wall second")
+                      help="real-time mode instead: N simulated seconds per wall second. With --wait-for-arm "
+                           "(a ground station attached) the run stays lockstep and is paced to N x wall time "
+                           "(default 1: a person can follow it; lockstep alone runs ~10x faster)")
     p.add_argument("--algorithm", choices=("rrt-star", "informed-rrt-star", "ddrrt-star"), default=None,
                    help="local planner (default: planner.algorithm = ddrrt-star)")
     p.add_argument("--out", metavar="DIR", default=None,
@@ -187,7 +189,9 @@ def run(args: argparse.Namespace) -> int:
         signal.signal(signal.SIGTERM, previous_term)
 
 
-def _default_wall_timeout(args: argparse.Namespace) -> float:
+def _default_wall_timeout(args: argparse.Namespace, paced: bool = False) -> float:
+    if paced:  # a GCS session: lockstep paced to --speedup x wall time
+        return args.duration / (args.speedup or 1.0) + 300.0
     if args.speedup is None:  # lockstep: usually faster than real time, slower on a busy machine
         return max(900.0, 3.0 * args.duration)
     return args.duration / args.speedup + 300.0
@@ -209,13 +213,21 @@ def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
     overrides = list(args.overrides)
     if args.algorithm:
         overrides.append(f"planner.algorithm={json.dumps(args.algorithm)}")
-    opts = RunOptions(scenario=args.scenario, lockstep=args.speedup is None, speedup=args.speedup or 1.0,
+    gcs_session = bool(args.wait_for_arm)
+    if gcs_session:
+        # A ground station attached: lockstep (repeatable) paced to --speedup x wall time, and the vehicle
+        # stays up after the scenario's goal (a mission ends when the GCS says, or Ctrl-C / --duration).
+        overrides.append(f"gcs.pace_speedup={float(args.speedup or 1.0)!r}")
+    opts = RunOptions(scenario=args.scenario, lockstep=gcs_session or args.speedup is None,
+                      speedup=args.speedup or 1.0, stop_at_goal=not gcs_session,
                       duration=args.duration, seed=seed, config=args.config, overrides=overrides, out=out,
                       on_progress=progress, plot=not args.no_plot,
                       extra_autopilot_args=_gcs_args(args), summary_on_interrupt=True,
-                      wall_timeout=args.wall_timeout or _default_wall_timeout(args))
+                      wall_timeout=args.wall_timeout or _default_wall_timeout(args, gcs_session))
     opts.actuators = cfg.can.actuators
-    progress(f"run: scenario {args.scenario}, {'lockstep' if opts.lockstep else f'real time x{opts.speedup:g}'}, "
+    pacing = f"lockstep paced to x{opts.speedup:g} wall time" if gcs_session else \
+        ("lockstep" if opts.lockstep else f"real time x{opts.speedup:g}")
+    progress(f"run: scenario {args.scenario}, {pacing}, "
              f"actuators {cfg.can.actuators}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
     summary = run_loop(opts, cfg)
     emit(args, summary, human_summary(summary))

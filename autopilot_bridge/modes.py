@@ -1,0 +1,138 @@
+"""The vehicle's control modes, one class each, as ArduPilot Rover organises them (mode.h, mode_*.cpp).
+
+Mode numbers are Rover's ``custom_mode`` so that boat ground stations (QGroundControl, MAVProxy,
+Mission Planner) show their names. Each mode says what it needs to be entered (:meth:`RoverMode.enter`),
+what it does per frame with the mission or its target (:meth:`RoverMode.update`) and where the thrust
+comes from (:meth:`RoverMode.output`):
+
+* MANUAL (0): thrusters from MANUAL_CONTROL (x: surge, r: yaw, each -1000..1000); zero without input.
+* HOLD (4): both thrusters at zero, the boat drifts with wind and current (as Rover's HOLD does for
+  boats; no station keeping).
+* LOITER (5): keep station where the mode was entered (drift within ``loiter_radius``, then steer back).
+* AUTO (10): run the mission (:mod:`autopilot_bridge.mission_executor`); the online planner (section 2.2
+  of the paper) plans local paths along the global reference path [position, waypoints of the leg...].
+* RTL (11): reference path [position, home]; keeps station at home (``mission_done``).
+* GUIDED (15): go to the last goto target (MAV_CMD_DO_REPOSITION, SET_POSITION_TARGET_GLOBAL_INT) and
+  keep station there; without a target the thrusters are at zero.
+
+Disarmed means zero thrust whatever the mode. All positions NED metres.
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+from typing import TYPE_CHECKING, Any, Protocol
+
+from common.mavlink import MAV_TYPE as M
+
+if TYPE_CHECKING:
+    from autopilot_bridge.vehicle import Vehicle
+
+
+class Mode(IntEnum):
+    """ArduPilot Rover's custom_mode numbers of the modes this boat has."""
+
+    MANUAL = 0
+    HOLD = 4
+    LOITER = 5
+    AUTO = 10
+    RTL = 11
+    GUIDED = 15
+
+
+class Driver(Protocol):
+    """What a mode drives the thrusters with (the autopilot implements it); each returns a Thrust."""
+
+    def idle(self) -> Any: ...                       # both thrusters at zero
+
+    def manual(self, stick: tuple[float, float, float] | None) -> Any: ...  # (x, r, wall time) or None
+
+    def navigate(self, s: Any, dt: float) -> Any: ...  # follow vehicle.route (planned/fallback, then station)
+
+
+_AUTO_FLAGS = M.MAV_MODE_FLAG_AUTO_ENABLED | M.MAV_MODE_FLAG_GUIDED_ENABLED | M.MAV_MODE_FLAG_STABILIZE_ENABLED
+_GUIDED_FLAGS = M.MAV_MODE_FLAG_GUIDED_ENABLED | M.MAV_MODE_FLAG_STABILIZE_ENABLED
+
+
+class RoverMode:
+    """A mode: entry conditions, per-frame behaviour, thrust source; HEARTBEAT base_mode flags."""
+
+    number: Mode = Mode.HOLD
+    flags: int = 0
+    needs_position = False
+    drives = False            # the planner and the controllers follow vehicle.route
+
+    @property
+    def name(self) -> str:
+        return self.number.name
+
+    def enter(self, v: Vehicle, position: tuple[float, float] | None) -> tuple[bool, str]:
+        """Refuse (False, why) or take over: set the vehicle's route for this mode."""
+        v.route = None
+        return True, self.name
+
+    def update(self, v: Vehicle, north: float, east: float, t: float) -> None:
+        """Per frame, after navigation (position NED m, vehicle time s)."""
+
+    def output(self, driver: Driver, v: Vehicle, s: Any, dt: float) -> Any:
+        if self.drives and v.route is not None:
+            return driver.navigate(s, dt)
+        return driver.idle()
+
+
+class ModeManual(RoverMode):
+    number, flags = Mode.MANUAL, M.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+
+    def output(self, driver: Driver, v: Vehicle, s: Any, dt: float) -> Any:
+        return driver.manual(v.manual)
+
+
+class ModeHold(RoverMode):
+    number = Mode.HOLD
+
+
+class ModeLoiter(RoverMode):
+    number, flags, needs_position, drives = Mode.LOITER, _GUIDED_FLAGS, True, True
+
+    def enter(self, v: Vehicle, position: tuple[float, float] | None) -> tuple[bool, str]:
+        v.new_route([position, position], v.default_radius, loiter=True)
+        return True, self.name
+
+
+class ModeAuto(RoverMode):
+    number, flags, needs_position, drives = Mode.AUTO, _AUTO_FLAGS, True, True
+
+    def enter(self, v: Vehicle, position: tuple[float, float] | None) -> tuple[bool, str]:
+        if not v.mission:
+            return False, "AUTO: no mission"
+        v.route = None
+        v.executor.start(v.executor.current, v, position, v.t)
+        return True, self.name
+
+    def update(self, v: Vehicle, north: float, east: float, t: float) -> None:
+        if v.armed:
+            v.executor.update(v, north, east, t)
+
+
+class ModeRTL(RoverMode):
+    number, flags, needs_position, drives = Mode.RTL, _AUTO_FLAGS, True, True
+
+    def enter(self, v: Vehicle, position: tuple[float, float] | None) -> tuple[bool, str]:
+        if v.home is None:
+            return False, "RTL: no home position"
+        v.new_route([position, v.home], v.default_radius)
+        return True, self.name
+
+
+class ModeGuided(RoverMode):
+    number, flags, needs_position, drives = Mode.GUIDED, _GUIDED_FLAGS, True, True
+
+    def enter(self, v: Vehicle, position: tuple[float, float] | None) -> tuple[bool, str]:
+        v.route = None
+        if v.guided_target is not None:
+            v.new_route([position, v.guided_target], v.default_radius)
+        return True, self.name
+
+
+MODES: dict[Mode, RoverMode] = {m.number: m for m in (ModeManual(), ModeHold(), ModeLoiter(), ModeAuto(), ModeRTL(),
+                                                      ModeGuided())}
