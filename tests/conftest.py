@@ -30,3 +30,54 @@ def run_hil(*args: str, timeout: float = 300, env: dict | None = None, cwd: Path
 @pytest.fixture
 def hil():
     return run_hil
+
+
+# -- test tiers --------------------------------------------------------------------------------
+# Every test is in exactly one tier, from its module (and `slow`, which always means e2e):
+#   unit         in-process, no sockets, no subprocesses: seconds for the whole tier;
+#   integration  one component over real sockets, subprocesses, CAN buses or a short campaign;
+#   e2e          whole HIL runs (simulator + vessel computer + tap), ground-station sessions,
+#                User-Mode Linux, and everything marked `slow`.
+# `pytest -m "not e2e"` is the developer's loop; the README's command and CI run every tier.
+# A new test module must be listed here: collection fails otherwise, so no test falls through.
+UNIT_MODULES = frozenset("""
+    can_codec can_esc collision_cone colregs config config_layers control current_field geodesy
+    global_route mission_executor modes navigation online percentiles plan_commitment
+    planner_algorithms planner_config planner_cost planner_dynamic_domain planner_gridmap
+    planner_guidance planner_kgrowth planner_metrics planner_postprocess reactive route_planning
+    run_plot scenarios sim_sensors sim_vessel sim_waves tiers tracking_stats traffic_planning vehicle
+""".split())
+INTEGRATION_MODULES = frozenset("""
+    autopilot_link bench_planner cli connection cpu_load executors gcs_esc_telemetry gcs_fuzz
+    gcs_link gcs_mission montecarlo output plan_cli planner_warmup planning_worker range_sensing
+    readme security_gates sim_link sim_udp startup_errors traffic_ais
+""".split())
+E2E_MODULES = frozenset("""
+    by_hand can_vcan colregs_loop gcs_mavproxy gcs_mavsdk gcs_session hil_faults hil_loop hil_vcan
+    mission_done route_mission security_loop sparse_routes
+""".split())
+TIERS = ("unit", "integration", "e2e")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    for tier, what in zip(TIERS, ("in-process, no sockets or subprocesses",
+                                  "one component over real sockets, subprocesses or buses",
+                                  "whole HIL runs, ground-station sessions, User-Mode Linux"), strict=True):
+        config.addinivalue_line("markers", f"{tier}: {what} (tests/conftest.py)")
+
+
+def tier_of(module: str, slow: bool) -> str:
+    """The tier of a test in ``tests/test_<module>.py``; raises for a module no tier lists."""
+    if slow or module in E2E_MODULES:
+        return "e2e"
+    if module in INTEGRATION_MODULES:
+        return "integration"
+    if module in UNIT_MODULES:
+        return "unit"
+    raise pytest.UsageError(f"tests/test_{module}.py is in no test tier: add it to tests/conftest.py")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        module = item.path.stem.removeprefix("test_")
+        item.add_marker(tier_of(module, item.get_closest_marker("slow") is not None))
