@@ -7,14 +7,16 @@ import json
 import math
 import sys
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from hil import settings
-from hil.settings import HilConfig
+if TYPE_CHECKING:  # hil.settings pulls every component's config (filterpy, scipy): load it only when used
+    from hil.settings import HilConfig
 
 
 def load_settings(args: argparse.Namespace) -> HilConfig:
     """The configuration named by ``--config`` with the ``--set`` overrides applied."""
+    from hil import settings
+
     return settings.load(args.config, args.overrides)
 
 

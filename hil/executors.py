@@ -30,6 +30,11 @@ from typing import Any, Callable, Iterator, Sequence
 
 from hil.errors import UsageError
 
+
+def default_jobs() -> int:
+    """The CPUs this process may run on (at least 1): the default number of workers."""
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+
 EXECUTORS = ("local", "dask")
 DASK_HINT = "pip install 'usv-hil[cluster]' (or: pip install 'dask[distributed]')"
 

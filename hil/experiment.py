@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import csv
 import math
-import os
 import signal
 import time
 from dataclasses import dataclass, field, replace
@@ -20,7 +19,10 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-ALGORITHMS = ("rrt-star", "informed-rrt-star", "ddrrt-star")
+from hil.executors import default_jobs  # noqa: F401  (re-exported: experiment.default_jobs)
+from planner.params import ALGORITHM_NAMES
+
+ALGORITHMS = ALGORITHM_NAMES  # the planner's registry; the order fixes the per-algorithm seeds
 LABELS = {"rrt-star": "RRT*", "informed-rrt-star": "IRRT*", "ddrrt-star": "DDRRT*"}
 
 # Per-run CSV columns; DETERMINISTIC ones must be identical for the same seed whatever --jobs is
@@ -307,10 +309,6 @@ def write_table_md(path: Path, table: Sequence[dict[str, Any]], title: str = "")
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(table_markdown(table, title))
     return path
-
-
-def default_jobs() -> int:
-    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
 
 
 @dataclass

@@ -48,9 +48,9 @@ from common.params import param
 from hil import config
 from hil.config import CONFIG_DIR
 from hil.errors import ConfigError, UsageError
+from hil.scenario_names import SCENARIO_DIR, available  # noqa: F401  (available: re-exported)
 from simulator.traffic import ShipSpec
 
-SCENARIO_DIR = CONFIG_DIR / "scenarios"
 
 
 @dataclass(frozen=True)
@@ -204,11 +204,6 @@ def scenario_path(name: str) -> Path:
     if p.suffix == ".toml":
         return p
     return SCENARIO_DIR / f"{name}.toml"
-
-
-def available() -> list[str]:
-    """Names of the scenarios in configs/scenarios/."""
-    return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
 
 
 def load_spec(name: str) -> ScenarioSpec:

@@ -6,14 +6,29 @@ nothing of the rest of the project (numpy, scipy, numba only).
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from planner.params import ALGORITHM_NAMES, PlannerParams
-from planner.problem import PlanningProblem
-from planner.result import PlannerResult
-from planner.termination import Termination
 
+# The one registry of algorithm names (hil's commands, experiments and benches use it). It is
+# importable without numba: `import planner.params` only loads this light module.
 ALGORITHMS = ALGORITHM_NAMES
+
+if TYPE_CHECKING:
+    from planner.problem import PlanningProblem
+    from planner.result import PlannerResult
+    from planner.termination import Termination
+
+# Loaded on first use (PEP 562), so that `import planner.params` does not compile numba kernels.
+_LAZY = {"PlanningProblem": "planner.problem", "PlannerResult": "planner.result", "Termination": "planner.termination"}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'planner' has no attribute {name!r}")
 
 
 class Planner(Protocol):

@@ -91,3 +91,38 @@ def test_json_summary_is_one_object_on_stdout(hil):
     assert len(lines) == 1, r.stdout
     summary = json.loads(lines[0])
     assert summary["steps"] == 20
+
+
+def test_building_the_parser_imports_no_heavy_library():
+    """`hil --help` stays fast: commands import numpy, numba, scipy, filterpy, pymavlink only when run."""
+    import subprocess
+    import sys
+
+    heavy = ("numpy", "numba", "scipy", "filterpy", "pymavlink")
+    code = ("import sys, hil.cli; hil.cli.build_parser(); "
+            f"print(','.join(sorted(m for m in {heavy!r} if m in sys.modules)))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "", f"building the parser imported: {r.stdout.strip()}"
+
+
+def test_one_algorithm_registry():
+    """The planner's ALGORITHM_NAMES is the only list of algorithm names; the rest use it."""
+    import typing
+
+    import planner
+    from hil import experiment
+    from hil.commands import plan
+    from planner.params import ALGORITHM_NAMES, PlannerParams
+
+    assert planner.ALGORITHMS is ALGORITHM_NAMES
+    assert experiment.ALGORITHMS is ALGORITHM_NAMES and plan.ALGORITHMS is ALGORITHM_NAMES
+    assert set(experiment.LABELS) == set(ALGORITHM_NAMES)
+    assert typing.get_args(typing.get_type_hints(PlannerParams)["algorithm"]) == ALGORITHM_NAMES
+    for name in ALGORITHM_NAMES:
+        assert planner.make_planner(name, PlannerParams(algorithm=name), seed=1) is not None
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    for command in ("run", "autopilot", "plan"):
+        algo = next(a for a in sub.choices[command]._actions if a.dest == "algorithm")
+        assert tuple(algo.choices) == ALGORITHM_NAMES

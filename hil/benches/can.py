@@ -10,8 +10,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 from hil.console import emit, load_settings, progress
 from hil.errors import RunFailed, UsageError
 
@@ -64,6 +62,8 @@ def _finish(proc: subprocess.Popen) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     import can
 
     from hil.can_path import esc_process_command, pair_latency, paced, recording_actuators, stats_ms

@@ -26,16 +26,17 @@ import math
 import statistics
 import time
 from dataclasses import replace
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
-import numpy as np
-
-from hil import console, scenario as scenarios
+from hil import console
 from hil.errors import UsageError
-from hil.optimum import shortest_path
+from planner.params import ALGORITHM_NAMES
+
+if TYPE_CHECKING:
+    import numpy as np
 
 MAPS = ("bench_discs", "bench_bugtrap", "bench_maze")
-ALGORITHMS = ("rrt-star", "informed-rrt-star", "ddrrt-star")
+ALGORITHMS = ALGORITHM_NAMES
 BUDGETS = (0.05, 0.2, 1.0)
 FIRST_SOLUTION_CAP_S = 2.0
 TARGETS = {"iterations_per_s": 15000.0, "first_solution_s": 0.040, "ratio_0.2": 1.03, "ratio_1": 1.01}
@@ -220,6 +221,8 @@ def end_to_end(map_name: str, algorithm: str, budget_s: float, args: argparse.Na
 
 
 def run(args: argparse.Namespace) -> int:
+    from hil import scenario as scenarios
+    from hil.optimum import shortest_path
     from planner.gridmap import OccupancyGrid
     from planner.problem import PlanningProblem
 

@@ -9,9 +9,6 @@ import time
 from hil.commands.run import HilClient, sim_command, start_simulator, stop_process
 from hil.console import emit, load_settings, progress
 from hil.errors import RunFailed
-from simulator.core import SimulatorCore
-from simulator.integrator import rk4_step
-from simulator.vessel import Vessel
 
 GOAL_LOCKSTEP_STEPS_PER_S = 2000.0
 
@@ -35,6 +32,9 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
 
 def bench_model(cfg, n: int) -> float:
     """RK4 steps per second of Vessel.dynamics (thrust, waves and current held)."""
+    from simulator.integrator import rk4_step
+    from simulator.vessel import Vessel
+
     vessel = Vessel(cfg.vessel)
     tau = vessel.propulsion(vessel.thrust(0.8), vessel.thrust(0.6))
     tau_w, cur = (1.0, 2.0, 0.3), (0.1, 0.2)
@@ -49,8 +49,9 @@ def bench_model(cfg, n: int) -> float:
 
 def bench_core(cfg, n: int) -> float:
     """Frames per second of SimulatorCore (step + frame encoding), no sockets."""
+    from simulator.core import Command, SimulatorCore
+
     core = SimulatorCore(cfg)
-    from simulator.core import Command
     t0 = time.perf_counter()
     for _ in range(n):
         core.frame()

@@ -10,12 +10,10 @@ import signal
 import tempfile
 from pathlib import Path
 
-import numpy as np
-
-from hil import scenario as scenarios
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.commands.sim import receiving, sending
 from hil.console import emit, load_settings, progress
+from planner.params import ALGORITHM_NAMES
 from hil.errors import UsageError
 
 
@@ -91,7 +89,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                    help="the simulator runs in lockstep: plan on an iteration budget "
                         "(autopilot.lockstep_iterations) so runs are repeatable")
     p.add_argument("--seed", type=int, default=None, help="seed of the planner's sampling (default: sim.seed)")
-    p.add_argument("--algorithm", choices=("rrt-star", "informed-rrt-star", "ddrrt-star"), default=None,
+    p.add_argument("--algorithm", choices=ALGORITHM_NAMES, default=None,
                    help="local planner (default: planner.algorithm = ddrrt-star)")
     p.add_argument("--summary-out", metavar="FILE", default=None,
                    help="also write the summary JSON to FILE (atomically) when stopping")
@@ -152,6 +150,7 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     from autopilot_bridge.planning_worker import PlannerWorker
     from autopilot_bridge.gcs.link import GcsLink
     from common.geodesy import LocalFrame
+    from hil import scenario as scenarios
     from simulator.vessel import Vessel
 
     scen = scenarios.load(scenario_name, cfg.current, cfg.planner.safety_radius)
@@ -236,6 +235,8 @@ def _max_time_step(cfg, lockstep: bool) -> float:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     args.overrides = list(args.overrides) + _overrides(args)
     cfg = load_settings(args)
     check_can(cfg, "hil autopilot (a process of its own)")

@@ -8,16 +8,18 @@ import math
 import time
 from pathlib import Path
 
-from hil import console, executors, experiment, scenario as scenarios
+from hil import console, executors
 from hil.errors import RunFailed, UsageError
+from hil.scenario_names import available as scenario_names
+from planner.params import ALGORITHM_NAMES
 
 
 def _algorithms(text: str) -> tuple[str, ...]:
     names = tuple(a.strip() for a in text.split(",") if a.strip())
-    bad = [a for a in names if a not in experiment.ALGORITHMS]
+    bad = [a for a in names if a not in ALGORITHM_NAMES]
     if bad or not names:
         raise argparse.ArgumentTypeError(
-            f"unknown algorithm(s) {', '.join(bad) or '(none)'}; choose from {','.join(experiment.ALGORITHMS)}")
+            f"unknown algorithm(s) {', '.join(bad) or '(none)'}; choose from {','.join(ALGORITHM_NAMES)}")
     if len(set(names)) != len(names):
         raise argparse.ArgumentTypeError("an algorithm is listed twice")
     return names
@@ -38,12 +40,12 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                     "and keeps the finished runs (so does SIGTERM).",
     )
     p.add_argument("--scenario", metavar="NAME", default="labyrinth",
-                   help=f"scenario in configs/scenarios/ (default labyrinth; {', '.join(scenarios.available())})")
+                   help=f"scenario in configs/scenarios/ (default labyrinth; {', '.join(scenario_names())})")
     p.add_argument("--runs", metavar="N", type=int, default=20, help="runs per algorithm (default 20; the paper: 1000)")
-    p.add_argument("--algorithms", metavar="LIST", type=_algorithms, default=experiment.ALGORITHMS,
+    p.add_argument("--algorithms", metavar="LIST", type=_algorithms, default=ALGORITHM_NAMES,
                    help="comma-separated algorithms (default rrt-star,informed-rrt-star,ddrrt-star)")
-    p.add_argument("--jobs", "-j", metavar="J", type=int, default=experiment.default_jobs(),
-                   help=f"worker processes (default: the CPUs available, {experiment.default_jobs()})")
+    p.add_argument("--jobs", "-j", metavar="J", type=int, default=executors.default_jobs(),
+                   help=f"worker processes (default: the CPUs available, {executors.default_jobs()})")
     p.add_argument("--seed", metavar="S", type=int, default=1, help="master seed (default 1)")
     p.add_argument("--executor", choices=executors.EXECUTORS, default="local",
                    help="where the runs execute: 'local' (default) = J processes of this machine (threads with "
@@ -106,6 +108,7 @@ def _range(text: str) -> tuple[float, float]:
 
 def run_traffic(args: argparse.Namespace) -> int:
     """`hil montecarlo --traffic`: HIL runs over randomised ship traffic."""
+    from hil import scenario as scenarios
     from hil.traffic_montecarlo import TrafficDraw, TrafficJob, run_campaign
 
     if args.ships < 1:
@@ -144,6 +147,7 @@ def run_traffic(args: argparse.Namespace) -> int:
 
 def run_routes(args: argparse.Namespace, argv_scenario: str | None) -> int:
     """`hil montecarlo --routes`: HIL runs on random sparse routes."""
+    from hil import scenario as scenarios
     from hil.hilrun import RunOptions, run_loop
     from hil.route_montecarlo import run_campaign
 
@@ -183,6 +187,8 @@ def run_routes(args: argparse.Namespace, argv_scenario: str | None) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hil import experiment, scenario as scenarios
+
     if args.runs < 1:
         raise UsageError("--runs must be >= 1")
     if args.jobs < 1:
@@ -269,7 +275,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _figures(args, spec, camp, out: Path) -> dict[str, str]:
-    from hil import plots
+    from hil import experiment, plots, scenario as scenarios
 
     files = {}
     algs = [a for a in ("ddrrt-star", "informed-rrt-star", "rrt-star") if a in camp.details]

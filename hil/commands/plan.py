@@ -7,12 +7,12 @@ import math
 import time
 from pathlib import Path
 
-import numpy as np
-
-from hil import console, scenario as scenarios
+from hil import console
 from hil.errors import UsageError
+from hil.scenario_names import available as scenario_names
+from planner.params import ALGORITHM_NAMES
 
-ALGORITHMS = ("rrt-star", "informed-rrt-star", "ddrrt-star")
+ALGORITHMS = ALGORITHM_NAMES
 
 
 def _point(text: str) -> tuple[float, float]:
@@ -40,7 +40,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     src = p.add_argument_group("problem (either --scenario or --map/--resolution/--start/--goal)")
     src.add_argument("--scenario", metavar="NAME",
                      help=f"take map, start, goal, heading and current from configs/scenarios/NAME.toml "
-                          f"({', '.join(scenarios.available())})")
+                          f"({', '.join(scenario_names())})")
     src.add_argument("--map", metavar="FILE", type=Path, help="occupancy map: .npy (bool/0-1) or .png (dark = obstacle)")
     src.add_argument("--resolution", metavar="R", type=float, help="map cell size (m per cell, > 0)")
     src.add_argument("--start", metavar="X,Y", type=_point, help="start position (m, map frame)")
@@ -70,6 +70,8 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
 
 
 def _problem_inputs(args: argparse.Namespace):
+    from hil import scenario as scenarios
+
     """(occ, resolution, start, goal, heading, field or None, overrides, label)"""
     if args.scenario:
         if args.map is not None or args.resolution is not None:
@@ -93,6 +95,10 @@ def _problem_inputs(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from hil import scenario as scenarios
+
     from dataclasses import replace
 
     from planner import make_planner, warm_up_info

@@ -22,12 +22,11 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from common.mavlink import Codec
-from common.udp import UdpEndpoint
 from hil import processes
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.config import config_args
 from hil.console import emit, load_settings, progress
+from planner.params import ALGORITHM_NAMES
 from hil.errors import ConfigError, RunFailed, UsageError
 
 FRAME_TIMEOUT_S = 15.0  # wall seconds to wait for the simulator's next frame before giving up
@@ -54,6 +53,9 @@ class HilClient:
 
     def __init__(self, bind: str = "127.0.0.1:0", system_id: int = 1, component_id: int = 1) -> None:
         """``system_id``/``component_id``: the autopilot's (the simulator takes commands only from those)."""
+        from common.mavlink import Codec
+        from common.udp import UdpEndpoint
+
         self.ep = UdpEndpoint(bind)
         self.codec = Codec(system_id, component_id, accept=self.ACCEPT)
         self.frames = self.commands = self.rejects = 0
@@ -147,7 +149,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                       help="real-time mode instead: N simulated seconds per wall second. With --wait-for-arm "
                            "(a ground station attached) the run stays lockstep and is paced to N x wall time "
                            "(default 1: a person can follow it; lockstep alone runs ~10x faster)")
-    p.add_argument("--algorithm", choices=("rrt-star", "informed-rrt-star", "ddrrt-star"), default=None,
+    p.add_argument("--algorithm", choices=ALGORITHM_NAMES, default=None,
                    help="local planner (default: planner.algorithm = ddrrt-star)")
     p.add_argument("--out", metavar="DIR", default=None,
                    help="run folder (default: runs/NAME-seedN-YYYYmmdd-HHMMSS, NAME the scenario's name key)")

@@ -7,13 +7,9 @@ import json
 import signal
 
 from common import connection
-from common.udp import UdpEndpoint
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, UsageError
-from simulator.core import SimulatorCore
-from simulator.rangefinder import WorldMap
-from simulator.server import SimulatorServer
 
 
 def _endpoint(role):
@@ -118,6 +114,11 @@ def scenario_overrides(scen, base_current) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from common.udp import UdpEndpoint
+    from simulator.core import SimulatorCore
+    from simulator.rangefinder import WorldMap
+    from simulator.server import SimulatorServer
+
     source = getattr(args, "commands_from", None)
     if source not in (None, "learn"):
         try:

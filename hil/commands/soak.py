@@ -9,9 +9,10 @@ import subprocess
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.console import emit, load_settings, progress
@@ -122,6 +123,8 @@ def _warmup(args: argparse.Namespace) -> float:
 
 
 def _load_record(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    import numpy as np
+
     if not path.exists():
         return np.zeros(0), np.zeros(0)
     z = np.load(path)
@@ -240,6 +243,8 @@ def _latency(sent_path: Path, applied_path: Path) -> dict[str, Any]:
 
 
 def _soak_can_path(args: argparse.Namespace, cfg: Any, out: Path) -> dict[str, Any]:
+    import numpy as np
+
     from hil import processes
     from hil.can_path import esc_process_command, pair_latency, paced, recording_actuators, stats_ms
 
