@@ -596,7 +596,7 @@ class HilRun:
         if self.encounter_judge is not None:
             from hil.encounter_report import totals
 
-            enc = self.encounter_judge.report(self.tap.truth)
+            enc = self.encounter_judge.report({t: self.tap.truth[t] for t in times})   # up to the deciding sample
             summary["encounters"] = enc
             summary["traffic"] = {**totals(enc), "ais": (ap.get("traffic") or {}).get("ais"),
                                   "ais_forwarded_to_gcs": self.tap.ais_forwarded,

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -26,7 +27,20 @@ PY = sys.executable
 PHYSICS = ["--set", "esc.time_constant=0.1", "--set", "esc.int14_resolution=true"]
 RUN = ["-m", "hil", "run", "--json", "--no-plot", "--scenario", "harbour", "--seed", "2", *PHYSICS]
 WALL_CLOCK_KEYS = {"wall_time_s", "control_latency_ms", "run_folder", "tlog", "plot", "simulator",
-                   "tlog_messages", "navigation", "sensed_obstacles", "gcs", "can", "actuators"}
+                   "tlog_messages", "navigation", "sensed_obstacles", "gcs", "can", "actuators", "security"}
+
+
+def _before_the_end(summary: dict) -> dict:
+    """The summary with only the events logged before its last simulated instant: the vessel
+    computer's handling of the frame at which the tap judges the goal races the tap's stop (over CAN
+    the command path is slower, so it more often gets to log "mission complete" first)."""
+    end = summary["sim_time_s"]
+
+    def logged_before(event: str) -> bool:
+        stamp = re.match(r"(\d+(?:\.\d+)?)s ", event)
+        return stamp is None or float(stamp.group(1)) < end
+
+    return {**summary, "events": [e for e in summary["events"] if logged_before(e)]}
 
 
 @pytest.fixture(scope="module")
@@ -95,7 +109,7 @@ def test_lockstep_can_run_gives_the_same_summary_as_mavlink(vcan_batch):
     mav = json.loads(r.stdout.strip().splitlines()[-1])
     assert can_run["actuators"] == "can" and mav["actuators"] == "mavlink"
     strip = lambda s: {k: v for k, v in s.items() if k not in WALL_CLOCK_KEYS}  # noqa: E731
-    assert strip(can_run) == strip(mav)
+    assert strip(_before_the_end(can_run)) == strip(_before_the_end(mav))
     assert can_run["outcome"] == "goal", can_run["events"]
     # The thrust really came over CAN: every frame's command was a RawCommand the ESCs applied.
     c = can_run["can"]
