@@ -221,6 +221,9 @@ class Autopilot:
             deadline_s=self.p.planning_deadline,
             iterations=self.p.lockstep_iterations if self.lockstep else None,
         )
+        if self.lockstep:
+            # Simulated time stands still while a (re)started worker starts up: lockstep stays repeatable.
+            self.worker.wait_ready(self.p.lockstep_planner_timeout)
         if self.worker.submit(request):
             self.stats.planning_cycles += 1
             self.pending_since = s.t
@@ -238,7 +241,7 @@ class Autopilot:
             reply = self.worker.wait(self.p.lockstep_planner_timeout)
             self.stats.planner_waits += 1
             self.stats.planner_wait_ms.append((time.perf_counter() - w0) * 1e3)
-            if reply is None and self.worker.watchdog(now=time.monotonic() + 1e9):
+            if reply is None and self.worker.busy and self.worker.watchdog(now=time.monotonic() + 1e9):
                 self._event(t, "planner hung: worker killed and restarted")
         else:
             reply = self.worker.poll()
@@ -729,6 +732,8 @@ class Autopilot:
             "deadline_overruns": w.overruns + w.killed,
             "worker_kills": w.killed,
             "worker_restarts": w.restarts,
+            "worker_startup_s": {"count": len(w.startup_s), "max": round(max(w.startup_s), 3) if w.startup_s else None},
+            "plans_skipped_worker_starting": w.not_ready_rejections,
             "fallback_activations": self.stats.fallback_activations,
             "tracking": self.tracking.summary(),
             "simulator_restarts": self.stats.simulator_restarts,

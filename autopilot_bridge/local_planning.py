@@ -101,8 +101,16 @@ def _length(path: np.ndarray) -> float:
     return float(np.sum(np.hypot(*np.diff(path, axis=0).T))) if len(path) > 1 else 0.0
 
 
-def online_cycle_handler(world: World) -> Callable[[Any], LocalPlan]:
-    """Worker factory: build the online context once, then plan one cycle per request."""
+WARM_UP_ITERATIONS = 200
+WARM_UP_DEADLINE_S = 0.05
+
+
+def online_cycle_handler(world: World, warm_up: CycleInput | None = None) -> Callable[[Any], LocalPlan]:
+    """Worker factory: build the online context once, then plan one cycle per request.
+
+    ``warm_up``: a start to plan short cycles from (both budgets) before the handler
+    is returned, so that a freshly forked worker pays its copy-on-write page faults and cache
+    loads while it starts up, not in its first real-time cycle; the context is left as new."""
     from planner.gridmap import OccupancyGrid
     from planner.online import VesselState, make_context, plan_cycle
 
@@ -154,4 +162,12 @@ def online_cycle_handler(world: World) -> Callable[[Any], LocalPlan]:
                          subgoal=tuple(rec.subgoal), subgoal_rule=rec.subgoal_rule, iterations=rec.iterations,
                          planning_time_s=rec.planning_time_s, reason=rec.reason, speed_factor=rec.speed_factor)
 
+    if warm_up is not None:
+        from autopilot_bridge.planning_worker import PlanRequest
+
+        # Both budgets: an iteration count (lockstep) and a wall-clock deadline (real time) take
+        # different compiled paths, each loaded on its first use.
+        handle(PlanRequest(0, warm_up, deadline_s=1.0, iterations=WARM_UP_ITERATIONS))
+        handle(PlanRequest(0, warm_up, deadline_s=WARM_UP_DEADLINE_S))
+        ctx.progress = 0
     return handle

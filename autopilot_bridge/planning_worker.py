@@ -8,6 +8,11 @@ best-so-far (OMPL-style anytime planning). If the worker has not answered ``grac
 the deadline, :meth:`PlannerWorker.watchdog` kills the process, starts a fresh one and counts the
 event: a hung planner costs the control loop nothing but the plan it did not deliver.
 
+A worker takes requests only once it has said it is ready (:class:`WorkerReady`, sent after its
+handler is built). Its start-up (a fork's copy-on-write faults, building the planning context) is
+not charged to a planning deadline: otherwise a start-up slower than deadline + grace, as inside
+User-Mode Linux, makes every restarted worker overrun its first request and be restarted again.
+
 Two budgets:
 
 * ``deadline_s`` (real time): the planner's termination is a wall-clock deadline;
@@ -51,6 +56,14 @@ class PlanReply:
     compute_time_s: float = 0.0
 
 
+@dataclass(frozen=True)
+class WorkerReady:
+    """The worker's first message: its handler is built (start-up time in s, worker clock)."""
+
+    pid: int
+    startup_s: float
+
+
 @dataclass
 class WorkerStats:
     submitted: int = 0
@@ -60,6 +73,8 @@ class WorkerStats:
     restarts: int = 0
     errors: int = 0                  # the handler raised
     busy_rejections: int = 0         # submit() while a request was still running
+    not_ready_rejections: int = 0    # submit() while a (re)started worker was still starting up
+    startup_s: list[float] = field(default_factory=list)   # each worker's start-up (s)
     events: list[str] = field(default_factory=list)
 
 
@@ -76,8 +91,32 @@ def _resolve(factory_path: str) -> Any:
     return getattr(importlib.import_module(module), name)
 
 
+def _owned_by_parent() -> None:
+    """The worker's life belongs to its parent: a SIGTERM/SIGINT to the process group (the way
+    runs are stopped) must not kill it under a parent that is still serving frames; it ends on
+    the pipe's EOF or the parent's SIGKILL, and (Linux) with its parent."""
+    import signal
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # 1 = PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
 def _worker_main(conn: Connection, factory_path: str, factory_args: tuple) -> None:
+    import os
+
+    _owned_by_parent()
+    t0 = time.perf_counter()
     handler = _resolve(factory_path)(*factory_args)
+    try:
+        conn.send(WorkerReady(os.getpid(), time.perf_counter() - t0))
+    except (BrokenPipeError, OSError):
+        return
     while True:
         try:
             request = conn.recv()
@@ -106,16 +145,19 @@ class PlannerWorker:
     """
 
     def __init__(self, factory: str, factory_args: tuple = (), grace_s: float = 0.5,
-                 start_method: str = "spawn") -> None:
+                 start_method: str = "spawn", startup_timeout_s: float = 60.0) -> None:
         self.factory = factory
         self.factory_args = factory_args
         self.grace_s = grace_s
+        self.startup_timeout_s = startup_timeout_s
         self.ctx = mp.get_context(start_method)
         self.stats = WorkerStats()
         self._proc: Any = None
         self._conn: Connection | None = None
         self._pending: PlanRequest | None = None
         self._pending_since = 0.0
+        self._ready = False
+        self._started_at = 0.0
         self._start()
 
     # -- process management ---------------------------------------------------------------
@@ -126,6 +168,8 @@ class PlannerWorker:
         self._proc.start()
         child.close()
         self._conn = parent
+        self._ready = False
+        self._started_at = time.monotonic()
 
     def _kill(self) -> None:
         if self._conn is not None:
@@ -164,14 +208,47 @@ class PlannerWorker:
     def busy(self) -> bool:
         return self._pending is not None
 
+    @property
+    def ready(self) -> bool:
+        """The worker has started and takes requests (never blocks)."""
+        return self.wait_ready(0.0)
+
+    def wait_ready(self, timeout: float) -> bool:
+        """Block up to ``timeout`` s for the worker's :class:`WorkerReady`; True once it came."""
+        if self._ready:
+            return True
+        if self._conn is None:
+            return False
+        try:
+            if not self._conn.poll(timeout):
+                return False
+            msg = self._conn.recv()
+        except (EOFError, OSError):
+            self._restart("worker died while starting")
+            return False
+        if not isinstance(msg, WorkerReady):
+            self._restart(f"worker sent {type(msg).__name__} before it was ready")
+            return False
+        self._ready = True
+        self.stats.startup_s.append(msg.startup_s)
+        return True
+
     # -- requests -----------------------------------------------------------------------------
     def submit(self, request: PlanRequest, now: float | None = None) -> bool:
-        """Start planning ``request``; False (and counted) if the previous one is still running."""
+        """Start planning ``request``; False (and counted) if the previous one is still running or
+        the worker is still starting up. The deadline runs from here."""
         if self._pending is not None:
             self.stats.busy_rejections += 1
             return False
+        if not self.ready:
+            self.stats.not_ready_rejections += 1
+            return False
         assert self._conn is not None
-        self._conn.send(request)
+        try:
+            self._conn.send(request)
+        except (BrokenPipeError, OSError):
+            self._restart(f"cycle {request.cycle}: worker died")
+            return False
         self._pending = request
         self._pending_since = time.monotonic() if now is None else now
         self.stats.submitted += 1
@@ -218,9 +295,17 @@ class PlannerWorker:
         return True
 
     def watchdog(self, now: float | None = None) -> bool:
-        """Kill and restart a worker that is ``grace_s`` past its request's deadline. True if it did."""
+        """Kill and restart a worker that is ``grace_s`` past its request's deadline, or that has
+        not started within ``startup_timeout_s``. True if it did."""
         if self._pending is None:
-            return False
+            if self._ready or self.ready:
+                return False
+            now = time.monotonic() if now is None else now
+            if now - self._started_at <= self.startup_timeout_s:
+                return False
+            self.stats.killed += 1
+            self._restart(f"planner worker not started after {now - self._started_at:.1f} s, killed")
+            return True
         now = time.monotonic() if now is None else now
         limit = self._pending.deadline_s + self.grace_s
         if now - self._pending_since <= limit:

@@ -48,3 +48,10 @@ def hanging_handler():
             time.sleep(0.01)
 
     return handle
+
+
+def slow_start_factory(startup_s: float) -> ScriptedPlanner:
+    """A planner whose worker takes ``startup_s`` to build (as a fork's page faults and the
+    planning context do inside User-Mode Linux)."""
+    time.sleep(startup_s)
+    return ScriptedPlanner()

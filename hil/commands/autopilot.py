@@ -198,11 +198,10 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     import time as _time
 
     from autopilot_bridge.local_planning import CycleInput, online_cycle_handler
-    from autopilot_bridge.planning_worker import PlanRequest
 
     t0 = _time.monotonic()
-    online_cycle_handler(world)(PlanRequest(0, CycleInput(scen.start[0], scen.start[1], scen.start_heading, 0.0, 0),
-                                            deadline_s=1.0, iterations=200))
+    warm_up = CycleInput(scen.start[0], scen.start[1], scen.start_heading, 0.0, 0)
+    online_cycle_handler(world, warm_up)
     spent = _time.monotonic() - t0
     if spent > 1.0:
         progress(f"autopilot: planner compiled and warmed up in {spent:.1f} s (cached for next time)")
@@ -213,7 +212,8 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     if planner_factory:
         worker = PlannerWorker(planner_factory, (), grace_s=ap.watchdog_grace, start_method=start_method)
     else:
-        worker = PlannerWorker("autopilot_bridge.local_planning:online_cycle_handler", (world,),
+        # Each (re)started worker warms up too (its first cycle would pay the fork's page faults).
+        worker = PlannerWorker("autopilot_bridge.local_planning:online_cycle_handler", (world, warm_up),
                                grace_s=ap.watchdog_grace, start_method=start_method)
     from autopilot_bridge.traffic_awareness import TrafficAwareness
 
