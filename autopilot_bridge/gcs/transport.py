@@ -14,7 +14,8 @@
 
 Peers are learned only from valid MAVLink frames (a fuzzer's garbage does not make it a peer) and
 kept up to ``max_peers`` per endpoint, the least recently heard dropped first. Every transport
-has the same small interface: :meth:`receive` gives ``(peer, bytes)`` chunks, :meth:`send`
+has the same small interface: :meth:`receive` gives ``(peer, bytes)`` chunks (at most ``max_reads``
+reads per peer: the link's frame budget), :meth:`send`
 fans a frame out to every peer, :meth:`heard` records a peer as a talker.
 """
 
@@ -63,9 +64,9 @@ class UdpTransport:
     def fileno(self) -> int:
         return self.ep.sock.fileno()
 
-    def receive(self) -> list[tuple[Any, bytes]]:
+    def receive(self, max_reads: int = 256) -> list[tuple[Any, bytes]]:
         out = []
-        for _ in range(256):  # bounded per call: a flood cannot starve the control loop
+        for _ in range(min(256, max_reads)):  # bounded per call: a flood cannot starve the control loop
             data = self.ep.recv(timeout=0.0)
             if data is None:
                 break
@@ -131,11 +132,11 @@ class TcpServerTransport:
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self.conns[("tcp", addr)] = conn
 
-    def receive(self) -> list[tuple[Any, bytes]]:
+    def receive(self, max_reads: int = 16) -> list[tuple[Any, bytes]]:
         self._accept()
         out = []
         for peer, conn in list(self.conns.items()):
-            for _ in range(16):
+            for _ in range(min(16, max_reads)):
                 try:
                     data = conn.recv(65536)
                 except (BlockingIOError, InterruptedError):
@@ -251,13 +252,13 @@ class TcpClientTransport:
         self.sock, self._connecting = None, False
         self._next_try = self.clock() + RECONNECT_S
 
-    def receive(self) -> list[tuple[Any, bytes]]:
+    def receive(self, max_reads: int = 16) -> list[tuple[Any, bytes]]:
         if self.sock is None or self._connecting:
             self._retry()
             return []
         out = []
         peer = self.peer
-        for _ in range(16):
+        for _ in range(min(16, max_reads)):
             try:
                 data = self.sock.recv(65536)
             except (BlockingIOError, InterruptedError):
@@ -298,7 +299,7 @@ class SerialTransport:
 
     def __init__(self, device: str, baud: int) -> None:
         try:
-            import serial
+            import serial  # type: ignore[import-untyped,unused-ignore]
         except ImportError:
             raise ValueError(f"serial:{device}:{baud}: needs pyserial (pip install pyserial)") from None
         try:
@@ -317,9 +318,9 @@ class SerialTransport:
     def fileno(self) -> int:
         return self.port.fileno()
 
-    def receive(self) -> list[tuple[Any, bytes]]:
+    def receive(self, max_reads: int = 16) -> list[tuple[Any, bytes]]:
         out = []
-        for _ in range(16):
+        for _ in range(min(16, max_reads)):
             try:
                 data = self.port.read(65536)
             except (self._serial_error, OSError):
