@@ -198,7 +198,6 @@ class GcsLink:
 
     def _service(self) -> None:
         now = self.clock()
-        self.parameter.tick()
         budget = FRAME_BUDGET
         for tr in self.transports:
             if budget <= 0:
@@ -225,6 +224,7 @@ class GcsLink:
                     except Exception as exc:  # absurd fields must never stop the boat
                         self.rejects["handler_error"] += 1
                         self.log(f"gcs: {m.get_type()} dropped: {type(exc).__name__}: {exc}")
+        self.parameter.tick()
         self.mission_service.tick(now)
         self.failsafe.check(now)
         self.telemetry.keep_alive()

@@ -2,8 +2,9 @@
 :func:`autopilot_bridge.gcs.params.collect` builds from every component's declarations.
 
 PARAM_REQUEST_LIST starts a dump that is paced: at most :data:`DUMP_PER_CALL` PARAM_VALUE per service
-call, and one dump at a time. A list request while a dump is under way joins it (counted as
-``param_list_coalesced``), so a datagram packed with list requests costs one dump, not one per request.
+call (:meth:`ParameterService.tick`, at the end of the call), and one dump at a time. A list request
+while a dump is pending or under way joins it (counted as ``param_list_coalesced``), so a datagram
+packed with list requests costs one dump, not one per request.
 PARAM_SET (a write: signed when signing is on) answers with the value in force, changed or not.
 """
 
@@ -62,8 +63,7 @@ class ParameterService:
         if self._dump_next is not None:
             self.security["param_list_coalesced"] += 1
             return
-        self._dump_next = 0
-        self.tick()
+        self._dump_next = 0   # sent from tick(), after every request of this service call joined it
 
     def _on_request_read(self, m: Any, now: float) -> None:
         if not self._for_us(m):
