@@ -146,7 +146,7 @@ def drain(sock: socket.socket) -> None:
     try:
         while sock.recv(65535):
             pass
-    except (BlockingIOError, TimeoutError, socket.timeout):
+    except (BlockingIOError, TimeoutError):
         pass
 
 
