@@ -368,3 +368,27 @@ def test_rate_limits_refill_with_time(closing):
     assert pings(3) == 1
     clock.t += 3600.0                                 # full again, never more than the burst
     assert pings(burst + 5) == burst
+
+
+def test_a_tcp_burst_beyond_the_budget_is_handled_over_several_calls_not_dropped(closing):
+    """A stream's frames beyond one call's budget stay in its parser and are handled on the next calls."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        tcp_port = s.getsockname()[1]
+    link = GcsLink(gcs_params(f"tcpin:127.0.0.1:{tcp_port}"), 1, 1, GEO, clock=FrozenClock())
+    closing(link)
+    link.attach(Api())
+    tcp = socket.create_connection(("127.0.0.1", tcp_port))
+    closing(tcp)
+    mav = signer(key=None)
+    n = 3 * FRAME_BUDGET + 5
+    tcp.sendall(b"".join(frame(mav, "heartbeat", M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0) for _ in range(n)))
+    calls = 0
+    end = time.monotonic() + 5.0
+    while link.received["HEARTBEAT"] < n and time.monotonic() < end:
+        before = link.received["HEARTBEAT"]
+        link.service()
+        assert link.received["HEARTBEAT"] - before <= FRAME_BUDGET
+        calls += link.received["HEARTBEAT"] > before
+    assert link.received["HEARTBEAT"] == n and calls >= 4
+    assert "frame_budget" not in link.summary()["security_rejects"]

@@ -16,7 +16,7 @@ from typing import Any
 
 from common.mavlink import MAV_TYPE as M
 
-FRAME_BUDGET = 64   # frames decoded and handled per service call, all transports together
+FRAME_BUDGET = 32   # frames decoded and handled per service call, all transports together (~30 µs each)
 
 
 @dataclass(frozen=True)

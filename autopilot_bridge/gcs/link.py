@@ -84,6 +84,7 @@ class GcsLink:
         self.gate = SecurityGate(self.key, params.allowed_sysids, self.security)
         self.limiter = ReadLimiter(self.security)
         self._parsers: dict[Any, FrameParser] = {}
+        self._backlog: list[tuple[Transport, Any]] = []   # stream peers whose parser holds frames not yet decoded
 
         mirror = UdpEndpoint("127.0.0.1:0", list(mirror_to)) if mirror_to else None
         self.out = Outbox(codec, self.transports, mirror, self.log)
@@ -199,6 +200,15 @@ class GcsLink:
     def _service(self) -> None:
         now = self.clock()
         budget = FRAME_BUDGET
+        # Streams cut by the last call's budget first: their frames are already here.
+        backlog, self._backlog = self._backlog, []
+        for tr, peer in backlog:
+            if peer not in self._parsers:
+                continue   # the connection closed
+            if budget <= 0:
+                self._backlog.append((tr, peer))
+            else:
+                budget = self._consume(tr, peer, b"", budget, now)
         for tr in self.transports:
             if budget <= 0:
                 break
@@ -210,24 +220,33 @@ class GcsLink:
                 if budget <= 0:
                     self.security["frame_budget"] += 1
                     continue
-                parsed = self._parser(tr, peer).parse(data, keep=tr.stream, max_frames=budget)
-                budget -= len(parsed.msgs) + len(parsed.rejects)
-                if parsed.over_budget_bytes:
-                    self.security["frame_budget"] += 1
-                for r in parsed.rejects:
-                    self.rejects[r] += 1
-                if parsed.msgs:
-                    tr.heard(peer)
-                for m in parsed.msgs:
-                    try:
-                        self._handle(m, now)
-                    except Exception as exc:  # absurd fields must never stop the boat
-                        self.rejects["handler_error"] += 1
-                        self.log(f"gcs: {m.get_type()} dropped: {type(exc).__name__}: {exc}")
+                budget = self._consume(tr, peer, data, budget, now)
         self.parameter.tick()
         self.mission_service.tick(now)
         self.failsafe.check(now)
         self.telemetry.keep_alive()
+
+    def _consume(self, tr: Transport, peer: Any, data: bytes, budget: int, now: float) -> int:
+        """Decode and handle one read's frames within ``budget``; the budget left."""
+        parser = self._parser(tr, peer)
+        parsed = parser.parse(data, keep=tr.stream, max_frames=budget)
+        budget -= len(parsed.msgs) + len(parsed.rejects)
+        if parsed.over_budget_bytes:
+            if tr.stream and parser.mav.buf_len() > 0:
+                self._backlog.append((tr, peer))   # the rest of the stream next call
+            else:
+                self.security["frame_budget"] += 1
+        for r in parsed.rejects:
+            self.rejects[r] += 1
+        if parsed.msgs:
+            tr.heard(peer)
+        for m in parsed.msgs:
+            try:
+                self._handle(m, now)
+            except Exception as exc:  # absurd fields must never stop the boat
+                self.rejects["handler_error"] += 1
+                self.log(f"gcs: {m.get_type()} dropped: {type(exc).__name__}: {exc}")
+        return budget
 
     def _handle(self, m: Any, now: float) -> None:
         kind = m.get_type()
