@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any, Protocol
 
 from autopilot_bridge.vehicle_api import VehicleApi, VehicleStatus
@@ -24,7 +24,7 @@ class Transport(Protocol):
     @property
     def address(self) -> tuple[str, int]: ...
 
-    def receive(self, max_reads: int = ...) -> list[tuple[Any, bytes]]: ...
+    def receive(self, max_reads: int = ..., hold: Collection[Any] = ...) -> list[tuple[Any, bytes]]: ...
 
     def send(self, data: bytes) -> None: ...
 

@@ -212,7 +212,9 @@ class GcsLink:
         for tr in self.transports:
             if budget <= 0:
                 break
-            for peer, data in tr.receive(max_reads=budget):
+            # A stream peer is read once per call, and not while its parser still holds frames.
+            hold = {peer for t, peer in self._backlog if t is tr}
+            for peer, data in tr.receive(max_reads=1 if tr.stream else budget, hold=hold):
                 if tr.stream and not data:
                     self._parsers.pop(peer, None)
                     continue

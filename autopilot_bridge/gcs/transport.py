@@ -15,7 +15,8 @@
 Peers are learned only from valid MAVLink frames (a fuzzer's garbage does not make it a peer) and
 kept up to ``max_peers`` per endpoint, the least recently heard dropped first. Every transport
 has the same small interface: :meth:`receive` gives ``(peer, bytes)`` chunks (at most ``max_reads``
-reads per peer: the link's frame budget), :meth:`send`
+reads per peer, none from the peers in ``hold``: the link's frame budget; a held TCP peer is throttled
+by TCP's own flow control), :meth:`send`
 fans a frame out to every peer, :meth:`heard` records a peer as a talker.
 """
 
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import socket
 from collections import OrderedDict
+from collections.abc import Collection
 from typing import Any
 
 from common import connection
@@ -64,7 +66,7 @@ class UdpTransport:
     def fileno(self) -> int:
         return self.ep.sock.fileno()
 
-    def receive(self, max_reads: int = 256) -> list[tuple[Any, bytes]]:
+    def receive(self, max_reads: int = 256, hold: Collection[Any] = ()) -> list[tuple[Any, bytes]]:
         out = []
         for _ in range(min(256, max_reads)):  # bounded per call: a flood cannot starve the control loop
             data = self.ep.recv(timeout=0.0)
@@ -132,10 +134,12 @@ class TcpServerTransport:
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self.conns[("tcp", addr)] = conn
 
-    def receive(self, max_reads: int = 16) -> list[tuple[Any, bytes]]:
+    def receive(self, max_reads: int = 16, hold: Collection[Any] = ()) -> list[tuple[Any, bytes]]:
         self._accept()
         out = []
         for peer, conn in list(self.conns.items()):
+            if peer in hold:
+                continue
             for _ in range(min(16, max_reads)):
                 try:
                     data = conn.recv(65536)
@@ -252,9 +256,11 @@ class TcpClientTransport:
         self.sock, self._connecting = None, False
         self._next_try = self.clock() + RECONNECT_S
 
-    def receive(self, max_reads: int = 16) -> list[tuple[Any, bytes]]:
+    def receive(self, max_reads: int = 16, hold: Collection[Any] = ()) -> list[tuple[Any, bytes]]:
         if self.sock is None or self._connecting:
             self._retry()
+            return []
+        if self.peer in hold:
             return []
         out = []
         peer = self.peer
@@ -318,8 +324,10 @@ class SerialTransport:
     def fileno(self) -> int:
         return self.port.fileno()
 
-    def receive(self, max_reads: int = 16) -> list[tuple[Any, bytes]]:
-        out = []
+    def receive(self, max_reads: int = 16, hold: Collection[Any] = ()) -> list[tuple[Any, bytes]]:
+        out: list[tuple[Any, bytes]] = []
+        if ("serial", self.device) in hold:
+            return out
         for _ in range(min(16, max_reads)):
             try:
                 data = self.port.read(65536)
