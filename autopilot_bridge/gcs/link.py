@@ -35,7 +35,12 @@ from autopilot_bridge.gcs.mission import MissionServer
 from autopilot_bridge.gcs.mission_service import MissionService
 from autopilot_bridge.gcs.parameter import ParameterService
 from autopilot_bridge.gcs.params import ParamTable, collect
-from autopilot_bridge.gcs.signing import ReplayGuard, SecurityGate, load_signing_key, signing_now
+from autopilot_bridge.gcs.signing import (
+    ReplayGuard,
+    SecurityGate,
+    load_signing_key,
+    signing_now,
+)
 from autopilot_bridge.gcs.telemetry import TelemetryService
 from autopilot_bridge.gcs.transport import open_endpoint
 from autopilot_bridge.parameters import Param
@@ -43,6 +48,7 @@ from autopilot_bridge.vehicle_api import VehicleApi, VehicleStatus
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE as M
 from common.mavlink import Codec
+from common.percentiles import StreamingPercentiles
 from common.udp import UdpEndpoint
 
 __all__ = ["GcsLink", "load_signing_key"]
@@ -84,6 +90,7 @@ class GcsLink:
         self.gate = SecurityGate(self.key, params.allowed_sysids, self.security)
         self.limiter = ReadLimiter(self.security)
         self._parsers: dict[Any, FrameParser] = {}
+        self.service_ms = StreamingPercentiles()   # wall time of each service() call, ms
         self._backlog: list[tuple[Transport, Any]] = []   # stream peers whose parser holds frames not yet decoded
 
         mirror = UdpEndpoint("127.0.0.1:0", list(mirror_to)) if mirror_to else None
@@ -185,10 +192,12 @@ class GcsLink:
     # -- receiving ------------------------------------------------------------------------------
     def service(self) -> None:
         """Between frames: read the transports (within the frame budget), answer, run timeouts and the failsafe."""
+        start = time.perf_counter()
         try:
             self._service()
         except Exception as exc:  # e.g. a socket error: the control loop goes on
             self._internal_error("service", exc)
+        self.service_ms.add((time.perf_counter() - start) * 1e3)
 
     def _parser(self, tr: Transport, peer: Any) -> FrameParser:
         key = peer if tr.stream else "udp"   # datagrams: one parser (no partial frames kept)
@@ -297,6 +306,9 @@ class GcsLink:
             "encode_errors": dict(out.encode_errors),
             "failsafe_events": self.failsafe.events,
             "failsafe_active": self.failsafe.active,
+            "service_ms": {"p50": self.service_ms.percentile(50), "p99": self.service_ms.percentile(99),
+                           "max": self.service_ms.max if self.service_ms.count else None,
+                           "calls": self.service_ms.count},
         }
 
     def close(self) -> None:
