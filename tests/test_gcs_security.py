@@ -392,3 +392,25 @@ def test_a_tcp_burst_beyond_the_budget_is_handled_over_several_calls_not_dropped
         calls += link.received["HEARTBEAT"] > before
     assert link.received["HEARTBEAT"] == n and calls >= 4
     assert "frame_budget" not in link.summary()["security_rejects"]
+
+
+def test_a_second_tcp_ground_station_is_not_cut_when_the_first_spends_the_budget(closing):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        tcp_port = s.getsockname()[1]
+    link = GcsLink(gcs_params(f"tcpin:127.0.0.1:{tcp_port}"), 1, 1, GEO, clock=FrozenClock())
+    closing(link)
+    link.attach(Api())
+    a, b = (socket.create_connection(("127.0.0.1", tcp_port)) for _ in range(2))
+    closing(a)
+    closing(b)
+    mav = signer(key=None)
+    hb = frame(mav, "heartbeat", M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+    n = 2 * FRAME_BUDGET
+    a.sendall(hb * n)
+    b.sendall(hb * n)
+    end = time.monotonic() + 5.0
+    while link.received["HEARTBEAT"] < 2 * n and time.monotonic() < end:
+        link.service()
+    assert link.received["HEARTBEAT"] == 2 * n and link.rejects == {}
+    assert "frame_budget" not in link.summary()["security_rejects"]

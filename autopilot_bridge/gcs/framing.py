@@ -47,6 +47,15 @@ class FrameParser:
         mav.expected_length = mavlink2.HEADER_LEN_V1 + 2
         mav.have_prefix_error = False
 
+    def defer(self, data: bytes) -> bool:
+        """Keep a stream's bytes for a later :meth:`parse` (no decoding now); False (and nothing kept)
+        when the backlog would exceed BUFFER_LIMIT."""
+        if self.mav.buf_len() + len(data) > BUFFER_LIMIT:
+            self._reset()
+            return False
+        self.mav.buf.extend(data)
+        return True
+
     def parse(self, data: bytes, keep: bool, max_frames: int) -> Parsed:
         mav = self.mav
         out = Parsed()

@@ -228,10 +228,12 @@ class GcsLink:
                     self._parsers.pop(peer, None)
                     continue
                 self.datagrams_in += 1
-                if budget <= 0:
+                if budget > 0:
+                    budget = self._consume(tr, peer, data, budget, now)
+                elif tr.stream and self._parser(tr, peer).defer(data):
+                    self._backlog.append((tr, peer))   # a stream's bytes are kept for the next call
+                else:
                     self.security["frame_budget"] += 1
-                    continue
-                budget = self._consume(tr, peer, data, budget, now)
         self.parameter.tick()
         self.mission_service.tick(now)
         self.failsafe.check(now)
