@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing as mp
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -103,6 +102,8 @@ def _leg(summary: dict) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    import multiprocessing as mp
+
     from hil.hilrun import RunOptions, free_udp_port, run_loop
 
     if args.duration <= 0 or args.rate <= 0:
