@@ -49,6 +49,23 @@ N_FSTATE = 4
 NEAR_CAP = 1024
 K_CAP = 64  # most nearest neighbours DDRRT* examines per sample
 TWO_PI = 2.0 * math.pi
+# Relative margin of the square-root shortcuts below. math.hypot is a libm call (~17 ns here,
+# against ~2 ns for sqrt(dx*dx + dy*dy)); the two differ by a few ulps (~1e-15 relative), so a
+# decision taken on the square root outside this margin is the one hypot would take, and inside
+# it the exact hypot decides. Results stay bit-identical to the all-hypot code.
+_REL = 1e-12
+
+
+@njit(cache=True)
+def _within(dx, dy, r):
+    """math.hypot(dx, dy) <= r, exactly, mostly without calling hypot (r > 0 finite)."""
+    d2 = dx * dx + dy * dy
+    r2 = r * r
+    if d2 < r2 * (1.0 - _REL):
+        return True
+    if d2 > r2 * (1.0 + _REL):
+        return False
+    return math.hypot(dx, dy) <= r
 
 
 @njit(cache=True)
@@ -167,7 +184,7 @@ def _in_domain(x, y, fc):
     if x < fc[C_BX0] or x > fc[C_BX1] or y < fc[C_BY0] or y > fc[C_BY1]:
         return False
     if fc[C_DR_DOM] > 0.0:
-        return math.hypot(x - fc[C_DCX], y - fc[C_DCY]) <= fc[C_DR_DOM]
+        return _within(x - fc[C_DCX], y - fc[C_DCY], fc[C_DR_DOM])
     return True
 
 
@@ -181,6 +198,21 @@ def _uniform(fc):
         if _in_domain(x, y, fc):
             break
     return x, y
+
+
+@njit(cache=True)
+def _in_ellipse(x, y, sx, sy, gx, gy, cb):
+    """math.hypot(x - sx, y - sy) + math.hypot(x - gx, y - gy) <= cb, exactly (see _REL)."""
+    ax = x - sx
+    ay = y - sy
+    bx = x - gx
+    by = y - gy
+    t = math.sqrt(ax * ax + ay * ay) + math.sqrt(bx * bx + by * by)
+    if t < cb * (1.0 - _REL):
+        return True
+    if t > cb * (1.0 + _REL):
+        return False
+    return math.hypot(ax, ay) + math.hypot(bx, by) <= cb
 
 
 @njit(cache=True)
@@ -221,7 +253,7 @@ def _informed(fc, c_best):
     # the ellipse covers more than the box: sample the box, keep points inside the ellipse
     for _ in range(64):
         x, y = _uniform(fc)
-        if math.hypot(x - sx, y - sy) + math.hypot(x - gx, y - gy) <= cb:
+        if _in_ellipse(x, y, sx, sy, gx, gy, cb):
             return x, y
     return x, y
 
@@ -340,6 +372,67 @@ def _sort_by(keys, idx, m):
 
 
 @njit(cache=True)
+def _parent_key(j, nx, ny, X, cost, fc, ic, fvx, fvy):
+    """(key, exact): the cost to (nx, ny) through node j. With a current, exact. For length, a
+    square root instead of math.hypot (exact = False): within 7.2e-16 relative of the exact key,
+    which _first_valid_parent computes only for the candidates that can be the minimum."""
+    if ic[I_FIELD] != 0:
+        return cost[j] + _cost(X[j, 0], X[j, 1], nx, ny, fc, ic, fvx, fvy), True
+    dx = nx - X[j, 0]
+    dy = ny - X[j, 1]
+    return cost[j] + math.sqrt(dx * dx + dy * dy), False
+
+
+@njit(cache=True)
+def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, occ, fc, ic, fvx, fvy, st, X, cost, head, max_turn,
+                        dd, track_failed):
+    """RRT*'s choose-parent: the first candidate, in ascending cost order, whose edge to (nx, ny)
+    is in its fan and collision-free; returns (node, cost through it) or (-1, 0.0). With
+    ``track_failed`` (DDRRT*) a colliding candidate counts as a failed extension and bounds or
+    shrinks its dynamic domain.
+
+    The same candidates are tried in the same order as after a stable sort of near_c (ties in
+    buffer order), but only as far as the first valid one: a selection of the minimum per try
+    instead of an insertion sort of the whole near set, which is O(nc^2) and dominated Informed
+    RRT* once its samples concentrate in a thin ellipse (hundreds of near nodes per sample).
+
+    Keys flagged inexact in near_x (see _parent_key; all keys are >= 0) are made exact where they
+    may be the minimum: a key above m (1 + 1e-12) + 1e-12, m the smallest key, is above the
+    minimum whatever its rounding, so the chosen candidate and its cost are the exact ones."""
+    left = nc
+    while left > 0:
+        m = near_c[0]
+        for a in range(1, left):
+            if near_c[a] < m:
+                m = near_c[a]
+        window = m * (1.0 + 1e-12) + 1e-12
+        b = -1
+        kb = 0.0
+        for a in range(left):
+            if near_c[a] <= window:
+                if not near_x[a]:
+                    i = near_i[a]
+                    near_c[a] = cost[i] + _cost(X[i, 0], X[i, 1], nx, ny, fc, ic, fvx, fvy)
+                    near_x[a] = True
+                if b < 0 or near_c[a] < kb:  # strict: the first of equal keys, as the stable sort would
+                    kb = near_c[a]
+                    b = a
+        j = near_i[b]
+        if _fan_ok(head[j], nx - X[j, 0], ny - X[j, 1], max_turn):
+            if _free(occ, fc, st, X[j, 0], X[j, 1], nx, ny):
+                return j, kb
+            if track_failed:
+                st[S_FAILED] += 1
+                _dd_failed(j, dd, fc)
+        for a in range(b, left - 1):  # drop candidate b, keeping the others' order
+            near_c[a] = near_c[a + 1]
+            near_i[a] = near_i[a + 1]
+            near_x[a] = near_x[a + 1]
+        left -= 1
+    return -1, 0.0
+
+
+@njit(cache=True)
 def _try_goal(i, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head, node_next,
               st, fs, fvx, fvy, stack, clockbuf, nv):
     """After node i joined the tree: track the closest node and connect the goal exactly."""
@@ -385,11 +478,19 @@ def _try_goal(i, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, 
 
 @njit(cache=True)
 def _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, first_child, next_sib, stack,
-            max_turn):
+            max_turn, lbf):
     """Make q_new the parent of node j if that is cheaper and the edge is valid (fan limit for the
-    edge and for j's children, collision-free): the rewiring step shared by RRT* and DDRRT*."""
+    edge and for j's children, collision-free): the rewiring step shared by RRT* and DDRRT*.
+
+    ``lbf`` > 0: every edge costs at least lbf x its length (see _edge_lower_factor); most
+    candidates are then refused on a square root, before the edge cost is computed."""
     dx = X[j, 0] - nx
     dy = X[j, 1] - ny
+    if lbf > 0.0:
+        # lbf * sqrt(...) * (1 - 1e-9) <= the computed edge cost, and rounding is monotone, so
+        # this refuses only candidates that the exact comparison below refuses too
+        if cost[new] + lbf * math.sqrt(dx * dx + dy * dy) * (1.0 - 1e-9) >= cost[j] - 1e-12:
+            return
     c = cost[new] + _cost(nx, ny, X[j, 0], X[j, 1], fc, ic, fvx, fvy)
     if c >= cost[j] - 1e-12:
         return
@@ -399,6 +500,19 @@ def _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, fi
         return
     if _free(occ, fc, st, nx, ny, X[j, 0], X[j, 1]):
         _reparent(j, new, c, X, parent, cost, head, first_child, next_sib, stack)
+
+
+@njit(cache=True)
+def _edge_lower_factor(fc, ic):
+    """f with edge cost >= f x edge length for every edge: 1 for length; for eq. (12), where each
+    piece costs min(1, D_alpha / (1 + exp(cos a - gamma sin a))) x its length and the exponent is
+    at most 1 when gamma >= 0, f = min(1, D_alpha / (1 + e)). 0 (no bound used) otherwise."""
+    if ic[I_FIELD] == 0:
+        return 1.0
+    da = fc[C_DALPHA]
+    if da > 0.0 and fc[C_GAMMA] >= 0.0:
+        return min(1.0, da / (1.0 + math.e))
+    return 0.0
 
 
 @njit(cache=True)
@@ -420,9 +534,11 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
     ext_k = np.empty(K_CAP, np.float64)
     near_i = np.empty(NEAR_CAP, np.int64)
     near_c = np.empty(NEAR_CAP, np.float64)
+    near_x = np.empty(NEAR_CAP, np.bool_)
     step = fc[C_STEP]
     max_turn = fc[C_MAXTURN]
     algo = ic[I_ALGO]
+    lbf = _edge_lower_factor(fc, ic)
     for _ in range(max_iter):
         if deadline_ns >= 0 and monotonic_ns(clockbuf) >= deadline_ns:
             return DONE_DEADLINE
@@ -486,23 +602,12 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
             nc = 0
             for a in range(ne):
                 i = ext_i[a]
-                if math.hypot(nx - X[i, 0], ny - X[i, 1]) <= step * (1.0 + 1e-9):
+                if _within(nx - X[i, 0], ny - X[i, 1], step * (1.0 + 1e-9)):
                     near_i[nc] = i
-                    near_c[nc] = cost[i] + _cost(X[i, 0], X[i, 1], nx, ny, fc, ic, fvx, fvy)
+                    near_c[nc], near_x[nc] = _parent_key(i, nx, ny, X, cost, fc, ic, fvx, fvy)
                     nc += 1
-            _sort_by(near_c, near_i, nc)
-            p = -1
-            pc = 0.0
-            for a in range(nc):
-                i = near_i[a]
-                if not _fan_ok(head[i], nx - X[i, 0], ny - X[i, 1], max_turn):
-                    continue
-                if _free(occ, fc, st, X[i, 0], X[i, 1], nx, ny):
-                    p = i
-                    pc = near_c[a]
-                    break
-                st[S_FAILED] += 1
-                _dd_failed(i, dd, fc)
+            p, pc = _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, occ, fc, ic, fvx, fvy, st, X, cost, head,
+                                        max_turn, dd, True)
             if p < 0:
                 continue
             if not math.isinf(dd[p]):
@@ -514,10 +619,10 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                 j = ext_i[a]
                 if j == p or j == new:
                     continue
-                if math.hypot(X[j, 0] - nx, X[j, 1] - ny) > step * (1.0 + 1e-9):
+                if not _within(X[j, 0] - nx, X[j, 1] - ny, step * (1.0 + 1e-9)):
                     continue
                 _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, first_child, next_sib,
-                        stack, max_turn)
+                        stack, max_turn, lbf)
         else:
             # ---- RRT* (Karaman & Frazzoli 2011), radius version
             m = _knn(sx, sy, 1, X, fc, ic, bucket_head, node_next, kn_i, kn_d)
@@ -544,22 +649,14 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                 if j == q0:
                     has_q0 = True
                 near_i[nc] = j
-                near_c[nc] = cost[j] + _cost(X[j, 0], X[j, 1], nx, ny, fc, ic, fvx, fvy)
+                near_c[nc], near_x[nc] = _parent_key(j, nx, ny, X, cost, fc, ic, fvx, fvy)
                 nc += 1
             if not has_q0 and nc < NEAR_CAP:
                 near_i[nc] = q0
-                near_c[nc] = cost[q0] + _cost(X[q0, 0], X[q0, 1], nx, ny, fc, ic, fvx, fvy)
+                near_c[nc], near_x[nc] = _parent_key(q0, nx, ny, X, cost, fc, ic, fvx, fvy)
                 nc += 1
-            _sort_by(near_c, near_i, nc)
-            p = -1
-            pc = 0.0
-            for a in range(nc):
-                j = near_i[a]
-                if _fan_ok(head[j], nx - X[j, 0], ny - X[j, 1], max_turn) and _free(
-                        occ, fc, st, X[j, 0], X[j, 1], nx, ny):
-                    p = j
-                    pc = near_c[a]
-                    break
+            p, pc = _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, occ, fc, ic, fvx, fvy, st, X, cost, head,
+                                        max_turn, dd, False)
             if p < 0:
                 continue
             new = _add_node(nx, ny, p, pc, X, parent, cost, head, dd, first_child, next_sib, fc, ic,
@@ -571,7 +668,7 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                 if j == p or j == new:
                     continue
                 _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, first_child, next_sib,
-                        stack, max_turn)
+                        stack, max_turn, lbf)
         _try_goal(new, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head, node_next,
                   st, fs, fvx, fvy, stack, clockbuf, nv)
         if stop_on_exact and st[S_GOAL] >= 0:
