@@ -48,6 +48,7 @@ N_FSTATE = 4
 
 NEAR_CAP = 1024
 K_CAP = 64  # most nearest neighbours DDRRT* examines per sample
+LAZY_TRIES = 8  # choose-parent: candidates tried by minimum selection before sorting the rest
 TWO_PI = 2.0 * math.pi
 # Relative margin of the square-root shortcuts below. math.hypot is a libm call (~17 ns here,
 # against ~2 ns for sqrt(dx*dx + dy*dy)); the two differ by a few ulps (~1e-15 relative), so a
@@ -93,6 +94,35 @@ def _fan_ok(head, dx, dy, max_turn):
 
 
 @njit(cache=True)
+def _fan_bounds(max_turn):
+    """(cos_pass, cos_fail, usable) for _fan_ok_cos: a direction whose cosine with the heading is
+    >= cos_pass is inside the fan, <= cos_fail outside, whatever the rounding of _fan_ok's atan2
+    (1e-7 rad and 1e-12 of slack, far above both computations' errors)."""
+    t = max_turn + 1e-9
+    if t - 1e-7 <= 0.0 or t + 1e-7 >= math.pi:
+        return 2.0, -2.0, False
+    return math.cos(t - 1e-7) + 1e-12, math.cos(t + 1e-7) - 1e-12, True
+
+
+@njit(cache=True)
+def _fan_ok_cos(head, hx, hy, dx, dy, max_turn, fb):
+    """_fan_ok(head, dx, dy, max_turn), exactly, with (hx, hy) = (cos head, sin head): decided on
+    a dot product and a square root (no atan2) unless the direction lies within 1e-7 rad of the
+    fan's edge."""
+    if math.isnan(head) or max_turn >= math.pi:
+        return True
+    if fb[2] != 0.0:
+        d2 = dx * dx + dy * dy
+        if d2 > 1e-200:
+            c = (dx * hx + dy * hy) / math.sqrt(d2)
+            if c >= fb[0]:
+                return True
+            if c <= fb[1]:
+                return False
+    return _fan_ok(head, dx, dy, max_turn)
+
+
+@njit(cache=True)
 def _bucket(x, y, fc, ic):
     bx = int(x / fc[C_BUCKET])  # buckets cover the whole map from (0, 0)
     by = int(y / fc[C_BUCKET])
@@ -112,7 +142,13 @@ def _insert_bucket(i, X, fc, ic, bucket_head, node_next):
 @njit(cache=True)
 def _knn(qx, qy, k, X, fc, ic, bucket_head, node_next, out_i, out_d):
     """k nearest nodes (Euclidean), ascending; returns how many were found (<= k). Squared
-    distances while scanning (no square root per candidate), roots of the k results at the end."""
+    distances while scanning (no square root per candidate), roots of the k results at the end.
+
+    The scan stops after the ring whose block of buckets is certain to hold every node nearer
+    than the k-th found: the distance from the query to the nearest side of the block (sides on
+    the map's border do not count; 1e-6 m of slack for bucket rounding), or ring x bucket side.
+    Nodes beyond are at least as far as the k-th, and an equal distance never displaces a node
+    found earlier, so the result is that of a full scan."""
     cx, cy = _bucket(qx, qy, fc, ic)
     nbx = ic[I_NBX]
     nby = ic[I_NBY]
@@ -147,8 +183,22 @@ def _knn(qx, qy, k, X, fc, ic, bucket_head, node_next, out_i, out_d):
                     bx += 1
                 else:
                     bx += 2 * ring  # interior rows: only the two edge columns
-        if m == k and out_d[m - 1] <= (ring * B) * (ring * B):
-            break
+        if m == k:
+            lim = ring * B
+            side = 1e300
+            if cx - ring > 0:
+                side = min(side, qx - (cx - ring) * B)
+            if cx + ring < nbx - 1:
+                side = min(side, (cx + ring + 1) * B - qx)
+            if cy - ring > 0:
+                side = min(side, qy - (cy - ring) * B)
+            if cy + ring < nby - 1:
+                side = min(side, (cy + ring + 1) * B - qy)
+            side -= 1e-6
+            if side > lim:
+                lim = side
+            if out_d[m - 1] <= lim * lim:
+                break
     for a in range(m):
         out_d[a] = math.sqrt(out_d[a])
     return m
@@ -157,6 +207,13 @@ def _knn(qx, qy, k, X, fc, ic, bucket_head, node_next, out_i, out_d):
 @njit(cache=True)
 def _near(qx, qy, radius, X, fc, ic, bucket_head, node_next, out_i):
     """Nodes within ``radius`` (at most NEAR_CAP of them)."""
+    return _near_pos(qx, qy, radius, X, fc, ic, bucket_head, node_next, out_i, -1)[0]
+
+
+@njit(cache=True)
+def _near_pos(qx, qy, radius, X, fc, ic, bucket_head, node_next, out_i, mark):
+    """_near, and how many nodes it had found when it reached bucket ``mark`` (NEAR_CAP if it
+    never did)."""
     B = fc[C_BUCKET]
     nbx = ic[I_NBX]
     nby = ic[I_NBY]
@@ -166,8 +223,11 @@ def _near(qx, qy, radius, X, fc, ic, bucket_head, node_next, out_i):
     by1 = int(math.floor((qy + radius) / B))
     r2 = radius * radius
     m = 0
+    pos = NEAR_CAP
     for by in range(max(by0, 0), min(by1, nby - 1) + 1):
         for bx in range(max(bx0, 0), min(bx1, nbx - 1) + 1):
+            if by * nbx + bx == mark:
+                pos = m
             j = bucket_head[by * nbx + bx]
             while j >= 0:
                 ex = X[j, 0] - qx
@@ -176,7 +236,7 @@ def _near(qx, qy, radius, X, fc, ic, bucket_head, node_next, out_i):
                     out_i[m] = j
                     m += 1
                 j = node_next[j]
-    return m
+    return m, pos
 
 
 @njit(cache=True)
@@ -398,9 +458,29 @@ def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, occ, fc, ic, fvx, fv
 
     Keys flagged inexact in near_x (see _parent_key; all keys are >= 0) are made exact where they
     may be the minimum: a key above m (1 + 1e-12) + 1e-12, m the smallest key, is above the
-    minimum whatever its rounding, so the chosen candidate and its cost are the exact ones."""
+    minimum whatever its rounding, so the chosen candidate and its cost are the exact ones.
+    After LAZY_TRIES refused candidates (with the fan limit, the cheapest candidates often point
+    backwards), the rest is sorted once instead (exact keys, stable merge sort: the same order)."""
     left = nc
+    tries = 0
     while left > 0:
+        if tries == LAZY_TRIES:
+            for a in range(left):
+                if not near_x[a]:
+                    i = near_i[a]
+                    near_c[a] = cost[i] + _cost(X[i, 0], X[i, 1], nx, ny, fc, ic, fvx, fvy)
+                    near_x[a] = True
+            order = np.argsort(near_c[:left], kind="mergesort")
+            for o in range(left):
+                j = near_i[order[o]]
+                if _fan_ok(head[j], nx - X[j, 0], ny - X[j, 1], max_turn):
+                    if _free(occ, fc, st, X[j, 0], X[j, 1], nx, ny):
+                        return j, near_c[order[o]]
+                    if track_failed:
+                        st[S_FAILED] += 1
+                        _dd_failed(j, dd, fc)
+            return -1, 0.0
+        tries += 1
         m = near_c[0]
         for a in range(1, left):
             if near_c[a] < m:
@@ -478,28 +558,37 @@ def _try_goal(i, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, 
 
 @njit(cache=True)
 def _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, first_child, next_sib, stack,
-            max_turn, lbf):
+            max_turn, hx, hy, fb):
     """Make q_new the parent of node j if that is cheaper and the edge is valid (fan limit for the
     edge and for j's children, collision-free): the rewiring step shared by RRT* and DDRRT*.
-
-    ``lbf`` > 0: every edge costs at least lbf x its length (see _edge_lower_factor); most
-    candidates are then refused on a square root, before the edge cost is computed."""
+    The tests are side-effect free until the collision check, so the cheap ones come first;
+    (hx, hy) = (cos, sin) of q_new's heading, fb = _fan_bounds(max_turn). The caller has
+    already refused the candidates that _rewire_cannot_pay refuses."""
     dx = X[j, 0] - nx
     dy = X[j, 1] - ny
-    if lbf > 0.0:
-        # lbf * sqrt(...) * (1 - 1e-9) <= the computed edge cost, and rounding is monotone, so
-        # this refuses only candidates that the exact comparison below refuses too
-        if cost[new] + lbf * math.sqrt(dx * dx + dy * dy) * (1.0 - 1e-9) >= cost[j] - 1e-12:
-            return
+    if not _fan_ok_cos(head[new], hx, hy, dx, dy, max_turn, fb):
+        return
     c = cost[new] + _cost(nx, ny, X[j, 0], X[j, 1], fc, ic, fvx, fvy)
     if c >= cost[j] - 1e-12:
-        return
-    if not _fan_ok(head[new], dx, dy, max_turn):
         return
     if not _children_fan_ok(j, math.atan2(dy, dx), X, first_child, next_sib, max_turn):
         return
     if _free(occ, fc, st, nx, ny, X[j, 0], X[j, 1]):
         _reparent(j, new, c, X, parent, cost, head, first_child, next_sib, stack)
+
+
+@njit(cache=True)
+def _rewire_cannot_pay(j, new, nx, ny, X, cost, lbf, margin):
+    """True if rewiring node j through q_new cannot lower its cost, decided on a square root:
+    lbf * sqrt(...) * (1 - margin) <= the computed edge cost (_edge_lower_factor), and rounding is
+    monotone, so this refuses only candidates that _rewire's exact comparison refuses too. Kept
+    small so that it is inlined: _rewire's call alone costs tens of ns, and Informed RRT* can have
+    a thousand near nodes per sample."""
+    if lbf <= 0.0:
+        return False
+    dx = X[j, 0] - nx
+    dy = X[j, 1] - ny
+    return cost[new] + lbf * math.sqrt(dx * dx + dy * dy) * (1.0 - margin) >= cost[j] - 1e-12
 
 
 @njit(cache=True)
@@ -535,10 +624,17 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
     near_i = np.empty(NEAR_CAP, np.int64)
     near_c = np.empty(NEAR_CAP, np.float64)
     near_x = np.empty(NEAR_CAP, np.bool_)
+    rw_i = np.empty(NEAR_CAP, np.int64)
     step = fc[C_STEP]
     max_turn = fc[C_MAXTURN]
     algo = ic[I_ALGO]
     lbf = _edge_lower_factor(fc, ic)
+    use_field = ic[I_FIELD] != 0
+    # length: the edge cost is hypot, within 4e-16 of the square root; eq. (12): exp and the sum
+    # of pieces round too, so a wider margin
+    lb_margin = 2e-15 if ic[I_FIELD] == 0 else 1e-9
+    cp, cf, fan_usable = _fan_bounds(max_turn)
+    fb = np.array([cp, cf, 1.0 if fan_usable else 0.0])
     for _ in range(max_iter):
         if deadline_ns >= 0 and monotonic_ns(clockbuf) >= deadline_ns:
             return DONE_DEADLINE
@@ -614,6 +710,8 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                 dd[p] *= fc[C_DDGROW]  # a successful extension grows a bounded domain (adaptive form)
             new = _add_node(nx, ny, p, pc, X, parent, cost, head, dd, first_child, next_sib, fc, ic,
                             bucket_head, node_next, st, nv, fvx, fvy)
+            hx = math.cos(head[new])
+            hy = math.sin(head[new])
             # ---- lines 18-21: rewire the other extendable nodes through q_new
             for a in range(ne):
                 j = ext_i[a]
@@ -621,8 +719,10 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                     continue
                 if not _within(X[j, 0] - nx, X[j, 1] - ny, step * (1.0 + 1e-9)):
                     continue
+                if _rewire_cannot_pay(j, new, nx, ny, X, cost, lbf, lb_margin):
+                    continue
                 _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, first_child, next_sib,
-                        stack, max_turn, lbf)
+                        stack, max_turn, hx, hy, fb)
         else:
             # ---- RRT* (Karaman & Frazzoli 2011), radius version
             m = _knn(sx, sy, 1, X, fc, ic, bucket_head, node_next, kn_i, kn_d)
@@ -639,7 +739,11 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
             radius = step
             if n > 1:
                 radius = min(step, fc[C_RGAMMA] * math.sqrt(math.log(n) / n))
-            nn = _near(nx, ny, radius, X, fc, ic, bucket_head, node_next, near_i)
+            nbx_new, nby_new = _bucket(nx, ny, fc, ic)
+            nn, pos_new = _near_pos(nx, ny, radius, X, fc, ic, bucket_head, node_next, near_i,
+                                    nby_new * ic[I_NBX] + nbx_new)
+            for a in range(nn):
+                rw_i[a] = near_i[a]
             # choose-parent over the near ball and the nearest node, in ascending cost order; the
             # nearest is not required to be valid itself (with the fan limit it often is not)
             nc = 0
@@ -649,7 +753,13 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                 if j == q0:
                     has_q0 = True
                 near_i[nc] = j
-                near_c[nc], near_x[nc] = _parent_key(j, nx, ny, X, cost, fc, ic, fvx, fvy)
+                if use_field:
+                    near_c[nc], near_x[nc] = _parent_key(j, nx, ny, X, cost, fc, ic, fvx, fvy)
+                else:  # _parent_key's length case, written out: a call per near node is costly
+                    ex = nx - X[j, 0]
+                    ey = ny - X[j, 1]
+                    near_c[nc] = cost[j] + math.sqrt(ex * ex + ey * ey)
+                    near_x[nc] = False
                 nc += 1
             if not has_q0 and nc < NEAR_CAP:
                 near_i[nc] = q0
@@ -661,14 +771,21 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                 continue
             new = _add_node(nx, ny, p, pc, X, parent, cost, head, dd, first_child, next_sib, fc, ic,
                             bucket_head, node_next, st, nv, fvx, fvy)
-            # rewire: the near set again (the buffer was reordered above)
-            nn = _near(nx, ny, radius, X, fc, ic, bucket_head, node_next, near_i)
+            hx = math.cos(head[new])
+            hy = math.sin(head[new])
+            # rewire: the near set as a second scan would give it: the same nodes in the same order
+            # with q_new (skipped) first in its bucket; when that scan is cut at NEAR_CAP and q_new
+            # comes before the cut, it pushes the last node out
+            if nn == NEAR_CAP and pos_new < NEAR_CAP:
+                nn -= 1
             for a in range(nn):
-                j = near_i[a]
+                j = rw_i[a]
                 if j == p or j == new:
                     continue
+                if _rewire_cannot_pay(j, new, nx, ny, X, cost, lbf, lb_margin):
+                    continue
                 _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, first_child, next_sib,
-                        stack, max_turn, lbf)
+                        stack, max_turn, hx, hy, fb)
         _try_goal(new, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head, node_next,
                   st, fs, fvx, fvy, stack, clockbuf, nv)
         if stop_on_exact and st[S_GOAL] >= 0:
