@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Protocol
 
 import numpy as np
@@ -52,6 +53,30 @@ class GridField:
     def uniform(cls, vx: float, vy: float) -> "GridField":
         """A constant field."""
         return cls(np.full((1, 1), vx), np.full((1, 1), vy), 1.0)
+
+    def at(self, x: float, y: float) -> tuple[float, float]:
+        """``self(x, y)`` for one point, in plain Python floats: the same operations in the same
+        order, so bit-identical, ~10x faster than the vectorised call on one point (the online
+        loop's path costs call it for every piece of every segment)."""
+        rows, cols = self.vx.shape
+        gx = (x - self.origin[0]) / self.resolution
+        gy = (y - self.origin[1]) / self.resolution
+        if gx != gx or gy != gy:  # NaN: let the vectorised code decide
+            vx, vy = self(x, y)
+            return float(vx), float(vy)
+        gx = min(max(gx, 0.0), float(cols - 1))
+        gy = min(max(gy, 0.0), float(rows - 1))
+        c0 = min(math.floor(gx), max(cols - 2, 0))
+        r0 = min(math.floor(gy), max(rows - 2, 0))
+        c1 = min(c0 + 1, cols - 1)
+        r1 = min(r0 + 1, rows - 1)
+        fx = gx - c0
+        fy = gy - r0
+        out = []
+        for a in (self.vx, self.vy):
+            out.append(a.item(r0, c0) * (1 - fx) * (1 - fy) + a.item(r0, c1) * fx * (1 - fy)
+                       + a.item(r1, c0) * (1 - fx) * fy + a.item(r1, c1) * fx * fy)
+        return out[0], out[1]
 
     def __call__(self, x, y):
         scalar = np.isscalar(x) and np.isscalar(y)
