@@ -4,7 +4,10 @@ import math
 
 import numpy as np
 import pytest
+from numba import njit
 
+from planner import _tree
+from planner._kernels import segment_free
 from planner.cost import cost_distance, esd, min_cost_factor, path_cost, segment_cost
 from planner.field import GridField, encounter_angle
 from planner.params import PlannerParams
@@ -87,3 +90,99 @@ def test_grid_field_bilinear_and_sample():
     assert vy == pytest.approx(-3.25)
     vx, vy = f(np.array([0.0, 100.0]), np.array([0.0, 0.0]))  # clamped outside
     assert vx == pytest.approx([0.0, 10.0])
+
+
+# -- the tree core's shortcuts take exactly the decisions of the plain computations they replace
+# (the references use the compiled core's hypot, libm's, which is not CPython's math.hypot)
+
+
+@njit(cache=True)
+def _hyp(dx, dy):
+    return math.hypot(dx, dy)
+def test_within_and_ellipse_match_hypot_including_the_boundary():
+    rng = np.random.default_rng(5)
+    for _ in range(20000):
+        dx, dy = rng.normal(scale=20.0, size=2)
+        r = _hyp(dx, dy) * (1.0 + rng.choice([-1e-16, 0.0, 1e-16, 1e-13, -1e-13, 0.3, -0.3]))
+        assert _tree._within(dx, dy, r) == (_hyp(dx, dy) <= r)
+        x, y, sx, sy, gx, gy = rng.uniform(0, 100, size=6)
+        cb = (_hyp(x - sx, y - sy) + _hyp(x - gx, y - gy)) * (1.0 + rng.choice([-1e-16, 0.0, 1e-16, 0.1]))
+        assert _tree._in_ellipse(x, y, sx, sy, gx, gy, cb) == (_hyp(x - sx, y - sy) + _hyp(x - gx, y - gy) <= cb)
+
+
+def _setup(rng, n):
+    occ = (rng.random((40, 40)) < 0.15).astype(np.uint8)
+    X = rng.uniform(0, 20, size=(n, 2))
+    # collinear nodes from the origin: keys tied up to rounding, as in a thin informed ellipse
+    t = np.sort(rng.uniform(0, 1, size=n // 2))
+    X[: n // 2] = np.c_[2.0 + 15.0 * t, 3.0 + 11.0 * t]
+    cost = np.hypot(X[:, 0] - 2.0, X[:, 1] - 3.0) * rng.choice([1.0, 1.0, 1.3], size=n)
+    fc = np.zeros(_tree.N_FCFG)
+    fc[_tree.C_RES] = 0.5
+    fc[_tree.C_STEP] = 4.0
+    fc[_tree.C_FRES] = 1.0
+    ic = np.zeros(_tree.N_ICFG, dtype=np.int64)
+    return occ, X, cost, fc, ic
+
+
+def test_lazy_choose_parent_matches_stable_sort():
+    rng = np.random.default_rng(11)
+    no_field = np.zeros((1, 1))
+    for trial in range(300):
+        n = int(rng.integers(1, 120))
+        occ, X, cost, fc, ic = _setup(rng, n)
+        nx, ny = (17.0 + 1e-3 * trial, 14.0) if trial % 2 else tuple(rng.uniform(0, 20, size=2))
+        idx = rng.permutation(n)
+        exact = np.array([cost[j] + _hyp(nx - X[j, 0], ny - X[j, 1]) for j in idx])
+        want, want_c = -1, 0.0
+        for o in np.argsort(exact, kind="stable"):
+            j = idx[o]
+            if segment_free(occ, 0.5, X[j, 0], X[j, 1], nx, ny):
+                want, want_c = j, exact[o]
+                break
+        near_i = idx.astype(np.int64).copy()
+        near_c = np.array([cost[j] + math.sqrt((nx - X[j, 0]) ** 2 + (ny - X[j, 1]) ** 2) for j in idx])
+        near_x = np.zeros(n, dtype=np.bool_)
+        st = np.zeros(_tree.N_ISTATE, dtype=np.int64)
+        head = np.full(n, np.nan)
+        got, got_c = _tree._first_valid_parent(near_i, near_c, near_x, n, nx, ny, occ, fc, ic, no_field, no_field,
+                                               st, X, cost, head, math.pi, np.full(n, np.inf), False)
+        assert got == want
+        if want >= 0:
+            assert got_c == want_c  # bit-identical cost, not only close
+
+
+def test_knn_matches_brute_force_with_ties():
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        n = int(rng.integers(1, 300))
+        X = np.round(rng.uniform(0, 50, size=(n, 2)) * 2) / 2  # on a 0.5 m lattice: many equal distances
+        fc = np.zeros(_tree.N_FCFG)
+        fc[_tree.C_BUCKET] = 4.0
+        ic = np.zeros(_tree.N_ICFG, dtype=np.int64)
+        ic[_tree.I_NBX] = ic[_tree.I_NBY] = int(math.ceil(50 / 4.0)) + 1
+        head = -np.ones(ic[_tree.I_NBX] * ic[_tree.I_NBY], dtype=np.int64)
+        nxt = np.empty(n, dtype=np.int64)
+        for i in range(n):
+            _tree._insert_bucket(i, X, fc, ic, head, nxt)
+        qx, qy = np.round(rng.uniform(0, 50, size=2) * 2) / 2
+        k = int(rng.integers(1, 12))
+        out_i = np.empty(64, np.int64)
+        out_d = np.empty(64)
+        m = _tree._knn(qx, qy, k, X, fc, ic, head, nxt, out_i, out_d)
+        d = (X[:, 0] - qx) ** 2 + (X[:, 1] - qy) ** 2
+        assert m == min(k, n)
+        assert np.array_equal(np.sqrt(np.sort(d)[:m]), out_d[:m])
+
+
+def test_gridfield_at_is_the_vectorised_call():
+    rng = np.random.default_rng(7)
+    fields = [GridField(rng.normal(size=(31, 41)), rng.normal(size=(31, 41)), 1.0),
+              GridField(rng.normal(size=(7, 9)), rng.normal(size=(7, 9)), 0.7, origin=(-1.3, 2.0)),
+              GridField.uniform(0.3, 0.1)]
+    for f in fields:
+        xs = np.r_[rng.uniform(-10, 50, 20000), 0.0, 40.0, 3.9999999999999996]
+        ys = np.r_[rng.uniform(-10, 40, 20000), 0.0, 30.0, 1e-300]
+        vx, vy = f(xs, ys)
+        for i in range(len(xs)):
+            assert f.at(float(xs[i]), float(ys[i])) == (vx[i], vy[i])
