@@ -102,11 +102,10 @@ def scenario_overrides(scen, base_current) -> list[str]:
     """The ``--set`` overrides that put the simulator where `hil run` starts it on ``scen``: the
     start (map x east, y north, heading counter-clockwise from east) as NED ``sim.initial`` and the
     scenario's own ``[current]`` keys."""
-    import math
-
+    from common.frames import map_to_ned
     from hil.config import to_table
 
-    north, east, psi = scen.start[1], scen.start[0], math.pi / 2.0 - scen.start_heading
+    north, east, psi = map_to_ned(scen.start[0], scen.start[1], scen.start_heading)
     out = [f"sim.initial.x={north!r}", f"sim.initial.y={east!r}", f"sim.initial.psi={psi!r}"]
     base, mine = to_table(base_current), to_table(scen.current)
     out += [f"current.{k}={json.dumps(v)}" for k, v in mine.items() if base.get(k) != v]
