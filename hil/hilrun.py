@@ -713,7 +713,7 @@ def run_loop(opts: RunOptions, cfg: Any) -> dict[str, Any]:
 
 
 def _run_loop(opts: RunOptions, cfg: Any) -> dict[str, Any]:
-    from hil.commands.autopilot import write_json_atomic
+    from hil.files import write_json_atomic
 
     run = HilRun(opts, cfg)
     summary = run.execute()
