@@ -15,6 +15,14 @@ against the chi-square quantile of ``gate_probability``: outliers (GPS glitches)
 and counted. Without GPS the filter dead-reckons from gyro and compass with constant body
 velocity, and its position covariance grows.
 
+Two interchangeable implementations of the update step (``navigation.filter``): ``"filterpy"``
+(filterpy's ``ExtendedKalmanFilter.update``, ~60-90 us a call in CPython) and ``"fast"`` (the same
+equations - gain from the gated innovation covariance, Joseph-form covariance update - on the
+7x7 numpy arrays directly, without filterpy's general-purpose bookkeeping: ``scipy.linalg.inv``,
+a deep copy of z, posterior copies). They agree to rounding (tests/test_navigation_fast.py);
+``"fast"`` is the default because filterpy's update alone exceeds the loop's per-step budget at
+3,000 lockstep steps/s (docs/performance.md).
+
 Numeric faults never escape: a measurement that is not finite, a singular innovation covariance
 (``LinAlgError``) or an update or prediction that would leave a NaN/inf in the state or its
 covariance is refused, the filter keeps its previous estimate (dead reckoning goes on) and the
@@ -26,6 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
@@ -38,6 +47,20 @@ MeasurementModel = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 X, Y, PSI, U, V, R, BG = range(7)
 DIM = 7
+
+
+def _selector(*rows: tuple[int, ...]) -> np.ndarray:
+    H = np.zeros((len(rows), DIM))
+    for i, cols in enumerate(rows):
+        H[i, list(cols)] = 1.0
+    H.flags.writeable = False
+    return H
+
+
+_H_POSITION = _selector((X,), (Y,))
+_H_HEADING = _selector((PSI,))
+_H_GYRO = _selector((R, BG))
+_H_BODY_VELOCITY = _selector((U,), (V,))
 
 
 @dataclass(frozen=True)
@@ -54,6 +77,9 @@ class NavigationParams:
     dvl_std: float = param("assumed DVL velocity noise per axis", "m/s", gt=0)
     gate_probability: float = param("NIS gate: chi-square probability of accepting a true measurement", gt=0, lt=1)
     reset_after_rejections: int = param("consecutive rejected GPS fixes after which the position is reset to GPS", ge=1)
+    filter: Literal["filterpy", "fast"] = param(
+        "implementation of the EKF update: filterpy's ExtendedKalmanFilter, or the same equations on numpy "
+        "arrays without filterpy's overhead (same estimates to rounding; docs/performance.md)", default="fast")
 
 
 @dataclass
@@ -85,12 +111,48 @@ class NavState:
         return math.hypot(self.u, self.v)
 
 
+class FastEkf:
+    """State ``x`` (7x1) and covariance ``P`` (7x7) updated by the EKF equations that filterpy's
+    ``ExtendedKalmanFilter.update`` uses, given the gain and innovation the caller has gated.
+
+    Like filterpy, every update assigns new arrays to ``x`` and ``P`` (never in place), so a caller
+    may keep the previous ones to roll back."""
+
+    def __init__(self) -> None:
+        self.x = np.zeros((DIM, 1))
+        self.P = np.eye(DIM)
+        self._I = np.eye(DIM)
+
+    def update(self, H: np.ndarray, K: np.ndarray, y: np.ndarray, Rm: np.ndarray) -> None:
+        """With the gain K = P H^T S^-1 and the innovation y: x += K y and the Joseph form
+        P = (I - K H) P (I - K H)^T + K R K^T, as filterpy computes them."""
+        self.x = self.x + K @ y
+        I_KH = self._I - K @ H
+        self.P = I_KH @ self.P @ I_KH.T + K @ Rm @ K.T
+
+
+def _inv2(S: np.ndarray) -> np.ndarray:
+    """Inverse of a 2x2 matrix (LinAlgError when singular), scaled so that the determinant
+    neither overflows nor underflows where a general inverse would not."""
+    a, b, c, d = S.ravel().tolist()
+    m = max(abs(a), abs(b), abs(c), abs(d))
+    if not 0.0 < m < math.inf:
+        raise np.linalg.LinAlgError("singular or non-finite innovation covariance")
+    a, b, c, d = a / m, b / m, c / m, d / m
+    det = (a * d - b * c) * m
+    if det == 0.0 or not math.isfinite(det):
+        raise np.linalg.LinAlgError("singular innovation covariance")
+    return np.array([[d, -b], [-c, a]]) / det
+
+
 class NavigationFilter:
     """EKF fusing GPS position/velocity, gyro, compass and DVL into ``[x, y, psi, u, v, r, b_g]``."""
 
     def __init__(self, params: NavigationParams) -> None:
         self.p = params
-        self.ekf = ExtendedKalmanFilter(dim_x=DIM, dim_z=2)
+        self.fast = params.filter == "fast"
+        # Both expose x (7x1) and P (7x7); only the update step differs (see the module docstring).
+        self.ekf: ExtendedKalmanFilter | FastEkf = FastEkf() if self.fast else ExtendedKalmanFilter(dim_x=DIM, dim_z=2)
         self.t: float | None = None
         self.stats = NavigationStats()
         self._heading: float | None = None
@@ -100,6 +162,10 @@ class NavigationFilter:
         # identity entries and only the Jacobian's entries are rewritten; Q depends on dt only.
         self._F = np.eye(DIM)
         self._Q: dict[float, np.ndarray] = {}
+        p = params
+        self._R = {"gps_pos": np.eye(2) * p.gps_pos_std**2, "gps_vel": np.eye(2) * p.gps_vel_std**2,
+                   "compass": np.array([[p.compass_std**2]]), "gyro": np.array([[p.gyro_std**2]]),
+                   "dvl": np.eye(2) * p.dvl_std**2}
 
     # -- life cycle ------------------------------------------------------------------------
     @property
@@ -178,7 +244,7 @@ class NavigationFilter:
             g = self._gates[dim] = float(chi2.ppf(self.p.gate_probability, dim))
         return g
 
-    def _update(self, kind: str, t: float, z: np.ndarray, model: MeasurementModel, Rm: np.ndarray,
+    def _update(self, kind: str, t: float, z: np.ndarray, model: MeasurementModel,
                 angle_rows: tuple[int, ...] = ()) -> bool:
         """Predict to ``t``, gate the innovation by NIS, then update. ``model(x) -> (H, h(x))``."""
         if not (math.isfinite(t) and np.isfinite(z).all()):
@@ -186,10 +252,16 @@ class NavigationFilter:
             return False
         if not self.predict_to(t):
             return False
-        x0, P0 = self.ekf.x.copy(), self.ekf.P.copy()
+        # Both implementations assign new x and P arrays on update (never in place): keeping the
+        # references is enough to roll back.
+        x0, P0 = self.ekf.x, self.ekf.P
+        Rm = self._R[kind]
         try:
             with np.errstate(all="ignore"):  # overflow is caught below, as a non-finite result
-                ok = self._gated_update(kind, z, model, Rm, angle_rows)
+                if self.fast:
+                    ok = self._gated_update_fast(kind, z, model, Rm, angle_rows)
+                else:
+                    ok = self._gated_update(kind, z, model, Rm, angle_rows)
         except (np.linalg.LinAlgError, ArithmeticError, ValueError):
             ok = None
         if ok is None or not (np.isfinite(self.ekf.x).all() and np.isfinite(self.ekf.P).all()):
@@ -217,19 +289,50 @@ class NavigationFilter:
         if not math.isfinite(nis):
             raise ArithmeticError("innovation not finite")
         if nis > self._gate(z.shape[0]):
-            self.stats.rejected[kind] = self.stats.rejected.get(kind, 0) + 1
+            self._rejected(kind)
             return False
         self.ekf.update(z, lambda _x: H, lambda _x: hx, R=Rm, residual=residual)
         self.ekf.x[PSI, 0] = wrap_angle(self.ekf.x[PSI, 0])
         self.stats.updates[kind] = self.stats.updates.get(kind, 0) + 1
         return True
 
+    def _gated_update_fast(self, kind: str, z: np.ndarray, model: MeasurementModel, Rm: np.ndarray,
+                           angle_rows: tuple[int, ...]) -> bool:
+        """:meth:`_gated_update` with :class:`FastEkf`: the gate's P H^T and S are the update's."""
+        ekf = self.ekf
+        H, hx = model(ekf.x)
+        y = z - hx
+        for i in angle_rows:
+            y[i, 0] = wrap_angle(y[i, 0])
+        PHT = ekf.P @ H.T
+        S = H @ PHT + Rm
+        if S.shape[0] == 1:
+            s = float(S[0, 0])
+            e = float(y[0, 0])
+            nis = e * e / s if s != 0.0 else math.inf
+            K = PHT / s if s != 0.0 else None
+        else:
+            Sinv = _inv2(S)
+            nis = float((y.T @ Sinv @ y)[0, 0])
+            K = PHT @ Sinv
+        if not math.isfinite(nis):
+            raise ArithmeticError("innovation not finite")
+        if nis > self._gate(z.shape[0]):
+            self._rejected(kind)
+            return False
+        ekf.update(H, K, y, Rm)
+        ekf.x[PSI, 0] = wrap_angle(ekf.x[PSI, 0])
+        self.stats.updates[kind] = self.stats.updates.get(kind, 0) + 1
+        return True
+
+    def _rejected(self, kind: str) -> None:
+        self.stats.rejected[kind] = self.stats.rejected.get(kind, 0) + 1
+
     # -- measurements (each model returns the Jacobian H and the prediction h(x)) -------------
+    # Linear measurements: their Jacobians are constants (neither update writes into H).
     @staticmethod
     def _position_model(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        H = np.zeros((2, DIM))
-        H[0, X] = H[1, Y] = 1.0
-        return H, np.array([[x[X, 0]], [x[Y, 0]]])
+        return _H_POSITION, x[[X, Y]]
 
     @staticmethod
     def _ground_velocity_model(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -242,21 +345,15 @@ class NavigationFilter:
 
     @staticmethod
     def _heading_model(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        H = np.zeros((1, DIM))
-        H[0, PSI] = 1.0
-        return H, np.array([[x[PSI, 0]]])
+        return _H_HEADING, x[[PSI]]
 
     @staticmethod
     def _gyro_model(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        H = np.zeros((1, DIM))
-        H[0, R] = H[0, BG] = 1.0
-        return H, np.array([[x[R, 0] + x[BG, 0]]])
+        return _H_GYRO, np.array([[x[R, 0] + x[BG, 0]]])
 
     @staticmethod
     def _body_velocity_model(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        H = np.zeros((2, DIM))
-        H[0, U] = H[1, V] = 1.0
-        return H, np.array([[x[U, 0]], [x[V, 0]]])
+        return _H_BODY_VELOCITY, x[[U, V]]
 
     def update_gps_position(self, t: float, north: float, east: float) -> bool:
         """A GPS fix converted to NED metres. Initialises the filter on the first one."""
@@ -270,8 +367,7 @@ class NavigationFilter:
         if t < self.t:
             self.stats.out_of_order += 1
             return False
-        ok = self._update("gps_pos", t, np.array([[north], [east]]), self._position_model,
-                          np.eye(2) * self.p.gps_pos_std**2)
+        ok = self._update("gps_pos", t, np.array([[north], [east]]), self._position_model)
         if ok:
             self._consecutive_gps_rejections = 0
             return True
@@ -291,8 +387,7 @@ class NavigationFilter:
         """GPS velocity over ground, north and east (m/s)."""
         if self.t is None:
             return False
-        return self._update("gps_vel", t, np.array([[vn], [ve]]), self._ground_velocity_model,
-                            np.eye(2) * self.p.gps_vel_std**2)
+        return self._update("gps_vel", t, np.array([[vn], [ve]]), self._ground_velocity_model)
 
     def update_compass(self, t: float, heading: float) -> bool:
         """Compass heading (rad, true north, clockwise)."""
@@ -302,22 +397,19 @@ class NavigationFilter:
         self._heading = heading
         if self.t is None:
             return False
-        return self._update("compass", t, np.array([[heading]]), self._heading_model,
-                            np.array([[self.p.compass_std**2]]), angle_rows=(0,))
+        return self._update("compass", t, np.array([[heading]]), self._heading_model, angle_rows=(0,))
 
     def update_gyro(self, t: float, yaw_rate: float) -> bool:
         """Gyro yaw rate (rad/s), modelled as r + b_g + noise."""
         if self.t is None:
             return False
-        return self._update("gyro", t, np.array([[yaw_rate]]), self._gyro_model,
-                            np.array([[self.p.gyro_std**2]]))
+        return self._update("gyro", t, np.array([[yaw_rate]]), self._gyro_model)
 
     def update_dvl(self, t: float, u: float, v: float) -> bool:
         """DVL bottom-lock body velocity over ground (m/s)."""
         if self.t is None:
             return False
-        return self._update("dvl", t, np.array([[u], [v]]), self._body_velocity_model,
-                            np.eye(2) * self.p.dvl_std**2)
+        return self._update("dvl", t, np.array([[u], [v]]), self._body_velocity_model)
 
     # -- output ------------------------------------------------------------------------------
     def state(self) -> NavState | None:
