@@ -15,13 +15,12 @@ against the chi-square quantile of ``gate_probability``: outliers (GPS glitches)
 and counted. Without GPS the filter dead-reckons from gyro and compass with constant body
 velocity, and its position covariance grows.
 
-Two interchangeable implementations of the update step (``navigation.filter``): ``"filterpy"``
-(filterpy's ``ExtendedKalmanFilter.update``, ~60-90 us a call in CPython) and ``"fast"`` (the same
-equations - gain from the gated innovation covariance, Joseph-form covariance update - on the
-7x7 numpy arrays directly, without filterpy's general-purpose bookkeeping: ``scipy.linalg.inv``,
-a deep copy of z, posterior copies). They agree to rounding (tests/test_navigation_fast.py);
-``"fast"`` is the default because filterpy's update alone exceeds the loop's per-step budget at
-3,000 lockstep steps/s (docs/performance.md).
+Two interchangeable implementations (``navigation.filter``): ``"filterpy"`` (the prediction below
+on numpy, filterpy's ``ExtendedKalmanFilter.update``) and ``"fast"`` (the same equations -
+prediction, NIS gate, gain, Joseph-form covariance update - compiled with numba in one call per
+measurement, autopilot_bridge/nav_kernel.py). They agree to rounding, refusals and counters
+included (tests/test_navigation_fast.py). ``"fast"`` is the default: filterpy's path alone costs
+more per frame than the loop's budget at 3,000 lockstep steps/s (docs/performance.md).
 
 Numeric faults never escape: a measurement that is not finite, a singular innovation covariance
 (``LinAlgError``) or an update or prediction that would leave a NaN/inf in the state or its
@@ -40,6 +39,7 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from scipy.stats import chi2
 
+from autopilot_bridge import nav_kernel
 from autopilot_bridge.angles import wrap_angle
 from common.params import param
 
@@ -78,8 +78,8 @@ class NavigationParams:
     gate_probability: float = param("NIS gate: chi-square probability of accepting a true measurement", gt=0, lt=1)
     reset_after_rejections: int = param("consecutive rejected GPS fixes after which the position is reset to GPS", ge=1)
     filter: Literal["filterpy", "fast"] = param(
-        "implementation of the EKF update: filterpy's ExtendedKalmanFilter, or the same equations on numpy "
-        "arrays without filterpy's overhead (same estimates to rounding; docs/performance.md)", default="fast")
+        "implementation of the EKF: filterpy's ExtendedKalmanFilter, or the same equations compiled with numba "
+        "(fast; same estimates to rounding; docs/performance.md)", default="fast")
 
 
 @dataclass
@@ -112,37 +112,28 @@ class NavState:
 
 
 class FastEkf:
-    """State ``x`` (7x1) and covariance ``P`` (7x7) updated by the EKF equations that filterpy's
-    ``ExtendedKalmanFilter.update`` uses, given the gain and innovation the caller has gated.
-
-    Like filterpy, every update assigns new arrays to ``x`` and ``P`` (never in place), so a caller
-    may keep the previous ones to roll back."""
+    """State ``x`` (7x1) and covariance ``P`` (7x7) of the ``"fast"`` filter; each step of
+    :func:`autopilot_bridge.nav_kernel.step` assigns new arrays (never in place)."""
 
     def __init__(self) -> None:
         self.x = np.zeros((DIM, 1))
         self.P = np.eye(DIM)
-        self._I = np.eye(DIM)
-
-    def update(self, H: np.ndarray, K: np.ndarray, y: np.ndarray, Rm: np.ndarray) -> None:
-        """With the gain K = P H^T S^-1 and the innovation y: x += K y and the Joseph form
-        P = (I - K H) P (I - K H)^T + K R K^T, as filterpy computes them."""
-        self.x = self.x + K @ y
-        I_KH = self._I - K @ H
-        self.P = I_KH @ self.P @ I_KH.T + K @ Rm @ K.T
 
 
-def _inv2(S: np.ndarray) -> np.ndarray:
-    """Inverse of a 2x2 matrix (LinAlgError when singular), scaled so that the determinant
-    neither overflows nor underflows where a general inverse would not."""
-    a, b, c, d = S.ravel().tolist()
-    m = max(abs(a), abs(b), abs(c), abs(d))
-    if not 0.0 < m < math.inf:
-        raise np.linalg.LinAlgError("singular or non-finite innovation covariance")
-    a, b, c, d = a / m, b / m, c / m, d / m
-    det = (a * d - b * c) * m
-    if det == 0.0 or not math.isfinite(det):
-        raise np.linalg.LinAlgError("singular innovation covariance")
-    return np.array([[d, -b], [-c, a]]) / det
+_KIND = {"gps_pos": nav_kernel.GPS_POS, "gps_vel": nav_kernel.GPS_VEL, "compass": nav_kernel.COMPASS,
+         "gyro": nav_kernel.GYRO, "dvl": nav_kernel.DVL}
+_warm = False
+
+
+def _warm_up() -> None:
+    """Compile (or load from numba's cache) the fast kernel once per process, for both measurement
+    sizes, so that no frame pays for it."""
+    global _warm
+    if not _warm:
+        x, P = np.zeros((DIM, 1)), np.eye(DIM)
+        nav_kernel.step(x, P, 0.01, 0.1, 0.1, 0.0, nav_kernel.GYRO, np.zeros((1, 1)), np.eye(1), 10.0)
+        nav_kernel.step(x, P, 0.01, 0.1, 0.1, 0.0, nav_kernel.DVL, np.zeros((2, 1)), np.eye(2), 10.0)
+        _warm = True
 
 
 class NavigationFilter:
@@ -151,7 +142,7 @@ class NavigationFilter:
     def __init__(self, params: NavigationParams) -> None:
         self.p = params
         self.fast = params.filter == "fast"
-        # Both expose x (7x1) and P (7x7); only the update step differs (see the module docstring).
+        # Both expose x (7x1) and P (7x7) (see the module docstring).
         self.ekf: ExtendedKalmanFilter | FastEkf = FastEkf() if self.fast else ExtendedKalmanFilter(dim_x=DIM, dim_z=2)
         self.t: float | None = None
         self.stats = NavigationStats()
@@ -163,6 +154,9 @@ class NavigationFilter:
         self._F = np.eye(DIM)
         self._Q: dict[float, np.ndarray] = {}
         p = params
+        self._q = (p.accel_noise**2, p.yaw_accel_noise**2, p.gyro_bias_walk**2)
+        if self.fast:
+            _warm_up()
         self._R = {"gps_pos": np.eye(2) * p.gps_pos_std**2, "gps_vel": np.eye(2) * p.gps_vel_std**2,
                    "compass": np.array([[p.compass_std**2]]), "gyro": np.array([[p.gyro_std**2]]),
                    "dvl": np.eye(2) * p.dvl_std**2}
@@ -247,21 +241,17 @@ class NavigationFilter:
     def _update(self, kind: str, t: float, z: np.ndarray, model: MeasurementModel,
                 angle_rows: tuple[int, ...] = ()) -> bool:
         """Predict to ``t``, gate the innovation by NIS, then update. ``model(x) -> (H, h(x))``."""
-        if not (math.isfinite(t) and np.isfinite(z).all()):
+        if not (math.isfinite(t) and all(math.isfinite(v) for row in z.tolist() for v in row)):
             self._numeric(kind)
             return False
+        if self.fast:
+            return self._update_fast(kind, t, z)
         if not self.predict_to(t):
             return False
-        # Both implementations assign new x and P arrays on update (never in place): keeping the
-        # references is enough to roll back.
-        x0, P0 = self.ekf.x, self.ekf.P
-        Rm = self._R[kind]
+        x0, P0 = self.ekf.x.copy(), self.ekf.P.copy()
         try:
             with np.errstate(all="ignore"):  # overflow is caught below, as a non-finite result
-                if self.fast:
-                    ok = self._gated_update_fast(kind, z, model, Rm, angle_rows)
-                else:
-                    ok = self._gated_update(kind, z, model, Rm, angle_rows)
+                ok = self._gated_update(kind, z, model, self._R[kind], angle_rows)
         except (np.linalg.LinAlgError, ArithmeticError, ValueError):
             ok = None
         if ok is None or not (np.isfinite(self.ekf.x).all() and np.isfinite(self.ekf.P).all()):
@@ -269,6 +259,35 @@ class NavigationFilter:
             self._numeric(kind)
             return False
         return ok
+
+    def _update_fast(self, kind: str, t: float, z: np.ndarray) -> bool:
+        """:meth:`_update` in one compiled step (autopilot_bridge/nav_kernel.py), with the same
+        refusals, counters and roll-backs as :meth:`predict_to` and :meth:`_gated_update`."""
+        if self.t is None:
+            return False
+        dt = t - self.t
+        if dt < 0.0:
+            self.stats.out_of_order += 1
+            return False
+        if not math.isfinite(dt):
+            self._numeric("predict")
+            return False
+        q_a, q_r, q_b = self._q
+        code, xp, Pp, xn, Pn = nav_kernel.step(self.ekf.x, self.ekf.P, dt, q_a, q_r, q_b, _KIND[kind], z,
+                                               self._R[kind], self._gate(z.shape[0]))
+        if code == nav_kernel.NUMERIC_PREDICT:
+            self._numeric("predict")  # keep the last estimate; its time stays, so dt grows next time
+            return False
+        self.ekf.x, self.ekf.P, self.t = xp, Pp, t
+        if code == nav_kernel.NUMERIC_UPDATE:
+            self._numeric(kind)
+            return False
+        if code == nav_kernel.REJECTED:
+            self._rejected(kind)
+            return False
+        self.ekf.x, self.ekf.P = xn, Pn
+        self.stats.updates[kind] = self.stats.updates.get(kind, 0) + 1
+        return True
 
     def _gated_update(self, kind: str, z: np.ndarray, model: MeasurementModel, Rm: np.ndarray,
                       angle_rows: tuple[int, ...]) -> bool:
@@ -293,35 +312,6 @@ class NavigationFilter:
             return False
         self.ekf.update(z, lambda _x: H, lambda _x: hx, R=Rm, residual=residual)
         self.ekf.x[PSI, 0] = wrap_angle(self.ekf.x[PSI, 0])
-        self.stats.updates[kind] = self.stats.updates.get(kind, 0) + 1
-        return True
-
-    def _gated_update_fast(self, kind: str, z: np.ndarray, model: MeasurementModel, Rm: np.ndarray,
-                           angle_rows: tuple[int, ...]) -> bool:
-        """:meth:`_gated_update` with :class:`FastEkf`: the gate's P H^T and S are the update's."""
-        ekf = self.ekf
-        H, hx = model(ekf.x)
-        y = z - hx
-        for i in angle_rows:
-            y[i, 0] = wrap_angle(y[i, 0])
-        PHT = ekf.P @ H.T
-        S = H @ PHT + Rm
-        if S.shape[0] == 1:
-            s = float(S[0, 0])
-            e = float(y[0, 0])
-            nis = e * e / s if s != 0.0 else math.inf
-            K = PHT / s if s != 0.0 else None
-        else:
-            Sinv = _inv2(S)
-            nis = float((y.T @ Sinv @ y)[0, 0])
-            K = PHT @ Sinv
-        if not math.isfinite(nis):
-            raise ArithmeticError("innovation not finite")
-        if nis > self._gate(z.shape[0]):
-            self._rejected(kind)
-            return False
-        ekf.update(H, K, y, Rm)
-        ekf.x[PSI, 0] = wrap_angle(ekf.x[PSI, 0])
         self.stats.updates[kind] = self.stats.updates.get(kind, 0) + 1
         return True
 
