@@ -45,9 +45,9 @@ ROWS: tuple[tuple[str, tuple[tuple[str, str], ...]], ...] = (
 )
 # Inside the navigation row: the filter's own steps.
 NAV_DETAIL: tuple[tuple[str, tuple[tuple[str, str], ...]], ...] = (
-    ("  of which: predict (NavigationFilter.predict_to)", (("autopilot_bridge/navigation.py", "predict_to"),)),
-    ("  of which: EKF update step (filterpy update / FastEkf.update)",
-     (("filterpy/kalman/EKF.py", "update"), ("autopilot_bridge/navigation.py", "update"))),
+    ("  of which the filter's arithmetic (fast: nav_kernel.step; filterpy: predict_to + EKF.update)",
+     (("autopilot_bridge/nav_kernel.py", "step"), ("autopilot_bridge/navigation.py", "predict_to"),
+      ("filterpy/kalman/EKF.py", "update"))),
 )
 PLANNER_WAIT = ("autopilot_bridge/planning_worker.py", "wait")
 # The whole of the autopilot's part of a frame, as _Loop.step runs it.
