@@ -45,7 +45,7 @@ ROWS: tuple[tuple[str, tuple[tuple[str, str], ...]], ...] = (
 )
 # Inside the navigation row: the filter's own steps.
 NAV_DETAIL: tuple[tuple[str, tuple[tuple[str, str], ...]], ...] = (
-    ("  of which the filter's arithmetic (fast: nav_kernel.step; filterpy: predict_to + EKF.update)",
+    ("  of which filter arithmetic (nav_kernel.step | predict_to+EKF.update)",
      (("autopilot_bridge/nav_kernel.py", "step"), ("autopilot_bridge/navigation.py", "predict_to"),
       ("filterpy/kalman/EKF.py", "update"))),
 )
@@ -226,11 +226,10 @@ def run(args: argparse.Namespace) -> int:
         result["top_own_time"] = [{"function": f"{f.split('site-packages/')[-1]}:{line}({name})",
                                    "calls_per_frame": round(v[1] / n, 2), "own_us_per_frame": round(v[2] / n * 1e6, 1)}
                                   for (f, line, name), v in top]
-    human = [f"autopilot frame on {args.scenario} ({result['navigation_filter']} EKF), no profiler: mean "
-             f"{result['frame_us']['mean']} us, p50 {result['frame_us']['p50']} us, p99 {result['frame_us']['p99']} us; "
-             f"{waited} of {args.steps} frames waited for the planner (left out); under cProfile "
-             f"{result['profiled_frame_us']} us/frame:",
-             "navigation filter alone, us per frame: " + ", ".join(
+    fu = result["frame_us"]
+    human = [f"{args.scenario}, {result['navigation_filter']} EKF, {args.steps} frames ({waited} waited for the planner, "
+             f"left out): mean {fu['mean']} us, p50 {fu['p50']} us, p99 {fu['p99']} us without profiler",
+             f"under cProfile {result['profiled_frame_us']} us/frame; navigation filter alone, us/frame: " + ", ".join(
                  f"{k} {v}" for k, v in result["navigation_alone_us_per_frame"].items())]
     for r in result["profile"]:
         share = "" if r["share"] is None else f"{100 * r['share']:5.1f}%"
