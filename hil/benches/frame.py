@@ -1,7 +1,7 @@
 """`hil bench frame`: where one autopilot frame's time goes (cProfile), in-process.
 
 The simulator core (:class:`simulator.core.SimulatorCore`) and the vessel computer
-(:func:`hil.commands.autopilot.build`, as `hil autopilot --lockstep` builds it: HIL link, planner
+(:func:`hil.assembly.build`, as `hil autopilot --lockstep` builds it: HIL link, planner
 worker process, ground-station link) run in this one process, closed-loop: each datagram the core
 encodes is decoded by the autopilot's link, handled by ``Autopilot.on_frame``, and the
 HIL_ACTUATOR_CONTROLS it sends over loopback UDP is read back and applied by the core. Only the
@@ -81,7 +81,7 @@ class _Loop:
 
     def __init__(self, args: argparse.Namespace) -> None:
         from hil import scenario as scenarios
-        from hil.commands.autopilot import build
+        from hil.assembly import build
         from hil.commands.sim import scenario_overrides
         from simulator.core import SimulatorCore
         from simulator.rangefinder import WorldMap
