@@ -1,17 +1,10 @@
-"""Files the hil commands write: JSON summaries atomically, send/apply time records."""
+"""Files the hil commands write: JSON summaries, atomically."""
 
 from __future__ import annotations
 
 import os
 import tempfile
 from pathlib import Path
-
-
-def save_record(path: str, tids, times) -> None:
-    """CAN send or apply times (transfer ids, monotonic seconds) as an .npz (hil soak, hil bench can)."""
-    import numpy as np
-
-    np.savez(path, tid=np.frombuffer(tids, dtype=np.int8), at=np.frombuffer(times, dtype=float))
 
 
 def write_json_atomic(path: str | Path, data: dict) -> None:

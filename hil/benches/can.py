@@ -135,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
             if acts is not None:
                 acts.close()
         z = np.load(rec)
-        ours = pair_latency(np.frombuffer(acts.sent_tid, dtype=np.int8), np.frombuffer(acts.sent_at, dtype=float),
+        ours = pair_latency(*acts.sent_times.arrays(),
                             z["tid"], z["at"])
         result["ours_command_to_applied_ms"] = stats_ms(ours)
         result["ours_lost"] = acts.commands_sent - int(esc_summary.get("raw_commands_applied", 0))

@@ -11,7 +11,7 @@ from common.readiness import Ready, announce
 from hil.commands.arg_types import receiving, sending
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.console import emit, load_settings, progress
-from hil.files import save_record, write_json_atomic
+from hil.files import write_json_atomic
 from planner.params import ALGORITHM_NAMES
 
 
@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
     autopilot = build(cfg, args.scenario, args.lockstep, args.planner_factory, getattr(args, "sensors_from", None))
     stop = {"flag": False}
     if args.can_record and autopilot.actuators is not autopilot.link:
-        autopilot.actuators.record = True
+        autopilot.actuators.sent_times.start(spill_to=args.can_record)
 
     def request_stop(*_):
         stop["flag"] = True
@@ -155,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
         if autopilot.actuators is not autopilot.link:
             autopilot.actuators.close()
             if args.can_record:
-                save_record(args.can_record, autopilot.actuators.sent_tid, autopilot.actuators.sent_at)
+                autopilot.actuators.sent_times.save(args.can_record)
         if autopilot.telemetry is not None:
             autopilot.telemetry.close()
     summary = autopilot.summary()

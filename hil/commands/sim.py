@@ -148,7 +148,8 @@ def run(args: argparse.Namespace) -> int:
 
         try:
             esc = EscBank(open_bus(cfg.can), cfg.can, cfg.esc, core.vessel)
-            esc.record = bool(args.can_record)
+            if args.can_record:
+                esc.applied_times.start(spill_to=args.can_record)
         except ValueError as exc:
             endpoint.close()
             raise UsageError(str(exc)) from None
@@ -169,9 +170,7 @@ def run(args: argparse.Namespace) -> int:
         if esc is not None:
             esc.bus.shutdown()
             if args.can_record:
-                from hil.files import save_record
-
-                save_record(args.can_record, esc.applied_tid, esc.applied_at)
+                esc.applied_times.save(args.can_record)
     summary["commands_on"] = f"{host}:{port}"
     try:
         emit(args, summary)

@@ -287,7 +287,7 @@ def _soak_can_path(args: argparse.Namespace, cfg: Any, out: Path) -> dict[str, A
     result: dict[str, Any] = {"mode": "can_path", "rate_hz": args.rate, "duration_s": args.duration,
                               "commands_sent": acts.commands_sent, "commands_behind_schedule": -behind if behind < 0 else 0}
     result["can"] = _can_checks({"autopilot": acts.summary(), "esc_nodes": esc_summary}, problems)
-    st, sa = np.frombuffer(acts.sent_tid, dtype=np.int8), np.frombuffer(acts.sent_at, dtype=float)
+    st, sa = acts.sent_times.arrays()
     at, aa = _load_record(rec)
     result["command_to_applied_ms"] = stats_ms(pair_latency(st, sa, at, aa))
     result["stale_failsafe_events"] = None  # no simulator clock on the bare path
