@@ -36,8 +36,9 @@ import math
 import time
 from array import array
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -71,7 +72,6 @@ from autopilot_bridge.vehicle_api import Result, VehicleStatus
 from common.dronecan_codec import RAW_COMMAND_MAX, quantize
 from common.mavlink import MAV_TYPE as M
 from common.percentiles import StreamingPercentiles
-
 
 SPEED_RANGE = (0.2, 3.0)   # m/s: speed set-points a GCS may give (3 m/s: the hull's top speed)
 
@@ -271,7 +271,7 @@ class Autopilot:
         if math.hypot(ned[0, 0] - s.x, ned[0, 1] - s.y) > 3.0 * self.p.lookahead:
             self.stats.plans_rejected["starts_too_far"] += 1
             return False
-        for (x0, y0), (x1, y1) in zip(plan.path[:-1], plan.path[1:]):
+        for (x0, y0), (x1, y1) in zip(plan.path[:-1], plan.path[1:], strict=True):
             if not self.grid.segment_free(x0, y0, x1, y1):
                 self.stats.plans_rejected["collides"] += 1
                 return False
@@ -298,7 +298,8 @@ class Autopilot:
         obstacle (autopilot_bridge/plan_commitment.py) - unless it is blocked, traffic is being
         planned for, the followed path is not an exact one, or the vessel is off it by more than the
         look-ahead."""
-        if self.behaviour.state is not Behaviour.PLANNED or self.los is None or self._path_invalid or self._traffic_planned:
+        if (self.behaviour.state is not Behaviour.PLANNED or self.los is None or self._path_invalid
+                or self._traffic_planned):
             return False
         if self.local_paths and self.local_paths[-1]["status"] != "exact":
             # The followed path stopped short of its subgoal (the tree found no way there): it may

@@ -1,9 +1,9 @@
 """The vessel computer's end of the HIL MAVLink link: sensor frames in, thruster commands out.
 
 The simulator sends one datagram per IMU period holding HIL_SENSOR and, when due, HIL_GPS,
-HIL_STATE_QUATERNION, ODOMETRY (DVL) and OBSTACLE_DISTANCE (range sensor). This end decodes it into a :class:`SensorFrame` in SI
-units and NED, converting GPS latitude/longitude with the shared geodesy. HIL_STATE_QUATERNION is
-the truth: it is dropped here and counted, never used for control. Commands go back as
+HIL_STATE_QUATERNION, ODOMETRY (DVL) and OBSTACLE_DISTANCE (range sensor). This end decodes it into a
+:class:`SensorFrame` in SI units and NED, converting GPS latitude/longitude with the shared geodesy.
+HIL_STATE_QUATERNION is the truth: it is dropped here and counted, never used for control. Commands go back as
 HIL_ACTUATOR_CONTROLS whose ``time_usec`` echoes the sensor frame they answer (the lockstep
 protocol of docs/simulator.md).
 

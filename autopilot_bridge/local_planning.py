@@ -14,8 +14,9 @@ autopilot converts with :func:`ned_to_map` / :func:`map_to_ned`.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 

@@ -25,9 +25,10 @@ from __future__ import annotations
 import importlib
 import multiprocessing as mp
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
-from typing import Any, Callable
+from typing import Any
 
 
 @dataclass(frozen=True)

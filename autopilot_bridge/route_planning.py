@@ -19,7 +19,7 @@ Frames: NED (north, east) metres here; the planner's map frame is x = east, y = 
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 from pymavlink.dialects.v20 import common as M

@@ -17,10 +17,10 @@ optimisation: no length prefix, its length is whatever fills the payload.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from functools import cached_property
 from types import SimpleNamespace
-from typing import Iterable
 
 
 @dataclass(frozen=True)

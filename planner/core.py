@@ -334,7 +334,8 @@ class TreePlanner:
             status=status, path=path, cost=c, length=length, iterations=int(st[_tree.S_ITER]),
             time_to_first_solution_s=first, planning_time_s=time.monotonic() - t0, reason=reason,
             tree_nodes=X[:n].copy(), tree_parents=parent[:n].copy(), samples_rejected=int(st[_tree.S_REJ]),
-            diagnostics={"collision_checks": int(st[_tree.S_CHECKS]), "tree_cost": float(cost[end]) if status != "none" else math.inf,
+            diagnostics={"collision_checks": int(st[_tree.S_CHECKS]),
+                         "tree_cost": float(cost[end]) if status != "none" else math.inf,
                          "first_solution_iteration": int(st[_tree.S_FIRST_ITER]) if goal >= 0 else None,
                          "algorithm": self.name,
                          "dynamic_domains": int(np.sum(np.isfinite(dd[:n]))),  # DDRRT* nodes with a bounded DD

@@ -41,7 +41,7 @@ class OccupancyGrid:
         self._clearance: np.ndarray | None = None
 
     @classmethod
-    def load(cls, path: str | Path, resolution: float) -> "OccupancyGrid":
+    def load(cls, path: str | Path, resolution: float) -> OccupancyGrid:
         """Load a ``.npy`` (bool, True = obstacle, row 0 at y = 0) or a ``.png`` (white free,
         black obstacle, drawn north-up: the top image row is the largest y)."""
         p = Path(path)
@@ -118,7 +118,7 @@ class OccupancyGrid:
         any obstacle (outside the map counts as occupied), so paths keep clear of it too."""
         return np.pad(self.occ, 1, constant_values=True)
 
-    def inflate(self, radius: float) -> "OccupancyGrid":
+    def inflate(self, radius: float) -> OccupancyGrid:
         """Disc dilation: a cell becomes an obstacle if its centre is within ``radius`` metres of
         the centre of an obstacle cell or of the ring of cells just outside the map."""
         if radius < 0:
@@ -128,7 +128,7 @@ class OccupancyGrid:
         dist = ndimage.distance_transform_edt(~self._bordered()) * self.resolution
         return OccupancyGrid(dist[1:-1, 1:-1] <= radius + 1e-12, self.resolution)
 
-    def inflate_velocity(self, velocity: tuple[float, float], gain: float, base_radius: float) -> "OccupancyGrid":
+    def inflate_velocity(self, velocity: tuple[float, float], gain: float, base_radius: float) -> OccupancyGrid:
         """Section 3.3: inflate by ``base_radius`` plus ``gain`` times the velocity component
         towards the obstacle. A free cell c becomes an obstacle if some obstacle cell o satisfies
         |o - c| <= base_radius + gain * max(0, v . (o - c) / |o - c|) (centre distances): the

@@ -28,8 +28,10 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field as dc_field, replace
-from typing import Any, Callable
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from dataclasses import field as dc_field
+from typing import Any
 
 import numpy as np
 from scipy import ndimage
@@ -144,7 +146,8 @@ class OnlineContext:
     def __post_init__(self) -> None:
         self.reference_path = np.asarray(self.reference_path, dtype=float).reshape(-1, 2)
         if self.safe_grid is None:
-            self.safe_grid = self.grid.inflate(self.params.safety_radius) if self.params.safety_radius > 0 else self.grid
+            radius = self.params.safety_radius
+            self.safe_grid = self.grid.inflate(radius) if radius > 0 else self.grid
 
     def planning_grid(self, velocity: tuple[float, float]) -> OccupancyGrid:
         """The safety-inflated map plus the section 3.3 velocity inflation (cached per direction)."""
@@ -198,7 +201,8 @@ class OnlineContext:
         """Distance (m) of each cell centre from the nearest obstacle cell centre or the map's edge
         (the measure of :meth:`OccupancyGrid.inflate`)."""
         if self._distance is None:
-            self._distance = ndimage.distance_transform_edt(~np.pad(self.grid.occ, 1, constant_values=True))[1:-1, 1:-1] \
+            self._distance = ndimage.distance_transform_edt(~np.pad(self.grid.occ, 1, constant_values=True))[1:-1,
+                                                                                                             1:-1] \
                 * self.grid.resolution
         return self._distance
 
@@ -245,7 +249,7 @@ def advance(path: np.ndarray, distance: float) -> tuple[np.ndarray, float]:
     out = [path[0]]
     left = distance
     heading = math.nan
-    for a, b in zip(path[:-1], path[1:]):
+    for a, b in zip(path[:-1], path[1:], strict=True):
         d = math.hypot(b[0] - a[0], b[1] - a[1])
         if d <= 1e-12:
             continue
@@ -395,7 +399,8 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
 
         traffic = relax_for_start(traffic)
         keep = 2.0 * grid.resolution
-        traffic_grid = lambda g: paint(g, traffic, pos, params.perceptual_radius, keep_free=pos, keep_radius=keep)  # noqa: E731
+        def traffic_grid(g):
+            return paint(g, traffic, pos, params.perceptual_radius, keep_free=pos, keep_radius=keep)
         plain_goal = _free_subgoal(ctx, grid, pos, sub_index, sub_point)
         grid = traffic_grid(grid)
         if plain_goal is not None and not grid.is_free(*plain_goal):
@@ -440,7 +445,8 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
                            result.iterations, empty, empty, False, result.tree_nodes, result.tree_parents,
                            reason=result.reason or "no local path")
 
-    cost_fn = (lambda p: path_cost(p, ctx.field, params))
+    def cost_fn(p):
+        return path_cost(p, ctx.field, params)
     local = prune(result.path, grid, cost_fn)
     radius = params.turn_radius_factor * params.speed
     # The bypass of a short leg must be clear of the safety-inflated map (the velocity
@@ -518,7 +524,7 @@ def _densify(path: np.ndarray, step: float) -> np.ndarray:
     if len(path) < 2:
         return path.copy()
     out = [path[:1]]
-    for a, b in zip(path[:-1], path[1:]):
+    for a, b in zip(path[:-1], path[1:], strict=True):
         n = max(int(math.ceil(math.hypot(*(b - a)) / step)), 1)
         out.append(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
     return np.concatenate(out)
@@ -536,7 +542,7 @@ def _termination(online: OnlineParams, clock: Callable[[], float]) -> Terminatio
 
 def _polyline_free(grid: OccupancyGrid, path: np.ndarray) -> bool:
     return all(grid.segment_free(float(a[0]), float(a[1]), float(b[0]), float(b[1]))
-               for a, b in zip(path[:-1], path[1:]))
+               for a, b in zip(path[:-1], path[1:], strict=True))
 
 
 def run_online(ctx: OnlineContext, start: VesselState, seed: int,

@@ -22,7 +22,8 @@ import math
 import time
 from array import array
 from collections import Counter
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import can
 

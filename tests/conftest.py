@@ -17,7 +17,8 @@ def repo() -> Path:
     return REPO
 
 
-def run_hil(*args: str, timeout: float = 300, env: dict | None = None, cwd: Path | None = None) -> subprocess.CompletedProcess:
+def run_hil(*args: str, timeout: float = 300, env: dict | None = None,
+            cwd: Path | None = None) -> subprocess.CompletedProcess:
     """Run `python -m hil ARGS` as a subprocess (the way a user runs it) and capture its output."""
     full_env = dict(os.environ)
     full_env.update(env or {})

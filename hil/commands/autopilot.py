@@ -13,8 +13,8 @@ from pathlib import Path
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.commands.sim import receiving, sending
 from hil.console import emit, load_settings, progress
-from planner.params import ALGORITHM_NAMES
 from hil.errors import UsageError
+from planner.params import ALGORITHM_NAMES
 
 
 def _gcs_endpoint(text: str) -> str:
@@ -145,10 +145,10 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     """The autopilot and its parts from a configuration and a scenario (used by `hil run` too)."""
     from autopilot_bridge.autopilot import Autopilot, Propulsion
     from autopilot_bridge.control import SurgeModel
+    from autopilot_bridge.gcs.link import GcsLink
     from autopilot_bridge.hil_link import HilLink
     from autopilot_bridge.local_planning import World
     from autopilot_bridge.planning_worker import PlannerWorker
-    from autopilot_bridge.gcs.link import GcsLink
     from common.geodesy import LocalFrame
     from hil import scenario as scenarios
     from simulator.vessel import Vessel
@@ -255,7 +255,7 @@ def run(args: argparse.Namespace) -> int:
     gcs = autopilot.telemetry
     if gcs is not None and gcs.addresses:
         progress("autopilot: ground stations on " + ", ".join(
-            f"{spec} (local {h}:{p})" for spec, (h, p) in zip(cfg.gcs.endpoints, gcs.addresses)))
+            f"{spec} (local {h}:{p})" for spec, (h, p) in zip(cfg.gcs.endpoints, gcs.addresses, strict=False)))
     progress(f"autopilot: listening on {host}:{port}, {acts}, "
              f"scenario {args.scenario}, {'lockstep' if args.lockstep else 'real time'}"
              f"{', waiting for a GCS to arm' if cfg.gcs.wait_for_arm else ''}")

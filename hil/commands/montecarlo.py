@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import time
 from pathlib import Path
@@ -187,7 +186,8 @@ def run_routes(args: argparse.Namespace, argv_scenario: str | None) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hil import experiment, scenario as scenarios
+    from hil import experiment
+    from hil import scenario as scenarios
 
     if args.runs < 1:
         raise UsageError("--runs must be >= 1")
@@ -267,7 +267,8 @@ def run(args: argparse.Namespace) -> int:
         console.emit(args, summary)
     else:  # the table itself, as Markdown, is the human summary (the same text as table3.md)
         print(markdown.rstrip("\n"), flush=True)
-        print(f"\n{len(camp.rows)} runs ({args.runs} per algorithm) in {wall:.0f} s; files in {out} (table3.md, table3.csv, runs.csv"
+        print(f"\n{len(camp.rows)} runs ({args.runs} per algorithm) in {wall:.0f} s; files in {out} "
+              f"(table3.md, table3.csv, runs.csv"
               f"{', figures' if figures else ''}, summary.json)", flush=True)
     if camp.interrupted:
         return 130
@@ -275,7 +276,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _figures(args, spec, camp, out: Path) -> dict[str, str]:
-    from hil import experiment, plots, scenario as scenarios
+    from hil import experiment, plots
+    from hil import scenario as scenarios
 
     files = {}
     algs = [a for a in ("ddrrt-star", "informed-rrt-star", "rrt-star") if a in camp.details]
