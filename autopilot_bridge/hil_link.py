@@ -177,8 +177,9 @@ class HilLink:
                 self.rejects[IMPLAUSIBLE + "compass"] += 1
         elif not (math.isfinite(mx) and math.isfinite(my)):
             self.rejects[IMPLAUSIBLE + "compass"] += 1
-        yaw_rate = float(sensor.zgyro)
-        if not (math.isfinite(yaw_rate) and abs(yaw_rate) <= MAX_YAW_RATE):
+        gyro = float(sensor.zgyro)
+        yaw_rate: float | None = gyro
+        if not (math.isfinite(gyro) and abs(gyro) <= MAX_YAW_RATE):
             self.rejects[IMPLAUSIBLE + "gyro"] += 1
             yaw_rate = None
         fix, dropout = None, False

@@ -160,7 +160,8 @@ def online_cycle_handler(world: World, warm_up: CycleInput | None = None) -> Cal
             if _length(rec.smooth_path) <= LOOP_FACTOR * _length(rec.local_path) + 1e-9:
                 path = rec.smooth_path
         return LocalPlan(cycle=request.cycle, status=rec.status, path=np.asarray(path, dtype=float).reshape(-1, 2),
-                         subgoal=tuple(rec.subgoal), subgoal_rule=rec.subgoal_rule, iterations=rec.iterations,
+                         subgoal=(float(rec.subgoal[0]), float(rec.subgoal[1])), subgoal_rule=rec.subgoal_rule,
+                         iterations=rec.iterations,
                          planning_time_s=rec.planning_time_s, reason=rec.reason, speed_factor=rec.speed_factor)
 
     if warm_up is not None:

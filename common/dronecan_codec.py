@@ -213,9 +213,9 @@ class TransferReceiver:
                 return None
             if eot:
                 return self._finish(dt, arb, tid, data[:-1], frame.timestamp, multi=False)
-            s = self.sessions[key] = _Session(tid, frame.timestamp)
-            s.data += data[:-1]
-            s.toggle = 1
+            new = self.sessions[key] = _Session(tid, frame.timestamp)
+            new.data += data[:-1]
+            new.toggle = 1
             return None
         s = self.sessions.get(key)
         if s is None:

@@ -111,7 +111,7 @@ def unpack(layout: Layout, payload: bytes) -> SimpleNamespace | None:
     if end < layout.fixed_bits:
         return None
     stream = int.from_bytes(payload, "big")
-    out = {}
+    out: dict[str, int | list[int]] = {}
     for f in layout.fields:
         out[f.name] = _from_unsigned(f, _pull(stream, end, f.bits))
         end -= f.bits

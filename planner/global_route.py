@@ -154,6 +154,7 @@ def plan_route(grid: OccupancyGrid, waypoints, spacing: float = DEFAULT_SPACING,
         wide = np.ascontiguousarray(preferred.occ.astype(np.uint8))
         wide_labels, _ = ndimage.label(~preferred.occ)
     legs_vertices: list[tuple[np.ndarray, bool]] = []
+    verts: np.ndarray | None
     for i in range(1, len(wps)):
         a = escape if (i == 1 and escape is not None) else wps[i - 1]
         b = wps[i]
@@ -161,7 +162,7 @@ def plan_route(grid: OccupancyGrid, waypoints, spacing: float = DEFAULT_SPACING,
             verts, straight = np.array([a, b]), True
         else:
             on = occ
-            if wide is not None:
+            if wide is not None and wide_labels is not None and preferred is not None:
                 la, lb = wide_labels[_cell(grid, a)], wide_labels[_cell(grid, b)]
                 if la != 0 and la == lb and preferred.is_free(*a) and preferred.is_free(*b):
                     on = wide

@@ -35,10 +35,11 @@ class OccupancyGrid:
         if isinstance(resolution, bool) or not (isinstance(resolution, numbers.Real) and math.isfinite(resolution)
                                                 and resolution > 0):
             raise MapError(f"map resolution must be a finite number > 0 m/cell, got {resolution!r}")
-        self.occ = np.ascontiguousarray(occ)
-        self.resolution = float(resolution)
-        self._u8 = self.occ.view(np.uint8)
+        self.occ: np.ndarray = np.ascontiguousarray(occ)
+        self.resolution: float = float(resolution)
+        self._u8: np.ndarray = self.occ.view(np.uint8)
         self._clearance: np.ndarray | None = None
+        self._free_labels: np.ndarray | None = None  # cache of planner.core.free_regions
 
     @classmethod
     def load(cls, path: str | Path, resolution: float) -> OccupancyGrid:

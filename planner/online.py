@@ -31,7 +31,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from dataclasses import field as dc_field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from scipy import ndimage
@@ -40,7 +40,7 @@ from planner import make_planner
 from planner.cost import path_cost
 from planner.gridmap import OccupancyGrid
 from planner.metrics import path_metrics
-from planner.params import PlannerParams
+from planner.params import AlgorithmName, PlannerParams
 from planner.postprocess import check_and_replan, prune
 from planner.problem import PlanningProblem
 from planner.result import PlannerResult
@@ -149,10 +149,16 @@ class OnlineContext:
             radius = self.params.safety_radius
             self.safe_grid = self.grid.inflate(radius) if radius > 0 else self.grid
 
+    @property
+    def safe(self) -> OccupancyGrid:
+        """The safety-inflated map (set by ``__post_init__``)."""
+        assert self.safe_grid is not None
+        return self.safe_grid
+
     def planning_grid(self, velocity: tuple[float, float]) -> OccupancyGrid:
         """The safety-inflated map plus the section 3.3 velocity inflation (cached per direction)."""
         if not self.online.velocity_inflation or self.params.velocity_inflation_gain <= 0:
-            return self.safe_grid
+            return self.safe
         key = (round(velocity[0], 1), round(velocity[1], 1))
         if key not in self._velocity_grids:
             if len(self._velocity_grids) > 32:
@@ -362,7 +368,7 @@ def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
     give-way ship that cannot turn away in time slows down instead."""
     if traffic is None or not traffic.obstacles:
         return _plan_cycle_once(ctx, state, index, seed, clock, None)
-    fallback = None
+    fallback: CycleRecord | None = None
     for k, factor in enumerate(traffic.speed_factors):
         snap = replace(traffic, speed=traffic.speed * factor)
         rec = _plan_cycle_once(ctx, state, index, seed + k, clock, snap)
@@ -371,6 +377,7 @@ def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
             return rec
         if fallback is None or (len(fallback.smooth_path) < 2 and len(rec.smooth_path) >= 2):
             fallback = rec
+    assert fallback is not None, "traffic.speed_factors is empty"
     return fallback
 
 
@@ -384,7 +391,7 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
     # inside the inflation: pushed there, it must still get out) the recovery map, else raw.
     velocity = reference_velocity(ctx.reference_path, sub_point, params.speed)
     grid = None
-    recovery = None if ctx.safe_grid.is_free(*pos) else ctx.recovery_grid(pos)
+    recovery = None if ctx.safe.is_free(*pos) else ctx.recovery_grid(pos)
     for candidate in (ctx.planning_grid(velocity), ctx.safe_grid, recovery, ctx.grid):
         if candidate is not None and candidate.is_free(*pos):
             grid = candidate
@@ -599,7 +606,7 @@ def run_online(ctx: OnlineContext, start: VesselState, seed: int,
         reached=reached, reason=reason, cycles=cycles, executed=path, final=state,
         search_time_s=float(sum(c.search_time_s for c in cycles)),
         planning_time_s=float(sum(c.planning_time_s for c in cycles)),
-        metrics={k: float(v) for k, v in metrics.items() if np.isscalar(v)},
+        metrics={k: float(v) for k, v in metrics.items() if np.isscalar(v)},  # type: ignore[arg-type]  # real numbers
     )
 
 
@@ -607,4 +614,4 @@ def make_context(grid: OccupancyGrid, goal: tuple[float, float], reference_path:
                  params: PlannerParams, online: OnlineParams, algorithm: str, field: Any = None) -> OnlineContext:
     """An :class:`OnlineContext` for ``algorithm`` (one of ``planner.ALGORITHMS``)."""
     return OnlineContext(grid=grid, goal=(float(goal[0]), float(goal[1])), reference_path=reference_path,
-                         params=replace(params, algorithm=algorithm), online=online, field=field)
+                         params=replace(params, algorithm=cast(AlgorithmName, algorithm)), online=online, field=field)

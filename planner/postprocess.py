@@ -174,7 +174,8 @@ def dubins_path(q0, q1, radius: float, word: str | None = None) -> DubinsPath:
             best = (w, seg)
     if best is None:
         raise ValueError(f"no Dubins path of word {word!r} between these poses")
-    return DubinsPath((x0, y0, t0), float(radius), best[0], tuple(float(s) for s in best[1]))
+    s1, s2, s3 = best[1]
+    return DubinsPath((x0, y0, t0), float(radius), best[0], (float(s1), float(s2), float(s3)))
 
 
 # ---------------------------------------------------------------------------------------------
