@@ -274,11 +274,16 @@ class HilLink:
 
     def summary(self) -> dict:
         """The link's refusals by reason, its endpoint's (source address, kernel drops) and
-        timeline switches (simulator restarts or long gaps accepted)."""
-        return {"rejects": dict(sorted(self.rejects.items())), "frames": self.frames,
-                "truth_ignored": self.truth_ignored, "timeline_switches": self.timeline_switches,
-                "sensors_from": None if self.ep.peer is None else f"{self.ep.peer[0]}:{self.ep.peer[1]}",
-                **self.ep.counters()}
+        timeline switches (simulator restarts or long gaps accepted); with fault injection on, the
+        datagrams it dropped on purpose each way."""
+        out = {"rejects": dict(sorted(self.rejects.items())), "frames": self.frames,
+               "truth_ignored": self.truth_ignored, "timeline_switches": self.timeline_switches,
+               "sensors_from": None if self.ep.peer is None else f"{self.ep.peer[0]}:{self.ep.peer[1]}",
+               **self.ep.counters()}
+        if self.ep.send_loss or self.ep.recv_loss:
+            out["loss_injected"] = {"sent": self.ep.sent, "dropped_out": self.ep.dropped_out,
+                                    "received": self.ep.recv_count, "dropped_in": self.ep.dropped_in}
+        return out
 
     def send_raw(self, data: bytes) -> None:
         self.ep.send(data)

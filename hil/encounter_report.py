@@ -8,7 +8,8 @@ has an own-ship sample at the same instant. From those:
   reference point, along the true heading; a ship's hull is the rectangle of its AIS dimensions
   A/B/C/D about its reference point, along its course (separating-axis test);
 * **CPA** per ship: the smallest distance between the reference points, and when;
-* **type**: COLREGs rules 13-15 (:func:`planner.colregs.classify`) from the truth at the first
+* **type**: COLREGs rules 13-15 (:func:`hil.colregs_oracle.classify`, written independently of
+  the vessel computer's :mod:`planner.colregs`, which it judges) from the truth at the first
   instant the ship is on a collision course (eq. 10 with R = own_radius + its hull radius +
   margin, closest approach within ``horizon``), or "no risk" if it never is;
 * **our action** between that instant and the CPA, from the true track: "starboard turn" /
@@ -30,8 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from planner import colregs as C
-from planner.collision_cone import assess
+from hil import colregs_oracle as O
+from planner.colregs import ColregsParams
 
 TURN_DEG = 10.0      # deg of course change that counts as a turn
 SLOW_RATIO = 0.75    # speed below this fraction of the initial speed counts as slowing down
@@ -78,7 +79,7 @@ class ShipTrack:
 class EncounterJudge:
     """Collects own/ship truth pairs, flags hull overlaps as they happen, reports per encounter."""
 
-    def __init__(self, own_length: float, own_width: float, colregs: C.ColregsParams) -> None:
+    def __init__(self, own_length: float, own_width: float, colregs: ColregsParams) -> None:
         self.L, self.W, self.p = own_length, own_width, colregs
         self.ships: dict[int, ShipTrack] = {}
         self.collision: tuple[float, int] | None = None   # (t s, mmsi)
@@ -123,15 +124,15 @@ class EncounterJudge:
         for i in range(len(t)):
             if not moving[i]:
                 continue  # no course yet (starting from rest): no encounter geometry
-            cone = assess((on[i], oe[i]), (ovn[i], ove[i]), (sn[i], se[i]), (svn[i], sve[i]), R)
-            if risk is None and ((cone.collision and cone.tcpa <= p.horizon) or cone.inside) and i <= k:
+            ap = O.approach((on[i], oe[i]), (ovn[i], ove[i]), (sn[i], se[i]), (svn[i], sve[i]))
+            if risk is None and ap.collision_course(R, p.horizon) and i <= k:
                 risk = i
             if risk is not None:
                 break
         if risk is not None:
             for i in range(risk, k + 1):
-                cone = assess((on[i], oe[i]), (ovn[i], ove[i]), (sn[i], se[i]), (svn[i], sve[i]), R + DCPA_TOLERANCE)
-                if cone.collision and cone.tcpa <= p.rule17_tcpa:
+                ap = O.approach((on[i], oe[i]), (ovn[i], ove[i]), (sn[i], se[i]), (svn[i], sve[i]))
+                if 0.0 < ap.tcpa_s <= p.rule17_tcpa and ap.dcpa_m <= R + DCPA_TOLERANCE:
                     rule17 = i
                     break
         collided = self.collision is not None and self.collision[1] == tr.mmsi
@@ -142,7 +143,9 @@ class EncounterJudge:
         i0 = risk
         own_speed = math.hypot(ovn[i0], ove[i0])
         own_course = math.atan2(ove[i0], ovn[i0])
-        enc = C.classify((on[i0], oe[i0]), own_course, own_speed, (sn[i0], se[i0]), sc[i0], ss[i0], p)
+        enc = O.classify((on[i0], oe[i0]), own_course, own_speed, (sn[i0], se[i0]), sc[i0], ss[i0],
+                         head_on_deg=p.head_on_sector, abaft_deg=p.overtaking_sector,
+                         min_target_speed=p.min_target_speed)
         seg = slice(i0, k + 1)
         course = np.arctan2(ove[seg], ovn[seg])
         dev = np.degrees(np.angle(np.exp(1j * (course - own_course))))   # + = to starboard
@@ -161,19 +164,19 @@ class EncounterJudge:
             action = "stand on"
         act_t = float(t[i0 + acted[0]]) if len(acted) else None
         # Where each ship was at the CPA, seen from the other.
-        rel_b = C.relative_bearing((on[k], oe[k]), math.atan2(ove[k], ovn[k]), (sn[k], se[k]))
+        rel_b = O.relative_bearing_deg((on[k], oe[k]), math.atan2(ove[k], ovn[k]), (sn[k], se[k]))
         along = (on[k] - sn[k]) * math.cos(sc[k]) + (oe[k] - se[k]) * math.sin(sc[k])  # ours, along her course
         ok = not collided and dist[k] >= safety
         why = []
-        if enc.type == C.HEAD_ON:
+        if enc.type == O.HEAD_ON:
             passed = "port to port" if rel_b > 180.0 else "starboard to starboard"
             ok = ok and rel_b > 180.0 and action != "port turn"
             why.append(passed)
-        elif enc.type == C.CROSSING_GIVE_WAY:
+        elif enc.type == O.CROSSING_GIVE_WAY:
             passed = "astern" if along < 0 else "ahead"
             ok = ok and along < 0
             why.append(f"passed {passed} of her")
-        elif enc.role == C.STAND_ON:
+        elif enc.role == O.STAND_ON:
             limit = float(t[rule17]) if rule17 is not None else None
             early = act_t is not None and (limit is None or act_t < limit - ACTION_GRACE)
             ok = ok and not early and action != "port turn"
@@ -181,12 +184,12 @@ class EncounterJudge:
                        (f"stood on until {limit:.1f} s" if limit is not None else "stood on"))
         if dist[k] < safety:
             why.append(f"CPA below {safety:.1f} m")
-        out.update(type=enc.type, role=enc.role, required=enc.action, risk_time_s=round(float(t[i0]), 2),
-                   bearing_deg=round(enc.bearing, 1), action=action,
+        out.update(type=enc.type, role=enc.role, required=enc.required, risk_time_s=round(float(t[i0]), 2),
+                   bearing_deg=round(enc.bearing_deg, 1), action=action,
                    action_time_s=None if act_t is None else round(act_t, 2),
                    max_starboard_deg=round(stbd, 1), max_port_deg=round(port, 1),
                    min_speed_ratio=round(float(speed.min() / max(own_speed, 1e-6)), 2),
-                   rule17_time_s=None if rule17 is None or enc.role != C.STAND_ON else round(float(t[rule17]), 2),
+                   rule17_time_s=None if rule17 is None or enc.role != O.STAND_ON else round(float(t[rule17]), 2),
                    compliant=bool(ok), note="; ".join(why))
         return out
 

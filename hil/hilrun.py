@@ -39,6 +39,7 @@ from scipy import ndimage
 
 from common.geodesy import LocalFrame
 from common.mavlink import Codec, mavlink2
+from common.readiness import ReadyWait
 from common.udp import UdpEndpoint
 from hil import config, processes
 from hil import scenario as scenarios
@@ -67,6 +68,13 @@ def startup_error(log: Path) -> str:
             return rest.strip()
     return lines[-1].strip() if lines else ""
 
+
+# Summary keys whose values depend on the wall clock or on the host, not on the seed: what two
+# lockstep runs of the same seed may differ in. Counters read when the processes are stopped
+# (after the deciding sample, until the SIGTERM arrives), latencies, paths, and warnings about
+# other runs on this host (a system id in use).
+WALL_CLOCK_KEYS = frozenset({"wall_time_s", "control_latency_ms", "run_folder", "tlog", "plot", "simulator",
+                             "tlog_messages", "navigation", "gcs", "sensed_obstacles", "security", "warnings"})
 
 @dataclass
 class RunOptions:
@@ -363,9 +371,10 @@ class HilRun:
             args.append("--lockstep")
         return args
 
-    def _spawn(self, cmd: list[str], name: str) -> subprocess.Popen:
+    def _spawn(self, cmd: list[str], name: str, pass_fds: tuple[int, ...] = ()) -> subprocess.Popen:
         log = open(self.out / f"{name}.log", "ab")
-        return processes.start(cmd, stdout=subprocess.PIPE, stderr=log, cwd=REPO, start_new_session=True)
+        return processes.start(cmd, stdout=subprocess.PIPE, stderr=log, cwd=REPO, start_new_session=True,
+                               pass_fds=pass_fds)
 
     def start(self, ready_timeout: float = 180.0) -> None:
         """The autopilot first, and the simulator once the autopilot is listening (its start-up may
@@ -377,18 +386,38 @@ class HilRun:
                 self.can_recorder = CanRecorder(self.cfg.can, self.out / "can.log")
             except ValueError as exc:
                 raise UsageError(str(exc)) from None
-        self.ap = self._spawn(self.autopilot_command(), "autopilot")
+        # Readiness comes on a pipe (common/readiness.py): one JSON line once the autopilot serves.
+        read_end, write_end = os.pipe()
+        try:
+            self.ap = self._spawn([*self.autopilot_command(), "--ready-fd", str(write_end)], "autopilot",
+                                  pass_fds=(write_end,))
+        finally:
+            os.close(write_end)
         log = self.out / "autopilot.log"
         deadline = time.monotonic() + ready_timeout
-        while b"autopilot: listening on" not in log.read_bytes():
-            if self.ap.poll() is not None:
-                cause = startup_error(log)
-                if self.ap.returncode == 2 and cause:  # a user mistake (a busy port ...): say which, exit 2
-                    raise UsageError(f"the autopilot could not start: {cause}")
-                raise RunFailed(f"the autopilot exited during start-up{': ' + cause if cause else ''} (see {log})")
-            if time.monotonic() > deadline:
-                raise _NotReady(f"the autopilot was not ready after {ready_timeout:g} s (see {log})")
-            self.tap.pump(timeout=0.05)
+        wait = ReadyWait(read_end)
+        try:
+            while True:
+                try:
+                    if wait.poll(timeout=0.05) is not None:
+                        break
+                except ValueError as exc:
+                    raise RunFailed(f"the autopilot's start-up: {exc} (see {log})") from None
+                if wait.eof or self.ap.poll() is not None:
+                    try:
+                        self.ap.wait(timeout=5.0)   # end of file: it is exiting
+                    except subprocess.TimeoutExpired:
+                        raise RunFailed(f"the autopilot closed its readiness pipe without being ready (see {log})") \
+                            from None
+                    cause = startup_error(log)
+                    if self.ap.returncode == 2 and cause:  # a user mistake (a busy port ...): say which, exit 2
+                        raise UsageError(f"the autopilot could not start: {cause}")
+                    raise RunFailed(f"the autopilot exited during start-up{': ' + cause if cause else ''} (see {log})")
+                if time.monotonic() > deadline:
+                    raise _NotReady(f"the autopilot was not ready after {ready_timeout:g} s (see {log})")
+                self.tap.pump(timeout=0.0)
+        finally:
+            wait.close()
         self.sim = self._spawn(self.sim_command(), "sim")
 
     def restart_simulator(self) -> None:

@@ -42,8 +42,8 @@ def hil():
 # `pytest -m "not e2e"` is the developer's loop; the README's command and CI run every tier.
 # A new test module must be listed here: collection fails otherwise, so no test falls through.
 UNIT_MODULES = frozenset("""
-    can_codec can_esc collision_cone colregs config config_layers control current_field geodesy
-    global_route mission_executor modes navigation online percentiles plan_commitment
+    can_codec can_esc collision_cone colregs colregs_oracle config config_layers control current_field geodesy
+    global_route mission_executor modes navigation online percentiles plan_commitment readiness
     planner_algorithms planner_config planner_cost planner_dynamic_domain planner_gridmap
     planner_guidance planner_kgrowth planner_metrics planner_postprocess reactive route_planning
     run_plot scenarios sim_sensors sim_vessel sim_waves tiers tracking_stats traffic_planning vehicle

@@ -91,7 +91,7 @@ def test_several_ships_and_ships_among_static_obstacles(hil, tmp_path, scenario)
 def test_same_seed_same_encounter_report_and_tlog_has_traffic(hil, tmp_path):
     from pymavlink import mavutil
 
-    from tests.test_hil_loop import WALL_CLOCK_KEYS
+    from hil.hilrun import WALL_CLOCK_KEYS
 
     a = _run(hil, tmp_path / "a", "colregs-crossing-right", 5)
     b = _run(hil, tmp_path / "b", "colregs-crossing-right", 5)

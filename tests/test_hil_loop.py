@@ -6,12 +6,7 @@ import json
 
 import pytest
 
-# Figures that depend on the wall clock (or on files' paths), not on the simulation.
-# tlog_messages and the autopilot's navigation counters are read when the processes are stopped:
-# after the goal the autopilot keeps answering frames until its SIGTERM arrives, a wall-clock moment.
-WALL_CLOCK_KEYS = {"wall_time_s", "control_latency_ms", "run_folder", "tlog", "plot", "simulator",
-                   "tlog_messages", "navigation", "gcs", "sensed_obstacles",
-                   "security"}  # frames counted until the SIGTERM, kernel drops: wall-clock dependent too
+from hil.hilrun import WALL_CLOCK_KEYS  # figures that depend on the wall clock or the host, not the seed
 
 
 def _run(hil, tmp_path, *args: str, name: str = "run", traffic: bool = True) -> tuple[int, dict]:

@@ -10,6 +10,7 @@ import signal
 import tempfile
 from pathlib import Path
 
+from common.readiness import Ready, announce
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.commands.sim import receiving, sending
 from hil.console import emit, load_settings, progress
@@ -93,6 +94,9 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                    help="local planner (default: planner.algorithm = ddrrt-star)")
     p.add_argument("--summary-out", metavar="FILE", default=None,
                    help="also write the summary JSON to FILE (atomically) when stopping")
+    p.add_argument("--ready-fd", type=int, default=None, metavar="FD",
+                   help="write a one-line JSON readiness message to this inherited file descriptor once "
+                        "serving, then close it (how `hil run` knows the autopilot is up)")
     p.add_argument("--planner-factory", default=None, help=argparse.SUPPRESS)  # tests: a planner double
     p.add_argument("--can-record", default=None, help=argparse.SUPPRESS)  # hil soak: RawCommand send times (.npz)
     add_can_arguments(p)
@@ -259,6 +263,7 @@ def run(args: argparse.Namespace) -> int:
     progress(f"autopilot: listening on {host}:{port}, {acts}, "
              f"scenario {args.scenario}, {'lockstep' if args.lockstep else 'real time'}"
              f"{', waiting for a GCS to arm' if cfg.gcs.wait_for_arm else ''}")
+    announce(args.ready_fd, Ready("autopilot", f"{host}:{port}", os.getpid()))
     try:
         autopilot.run(lambda: stop["flag"])
     finally:
