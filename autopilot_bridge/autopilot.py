@@ -32,6 +32,7 @@ and planning start over.
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from array import array
@@ -72,6 +73,8 @@ from autopilot_bridge.vehicle_api import Result, VehicleStatus
 from common.dronecan_codec import RAW_COMMAND_MAX, quantize
 from common.mavlink import MAV_TYPE as M
 from common.percentiles import StreamingPercentiles
+
+_logger = logging.getLogger(__name__)
 
 SPEED_RANGE = (0.2, 3.0)   # m/s: speed set-points a GCS may give (3 m/s: the hull's top speed)
 
@@ -121,7 +124,7 @@ class Autopilot:
         self.actuators: Any = actuators if actuators is not None else link
         self.int14_commands = int14_commands
         self.lockstep, self.seed = lockstep, seed
-        self.log = log or (lambda _m: None)
+        self.log = log or _logger.info
         self.goal_ned = (world.goal[1], world.goal[0])
         self.reference_ned = map_to_ned_path(world.reference_path)
         from planner.gridmap import OccupancyGrid

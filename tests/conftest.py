@@ -45,7 +45,7 @@ UNIT_MODULES = frozenset("""
     can_codec can_esc collision_cone colregs colregs_oracle config config_layers control current_field geodesy
     global_route mission_executor modes navigation online percentiles plan_commitment readiness
     planner_algorithms planner_config planner_cost planner_dynamic_domain planner_gridmap
-    planner_guidance planner_kgrowth planner_metrics planner_postprocess reactive route_planning
+    planner_guidance planner_kgrowth planner_metrics planner_postprocess process_logging reactive route_planning
     run_plot scenarios sim_sensors sim_vessel sim_waves tiers tracking_stats traffic_planning vehicle
 """.split())
 INTEGRATION_MODULES = frozenset("""
