@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from planner.cost import path_length
+
 
 def ned_to_map(north: float, east: float, psi: float | None = None) -> tuple[float, ...]:
     """NED position (and heading clockwise from north) to map x, y (and heading from east)."""
@@ -97,11 +99,6 @@ PLANNER_SHARE = 0.7  # of a real-time cycle's deadline; the rest is for post-pro
 LOOP_FACTOR = 1.25  # a smoothed path this much longer than its polyline contains a loop
 
 
-def _length(path: np.ndarray) -> float:
-    path = np.asarray(path, dtype=float).reshape(-1, 2)
-    return float(np.sum(np.hypot(*np.diff(path, axis=0).T))) if len(path) > 1 else 0.0
-
-
 WARM_UP_ITERATIONS = 200
 WARM_UP_DEADLINE_S = 0.05
 
@@ -157,7 +154,7 @@ def online_cycle_handler(world: World, warm_up: CycleInput | None = None) -> Cal
         if len(rec.smooth_path) >= 2 and rec.smoothed_ok:
             # Dubins curves between waypoints closer than ~2 R_min can loop; a loop is worse to follow
             # than the pruned polyline (whose turns the planner's fan limit already bounds).
-            if _length(rec.smooth_path) <= LOOP_FACTOR * _length(rec.local_path) + 1e-9:
+            if path_length(rec.smooth_path) <= LOOP_FACTOR * path_length(rec.local_path) + 1e-9:
                 path = rec.smooth_path
         return LocalPlan(cycle=request.cycle, status=rec.status, path=np.asarray(path, dtype=float).reshape(-1, 2),
                          subgoal=(float(rec.subgoal[0]), float(rec.subgoal[1])), subgoal_rule=rec.subgoal_rule,

@@ -113,7 +113,7 @@ class Tap:
     """Receives everything both processes send to it; writes the .tlog; keeps the evaluation data."""
 
     def __init__(self, tlog_path: Path, geo: LocalFrame, encounters: Any = None, truth_component_id: int = 52,
-                 sim_component_id: int = 51, lockstep: bool = False) -> None:
+                 sim_component_id: int = 51, lockstep: bool = False, private: bool = False) -> None:
         self.ep = UdpEndpoint("127.0.0.1:0", [], recv_buffer=8 << 20)
         # Every message of the dialect: the autopilot copies all ground-station traffic here too.
         self.codec = Codec(255, 190, accept=[c.msgname for c in mavlink2.mavlink_map.values()])
@@ -122,7 +122,12 @@ class Tap:
         self.encounters = encounters
         self.truth_component_id, self.sim_component_id = truth_component_id, sim_component_id
         self.ais_forwarded = 0  # AIS_VESSEL from the vessel computer's telemetry (forwarded to ground stations)
-        self.tlog = open(tlog_path, "wb")
+        # With a signing key the tlog holds signed frames: owner-only (0600), like the JSON summaries
+        # (written through mkstemp), even where an older run.tlog was there.
+        fd = os.open(tlog_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600 if private else 0o666)
+        if private:
+            os.fchmod(fd, 0o600)
+        self.tlog = os.fdopen(fd, "wb")
         self.geo = geo
         self.truth: dict[int, tuple[float, float, float, float]] = {}  # time_usec -> (north, east, vn, ve)
         self.estimate: dict[tuple[int, int], tuple[float, float]] = {}  # (segment, ms) -> (north, east)
@@ -301,7 +306,7 @@ class HilRun:
 
         self.encounter_judge = EncounterJudge(cfg.vessel.L, cfg.vessel.W, cfg.colregs) if self.scen.traffic else None
         self.tap = Tap(self.out / "run.tlog", self.geo, self.encounter_judge, cfg.traffic.truth_component_id,
-                       cfg.link.component_id, lockstep=opts.lockstep)
+                       cfg.link.component_id, lockstep=opts.lockstep, private=bool(cfg.gcs.signing_key_file))
         goal_ned = (self.scen.goal[1], self.scen.goal[0])
         # The truth: the chart plus the obstacles it lacks; the simulator's range sensor scans it.
         truth_occ = self.scen.truth_occ()

@@ -37,7 +37,7 @@ import numpy as np
 from scipy import ndimage
 
 from planner import make_planner
-from planner.cost import path_cost
+from planner.cost import path_cost, path_length
 from planner.gridmap import OccupancyGrid
 from planner.metrics import path_metrics
 from planner.params import AlgorithmName, PlannerParams
@@ -223,12 +223,6 @@ class OnlineContext:
         c = min(max(int(point[0] / res), 0), occ.shape[1] - 1)
         rr, cc = idx[0][r, c], idx[1][r, c]
         return ((cc + 0.5) * res, (rr + 0.5) * res)
-
-
-def _polyline_length(path: np.ndarray) -> float:
-    if len(path) < 2:
-        return 0.0
-    return float(np.sum(np.hypot(*np.diff(path, axis=0).T)))
 
 
 def resample(path: np.ndarray, spacing: float) -> np.ndarray:
@@ -587,7 +581,7 @@ def run_online(ctx: OnlineContext, start: VesselState, seed: int,
         travelled, heading = advance(rec.smooth_path, step)
         rec.travelled = travelled
         executed.append(travelled[1:])
-        sailed = _polyline_length(travelled)
+        sailed = path_length(travelled)
         end = travelled[-1]
         state = VesselState(float(end[0]), float(end[1]),
                             state.heading if math.isnan(heading) else heading,

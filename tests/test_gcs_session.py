@@ -221,3 +221,6 @@ def test_signing_rejects_unsigned_and_forged_writes_and_the_allow_list_holds(liv
     assert s["signing"] and s["security_rejects"] == sec
     assert s["command_acks"].get("MAV_RESULT_DENIED", 0) >= 3 and s["command_acks"]["MAV_RESULT_ACCEPTED"] >= 1
     assert s["failsafe_events"] == 0
+    # With a key the run folder's signed traffic and summaries are owner-only.
+    for name in ("run.tlog", "summary.json", "autopilot.json"):
+        assert (out / name).stat().st_mode & 0o077 == 0, name

@@ -8,7 +8,8 @@ Follows https://mavlink.io/en/services/mission.html:
   (MISSION_ACK MAV_MISSION_OPERATION_CANCELLED). An out-of-sequence item is dropped and the expected
   one re-requested (the spec: recoverable); an item beyond the announced count is
   MAV_MISSION_INVALID_SEQUENCE. Every item is validated (frame, command, coordinates, acceptance
-  radius, per command: :mod:`autopilot_bridge.mission_commands`); the first bad one ends the upload with its MAV_MISSION_RESULT code. Only a complete,
+  radius, per command: :mod:`autopilot_bridge.mission_commands`); the first bad one ends the upload
+  with its MAV_MISSION_RESULT code. Only a complete,
   valid upload replaces the mission, atomically; any error or timeout leaves the old one untouched.
 * download: MISSION_REQUEST_LIST -> MISSION_COUNT, then each MISSION_REQUEST_INT is answered with
   MISSION_ITEM_INT exactly as uploaded (commands stored but not executed included).
@@ -26,8 +27,9 @@ Inputs are decoded pymavlink messages plus the time ``now`` (s, any monotonic cl
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 from autopilot_bridge import mission_commands as mc
 from common.mavlink import MAV_TYPE as M
@@ -321,5 +323,5 @@ class MissionServer:
 
 def same_items(a: MissionItem, b: MissionItem) -> bool:
     """Field-by-field equality where NaN equals NaN (unused parameters are often NaN)."""
-    return all(_same(getattr(a, f), getattr(b, f)) if isinstance(getattr(a, f), float) else getattr(a, f) == getattr(b, f)
-               for f in MissionItem.__dataclass_fields__)
+    return all(_same(getattr(a, f), getattr(b, f)) if isinstance(getattr(a, f), float)
+               else getattr(a, f) == getattr(b, f) for f in MissionItem.__dataclass_fields__)

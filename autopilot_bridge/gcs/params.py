@@ -2,7 +2,7 @@
 
 The declarations live with their owners: the autopilot (planning schedule, speed, controller gains,
 planner overrides, waypoint radius; :meth:`autopilot_bridge.autopilot.Autopilot.parameters`) and the
-ground-station link (failsafe; :meth:`autopilot_bridge.gcs.link.GcsLink.parameters`). This module only
+ground-station link (failsafe; :meth:`autopilot_bridge.gcs.failsafe.GcsFailsafe.parameters`). This module only
 collects them; PARAM_SET outside a parameter's range changes nothing (:class:`ParamTable`).
 """
 

@@ -14,7 +14,9 @@
 
 Peers are learned only from valid MAVLink frames (a fuzzer's garbage does not make it a peer) and
 kept up to ``max_peers`` per endpoint, the least recently heard dropped first. Every transport
-has the same small interface: :meth:`receive` gives ``(peer, bytes)`` chunks, :meth:`send`
+has the same small interface: :meth:`receive` gives ``(peer, bytes)`` chunks (at most ``max_reads``
+reads per peer, none from the peers in ``hold``: the link's frame budget; a held TCP peer is throttled
+by TCP's own flow control), :meth:`send`
 fans a frame out to every peer, :meth:`heard` records a peer as a talker.
 """
 
@@ -22,6 +24,7 @@ from __future__ import annotations
 
 import socket
 from collections import OrderedDict
+from collections.abc import Collection
 from typing import Any
 
 from common import connection
@@ -63,9 +66,9 @@ class UdpTransport:
     def fileno(self) -> int:
         return self.ep.sock.fileno()
 
-    def receive(self) -> list[tuple[Any, bytes]]:
+    def receive(self, max_reads: int = 256, hold: Collection[Any] = ()) -> list[tuple[Any, bytes]]:
         out = []
-        for _ in range(256):  # bounded per call: a flood cannot starve the control loop
+        for _ in range(min(256, max_reads)):  # bounded per call: a flood cannot starve the control loop
             data = self.ep.recv(timeout=0.0)
             if data is None:
                 break
@@ -131,11 +134,13 @@ class TcpServerTransport:
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self.conns[("tcp", addr)] = conn
 
-    def receive(self) -> list[tuple[Any, bytes]]:
+    def receive(self, max_reads: int = 16, hold: Collection[Any] = ()) -> list[tuple[Any, bytes]]:
         self._accept()
         out = []
         for peer, conn in list(self.conns.items()):
-            for _ in range(16):
+            if peer in hold:
+                continue
+            for _ in range(min(16, max_reads)):
                 try:
                     data = conn.recv(65536)
                 except (BlockingIOError, InterruptedError):
@@ -251,13 +256,15 @@ class TcpClientTransport:
         self.sock, self._connecting = None, False
         self._next_try = self.clock() + RECONNECT_S
 
-    def receive(self) -> list[tuple[Any, bytes]]:
+    def receive(self, max_reads: int = 16, hold: Collection[Any] = ()) -> list[tuple[Any, bytes]]:
         if self.sock is None or self._connecting:
             self._retry()
             return []
+        if self.peer in hold:
+            return []
         out = []
         peer = self.peer
-        for _ in range(16):
+        for _ in range(min(16, max_reads)):
             try:
                 data = self.sock.recv(65536)
             except (BlockingIOError, InterruptedError):
@@ -298,7 +305,7 @@ class SerialTransport:
 
     def __init__(self, device: str, baud: int) -> None:
         try:
-            import serial
+            import serial  # type: ignore[import-untyped,unused-ignore]
         except ImportError:
             raise ValueError(f"serial:{device}:{baud}: needs pyserial (pip install pyserial)") from None
         try:
@@ -317,9 +324,11 @@ class SerialTransport:
     def fileno(self) -> int:
         return self.port.fileno()
 
-    def receive(self) -> list[tuple[Any, bytes]]:
-        out = []
-        for _ in range(16):
+    def receive(self, max_reads: int = 16, hold: Collection[Any] = ()) -> list[tuple[Any, bytes]]:
+        out: list[tuple[Any, bytes]] = []
+        if ("serial", self.device) in hold:
+            return out
+        for _ in range(min(16, max_reads)):
             try:
                 data = self.port.read(65536)
             except (self._serial_error, OSError):

@@ -1,0 +1,100 @@
+"""The mission microservice on the link: :class:`autopilot_bridge.gcs.mission.MissionServer` (the pure
+protocol state machine) wired to the vessel's command API, with conversions between upload items
+(geodetic) and the vessel's stored commands (NED m)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from autopilot_bridge import mission_commands as mc
+from autopilot_bridge.gcs.context import Outbox, VehicleView
+from autopilot_bridge.gcs.mission import MissionItem, MissionServer, has_position
+from autopilot_bridge.mission_commands import MissionCommand
+from common.mavlink import MAV_TYPE as M
+
+# Every MISSION_* message the protocol state machine has a handler for.
+MISSION_MESSAGES = tuple(sorted(name[len("_on_"):].upper() for name in vars(MissionServer)
+                                if name.startswith("_on_mission")))
+MISSION_WRITES = frozenset({"MISSION_COUNT", "MISSION_ITEM", "MISSION_ITEM_INT", "MISSION_CLEAR_ALL"})
+
+
+class MissionService:
+    def __init__(self, out: Outbox, view: VehicleView, on_changed: Callable[[], None], *, max_items: int,
+                 item_timeout: float, retries: int) -> None:
+        self.out, self.view = out, view
+        self.on_changed = on_changed     # the current item or the mission changed: MISSION_CURRENT
+        self.server: MissionServer | None = None
+        self._limits = (max_items, item_timeout, retries)
+
+    def attach(self, commands: tuple[MissionCommand, ...]) -> None:
+        max_items, item_timeout, retries = self._limits
+        self.server = MissionServer(tuple(self.item_of(c) for c in commands), system_id=self.view.sysid,
+                                    component_id=self.view.compid, max_items=max_items, item_timeout=item_timeout,
+                                    retries=retries, position_check=self.view.on_chart,
+                                    mission_check=self._check_mission)
+
+    def handlers(self) -> dict[str, Callable[[Any, float], None]]:
+        return {name: self._on_message for name in MISSION_MESSAGES}
+
+    def total(self) -> int:
+        return len(self.server.items) if self.server is not None else 0
+
+    def item_of(self, c: MissionCommand) -> MissionItem:
+        """A stored command as a MISSION_ITEM_INT (for a mission the vessel started with)."""
+        lat = lon = 0.0
+        if c.position is not None:
+            lat, lon = self.view.geo.sea_level_to_geodetic(*c.position)
+        return MissionItem(M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, c.command, 1, c.p1, c.p2, c.p3, c.p4,
+                           int(round(lat * 1e7)), int(round(lon * 1e7)), 0.0)
+
+    def command_of(self, it: MissionItem) -> MissionCommand:
+        north = east = None
+        if has_position(it):
+            north, east = self.view.geo.geodetic_to_sea_level(it.lat, it.lon)
+        return MissionCommand(it.command, north, east, it.param1, it.param2, it.param3, it.param4)
+
+    def _check_mission(self, items: tuple[MissionItem, ...]) -> tuple[int, int, str] | None:
+        """A complete upload's route through the chart: ``(seq, MAV_MISSION_RESULT, reason)`` or None."""
+        api = self.view.api
+        return None if api is None else api.check_mission(items, self.view.geo.geodetic_to_sea_level)
+
+    def refuse(self, m: Any) -> None:
+        """A write refused by the security gate: MISSION_DENIED to its sender (mission writes only)."""
+        if m.get_type() in MISSION_WRITES:
+            self.out.send("mission_ack", m.get_srcSystem(), m.get_srcComponent(), M.MAV_MISSION_DENIED,
+                          getattr(m, "mission_type", 0))
+
+    def _on_message(self, m: Any, now: float) -> None:
+        if self.server is None:
+            return
+        for o in self.server.handle(m, now):
+            self.out.send(o.name, *o.args)
+        self._events()
+
+    def tick(self, now: float) -> None:
+        """Re-requests and timeouts of an upload under way."""
+        if self.server is None:
+            return
+        for o in self.server.tick(now):
+            self.out.send(o.name, *o.args)
+        self._events()
+
+    def _events(self) -> None:
+        server, api = self.server, self.view.api
+        assert server is not None
+        for ev in server.take_events():
+            if ev.kind == "replaced" and api is not None:
+                commands = tuple(self.command_of(it) for it in ev.items)
+                api.replace_mission(commands)
+                skipped = sum(c.command in mc.STORED_ONLY for c in commands)
+                self.out.statustext((f"mission: {len(commands)} items accepted"
+                                     + (f" ({skipped} stored, not executed)" if skipped else ""))
+                                    if commands else "mission cleared")
+                self.on_changed()
+            elif ev.kind == "set_current" and api is not None:
+                api.set_mission_current(ev.seq)
+                self.on_changed()
+            elif ev.kind == "rejected" and server.last_reject is not None:
+                seq, why = server.last_reject
+                self.out.statustext(f"mission item {seq} rejected: {why}", M.MAV_SEVERITY_WARNING)

@@ -1,0 +1,131 @@
+"""MAVLink 2 message signing (https://mavlink.io/en/guide/message_signing.html) and the write gate.
+
+* :func:`load_signing_key` reads the shared secret key.
+* :class:`ReplayGuard` verifies a signed frame: the 48-bit SHA-256 signature over the key and the frame,
+  and a timestamp (10 µs units since 2015-01-01) strictly newer than the last accepted one of the
+  same (link id, system id, component id). There is ONE guard per link and key, shared by every
+  parser of every transport (UDP, each TCP connection, serial): a frame captured on one connection
+  and replayed on another, or replayed over UDP, is refused. A frame is recorded only once its
+  signature is good, so a forged frame with a future timestamp cannot lock the real GCS out.
+* :class:`SecurityGate` decides, per message, whether a frame may change the vessel: with signing on,
+  every state- or rate-changing message (:data:`WRITES`) must carry a good signature; with an
+  allow-list, its source system id must be listed. Refusals are counted by reason.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import struct
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+from common.mavlink import mavlink2
+
+SIGNING_EPOCH = 1420070400  # 2015-01-01 00:00:00 UTC, the MAVLink 2 signing timestamp origin
+NEW_STREAM_SLACK = 6_000_000  # a new stream's first timestamp may lag our clock by 60 s (10 µs units), as the spec
+
+# Messages that change the vessel's state or what it sends (rates included): signing and the allow-list
+# apply to these. Read requests (PARAM_REQUEST_*, MISSION_REQUEST_*, PING) stay open, rate-limited
+# (:mod:`.limits`), so that telemetry remains readable without the key.
+WRITES = frozenset({
+    "COMMAND_LONG", "COMMAND_INT", "SET_MODE", "MISSION_COUNT", "MISSION_ITEM", "MISSION_ITEM_INT",
+    "MISSION_CLEAR_ALL", "MISSION_SET_CURRENT", "MISSION_WRITE_PARTIAL_LIST", "PARAM_SET", "PARAM_EXT_SET",
+    "MANUAL_CONTROL", "RC_CHANNELS_OVERRIDE", "SET_POSITION_TARGET_GLOBAL_INT", "SET_POSITION_TARGET_LOCAL_NED",
+    "REQUEST_DATA_STREAM", "SET_HOME_POSITION", "SETUP_SIGNING", "SET_GPS_GLOBAL_ORIGIN",
+})
+
+
+def load_signing_key(path: str) -> bytes:
+    """32-byte key from a file: raw 32 bytes, 64 hex digits, or a passphrase (SHA-256 of it, as MAVProxy)."""
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as exc:
+        raise ValueError(f"signing key file {path}: {exc.strerror or exc}") from None
+    if len(raw) == 32:
+        return raw
+    text = raw.decode(errors="replace").strip()
+    if not text:
+        raise ValueError(f"signing key file {path}: empty")
+    if len(text) == 64:
+        try:
+            return bytes.fromhex(text)
+        except ValueError:
+            pass
+    return hashlib.sha256(text.encode()).digest()
+
+
+def signing_now(wall: float | None = None) -> int:
+    """The signing timestamp of a wall time (s since the Unix epoch; now by default), 10 µs units."""
+    return int(((time.time() if wall is None else wall) - SIGNING_EPOCH) * 1e5)
+
+
+def signature_matches(key: bytes, msgbuf: bytes | bytearray) -> bool:
+    """Whether a signed frame's 6-byte signature is SHA-256(key + frame up to the signature)[:6]."""
+    return len(msgbuf) > 13 and hmac.compare_digest(hashlib.sha256(key + bytes(msgbuf[:-6])).digest()[:6],
+                                                    bytes(msgbuf[-6:]))
+
+
+class ReplayGuard:
+    """One link's signature check and replay state: newest accepted timestamp per (link id, sysid, compid)."""
+
+    def __init__(self, key: bytes, now: int | None = None) -> None:
+        self.key = key
+        self.timestamp = signing_now() if now is None else now   # our clock: max(start, newest accepted)
+        self.streams: dict[tuple[int, int, int], int] = {}
+        self.refused: Counter[str] = Counter()                    # "replay" / "bad_signature", every frame
+
+    def check(self, msgbuf: bytes | bytearray, src_system: int, src_component: int) -> bool:
+        """pymavlink's ``check_signature`` hook: True for a good signature with a fresh timestamp."""
+        if not signature_matches(self.key, msgbuf):
+            self.refused["bad_signature"] += 1
+            return False
+        link_id = msgbuf[-13]
+        low, high = struct.unpack("<IH", bytes(msgbuf[-12:-6]))
+        stamp = low + (high << 32)
+        stream = (link_id, src_system, src_component)
+        last = self.streams.get(stream)
+        if (last is not None and stamp <= last) or (last is None and stamp + NEW_STREAM_SLACK < self.timestamp):
+            self.refused["replay"] += 1
+            return False
+        self.streams[stream] = stamp
+        self.timestamp = max(self.timestamp, stamp)
+        return True
+
+    def install(self, mav: Any) -> None:
+        """Make a pymavlink parser verify with this guard and decode unsigned frames too (the gate decides)."""
+        mav.signing.secret_key = self.key
+        mav.signing.timestamp = self.timestamp
+        mav.signing.allow_unsigned_callback = lambda _mav, _msgid: True
+        mav.check_signature = self.check
+
+
+class SecurityGate:
+    """Whether a decoded message may change the vessel; counts refusals by reason in ``counts``."""
+
+    def __init__(self, key: bytes | None, allowed_sysids: tuple[int, ...], counts: Counter[str]) -> None:
+        self.key = key
+        self.allowed = frozenset(allowed_sysids)
+        self.counts = counts
+
+    def signed(self, m: Any) -> bool:
+        """Signed with our key and fresh (the frame passed :class:`ReplayGuard` while it was parsed)."""
+        return bool(getattr(m, "_signed", False))
+
+    def allows(self, m: Any, kind: str) -> bool:
+        if kind not in WRITES:
+            return True
+        if self.allowed and m.get_srcSystem() not in self.allowed:
+            self.counts["not_allowed_sysid"] += 1
+            return False
+        if self.key is not None and not self.signed(m):
+            if not m.get_header().incompat_flags & mavlink2.MAVLINK_IFLAG_SIGNED:
+                self.counts["unsigned"] += 1
+            elif signature_matches(self.key, m.get_msgbuf()):
+                self.counts["replay"] += 1      # our key, an old timestamp: a captured frame sent again
+            else:
+                self.counts["bad_signature"] += 1
+            return False
+        return True
