@@ -144,6 +144,7 @@ class Autopilot:
         self.tracking = TrackingStats()
         self._waited = False
         self.local_paths: list[dict[str, Any]] = []
+        self._local_path: tuple[int, tuple[tuple[float, float], ...]] = (0, ())   # (len(local_paths), newest, NED)
         self.track = array("d")   # t, north, east, psi of the estimate at 10 Hz, flat (8 bytes a value)
         # What a ground station commands (autopilot_bridge.vehicle). Without one the scenario's
         # reference path is the mission and the boat starts armed in AUTO, as it always did.
@@ -433,13 +434,16 @@ class Autopilot:
         v = self.vehicle
         for text, warning in v.take_notes():   # the mission executor's and the modes' messages
             self._event(t, text, warning)
-        last = self.local_paths[-1]["path_ned"] if self.local_paths else ()
+        n_paths = len(self.local_paths)
+        if self._local_path[0] != n_paths:   # a new local path: its tuple once, not every frame
+            last = self.local_paths[-1]["path_ned"] if self.local_paths else ()
+            self._local_path = (n_paths, tuple((float(n), float(e)) for n, e in last))
         status = VehicleStatus(
             t=t, armed=v.armed, mode=v.mode, mode_flags=v.active.flags, behaviour=self.behaviour.state, nav=s,
             home=v.home, mission_count=len(v.mission), mission_current=v.current, mission_complete=v.complete,
             speed_setpoint=self.speed_setpoint(),
             thrust=None if cmd is None else (float(cmd.port_cmd), float(cmd.stdb_cmd)),
-            local_paths=len(self.local_paths), local_path=tuple((float(n), float(e)) for n, e in last),
+            local_paths=n_paths, local_path=self._local_path[1],
             reached=tuple(v.take_reached()), changed=v.changed)
         v.changed = False
         self._status = status

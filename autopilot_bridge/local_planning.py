@@ -8,32 +8,19 @@ adds to the chart). The cycle itself is
 DDRRT* (or RRT*, Informed RRT*), pruning and Dubins smoothing (section 2.4).
 
 Frames: the planner's map frame (x east, y north, headings counter-clockwise from east). The
-autopilot converts with :func:`ned_to_map` / :func:`map_to_ned`.
+autopilot converts with :func:`common.frames.ned_to_map` / :func:`common.frames.map_to_ned`.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
+from common.frames import map_to_ned, map_to_ned_path, ned_to_map  # noqa: F401  (re-exported)
 from planner.cost import path_length
-
-
-def ned_to_map(north: float, east: float, psi: float | None = None) -> tuple[float, ...]:
-    """NED position (and heading clockwise from north) to map x, y (and heading from east)."""
-    if psi is None:
-        return east, north
-    return east, north, math.pi / 2.0 - psi
-
-
-def map_to_ned_path(path: np.ndarray) -> np.ndarray:
-    """(N, 2) map points (x east, y north) to NED (north, east)."""
-    path = np.asarray(path, dtype=float).reshape(-1, 2)
-    return path[:, ::-1].copy()
 
 
 @dataclass(frozen=True)

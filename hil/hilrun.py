@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from common.frames import map_to_ned
 from common.geodesy import LocalFrame
 from common.mavlink import Codec, mavlink2
 from common.readiness import ReadyWait
@@ -342,7 +343,7 @@ class HilRun:
 
     def sim_command(self, initial: tuple[float, float, float] | None = None) -> list[str]:
         s = self.scen
-        north, east, psi = (s.start[1], s.start[0], math.pi / 2.0 - s.start_heading) if initial is None else initial
+        north, east, psi = map_to_ned(s.start[0], s.start[1], s.start_heading) if initial is None else initial
         cur = self.scen.current
         args = [sys.executable, "-m", "hil", "sim", *self._common_args(),
                 "--state-to", f"127.0.0.1:{self.ap_port}", "--state-to", f"127.0.0.1:{self.tap.port}",
@@ -715,7 +716,7 @@ def run_loop(opts: RunOptions, cfg: Any) -> dict[str, Any]:
 
 
 def _run_loop(opts: RunOptions, cfg: Any) -> dict[str, Any]:
-    from hil.commands.autopilot import write_json_atomic
+    from hil.files import write_json_atomic
 
     run = HilRun(opts, cfg)
     summary = run.execute()

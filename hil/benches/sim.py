@@ -6,9 +6,10 @@ import argparse
 import subprocess
 import time
 
-from hil.commands.run import HilClient, sim_command, start_simulator, stop_process
 from hil.console import emit, load_settings, progress
 from hil.errors import RunFailed
+from hil.processes import stop as stop_process
+from hil.sim_client import HilClient, sim_command, start_simulator
 
 GOAL_LOCKSTEP_STEPS_PER_S = 2000.0
 
