@@ -13,8 +13,9 @@ autopilot converts with :func:`common.frames.ned_to_map` / :func:`common.frames.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -143,7 +144,8 @@ def online_cycle_handler(world: World, warm_up: CycleInput | None = None) -> Cal
             if path_length(rec.smooth_path) <= LOOP_FACTOR * path_length(rec.local_path) + 1e-9:
                 path = rec.smooth_path
         return LocalPlan(cycle=request.cycle, status=rec.status, path=np.asarray(path, dtype=float).reshape(-1, 2),
-                         subgoal=tuple(rec.subgoal), subgoal_rule=rec.subgoal_rule, iterations=rec.iterations,
+                         subgoal=(float(rec.subgoal[0]), float(rec.subgoal[1])), subgoal_rule=rec.subgoal_rule,
+                         iterations=rec.iterations,
                          planning_time_s=rec.planning_time_s, reason=rec.reason, speed_factor=rec.speed_factor)
 
     if warm_up is not None:

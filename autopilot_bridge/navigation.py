@@ -310,6 +310,7 @@ class NavigationFilter:
         if nis > self._gate(z.shape[0]):
             self._rejected(kind)
             return False
+        assert not isinstance(self.ekf, FastEkf)  # the "fast" filter updates in nav_kernel.step instead
         self.ekf.update(z, lambda _x: H, lambda _x: hx, R=Rm, residual=residual)
         self.ekf.x[PSI, 0] = wrap_angle(self.ekf.x[PSI, 0])
         self.stats.updates[kind] = self.stats.updates.get(kind, 0) + 1

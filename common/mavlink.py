@@ -9,7 +9,7 @@ joined with the next datagram.
 
 from __future__ import annotations
 
-from typing import Iterable
+from collections.abc import Iterable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 

@@ -92,7 +92,7 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
 
     traffic = TrafficAwareness(cfg.tracking, cfg.colregs, geo)  # AIS targets, COLREGs encounters
     autopilot = Autopilot(ap, cfg.navigation, cfg.control, propulsion, world, link, worker, telemetry,
-                          lockstep=lockstep, seed=cfg.sim.seed, log=progress, traffic=traffic, actuators=actuators,
+                          lockstep=lockstep, seed=cfg.sim.seed, traffic=traffic, actuators=actuators,
                           int14_commands=cfg.esc.int14_resolution or cfg.can.actuators == "can",
                           wait_for_arm=cfg.gcs.wait_for_arm,
                           pace_speedup=cfg.gcs.pace_speedup if cfg.gcs.wait_for_arm else None)

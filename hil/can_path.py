@@ -31,7 +31,7 @@ def pair_latency(sent_tid, sent_at, applied_tid, applied_at, modulo: int = TRANS
     st, sa = np.asarray(sent_tid), np.asarray(sent_at)
     out = []
     j = 0
-    for tid, ta in zip(applied_tid, applied_at):
+    for tid, ta in zip(applied_tid, applied_at, strict=False):
         k = j
         while k < len(st) and k < j + modulo and not (st[k] == tid and sa[k] <= ta):
             k += 1

@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import csv
 import json
-import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 

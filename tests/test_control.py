@@ -22,7 +22,8 @@ MODEL = SurgeModel(m11=57.75, m22=112.82, d_u=31.915)
 
 
 def params(**kw) -> ControlParams:
-    base = dict(heading_kp=40.0, heading_ki=2.0, heading_kd=30.0, heading_integral_limit=10.0, heading_rate_feedforward=0.0,
+    base = dict(heading_kp=40.0, heading_ki=2.0, heading_kd=30.0, heading_integral_limit=10.0,
+                heading_rate_feedforward=0.0,
                 speed_bandwidth=1.0, speed_damping=1.0, speed_integral_limit=40.0,
                 speed_reference_time_constant=2.0, max_acceleration=0.5)
     base.update(kw)

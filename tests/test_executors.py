@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from hil import experiment, executors, ports
+from hil import executors, experiment, ports
 
 FAST = ("--local-iterations", "500", "--cycle-time", "8")
 NEEDS_DASK = "dask.distributed is not installed (pip install 'usv-hil[cluster]')"

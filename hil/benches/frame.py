@@ -227,7 +227,8 @@ def run(args: argparse.Namespace) -> int:
                                    "calls_per_frame": round(v[1] / n, 2), "own_us_per_frame": round(v[2] / n * 1e6, 1)}
                                   for (f, line, name), v in top]
     fu = result["frame_us"]
-    human = [f"{args.scenario}, {result['navigation_filter']} EKF, {args.steps} frames ({waited} waited for the planner, "
+    human = [f"{args.scenario}, {result['navigation_filter']} EKF, {args.steps} frames "
+             f"({waited} waited for the planner, "
              f"left out): mean {fu['mean']} us, p50 {fu['p50']} us, p99 {fu['p99']} us without profiler",
              f"under cProfile {result['profiled_frame_us']} us/frame; navigation filter alone, us/frame: " + ", ".join(
                  f"{k} {v}" for k, v in result["navigation_alone_us_per_frame"].items())]

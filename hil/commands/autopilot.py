@@ -139,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
     gcs = autopilot.telemetry
     if gcs is not None and gcs.addresses:
         progress("autopilot: ground stations on " + ", ".join(
-            f"{spec} (local {h}:{p})" for spec, (h, p) in zip(cfg.gcs.endpoints, gcs.addresses)))
+            f"{spec} (local {h}:{p})" for spec, (h, p) in zip(cfg.gcs.endpoints, gcs.addresses, strict=False)))
     progress(f"autopilot: listening on {host}:{port}, {acts}, "
              f"scenario {args.scenario}, {'lockstep' if args.lockstep else 'real time'}"
              f"{', waiting for a GCS to arm' if cfg.gcs.wait_for_arm else ''}")

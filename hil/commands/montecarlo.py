@@ -185,7 +185,8 @@ def _finish(args: argparse.Namespace, out: Path, summary: dict, t0: float, line:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hil import experiment, scenario as scenarios
+    from hil import experiment
+    from hil import scenario as scenarios
 
     if args.runs < 1:
         raise UsageError("--runs must be >= 1")
@@ -265,7 +266,8 @@ def run(args: argparse.Namespace) -> int:
         console.emit(args, summary)
     else:  # the table itself, as Markdown, is the human summary (the same text as table3.md)
         print(markdown.rstrip("\n"), flush=True)
-        print(f"\n{len(camp.rows)} runs ({args.runs} per algorithm) in {wall:.0f} s; files in {out} (table3.md, table3.csv, runs.csv"
+        print(f"\n{len(camp.rows)} runs ({args.runs} per algorithm) in {wall:.0f} s; files in {out} "
+              f"(table3.md, table3.csv, runs.csv"
               f"{', figures' if figures else ''}, summary.json)", flush=True)
     if camp.interrupted:
         return 130
@@ -273,7 +275,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _figures(args, spec, camp, out: Path) -> dict[str, str]:
-    from hil import experiment, plots, scenario as scenarios
+    from hil import experiment, plots
+    from hil import scenario as scenarios
 
     files = {}
     algs = [a for a in ("ddrrt-star", "informed-rrt-star", "rrt-star") if a in camp.details]

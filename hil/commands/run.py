@@ -180,9 +180,11 @@ def human_summary(s: dict[str, Any]) -> list[str]:
     lines = [f"outcome: {outcome} (scenario {s.get('scenario')}, seed {s.get('seed')}, {s.get('mode')}, "
              f"actuators {s.get('actuators')})"]
     sim_t, wall = s.get("sim_time_s") or 0.0, s.get("wall_time_s") or 0.0
-    lines.append(f"time: {sim_t:.1f} s simulated in {wall:.1f} s wall" + (f" (x{sim_t / wall:.1f})" if wall > 0 else ""))
+    speed_up = f" (x{sim_t / wall:.1f})" if wall > 0 else ""
+    lines.append(f"time: {sim_t:.1f} s simulated in {wall:.1f} s wall" + speed_up)
     energy = s.get("energy_J")
-    lines.append(f"clearance: min {num(s.get('min_clearance_m'), ' m')}; path {num(s.get('path_length_m'), ' m', '.1f')}"
+    lines.append(f"clearance: min {num(s.get('min_clearance_m'), ' m')}; "
+                 f"path {num(s.get('path_length_m'), ' m', '.1f')}"
                  f"; energy {'-' if energy is None else f'{energy / 1000:.1f} kJ'}")
     tr, lat = s.get("tracking") or {}, s.get("control_latency_ms") or {}
     lines.append(f"errors: navigation RMSE {num(s.get('navigation_rmse_m'), ' m')}; cross-track RMS "
@@ -210,7 +212,7 @@ def _gcs_args(args: argparse.Namespace) -> list[str]:
     return out + (["--wait-for-arm"] if args.wait_for_arm else [])
 
 
-def _run_loop(args: argparse.Namespace, client: "HilClient", lockstep: bool) -> int:
+def _run_loop(args: argparse.Namespace, client: HilClient, lockstep: bool) -> int:
     proc = start_simulator(sim_command(args, client.port, lockstep), stdout=subprocess.PIPE, text=True)
     start = time.monotonic()
     end_usec = int(round(args.duration * 1e6))
