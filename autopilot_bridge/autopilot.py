@@ -32,12 +32,14 @@ and planning start over.
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from array import array
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -53,7 +55,7 @@ from autopilot_bridge.control import (
     clearance_speed_cap,
 )
 from autopilot_bridge.guidance import GuidanceOutput, LineOfSight
-from autopilot_bridge.hil_link import HilLink, SensorFrame
+from autopilot_bridge.hil_link import HilLink, RangeScan, SensorFrame
 from autopilot_bridge.local_planning import CycleInput, LocalPlan, World, map_to_ned_path, ned_to_map
 from autopilot_bridge.mission_commands import MissionCommand
 from autopilot_bridge.modes import Mode
@@ -72,6 +74,7 @@ from common.dronecan_codec import RAW_COMMAND_MAX, quantize
 from common.mavlink import MAV_TYPE as M
 from common.percentiles import StreamingPercentiles
 
+_logger = logging.getLogger(__name__)
 
 SPEED_RANGE = (0.2, 3.0)   # m/s: speed set-points a GCS may give (3 m/s: the hull's top speed)
 
@@ -117,10 +120,11 @@ class Autopilot:
         self.zero_thrust = allocate(0.0, 0.0, propulsion.B_u, propulsion.T_max, propulsion.T_min)
         self.telemetry = telemetry
         self.traffic = traffic  # autopilot_bridge.traffic_awareness.TrafficAwareness, or None
-        self.actuators = actuators if actuators is not None else link  # send_controls(time_usec, port, stdb)
+        # send_controls(time_usec, port, stdb): the HIL link itself, or CanActuators (service(), summary())
+        self.actuators: Any = actuators if actuators is not None else link
         self.int14_commands = int14_commands
         self.lockstep, self.seed = lockstep, seed
-        self.log = log or (lambda _m: None)
+        self.log = log or _logger.info
         self.goal_ned = (world.goal[1], world.goal[0])
         self.reference_ned = map_to_ned_path(world.reference_path)
         from planner.gridmap import OccupancyGrid
@@ -140,6 +144,7 @@ class Autopilot:
         self.tracking = TrackingStats()
         self._waited = False
         self.local_paths: list[dict[str, Any]] = []
+        self._local_path: tuple[int, tuple[tuple[float, float], ...]] = (0, ())   # (len(local_paths), newest, NED)
         self.track = array("d")   # t, north, east, psi of the estimate at 10 Hz, flat (8 bytes a value)
         # What a ground station commands (autopilot_bridge.vehicle). Without one the scenario's
         # reference path is the mission and the boat starts armed in AUTO, as it always did.
@@ -271,7 +276,7 @@ class Autopilot:
         if math.hypot(ned[0, 0] - s.x, ned[0, 1] - s.y) > 3.0 * self.p.lookahead:
             self.stats.plans_rejected["starts_too_far"] += 1
             return False
-        for (x0, y0), (x1, y1) in zip(plan.path[:-1], plan.path[1:]):
+        for (x0, y0), (x1, y1) in zip(plan.path[:-1], plan.path[1:], strict=True):
             if not self.grid.segment_free(x0, y0, x1, y1):
                 self.stats.plans_rejected["collides"] += 1
                 return False
@@ -298,7 +303,8 @@ class Autopilot:
         obstacle (autopilot_bridge/plan_commitment.py) - unless it is blocked, traffic is being
         planned for, the followed path is not an exact one, or the vessel is off it by more than the
         look-ahead."""
-        if self.behaviour.state is not Behaviour.PLANNED or self.los is None or self._path_invalid or self._traffic_planned:
+        if (self.behaviour.state is not Behaviour.PLANNED or self.los is None or self._path_invalid
+                or self._traffic_planned):
             return False
         if self.local_paths and self.local_paths[-1]["status"] != "exact":
             # The followed path stopped short of its subgoal (the tree found no way there): it may
@@ -338,7 +344,7 @@ class Autopilot:
             self.behaviour.to(Behaviour.IDLE)      # navigation is ready
             self.next_plan_t = t
         if f.scan is not None and self.p.sensed_obstacles:
-            self._sense(t, f, s)
+            self._sense(t, f.scan, s)
         if self.traffic is not None:
             texts, replan = self.traffic.on_frame(t, s, self.link.take_ais(), self.telemetry)
             for text in texts:
@@ -410,7 +416,7 @@ class Autopilot:
             self._submit_plan(s)
         preview = max(self.p.lookahead, 3.0 * self.speed_setpoint())  # ~3 s of travel
         following = b.state is Behaviour.PLANNED and self.los is not None
-        guidance = self.los.update(s.x, s.y, preview) if following else None
+        guidance = self.los.update(s.x, s.y, preview) if following and self.los is not None else None
         if guidance is not None and guidance.finished and \
                 math.hypot(self.goal_ned[0] - s.x, self.goal_ned[1] - s.y) > self.p.goal_tolerance:
             self._to_fallback(t, "local path finished before a new one arrived")
@@ -428,13 +434,16 @@ class Autopilot:
         v = self.vehicle
         for text, warning in v.take_notes():   # the mission executor's and the modes' messages
             self._event(t, text, warning)
-        last = self.local_paths[-1]["path_ned"] if self.local_paths else ()
+        n_paths = len(self.local_paths)
+        if self._local_path[0] != n_paths:   # a new local path: its tuple once, not every frame
+            last = self.local_paths[-1]["path_ned"] if self.local_paths else ()
+            self._local_path = (n_paths, tuple((float(n), float(e)) for n, e in last))
         status = VehicleStatus(
             t=t, armed=v.armed, mode=v.mode, mode_flags=v.active.flags, behaviour=self.behaviour.state, nav=s,
             home=v.home, mission_count=len(v.mission), mission_current=v.current, mission_complete=v.complete,
             speed_setpoint=self.speed_setpoint(),
             thrust=None if cmd is None else (float(cmd.port_cmd), float(cmd.stdb_cmd)),
-            local_paths=len(self.local_paths), local_path=tuple((float(n), float(e)) for n, e in last),
+            local_paths=n_paths, local_path=self._local_path[1],
             reached=tuple(v.take_reached()), changed=v.changed)
         v.changed = False
         self._status = status
@@ -498,6 +507,7 @@ class Autopilot:
 
     def set_speed(self, speed: float) -> Result:
         p = self.param_table.get("CRUISE_SPEED")
+        assert p is not None  # declared by parameters()
         if not math.isfinite(speed) or not p.lo <= speed <= p.hi:
             return Result(False, f"speed {speed:g} m/s outside {p.lo:g}..{p.hi:g}")
         self.vehicle.speed = float(speed)
@@ -537,7 +547,8 @@ class Autopilot:
 
         def set_ap(key: str) -> Callable[[float], None]:
             def f(v: float) -> None:
-                self.p = replace(self.p, **{key: v})  # AutopilotParams.__post_init__ checks deadline < period
+                changes: dict[str, Any] = {key: v}  # a float field of AutopilotParams named by the parameter
+                self.p = replace(self.p, **changes)  # AutopilotParams.__post_init__ checks deadline < period
             return f
 
         def set_ctl(key: str) -> Callable[[float], None]:
@@ -593,9 +604,8 @@ class Autopilot:
             time.sleep(min(ahead, 0.1))
             self._waited = True  # a paced frame measures the pacing, not the control loop
 
-    def _sense(self, t: float, f: SensorFrame, s: NavState) -> None:
+    def _sense(self, t: float, scan: RangeScan, s: NavState) -> None:
         """Add a range scan's new obstacles to the map; replan at once if they are near the path ahead."""
-        scan = f.scan
         new = self.sensed.add_scan(scan.bearings, scan.ranges, s.x, s.y, s.psi, scan.sector_width)
         if len(new) == 0:
             return

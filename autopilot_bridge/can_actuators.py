@@ -22,14 +22,15 @@ nodes hold that RawCommand (docs/can.md).
 from __future__ import annotations
 
 import time
-from array import array
 from collections import Counter
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import can
 
 from common import dronecan_codec as dc
 from common.can_params import CanParams
+from common.transfer_times import TransferTimes
 
 MAX_FRAMES_PER_SERVICE = 256
 
@@ -54,9 +55,7 @@ class CanActuators:
         self.esc_health: dict[int, int] = {}
         self.next_node_status_t = 0.0
         self.started = clock()
-        self.record = False                 # latency records: transfer ID and wall time commanded
-        self.sent_tid = array("b")
-        self.sent_at = array("d")
+        self.sent_times = TransferTimes()   # latency records: transfer ID and wall time commanded
 
     def _send(self, full_name: str, payload: bytes, priority: int) -> int:
         tid = self.tids.take(full_name)
@@ -75,9 +74,7 @@ class CanActuators:
         values = (dc.quantize(port), dc.quantize(stdb)) if armed else (0, 0)
         tid = self._send(dc.RAW_COMMAND, dc.raw_command(values), dc.PRIORITY_HIGH)
         self.commands_sent += 1
-        if self.record:
-            self.sent_tid.append(tid)
-            self.sent_at.append(t0)
+        self.sent_times.add(tid, t0)
         if self.token is not None:
             self.token.send_controls(time_usec, values[0] / dc.RAW_COMMAND_MAX, values[1] / dc.RAW_COMMAND_MAX, armed)
         t = time_usec * 1e-6

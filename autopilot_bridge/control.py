@@ -48,6 +48,14 @@ class SurgeModel:
     m22: float      # kg, sway inertia, eq. (5)
     d_u: float      # kg/s, linear surge damping; d_u2 = 0.2 d_u, d_u3 = 0.1 d_u
 
+    @classmethod
+    def from_hull(cls, m: float, rho: float, D: float, L: float, d_u: float) -> SurgeModel:
+        """The nominal model from the hull's configured numbers ([vessel]: mass m (kg), water
+        density rho (kg/m^3), draught D (m), length L (m), damping d_u (kg/s)), by eq. (5)'s first
+        two rows: m11 = 1.05 m, m22 = m + 0.5 rho pi D^2 L. The vessel computer's own reading of
+        the paper; the simulator keeps its truth model to itself."""
+        return cls(m11=1.05 * m, m22=m + 0.5 * rho * math.pi * D * D * L, d_u=d_u)
+
     def damping(self, u: float) -> float:
         """Surge damping force of eq. (4) at speed ``u`` (N)."""
         return self.d_u * (u + 0.2 * abs(u) * u + 0.1 * u * u * u)

@@ -1,9 +1,9 @@
 """The vessel computer's end of the HIL MAVLink link: sensor frames in, thruster commands out.
 
 The simulator sends one datagram per IMU period holding HIL_SENSOR and, when due, HIL_GPS,
-HIL_STATE_QUATERNION, ODOMETRY (DVL) and OBSTACLE_DISTANCE (range sensor). This end decodes it into a :class:`SensorFrame` in SI
-units and NED, converting GPS latitude/longitude with the shared geodesy. HIL_STATE_QUATERNION is
-the truth: it is dropped here and counted, never used for control. Commands go back as
+HIL_STATE_QUATERNION, ODOMETRY (DVL) and OBSTACLE_DISTANCE (range sensor). This end decodes it into a
+:class:`SensorFrame` in SI units and NED, converting GPS latitude/longitude with the shared geodesy.
+HIL_STATE_QUATERNION is the truth: it is dropped here and counted, never used for control. Commands go back as
 HIL_ACTUATOR_CONTROLS whose ``time_usec`` echoes the sensor frame they answer (the lockstep
 protocol of docs/simulator.md).
 
@@ -177,8 +177,9 @@ class HilLink:
                 self.rejects[IMPLAUSIBLE + "compass"] += 1
         elif not (math.isfinite(mx) and math.isfinite(my)):
             self.rejects[IMPLAUSIBLE + "compass"] += 1
-        yaw_rate = float(sensor.zgyro)
-        if not (math.isfinite(yaw_rate) and abs(yaw_rate) <= MAX_YAW_RATE):
+        gyro = float(sensor.zgyro)
+        yaw_rate: float | None = gyro
+        if not (math.isfinite(gyro) and abs(gyro) <= MAX_YAW_RATE):
             self.rejects[IMPLAUSIBLE + "gyro"] += 1
             yaw_rate = None
         fix, dropout = None, False

@@ -8,29 +8,19 @@ adds to the chart). The cycle itself is
 DDRRT* (or RRT*, Informed RRT*), pruning and Dubins smoothing (section 2.4).
 
 Frames: the planner's map frame (x east, y north, headings counter-clockwise from east). The
-autopilot converts with :func:`ned_to_map` / :func:`map_to_ned`.
+autopilot converts with :func:`common.frames.ned_to_map` / :func:`common.frames.map_to_ned`.
 """
 
 from __future__ import annotations
 
-import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-
-def ned_to_map(north: float, east: float, psi: float | None = None) -> tuple[float, ...]:
-    """NED position (and heading clockwise from north) to map x, y (and heading from east)."""
-    if psi is None:
-        return east, north
-    return east, north, math.pi / 2.0 - psi
-
-
-def map_to_ned_path(path: np.ndarray) -> np.ndarray:
-    """(N, 2) map points (x east, y north) to NED (north, east)."""
-    path = np.asarray(path, dtype=float).reshape(-1, 2)
-    return path[:, ::-1].copy()
+from common.frames import map_to_ned, map_to_ned_path, ned_to_map  # noqa: F401  (re-exported)
+from planner.cost import path_length
 
 
 @dataclass(frozen=True)
@@ -96,11 +86,6 @@ PLANNER_SHARE = 0.7  # of a real-time cycle's deadline; the rest is for post-pro
 LOOP_FACTOR = 1.25  # a smoothed path this much longer than its polyline contains a loop
 
 
-def _length(path: np.ndarray) -> float:
-    path = np.asarray(path, dtype=float).reshape(-1, 2)
-    return float(np.sum(np.hypot(*np.diff(path, axis=0).T))) if len(path) > 1 else 0.0
-
-
 WARM_UP_ITERATIONS = 200
 WARM_UP_DEADLINE_S = 0.05
 
@@ -156,10 +141,11 @@ def online_cycle_handler(world: World, warm_up: CycleInput | None = None) -> Cal
         if len(rec.smooth_path) >= 2 and rec.smoothed_ok:
             # Dubins curves between waypoints closer than ~2 R_min can loop; a loop is worse to follow
             # than the pruned polyline (whose turns the planner's fan limit already bounds).
-            if _length(rec.smooth_path) <= LOOP_FACTOR * _length(rec.local_path) + 1e-9:
+            if path_length(rec.smooth_path) <= LOOP_FACTOR * path_length(rec.local_path) + 1e-9:
                 path = rec.smooth_path
         return LocalPlan(cycle=request.cycle, status=rec.status, path=np.asarray(path, dtype=float).reshape(-1, 2),
-                         subgoal=tuple(rec.subgoal), subgoal_rule=rec.subgoal_rule, iterations=rec.iterations,
+                         subgoal=(float(rec.subgoal[0]), float(rec.subgoal[1])), subgoal_rule=rec.subgoal_rule,
+                         iterations=rec.iterations,
                          planning_time_s=rec.planning_time_s, reason=rec.reason, speed_factor=rec.speed_factor)
 
     if warm_up is not None:

@@ -78,6 +78,12 @@ class MissionCommand:
     def position(self) -> tuple[float, float] | None:
         return None if self.north is None or self.east is None else (self.north, self.east)
 
+    def required_position(self) -> tuple[float, float]:
+        """The position of an item that must have one (ValueError if it has none)."""
+        if self.north is None or self.east is None:
+            raise ValueError(f"mission item {self.command} has no position")
+        return (self.north, self.east)
+
 
 def waypoint(north: float, east: float, radius: float, hold: float = 0.0) -> MissionCommand:
     """A NAV_WAYPOINT (hold s, acceptance radius m)."""

@@ -176,7 +176,7 @@ class MissionExecutor:
             if not self._joins_leg(nxt):
                 break
             leg.append(j)
-            points.append(nxt.position)
+            points.append(nxt.required_position())  # _joins_leg: it has one
             j += 1
             while j < len(self.commands) and not self.commands[j].is_nav and self.commands[j].command != mc.DO_JUMP:
                 j += 1

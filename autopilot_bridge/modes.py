@@ -95,6 +95,7 @@ class ModeLoiter(RoverMode):
     number, flags, needs_position, drives = Mode.LOITER, _GUIDED_FLAGS, True, True
 
     def enter(self, v: Vehicle, position: tuple[float, float] | None) -> tuple[bool, str]:
+        assert position is not None  # needs_position: Vehicle.set_mode checked it
         v.new_route([position, position], v.default_radius, loiter=True)
         return True, self.name
 
@@ -105,6 +106,7 @@ class ModeAuto(RoverMode):
     def enter(self, v: Vehicle, position: tuple[float, float] | None) -> tuple[bool, str]:
         if not v.mission:
             return False, "AUTO: no mission"
+        assert position is not None  # needs_position: Vehicle.set_mode checked it
         v.route = None
         v.executor.start(v.executor.current, v, position, v.t)
         return True, self.name
@@ -120,6 +122,7 @@ class ModeRTL(RoverMode):
     def enter(self, v: Vehicle, position: tuple[float, float] | None) -> tuple[bool, str]:
         if v.home is None:
             return False, "RTL: no home position"
+        assert position is not None  # needs_position: Vehicle.set_mode checked it
         v.new_route([position, v.home], v.default_radius)
         return True, self.name
 
@@ -130,6 +133,7 @@ class ModeGuided(RoverMode):
     def enter(self, v: Vehicle, position: tuple[float, float] | None) -> tuple[bool, str]:
         v.route = None
         if v.guided_target is not None:
+            assert position is not None  # needs_position: Vehicle.set_mode checked it
             v.new_route([position, v.guided_target], v.default_radius)
         return True, self.name
 

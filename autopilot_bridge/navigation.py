@@ -15,6 +15,13 @@ against the chi-square quantile of ``gate_probability``: outliers (GPS glitches)
 and counted. Without GPS the filter dead-reckons from gyro and compass with constant body
 velocity, and its position covariance grows.
 
+Two interchangeable implementations (``navigation.filter``): ``"filterpy"`` (the prediction below
+on numpy, filterpy's ``ExtendedKalmanFilter.update``) and ``"fast"`` (the same equations -
+prediction, NIS gate, gain, Joseph-form covariance update - compiled with numba in one call per
+measurement, autopilot_bridge/nav_kernel.py). They agree to rounding, refusals and counters
+included (tests/test_navigation_fast.py). ``"fast"`` is the default: filterpy's path alone costs
+more per frame than the loop's budget at 3,000 lockstep steps/s (docs/performance.md).
+
 Numeric faults never escape: a measurement that is not finite, a singular innovation covariance
 (``LinAlgError``) or an update or prediction that would leave a NaN/inf in the state or its
 covariance is refused, the filter keeps its previous estimate (dead reckoning goes on) and the
@@ -26,11 +33,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from scipy.stats import chi2
 
+from autopilot_bridge import nav_kernel
 from autopilot_bridge.angles import wrap_angle
 from common.params import param
 
@@ -38,6 +47,20 @@ MeasurementModel = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 X, Y, PSI, U, V, R, BG = range(7)
 DIM = 7
+
+
+def _selector(*rows: tuple[int, ...]) -> np.ndarray:
+    H = np.zeros((len(rows), DIM))
+    for i, cols in enumerate(rows):
+        H[i, list(cols)] = 1.0
+    H.flags.writeable = False
+    return H
+
+
+_H_POSITION = _selector((X,), (Y,))
+_H_HEADING = _selector((PSI,))
+_H_GYRO = _selector((R, BG))
+_H_BODY_VELOCITY = _selector((U,), (V,))
 
 
 @dataclass(frozen=True)
@@ -54,6 +77,9 @@ class NavigationParams:
     dvl_std: float = param("assumed DVL velocity noise per axis", "m/s", gt=0)
     gate_probability: float = param("NIS gate: chi-square probability of accepting a true measurement", gt=0, lt=1)
     reset_after_rejections: int = param("consecutive rejected GPS fixes after which the position is reset to GPS", ge=1)
+    filter: Literal["filterpy", "fast"] = param(
+        "implementation of the EKF: filterpy's ExtendedKalmanFilter, or the same equations compiled with numba "
+        "(fast; same estimates to rounding; docs/performance.md)", default="fast")
 
 
 @dataclass
@@ -85,12 +111,39 @@ class NavState:
         return math.hypot(self.u, self.v)
 
 
+class FastEkf:
+    """State ``x`` (7x1) and covariance ``P`` (7x7) of the ``"fast"`` filter; each step of
+    :func:`autopilot_bridge.nav_kernel.step` assigns new arrays (never in place)."""
+
+    def __init__(self) -> None:
+        self.x = np.zeros((DIM, 1))
+        self.P = np.eye(DIM)
+
+
+_KIND = {"gps_pos": nav_kernel.GPS_POS, "gps_vel": nav_kernel.GPS_VEL, "compass": nav_kernel.COMPASS,
+         "gyro": nav_kernel.GYRO, "dvl": nav_kernel.DVL}
+_warm = False
+
+
+def _warm_up() -> None:
+    """Compile (or load from numba's cache) the fast kernel once per process, for both measurement
+    sizes, so that no frame pays for it."""
+    global _warm
+    if not _warm:
+        x, P = np.zeros((DIM, 1)), np.eye(DIM)
+        nav_kernel.step(x, P, 0.01, 0.1, 0.1, 0.0, nav_kernel.GYRO, np.zeros((1, 1)), np.eye(1), 10.0)
+        nav_kernel.step(x, P, 0.01, 0.1, 0.1, 0.0, nav_kernel.DVL, np.zeros((2, 1)), np.eye(2), 10.0)
+        _warm = True
+
+
 class NavigationFilter:
     """EKF fusing GPS position/velocity, gyro, compass and DVL into ``[x, y, psi, u, v, r, b_g]``."""
 
     def __init__(self, params: NavigationParams) -> None:
         self.p = params
-        self.ekf = ExtendedKalmanFilter(dim_x=DIM, dim_z=2)
+        self.fast = params.filter == "fast"
+        # Both expose x (7x1) and P (7x7) (see the module docstring).
+        self.ekf: ExtendedKalmanFilter | FastEkf = FastEkf() if self.fast else ExtendedKalmanFilter(dim_x=DIM, dim_z=2)
         self.t: float | None = None
         self.stats = NavigationStats()
         self._heading: float | None = None
@@ -100,6 +153,13 @@ class NavigationFilter:
         # identity entries and only the Jacobian's entries are rewritten; Q depends on dt only.
         self._F = np.eye(DIM)
         self._Q: dict[float, np.ndarray] = {}
+        p = params
+        self._q = (p.accel_noise**2, p.yaw_accel_noise**2, p.gyro_bias_walk**2)
+        if self.fast:
+            _warm_up()
+        self._R = {"gps_pos": np.eye(2) * p.gps_pos_std**2, "gps_vel": np.eye(2) * p.gps_vel_std**2,
+                   "compass": np.array([[p.compass_std**2]]), "gyro": np.array([[p.gyro_std**2]]),
+                   "dvl": np.eye(2) * p.dvl_std**2}
 
     # -- life cycle ------------------------------------------------------------------------
     @property
@@ -178,18 +238,20 @@ class NavigationFilter:
             g = self._gates[dim] = float(chi2.ppf(self.p.gate_probability, dim))
         return g
 
-    def _update(self, kind: str, t: float, z: np.ndarray, model: MeasurementModel, Rm: np.ndarray,
+    def _update(self, kind: str, t: float, z: np.ndarray, model: MeasurementModel,
                 angle_rows: tuple[int, ...] = ()) -> bool:
         """Predict to ``t``, gate the innovation by NIS, then update. ``model(x) -> (H, h(x))``."""
-        if not (math.isfinite(t) and np.isfinite(z).all()):
+        if not (math.isfinite(t) and all(math.isfinite(v) for row in z.tolist() for v in row)):
             self._numeric(kind)
             return False
+        if self.fast:
+            return self._update_fast(kind, t, z)
         if not self.predict_to(t):
             return False
         x0, P0 = self.ekf.x.copy(), self.ekf.P.copy()
         try:
             with np.errstate(all="ignore"):  # overflow is caught below, as a non-finite result
-                ok = self._gated_update(kind, z, model, Rm, angle_rows)
+                ok = self._gated_update(kind, z, model, self._R[kind], angle_rows)
         except (np.linalg.LinAlgError, ArithmeticError, ValueError):
             ok = None
         if ok is None or not (np.isfinite(self.ekf.x).all() and np.isfinite(self.ekf.P).all()):
@@ -197,6 +259,35 @@ class NavigationFilter:
             self._numeric(kind)
             return False
         return ok
+
+    def _update_fast(self, kind: str, t: float, z: np.ndarray) -> bool:
+        """:meth:`_update` in one compiled step (autopilot_bridge/nav_kernel.py), with the same
+        refusals, counters and roll-backs as :meth:`predict_to` and :meth:`_gated_update`."""
+        if self.t is None:
+            return False
+        dt = t - self.t
+        if dt < 0.0:
+            self.stats.out_of_order += 1
+            return False
+        if not math.isfinite(dt):
+            self._numeric("predict")
+            return False
+        q_a, q_r, q_b = self._q
+        code, xp, Pp, xn, Pn = nav_kernel.step(self.ekf.x, self.ekf.P, dt, q_a, q_r, q_b, _KIND[kind], z,
+                                               self._R[kind], self._gate(z.shape[0]))
+        if code == nav_kernel.NUMERIC_PREDICT:
+            self._numeric("predict")  # keep the last estimate; its time stays, so dt grows next time
+            return False
+        self.ekf.x, self.ekf.P, self.t = xp, Pp, t
+        if code == nav_kernel.NUMERIC_UPDATE:
+            self._numeric(kind)
+            return False
+        if code == nav_kernel.REJECTED:
+            self._rejected(kind)
+            return False
+        self.ekf.x, self.ekf.P = xn, Pn
+        self.stats.updates[kind] = self.stats.updates.get(kind, 0) + 1
+        return True
 
     def _gated_update(self, kind: str, z: np.ndarray, model: MeasurementModel, Rm: np.ndarray,
                       angle_rows: tuple[int, ...]) -> bool:
@@ -217,19 +308,22 @@ class NavigationFilter:
         if not math.isfinite(nis):
             raise ArithmeticError("innovation not finite")
         if nis > self._gate(z.shape[0]):
-            self.stats.rejected[kind] = self.stats.rejected.get(kind, 0) + 1
+            self._rejected(kind)
             return False
+        assert not isinstance(self.ekf, FastEkf)  # the "fast" filter updates in nav_kernel.step instead
         self.ekf.update(z, lambda _x: H, lambda _x: hx, R=Rm, residual=residual)
         self.ekf.x[PSI, 0] = wrap_angle(self.ekf.x[PSI, 0])
         self.stats.updates[kind] = self.stats.updates.get(kind, 0) + 1
         return True
 
+    def _rejected(self, kind: str) -> None:
+        self.stats.rejected[kind] = self.stats.rejected.get(kind, 0) + 1
+
     # -- measurements (each model returns the Jacobian H and the prediction h(x)) -------------
+    # Linear measurements: their Jacobians are constants (neither update writes into H).
     @staticmethod
     def _position_model(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        H = np.zeros((2, DIM))
-        H[0, X] = H[1, Y] = 1.0
-        return H, np.array([[x[X, 0]], [x[Y, 0]]])
+        return _H_POSITION, x[[X, Y]]
 
     @staticmethod
     def _ground_velocity_model(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -242,21 +336,15 @@ class NavigationFilter:
 
     @staticmethod
     def _heading_model(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        H = np.zeros((1, DIM))
-        H[0, PSI] = 1.0
-        return H, np.array([[x[PSI, 0]]])
+        return _H_HEADING, x[[PSI]]
 
     @staticmethod
     def _gyro_model(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        H = np.zeros((1, DIM))
-        H[0, R] = H[0, BG] = 1.0
-        return H, np.array([[x[R, 0] + x[BG, 0]]])
+        return _H_GYRO, np.array([[x[R, 0] + x[BG, 0]]])
 
     @staticmethod
     def _body_velocity_model(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        H = np.zeros((2, DIM))
-        H[0, U] = H[1, V] = 1.0
-        return H, np.array([[x[U, 0]], [x[V, 0]]])
+        return _H_BODY_VELOCITY, x[[U, V]]
 
     def update_gps_position(self, t: float, north: float, east: float) -> bool:
         """A GPS fix converted to NED metres. Initialises the filter on the first one."""
@@ -270,8 +358,7 @@ class NavigationFilter:
         if t < self.t:
             self.stats.out_of_order += 1
             return False
-        ok = self._update("gps_pos", t, np.array([[north], [east]]), self._position_model,
-                          np.eye(2) * self.p.gps_pos_std**2)
+        ok = self._update("gps_pos", t, np.array([[north], [east]]), self._position_model)
         if ok:
             self._consecutive_gps_rejections = 0
             return True
@@ -291,8 +378,7 @@ class NavigationFilter:
         """GPS velocity over ground, north and east (m/s)."""
         if self.t is None:
             return False
-        return self._update("gps_vel", t, np.array([[vn], [ve]]), self._ground_velocity_model,
-                            np.eye(2) * self.p.gps_vel_std**2)
+        return self._update("gps_vel", t, np.array([[vn], [ve]]), self._ground_velocity_model)
 
     def update_compass(self, t: float, heading: float) -> bool:
         """Compass heading (rad, true north, clockwise)."""
@@ -302,22 +388,19 @@ class NavigationFilter:
         self._heading = heading
         if self.t is None:
             return False
-        return self._update("compass", t, np.array([[heading]]), self._heading_model,
-                            np.array([[self.p.compass_std**2]]), angle_rows=(0,))
+        return self._update("compass", t, np.array([[heading]]), self._heading_model, angle_rows=(0,))
 
     def update_gyro(self, t: float, yaw_rate: float) -> bool:
         """Gyro yaw rate (rad/s), modelled as r + b_g + noise."""
         if self.t is None:
             return False
-        return self._update("gyro", t, np.array([[yaw_rate]]), self._gyro_model,
-                            np.array([[self.p.gyro_std**2]]))
+        return self._update("gyro", t, np.array([[yaw_rate]]), self._gyro_model)
 
     def update_dvl(self, t: float, u: float, v: float) -> bool:
         """DVL bottom-lock body velocity over ground (m/s)."""
         if self.t is None:
             return False
-        return self._update("dvl", t, np.array([[u], [v]]), self._body_velocity_model,
-                            np.eye(2) * self.p.dvl_std**2)
+        return self._update("dvl", t, np.array([[u], [v]]), self._body_velocity_model)
 
     # -- output ------------------------------------------------------------------------------
     def state(self) -> NavState | None:

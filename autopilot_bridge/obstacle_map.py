@@ -85,7 +85,7 @@ class SensedObstacles:
         new = np.column_stack([hr[done], hc[done]]).astype(np.int32).reshape(-1, 2)
         if len(new):
             self.confirmed[new[:, 0], new[:, 1]] = True
-            self._cells.extend(map(tuple, new.tolist()))
+            self._cells.extend((int(r), int(c)) for r, c in new.tolist())
             self.version += 1
         return new
 

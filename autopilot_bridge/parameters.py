@@ -8,8 +8,8 @@ https://mavlink.io/en/services/parameter.html asks. Values travel as MAV_PARAM_T
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 from matplotlib.path import Path
 
+from planner.cost import path_length
+
 
 @dataclass(frozen=True)
 class CommitmentParams:
@@ -29,12 +31,6 @@ class CommitmentParams:
     compare_length: float      # m of both paths compared from their starts
     min_remaining: float       # m: a current path with less left than this is always replaced
     shortcut_ratio: float      # a new path this much shorter (ratio of lengths) replaces it anyway
-
-
-def path_length(path: np.ndarray) -> float:
-    """Length (m) of an (N, 2) polyline."""
-    path = np.asarray(path, dtype=float)
-    return float(np.hypot(*np.diff(path, axis=0).T).sum()) if len(path) > 1 else 0.0
 
 
 def truncate(path: np.ndarray, length: float) -> np.ndarray:

@@ -25,9 +25,10 @@ from __future__ import annotations
 import importlib
 import multiprocessing as mp
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
-from typing import Any, Callable
+from typing import Any
 
 
 @dataclass(frozen=True)
@@ -150,7 +151,8 @@ class PlannerWorker:
         self.factory_args = factory_args
         self.grace_s = grace_s
         self.startup_timeout_s = startup_timeout_s
-        self.ctx = mp.get_context(start_method)
+        # Any: typeshed's BaseContext has no Process (each concrete context has its own)
+        self.ctx: Any = mp.get_context(start_method)
         self.stats = WorkerStats()
         self._proc: Any = None
         self._conn: Connection | None = None

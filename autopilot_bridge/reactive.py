@@ -19,8 +19,6 @@ from typing import Any
 
 import numpy as np
 
-from autopilot_bridge.angles import wrap_angle
-
 
 @dataclass(frozen=True)
 class AvoidanceCommand:

@@ -18,13 +18,16 @@ Frames: NED (north, east) metres here; the planner's map frame is x = east, y = 
 
 from __future__ import annotations
 
+import logging
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 from pymavlink.dialects.v20 import common as M
 
 from autopilot_bridge.obstacle_map import path_blocked
+
+_logger = logging.getLogger(__name__)
 
 
 def _to_map(ned) -> np.ndarray:
@@ -84,7 +87,7 @@ class RouteKeeper:
     def __init__(self, grid, safety_radius: float, spacing: float = 10.0,
                  log: Callable[[str], None] | None = None) -> None:
         self.grid, self.safety_radius, self.spacing = grid, float(safety_radius), float(spacing)
-        self.log = log or (lambda _m: None)
+        self.log = log or _logger.info
         self.waypoints: np.ndarray = np.zeros((0, 2))     # NED, the route as given (first: where it began)
         self.path: np.ndarray = np.zeros((0, 2))          # NED, dense global route
         self.progress = 0                                  # index into path of the vessel's nearest point

@@ -153,7 +153,8 @@ class TrafficAwareness:
             "ais": self.tracker.summary(),
             "forwarded_to_gcs": self.forwarded,
             "encounters": [{"mmsi": e.mmsi, "type": e.type, "role": e.role, "start_s": round(e.start_t, 2),
-                            "bearing_deg": round(e.bearing, 1), "rule17_act_s": None if e.act_t is None else round(e.act_t, 2),
+                            "bearing_deg": round(e.bearing, 1),
+                            "rule17_act_s": None if e.act_t is None else round(e.act_t, 2),
                             "end_s": None if e.end_t is None else round(e.end_t, 2)} for e in self.history],
         }
 

@@ -66,7 +66,7 @@ class Vehicle:
         if scenario_route is not None and self.active.number == Mode.AUTO:
             # The scenario's reference path as given (version 0): runs without a GCS stay as they were.
             self.route = Route(0, np.asarray(scenario_route, dtype=float), self._final_radius())
-            self.executor.adopt_leg(list(range(len(self.mission))), [c.position for c in self.mission])
+            self.executor.adopt_leg(list(range(len(self.mission))), [c.required_position() for c in self.mission])
         self.changed = False                  # mode/arming changed since last looked (telemetry)
 
     # -- state ----------------------------------------------------------------------------------

@@ -7,8 +7,9 @@ frozen :class:`VehicleStatus` snapshot published with every control frame.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable, Protocol
+from typing import Any, Protocol
 
 from autopilot_bridge.behaviour import Behaviour
 from autopilot_bridge.mission_commands import MissionCommand

@@ -19,15 +19,18 @@ class CanParams:
     """
 
     actuators: Literal["mavlink", "can"] = param(
-        "thruster set-points as HIL_ACTUATOR_CONTROLS over UDP (mavlink) or DroneCAN RawCommand over CAN (can)", default="mavlink")
+        "thruster set-points as HIL_ACTUATOR_CONTROLS over UDP (mavlink) or DroneCAN RawCommand over CAN (can)",
+        default="mavlink")
     interface: str = param("python-can interface of the bus (socketcan, virtual, pcan, ...)", default="socketcan")
     channel: str = param("python-can channel of the bus (vcan0, can0, ...)", default="vcan0")
     autopilot_node_id: int = param("static DroneCAN node ID of the autopilot", ge=1, le=127, default=10)
     esc_node_ids: tuple[int, int] = param("static DroneCAN node IDs of the port and starboard ESCs", default=(20, 21))
     status_rate_hz: float = param("ESC Status rate of each ESC node (simulated time)", "Hz", gt=0, le=100, default=10.0)
-    node_status_rate_hz: float = param("NodeStatus rate of every node (DroneCAN: 1-2 Hz typical)", "Hz", gt=0, le=10, default=1.0)
+    node_status_rate_hz: float = param(
+        "NodeStatus rate of every node (DroneCAN: 1-2 Hz typical)", "Hz", gt=0, le=10, default=1.0)
     lockstep_wait: float = param(
-        "lockstep: wall time the simulator waits for the RawCommand that matches a frame's answer", "s", gt=0, default=1.0)
+        "lockstep: wall time the simulator waits for the RawCommand that matches a frame's answer", "s", gt=0,
+        default=1.0)
     log: bool = param("hil run: record every CAN frame to can.log (candump format) in the run folder", default=True)
     socket_rx_buffer: int = param(
         "SocketCAN: receive buffer of each node's socket (SO_RCVBUF; the kernel caps it at net.core.rmem_max)",

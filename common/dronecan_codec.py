@@ -24,9 +24,10 @@ this module raises on bad input from the bus.
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Iterable
 from dataclasses import dataclass
-from functools import lru_cache
-from typing import Any, Iterable
+from functools import cache
+from typing import Any
 
 import can
 import dronecan
@@ -106,7 +107,7 @@ def decode(dt: Any, payload: bytes) -> Any | None:
         msg = dt()
         msg._unpack(bits_from_bytes(bytearray(payload)), True)
         canonical = serialize(msg)
-    except Exception:  # noqa: BLE001  (a payload too short for the type's fields: counted, never raised)
+    except Exception:
         return None
     return msg if canonical == payload else None
 
@@ -165,7 +166,8 @@ class TransferReceiver:
     :attr:`rejects` by reason, except continuation frames of transfers still in progress.
     """
 
-    def __init__(self, accept: Iterable[str], nodes: Iterable[int] | None = None, own_nodes: Iterable[int] = ()) -> None:
+    def __init__(self, accept: Iterable[str], nodes: Iterable[int] | None = None,
+                 own_nodes: Iterable[int] = ()) -> None:
         self.types = {data_type(n).default_dtid: data_type(n) for n in accept}
         self.nodes = None if nodes is None else frozenset(nodes)
         self.own_nodes = frozenset(own_nodes)
@@ -211,9 +213,9 @@ class TransferReceiver:
                 return None
             if eot:
                 return self._finish(dt, arb, tid, data[:-1], frame.timestamp, multi=False)
-            s = self.sessions[key] = _Session(tid, frame.timestamp)
-            s.data += data[:-1]
-            s.toggle = 1
+            new = self.sessions[key] = _Session(tid, frame.timestamp)
+            new.data += data[:-1]
+            new.toggle = 1
             return None
         s = self.sessions.get(key)
         if s is None:
@@ -328,7 +330,7 @@ def quantize(normalised: float) -> int:
     return int(round(x * RAW_COMMAND_MAX))
 
 
-@lru_cache(maxsize=None)
+@cache
 def short_name(full_name: str) -> str:
     """"uavcan.equipment.esc.Status" -> "Status"."""
     return full_name.rsplit(".", 1)[-1]

@@ -17,10 +17,10 @@ optimisation: no length prefix, its length is whatever fills the payload.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from functools import cached_property
 from types import SimpleNamespace
-from typing import Iterable
 
 
 @dataclass(frozen=True)
@@ -111,7 +111,7 @@ def unpack(layout: Layout, payload: bytes) -> SimpleNamespace | None:
     if end < layout.fixed_bits:
         return None
     stream = int.from_bytes(payload, "big")
-    out = {}
+    out: dict[str, int | list[int]] = {}
     for f in layout.fields:
         out[f.name] = _from_unsigned(f, _pull(stream, end, f.bits))
         end -= f.bits

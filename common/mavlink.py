@@ -9,7 +9,7 @@ joined with the next datagram.
 
 from __future__ import annotations
 
-from typing import Iterable
+from collections.abc import Iterable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
@@ -23,6 +23,17 @@ UNWANTED_MESSAGE = "unwanted_message"  # a valid, known message this endpoint do
 REJECT_REASONS = (NOT_MAVLINK, BAD_CRC, TRUNCATED, MALFORMED, UNKNOWN_MESSAGE, UNWANTED_MESSAGE)
 
 MAV_TYPE = mavlink2  # the dialect module, for enums (e.g. MAV_FRAME_BODY_FRD)
+
+
+def bad_data_reason(bad: mavlink2.MAVLink_bad_data) -> str:
+    """The rejection reason of a frame pymavlink could not parse: the one classifier of every
+    MAVLink endpoint (HIL link, simulator, ground-station link)."""
+    reason = str(getattr(bad, "reason", "")).lower()
+    if "prefix" in reason:
+        return NOT_MAVLINK
+    if "crc" in reason:
+        return BAD_CRC
+    return MALFORMED
 
 
 class Codec:
@@ -64,13 +75,7 @@ class Codec:
             return [], [MALFORMED]
         for m in msgs:
             if isinstance(m, mavlink2.MAVLink_bad_data):
-                reason = str(getattr(m, "reason", ""))
-                if "prefix" in reason:
-                    rejects.append(NOT_MAVLINK)
-                elif "CRC" in reason or "crc" in reason:
-                    rejects.append(BAD_CRC)
-                else:
-                    rejects.append(MALFORMED)
+                rejects.append(bad_data_reason(m))
             elif isinstance(m, mavlink2.MAVLink_unknown):
                 rejects.append(UNKNOWN_MESSAGE)
             elif m.get_type() in self.accept:

@@ -178,7 +178,7 @@ class UdpEndpoint:
     def close(self) -> None:
         self.sock.close()
 
-    def __enter__(self) -> "UdpEndpoint":
+    def __enter__(self) -> UdpEndpoint:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -31,7 +31,7 @@ def pair_latency(sent_tid, sent_at, applied_tid, applied_at, modulo: int = TRANS
     st, sa = np.asarray(sent_tid), np.asarray(sent_at)
     out = []
     j = 0
-    for tid, ta in zip(applied_tid, applied_at):
+    for tid, ta in zip(applied_tid, applied_at, strict=False):
         k = j
         while k < len(st) and k < j + modulo and not (st[k] == tid and sa[k] <= ta):
             k += 1
@@ -65,7 +65,7 @@ def recording_actuators(cfg: Any) -> Any:
         acts = CanActuators(open_bus(cfg.can), cfg.can)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    acts.record = True
+    acts.sent_times.start()
     return acts
 
 
@@ -114,7 +114,7 @@ def esc_main(args: argparse.Namespace) -> int:
     if args.only_from_autopilot:  # messages (service bit 0) from the autopilot's node ID only
         filters = [{"can_id": cfg.can.autopilot_node_id, "can_mask": 0xFF, "extended": True}]
     esc = EscBank(open_bus(cfg.can, can_filters=filters), cfg.can, cfg.esc, vessel)
-    esc.record = True
+    esc.applied_times.start(spill_to=args.record)
     flag = _stop_flag()
     print("esc: ready", file=sys.stderr, flush=True)
     t0 = time.monotonic()
@@ -127,8 +127,7 @@ def esc_main(args: argparse.Namespace) -> int:
         c = esc.controls() or (0.0, 0.0)
         esc.publish(now - t0, (vessel.thrust(c[0]), vessel.thrust(c[1])))
     esc.bus.shutdown()
-    np.savez(args.record, tid=np.frombuffer(esc.applied_tid, dtype=np.int8),
-             at=np.frombuffer(esc.applied_at, dtype=float))
+    esc.applied_times.save(args.record)
     print(json.dumps(esc.summary()), flush=True)
     return 0
 

@@ -16,6 +16,7 @@ import argparse
 import importlib
 import sys
 
+from hil import console
 from hil.errors import HilError
 
 # Subcommand modules under hil/commands/, in the order `hil --help` lists them.
@@ -65,6 +66,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if getattr(args, "config", None) is not None:
         args.config = tuple(args.config)
+    console.configure_logging()
     try:
         return int(args.func(args))
     except HilError as exc:

@@ -29,7 +29,6 @@ import typing
 from pathlib import Path
 from typing import Any, Literal, TypeVar, get_args, get_origin
 
-from common.params import param  # noqa: F401  (re-exported for schemas)
 from hil.errors import ConfigError
 
 T = TypeVar("T")
@@ -81,7 +80,7 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
             return tuple(_convert(v, args[0], f"{key}[{i}]") for i, v in enumerate(value))
         if len(value) != len(args):
             raise ValueError(f"{key}: expected an array of {len(args)} items, got {len(value)}")
-        return tuple(_convert(v, a, f"{key}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
+        return tuple(_convert(v, a, f"{key}[{i}]") for i, (v, a) in enumerate(zip(value, args, strict=False)))
     if origin is dict:
         if not isinstance(value, dict):
             raise ValueError(f"{key}: expected a table, got {type(value).__name__}")

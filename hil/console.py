@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import math
 import sys
 import time
@@ -18,6 +19,38 @@ def load_settings(args: argparse.Namespace) -> HilConfig:
     from hil import settings
 
     return settings.load(args.config, args.overrides)
+
+
+# The processes' packages log under their own names (``logging.getLogger(__name__)``); a `hil` command
+# shows their INFO records as progress lines. User errors stay one line printed by hil.cli.main.
+PROCESS_PACKAGES = ("hil", "simulator", "autopilot_bridge", "common")
+
+
+class _StderrHandler(logging.StreamHandler):
+    """Writes each record to the ``sys.stderr`` of the moment (a redirect, pytest's capture)."""
+
+    def __init__(self) -> None:
+        super().__init__(sys.stderr)
+        self.setFormatter(logging.Formatter("%(message)s"))
+
+    @property  # type: ignore[override]
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, _value) -> None:
+        pass
+
+
+def configure_logging(level: int = logging.INFO) -> None:
+    """Records of :data:`PROCESS_PACKAGES` at ``level`` and above on stderr, the bare message a line,
+    as :func:`progress` writes (idempotent)."""
+    for name in PROCESS_PACKAGES:
+        logger = logging.getLogger(name)
+        if not any(isinstance(h, _StderrHandler) for h in logger.handlers):
+            logger.addHandler(_StderrHandler())
+        logger.setLevel(level)
+        logger.propagate = False  # once on stderr, not again through a root handler
 
 
 def progress(message: str) -> None:

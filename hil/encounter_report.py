@@ -185,7 +185,8 @@ class EncounterJudge:
         if dist[k] < safety:
             why.append(f"CPA below {safety:.1f} m")
         out.update(type=enc.type, role=enc.role, required=enc.required, risk_time_s=round(float(t[i0]), 2),
-                   bearing_deg=round(enc.bearing_deg, 1), action=action, action_time_s=None if act_t is None else round(act_t, 2),
+                   bearing_deg=round(enc.bearing_deg, 1), action=action,
+                   action_time_s=None if act_t is None else round(act_t, 2),
                    max_starboard_deg=round(stbd, 1), max_port_deg=round(port, 1),
                    min_speed_ratio=round(float(speed.min() / max(own_speed, 1e-6)), 2),
                    rule17_time_s=None if rule17 is None or enc.role != O.STAND_ON else round(float(t[rule17]), 2),

@@ -24,9 +24,10 @@ import os
 import signal
 import threading
 import uuid
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass
-from typing import Any, Callable, Iterator, Sequence
+from typing import Any
 
 from hil.errors import UsageError
 
@@ -85,7 +86,7 @@ class Executor:
     def close(self) -> None:
         """Release the workers."""
 
-    def __enter__(self) -> "Executor":
+    def __enter__(self) -> Executor:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:

@@ -13,13 +13,13 @@ import csv
 import math
 import signal
 import time
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
-from hil.executors import default_jobs  # noqa: F401  (re-exported: experiment.default_jobs)
 from planner.params import ALGORITHM_NAMES
 
 ALGORITHMS = ALGORITHM_NAMES  # the planner's registry; the order fixes the per-algorithm seeds

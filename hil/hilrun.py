@@ -23,20 +23,21 @@ import errno
 import json
 import math
 import os
-import tempfile
 import signal
-import socket
 import struct
 import subprocess
 import sys
+import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from scipy import ndimage
 
+from common.frames import map_to_ned
 from common.geodesy import LocalFrame
 from common.mavlink import Codec, mavlink2
 from common.readiness import ReadyWait
@@ -83,7 +84,7 @@ class RunOptions:
     speedup: float = 1.0
     duration: float = 300.0              # s of simulated time at most
     seed: int = 1
-    config: "str | tuple[str, ...] | None" = None   # --config file(s), laid over the defaults in order
+    config: str | tuple[str, ...] | None = None   # --config file(s), laid over the defaults in order
     overrides: list[str] = field(default_factory=list)
     out: Path | None = None              # run folder
     wall_timeout: float = 900.0          # s, whatever happens
@@ -94,7 +95,7 @@ class RunOptions:
     stop_at_goal: bool = True            # hil soak: keep running after the goal until the time is up
     on_progress: Callable[[str], None] = lambda _m: None
     plot: bool = True
-    hooks: list[Callable[["Tap", "HilRun"], None]] = field(default_factory=list)  # tests: fault injection
+    hooks: list[Callable[[Tap, HilRun], None]] = field(default_factory=list)  # tests: fault injection
     traffic: tuple | None = None         # ships replacing the scenario's [[traffic]] (Monte Carlo draws)
 
     def __post_init__(self) -> None:
@@ -342,7 +343,7 @@ class HilRun:
 
     def sim_command(self, initial: tuple[float, float, float] | None = None) -> list[str]:
         s = self.scen
-        north, east, psi = (s.start[1], s.start[0], math.pi / 2.0 - s.start_heading) if initial is None else initial
+        north, east, psi = map_to_ned(s.start[0], s.start[1], s.start_heading) if initial is None else initial
         cur = self.scen.current
         args = [sys.executable, "-m", "hil", "sim", *self._common_args(),
                 "--state-to", f"127.0.0.1:{self.ap_port}", "--state-to", f"127.0.0.1:{self.tap.port}",
@@ -610,9 +611,11 @@ class HilRun:
                 "jitter_ms")},
             # Every refused frame by reason, per endpoint, with the kernel's drops (docs/security.md).
             "security": {
-                "simulator": None if sim is None else {"rejects": sim.get("rejects"), **(sim.get("command_port") or {})},
+                "simulator": None if sim is None else {"rejects": sim.get("rejects"),
+                                                       **(sim.get("command_port") or {})},
                 "autopilot": ap.get("link"),
-                "autopilot_navigation_numeric": {k: v for k, v in ((ap.get("navigation") or {}).get("rejected") or {}).items()
+                "autopilot_navigation_numeric": {k: v for k,
+                                                 v in ((ap.get("navigation") or {}).get("rejected") or {}).items()
                                                  if k.startswith("numeric_")},
                 "tap": self.tap.counters_at_close,
             },
@@ -635,7 +638,8 @@ class HilRun:
             summary["traffic"] = {**totals(enc), "ais": (ap.get("traffic") or {}).get("ais"),
                                   "ais_forwarded_to_gcs": self.tap.ais_forwarded,
                                   "ship_collision": None if self.encounter_judge.collision is None else
-                                  {"time_s": self.encounter_judge.collision[0], "mmsi": self.encounter_judge.collision[1]}}
+                                  {"time_s": self.encounter_judge.collision[0],
+                                   "mmsi": self.encounter_judge.collision[1]}}
         if self.cfg.can.actuators == "can":
             # The CAN path's counters: transport, ESC status, rejects (wall-clock dependent).
             summary["can"] = {"autopilot": ap.get("can"), "simulator": None if sim is None else sim.get("can"),
@@ -712,7 +716,7 @@ def run_loop(opts: RunOptions, cfg: Any) -> dict[str, Any]:
 
 
 def _run_loop(opts: RunOptions, cfg: Any) -> dict[str, Any]:
-    from hil.commands.autopilot import write_json_atomic
+    from hil.files import write_json_atomic
 
     run = HilRun(opts, cfg)
     summary = run.execute()

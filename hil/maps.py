@@ -214,7 +214,8 @@ def write_all(out_dir: Path = MAP_DIR) -> list[Path]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m hil.maps", description="Regenerate configs/maps/*.npy from their seeds.")
+    p = argparse.ArgumentParser(prog="python -m hil.maps",
+                                description="Regenerate configs/maps/*.npy from their seeds.")
     p.add_argument("--out", type=Path, default=MAP_DIR, help="output folder (default configs/maps)")
     args = p.parse_args(argv)
     for path in write_all(args.out):

@@ -9,16 +9,17 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.collections import LineCollection  # noqa: E402
-from matplotlib.colors import ListedColormap  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.collections import LineCollection
+from matplotlib.colors import ListedColormap
 
 
 def _draw_map(ax, occ: np.ndarray, resolution: float, inflated: np.ndarray | None = None) -> None:
@@ -86,7 +87,7 @@ def plot_online(out: str | Path, occ: np.ndarray, resolution: float, runs: Seque
     n = max(len(runs), 1)
     aspect = occ.shape[0] / occ.shape[1]
     fig, axes = plt.subplots(1, n, figsize=(6.5 * n, 6.5 * aspect + 0.8), squeeze=False)
-    for ax, (label, res) in zip(axes[0], runs):
+    for ax, (label, res) in zip(axes[0], runs, strict=False):
         _draw_map(ax, occ, resolution, inflated)
         _draw_field(ax, field, occ.shape[1] * resolution, occ.shape[0] * resolution)
         ref = np.asarray(reference_path)
@@ -121,7 +122,7 @@ def plot_runs_grid(out: str | Path, panels: Sequence[dict], cols: int = 3, title
     colors = {"rrt-star": "tab:blue", "informed-rrt-star": "tab:orange", "ddrrt-star": "red"}
     for ax in axes.flat[n:]:
         ax.axis("off")
-    for ax, p in zip(axes.flat, panels):
+    for ax, p in zip(axes.flat, panels, strict=False):
         _draw_map(ax, p["occ"], p["resolution"])
         _path(ax, p["reference_path"], color="black", ls=":", lw=1.0)
         for label, path, reached in p["paths"]:

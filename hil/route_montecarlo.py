@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import csv
 import json
-import math
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -50,10 +50,32 @@ def write_instance(scen: Any, spec: Any, folder: Path, name: str) -> Path:
     return path
 
 
-def run_campaign(scenario: str, runs: int, seed: int, out: Path, jobs: int, safety_radius: float, base_current: Any,
-                 make_options: Callable[[int, Path, Path], Any], run_one: Callable[[Any], dict],
+@dataclass(frozen=True)
+class RouteJob:
+    """One whole lockstep HIL run of a routes campaign, picklable for any executor
+    (:mod:`hil.executors`): called with ``(run, scenario_file, run_folder)`` it returns the run's
+    summary. Each run picks its own UDP ports (reserved host-wide), so runs sharing a host never collide."""
+
+    seed: int
+    duration: float            # s of simulated time at most
+    config: Any                # --config file(s), as hil.settings.load takes them
+    overrides: tuple[str, ...]
+
+    def __call__(self, item: tuple[int, str, str]) -> dict:
+        from hil import settings
+        from hil.hilrun import RunOptions, run_loop
+
+        i, scenario_file, folder = item
+        opts = RunOptions(scenario=scenario_file, lockstep=True, duration=self.duration, seed=self.seed * 1000 + i,
+                          config=self.config, overrides=list(self.overrides), out=Path(folder) / "hil", plot=False)
+        return run_loop(opts, settings.load(self.config, list(self.overrides)))
+
+
+def run_campaign(scenario: str, runs: int, seed: int, out: Path, executor: Any, safety_radius: float,
+                 base_current: Any, run_one: Callable[[tuple[int, str, str]], dict],
                  progress: Callable[[int, dict], None] = lambda _i, _s: None) -> dict[str, Any]:
-    """``runs`` HIL runs on instances of the random ``scenario``; writes ``runs.csv`` and ``summary.json``."""
+    """``runs`` HIL runs of ``run_one((run, scenario_file, folder))`` on instances of the random
+    ``scenario``, on ``executor``; writes ``runs.csv`` and ``summary.json``."""
     from hil import scenario as scenarios
 
     spec = scenarios.load_spec(scenario)
@@ -63,23 +85,20 @@ def run_campaign(scenario: str, runs: int, seed: int, out: Path, jobs: int, safe
         folder = out / f"run{i:04d}"
         plans.append((i, scen, write_instance(scen, spec, folder, f"{spec.name}-{seed}-{i}"), folder))
 
-    def one(item):
-        i, scen, path, folder = item
-        return i, scen, path, run_one(make_options(i, path, folder))
-
     rows = []
-    with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
-        for done, (i, scen, path, s) in enumerate(pool.map(one, plans), start=1):
-            wps = np.asarray(scen.waypoints)
-            legs = np.hypot(*np.diff(wps, axis=0).T)
-            rows.append({"run": i, "outcome": s["outcome"], "reached": bool(s["reached_goal"]),
-                         "collisions": s["collisions"], "min_clearance_m": s["min_clearance_m"],
-                         "sim_time_s": s["sim_time_s"], "waypoints": len(wps) - 1,
-                         "longest_leg_m": round(float(legs.max()), 1), "route_length_m":
-                         round(float(np.sum(np.hypot(*np.diff(scen.reference_path, axis=0).T))), 1),
-                         "path_length_m": s["path_length_m"], "fallbacks": s["fallback_activations"],
-                         "scenario": str(path)})
-            progress(done, s)
+    items = [(i, str(path), str(folder)) for i, _, path, folder in plans]
+    for done, (i, s) in enumerate(executor.map_unordered(run_one, items), start=1):
+        _, scen, path, _ = plans[i]
+        wps = np.asarray(scen.waypoints)
+        legs = np.hypot(*np.diff(wps, axis=0).T)
+        rows.append({"run": i, "outcome": s["outcome"], "reached": bool(s["reached_goal"]),
+                     "collisions": s["collisions"], "min_clearance_m": s["min_clearance_m"],
+                     "sim_time_s": s["sim_time_s"], "waypoints": len(wps) - 1,
+                     "longest_leg_m": round(float(legs.max()), 1), "route_length_m":
+                     round(float(np.sum(np.hypot(*np.diff(scen.reference_path, axis=0).T))), 1),
+                     "path_length_m": s["path_length_m"], "fallbacks": s["fallback_activations"],
+                     "scenario": str(path)})
+        progress(done, s)
     rows.sort(key=lambda r: r["run"])
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "runs.csv", "w", newline="") as fh:

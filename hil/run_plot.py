@@ -1,5 +1,6 @@
 """The picture of one HIL run: chart, uncharted and sensed obstacles, reference path, planned local
-paths, true and estimated tracks, current arrows. Drawn in the map frame (x east, y north) like the paper's Figures 9 and 10."""
+paths, true and estimated tracks, current arrows. Drawn in the map frame (x east, y north) like the paper's
+Figures 9 and 10."""
 
 from __future__ import annotations
 
@@ -9,8 +10,8 @@ from typing import Any
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
 
 def plot_run(path: Path, scen: Any, truth: dict[int, tuple], autopilot: dict, cfg: Any,

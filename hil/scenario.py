@@ -48,9 +48,8 @@ from common.params import param
 from hil import config
 from hil.config import CONFIG_DIR
 from hil.errors import ConfigError, UsageError
-from hil.scenario_names import SCENARIO_DIR, available  # noqa: F401  (available: re-exported)
+from hil.scenario_names import SCENARIO_DIR, available
 from simulator.traffic import ShipSpec
-
 
 
 @dataclass(frozen=True)
@@ -171,7 +170,7 @@ class Scenario:
         from common.current_field import CurrentField
         return CurrentField(self.current)
 
-    def map_field(self) -> "MapFrameCurrent | None":
+    def map_field(self) -> MapFrameCurrent | None:
         """The current frozen at ``field_time`` as a map-frame DisturbanceField, or None."""
         f = self.current_field()
         return None if f is None else MapFrameCurrent(f, self.field_time)

@@ -7,9 +7,9 @@ is laid over it (several in order), then the ``--set section.key=value`` overrid
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
 
 from autopilot_bridge.ais_tracking import TrackerParams
 from autopilot_bridge.config import AutopilotParams

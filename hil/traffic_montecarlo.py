@@ -21,9 +21,10 @@ from __future__ import annotations
 import csv
 import json
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -143,7 +144,8 @@ def run_campaign(scenario: str, runs: int, seed: int, draw: TrafficDraw, out: Pa
         "encounters": len(risky),
         "compliance_rate": round(sum(1 for r in risky if r["compliant"]) / len(risky), 4) if risky else None,
         "by_type": {k: {"n": len(v), "compliant": sum(1 for r in v if r["compliant"]),
-                        "mean_cpa_m": round(float(np.mean([r["cpa_m"] for r in v])), 2)} for k, v in sorted(by_type.items())},
+                        "mean_cpa_m": round(float(np.mean([r["cpa_m"] for r in v])), 2)}
+                    for k, v in sorted(by_type.items())},
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     return summary

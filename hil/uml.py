@@ -69,7 +69,7 @@ def _can_socket_ok(channel: str) -> str | None:
         bus = can.Bus(interface="socketcan", channel=channel)
         bus.shutdown()
         return None
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:
         return f"{type(exc).__name__}: {exc}"
 
 
@@ -232,7 +232,8 @@ def run_in_uml(jobs: list[Job], mem: str = "1536M", boot_timeout: float = 60.0,
             sysctls[key] = Path(f"/proc/sys/net/core/{key}").read_text().strip()
         except OSError:
             pass
-    init.write_text(_INIT.format(python=sys.executable, sysctls=sysctls, work=str(work.resolve()), modules=list(CAN_MODULES),
+    init.write_text(_INIT.format(python=sys.executable, sysctls=sysctls, work=str(work.resolve()),
+                                 modules=list(CAN_MODULES),
                                  kernel=str(uml_modules()), ip=shutil.which("ip") or "/usr/sbin/ip"))
     init.chmod(0o755)
     (work / "guest.json").unlink(missing_ok=True)
@@ -267,7 +268,7 @@ def run_in_uml(jobs: list[Job], mem: str = "1536M", boot_timeout: float = 60.0,
         raise RuntimeError(f"User-Mode Linux init failed: {guest['error'].strip().splitlines()[-1]}; "
                            f"modules {guest.get('modules')}; console:\n" + _tail(console_path))
     results = []
-    for i, (job, done) in enumerate(zip(jobs, guest["jobs"])):
+    for i, (job, done) in enumerate(zip(jobs, guest["jobs"], strict=False)):
         results.append(JobResult(job.name, done["returncode"],
                                  (work / f"job{i}.out").read_text(errors="replace"),
                                  (work / f"job{i}.err").read_text(errors="replace"), done["seconds"]))

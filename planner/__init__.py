@@ -68,5 +68,5 @@ def warm_up_info():
     return _info()
 
 
-__all__ = ["warm_up", "warm_up_info", "ALGORITHMS", "Planner", "PlannerParams", "PlannerResult", "PlanningProblem", "Termination",
-           "make_planner"]
+__all__ = ["warm_up", "warm_up_info", "ALGORITHMS", "Planner", "PlannerParams", "PlannerResult", "PlanningProblem",
+           "Termination", "make_planner"]

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from llvmlite import ir
 from numba import njit, types
 from numba.core import cgutils
@@ -40,7 +39,7 @@ def _clock_gettime_monotonic(typingctx, buf):
 @njit(cache=True)
 def monotonic_ns(buf):
     """Nanoseconds of CLOCK_MONOTONIC; ``buf`` is a scratch int64[2] (timespec)."""
-    _clock_gettime_monotonic(buf)
+    _clock_gettime_monotonic(buf)  # type: ignore[call-arg]  # numba passes the typing context itself
     return buf[0] * 1_000_000_000 + buf[1]
 
 

@@ -17,7 +17,7 @@ import math
 import numpy as np
 from numba import njit
 
-from planner._kernels import edge_cost, field_at, monotonic_ns, segment_free, sigmoid_arg
+from planner._kernels import edge_cost, field_at, monotonic_ns, segment_free
 
 # algorithm codes
 RRT_STAR = 0

@@ -142,7 +142,8 @@ def classify(own_pos, own_course: float, own_speed: float, tgt_pos, tgt_course: 
     return done(CROSSING_STAND_ON)
 
 
-def forbidden_zones(encounter_type: str, radius: float, p: ColregsParams, act_stand_on: bool = False) -> tuple[Zone, ...]:
+def forbidden_zones(encounter_type: str, radius: float, p: ColregsParams, act_stand_on: bool = False) -> tuple[Zone,
+                                                                                                               ...]:
     """The rule zones (besides the target's disc of radius R) for one encounter.
 
     ``act_stand_on``: the stand-on USV is acting under rule 17 (the give-way ship clearly fails);

@@ -25,7 +25,7 @@ from planner import _tree
 from planner.cost import min_cost_factor, path_cost, path_length
 from planner.field import GridField
 from planner.gridmap import OccupancyGrid
-from planner.params import PlannerParams
+from planner.params import Objective, PlannerParams
 from planner.problem import PlanningProblem
 from planner.result import PlannerResult
 from planner.termination import Termination
@@ -98,7 +98,9 @@ def warm_up_info() -> WarmUp:
     grid = OccupancyGrid(occ, 0.5)
     grid.segment_free(1.0, 1.0, 18.0, 18.0)
     ref = np.array([[2.0, 10.0], [18.0, 10.0]])
-    for objective, field in (("length", None), ("current", GridField.uniform(0.3, 0.1))):
+    cases: tuple[tuple[Objective, GridField | None], ...] = (("length", None),
+                                                            ("current", GridField.uniform(0.3, 0.1)))
+    for objective, field in cases:
         params = PlannerParams(max_nodes=2000, objective=objective)
         for cls in (RRTStar, InformedRRTStar, DDRRTStar):
             problem = PlanningProblem(grid, (2.0, 10.0), (18.0, 10.0), start_heading=0.0, field=field,
@@ -126,7 +128,7 @@ def _none(reason: str, t0: float, start=None) -> PlannerResult:
 def free_regions(grid: OccupancyGrid) -> np.ndarray:
     """4-connected labels of the free cells (cached on the grid). 4-connectivity matches the
     segment check, which never lets a path through a corner shared by two obstacle cells."""
-    labels = getattr(grid, "_free_labels", None)
+    labels = grid._free_labels
     if labels is None:
         labels, _ = ndimage.label(~grid.occ)
         grid._free_labels = labels
@@ -319,7 +321,7 @@ class TreePlanner:
                 reason = f"goal not reached; path to the closest node ({fs[_tree.F_CLOSEST_D]:.2f} m away); {why}"
         path = np.zeros((0, 2))
         if status != "none":
-            chain = []
+            chain: list[int] = []
             i = end
             while i >= 0 and len(chain) <= n:
                 chain.append(i)
@@ -334,7 +336,8 @@ class TreePlanner:
             status=status, path=path, cost=c, length=length, iterations=int(st[_tree.S_ITER]),
             time_to_first_solution_s=first, planning_time_s=time.monotonic() - t0, reason=reason,
             tree_nodes=X[:n].copy(), tree_parents=parent[:n].copy(), samples_rejected=int(st[_tree.S_REJ]),
-            diagnostics={"collision_checks": int(st[_tree.S_CHECKS]), "tree_cost": float(cost[end]) if status != "none" else math.inf,
+            diagnostics={"collision_checks": int(st[_tree.S_CHECKS]),
+                         "tree_cost": float(cost[end]) if status != "none" else math.inf,
                          "first_solution_iteration": int(st[_tree.S_FIRST_ITER]) if goal >= 0 else None,
                          "algorithm": self.name,
                          "dynamic_domains": int(np.sum(np.isfinite(dd[:n]))),  # DDRRT* nodes with a bounded DD

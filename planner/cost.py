@@ -100,7 +100,9 @@ def path_cost(path: np.ndarray, field, params) -> float:
 
 
 def path_length(path: np.ndarray) -> float:
-    path = np.asarray(path, dtype=np.float64)
+    """Euclidean length (m) of an (N, 2) polyline; 0 for fewer than two points. The one polyline
+    length of the project (the vessel computer uses it too)."""
+    path = np.asarray(path, dtype=np.float64).reshape(-1, 2)
     if len(path) < 2:
         return 0.0
     return float(np.sum(np.hypot(*np.diff(path, axis=0).T)))

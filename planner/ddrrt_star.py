@@ -54,7 +54,8 @@ class DDRRTStar(TreePlanner):
         t_head = math.atan2(ref[j + 1, 1] - ref[j, 1], ref[j + 1, 0] - ref[j, 0])
         heading = problem.start_heading
         if heading is None:
-            heading = math.atan2(ref[j, 1] - sy, ref[j, 0] - sx) if math.hypot(ref[j, 0] - sx, ref[j, 1] - sy) > 1e-9 else t_head
+            dx, dy = ref[j, 0] - sx, ref[j, 1] - sy
+            heading = math.atan2(dy, dx) if math.hypot(dx, dy) > 1e-9 else t_head
         p = self.params
         # the USV (twice the target's speed) covers its straight-line distance to the goal in one
         # guidance step: the PGNode is never farther away than the (sub)goal

@@ -39,7 +39,7 @@ class GridField:
         self.origin = (float(origin[0]), float(origin[1]))
 
     @classmethod
-    def sample(cls, field: DisturbanceField, width: float, height: float, resolution: float) -> "GridField":
+    def sample(cls, field: DisturbanceField, width: float, height: float, resolution: float) -> GridField:
         """Sample ``field`` on [0, width] x [0, height] every ``resolution`` metres."""
         nx = int(np.ceil(width / resolution)) + 1
         ny = int(np.ceil(height / resolution)) + 1
@@ -50,7 +50,7 @@ class GridField:
         return cls(np.broadcast_to(vx, X.shape), np.broadcast_to(vy, X.shape), resolution)
 
     @classmethod
-    def uniform(cls, vx: float, vy: float) -> "GridField":
+    def uniform(cls, vx: float, vy: float) -> GridField:
         """A constant field."""
         return cls(np.full((1, 1), vx), np.full((1, 1), vy), 1.0)
 

@@ -39,7 +39,7 @@ from planner.gridmap import OccupancyGrid
 DEFAULT_SPACING = 10.0  # m: a third of the paper's 33 m perceptual radius (the hand-drawn routes' spacing)
 
 
-class RouteStatus(str, Enum):
+class RouteStatus(str, Enum):  # noqa: UP042  (StrEnum would change str() of the members, which reports print)
     """Outcome of :func:`plan_route` (the string is what reports print)."""
 
     OK = "ok"
@@ -134,7 +134,6 @@ def plan_route(grid: OccupancyGrid, waypoints, spacing: float = DEFAULT_SPACING,
                                                      "safety margin")
     if grid.occ.all():
         return _fail(RouteStatus.UNREACHABLE, 1, "the chart has no free water")
-    points = [wps[0]]
     escape = None
     if not grid.is_free(*wps[0]):
         if not start_may_be_blocked:
@@ -155,6 +154,7 @@ def plan_route(grid: OccupancyGrid, waypoints, spacing: float = DEFAULT_SPACING,
         wide = np.ascontiguousarray(preferred.occ.astype(np.uint8))
         wide_labels, _ = ndimage.label(~preferred.occ)
     legs_vertices: list[tuple[np.ndarray, bool]] = []
+    verts: np.ndarray | None
     for i in range(1, len(wps)):
         a = escape if (i == 1 and escape is not None) else wps[i - 1]
         b = wps[i]
@@ -162,7 +162,7 @@ def plan_route(grid: OccupancyGrid, waypoints, spacing: float = DEFAULT_SPACING,
             verts, straight = np.array([a, b]), True
         else:
             on = occ
-            if wide is not None:
+            if wide is not None and wide_labels is not None and preferred is not None:
                 la, lb = wide_labels[_cell(grid, a)], wide_labels[_cell(grid, b)]
                 if la != 0 and la == lb and preferred.is_free(*a) and preferred.is_free(*b):
                     on = wide
@@ -208,7 +208,7 @@ def densify(vertices, spacing: float) -> np.ndarray:
     if len(v) < 2:
         return v.copy()
     out = [v[:1]]
-    for a, b in zip(v[:-1], v[1:]):
+    for a, b in zip(v[:-1], v[1:], strict=True):
         n = max(int(math.ceil(math.hypot(*(b - a)) / spacing - 1e-9)), 1)
         out.append(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
     return np.concatenate(out)

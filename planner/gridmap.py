@@ -35,13 +35,14 @@ class OccupancyGrid:
         if isinstance(resolution, bool) or not (isinstance(resolution, numbers.Real) and math.isfinite(resolution)
                                                 and resolution > 0):
             raise MapError(f"map resolution must be a finite number > 0 m/cell, got {resolution!r}")
-        self.occ = np.ascontiguousarray(occ)
-        self.resolution = float(resolution)
-        self._u8 = self.occ.view(np.uint8)
+        self.occ: np.ndarray = np.ascontiguousarray(occ)
+        self.resolution: float = float(resolution)
+        self._u8: np.ndarray = self.occ.view(np.uint8)
         self._clearance: np.ndarray | None = None
+        self._free_labels: np.ndarray | None = None  # cache of planner.core.free_regions
 
     @classmethod
-    def load(cls, path: str | Path, resolution: float) -> "OccupancyGrid":
+    def load(cls, path: str | Path, resolution: float) -> OccupancyGrid:
         """Load a ``.npy`` (bool, True = obstacle, row 0 at y = 0) or a ``.png`` (white free,
         black obstacle, drawn north-up: the top image row is the largest y)."""
         p = Path(path)
@@ -118,7 +119,7 @@ class OccupancyGrid:
         any obstacle (outside the map counts as occupied), so paths keep clear of it too."""
         return np.pad(self.occ, 1, constant_values=True)
 
-    def inflate(self, radius: float) -> "OccupancyGrid":
+    def inflate(self, radius: float) -> OccupancyGrid:
         """Disc dilation: a cell becomes an obstacle if its centre is within ``radius`` metres of
         the centre of an obstacle cell or of the ring of cells just outside the map."""
         if radius < 0:
@@ -128,7 +129,7 @@ class OccupancyGrid:
         dist = ndimage.distance_transform_edt(~self._bordered()) * self.resolution
         return OccupancyGrid(dist[1:-1, 1:-1] <= radius + 1e-12, self.resolution)
 
-    def inflate_velocity(self, velocity: tuple[float, float], gain: float, base_radius: float) -> "OccupancyGrid":
+    def inflate_velocity(self, velocity: tuple[float, float], gain: float, base_radius: float) -> OccupancyGrid:
         """Section 3.3: inflate by ``base_radius`` plus ``gain`` times the velocity component
         towards the obstacle. A free cell c becomes an obstacle if some obstacle cell o satisfies
         |o - c| <= base_radius + gain * max(0, v . (o - c) / |o - c|) (centre distances): the

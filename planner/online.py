@@ -28,17 +28,19 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field as dc_field, replace
-from typing import Any, Callable
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from dataclasses import field as dc_field
+from typing import Any, cast
 
 import numpy as np
 from scipy import ndimage
 
 from planner import make_planner
-from planner.cost import path_cost
+from planner.cost import path_cost, path_length
 from planner.gridmap import OccupancyGrid
 from planner.metrics import path_metrics
-from planner.params import PlannerParams
+from planner.params import AlgorithmName, PlannerParams
 from planner.postprocess import check_and_replan, prune
 from planner.problem import PlanningProblem
 from planner.result import PlannerResult
@@ -144,12 +146,19 @@ class OnlineContext:
     def __post_init__(self) -> None:
         self.reference_path = np.asarray(self.reference_path, dtype=float).reshape(-1, 2)
         if self.safe_grid is None:
-            self.safe_grid = self.grid.inflate(self.params.safety_radius) if self.params.safety_radius > 0 else self.grid
+            radius = self.params.safety_radius
+            self.safe_grid = self.grid.inflate(radius) if radius > 0 else self.grid
+
+    @property
+    def safe(self) -> OccupancyGrid:
+        """The safety-inflated map (set by ``__post_init__``)."""
+        assert self.safe_grid is not None
+        return self.safe_grid
 
     def planning_grid(self, velocity: tuple[float, float]) -> OccupancyGrid:
         """The safety-inflated map plus the section 3.3 velocity inflation (cached per direction)."""
         if not self.online.velocity_inflation or self.params.velocity_inflation_gain <= 0:
-            return self.safe_grid
+            return self.safe
         key = (round(velocity[0], 1), round(velocity[1], 1))
         if key not in self._velocity_grids:
             if len(self._velocity_grids) > 32:
@@ -198,7 +207,8 @@ class OnlineContext:
         """Distance (m) of each cell centre from the nearest obstacle cell centre or the map's edge
         (the measure of :meth:`OccupancyGrid.inflate`)."""
         if self._distance is None:
-            self._distance = ndimage.distance_transform_edt(~np.pad(self.grid.occ, 1, constant_values=True))[1:-1, 1:-1] \
+            self._distance = ndimage.distance_transform_edt(~np.pad(self.grid.occ, 1, constant_values=True))[1:-1,
+                                                                                                             1:-1] \
                 * self.grid.resolution
         return self._distance
 
@@ -213,12 +223,6 @@ class OnlineContext:
         c = min(max(int(point[0] / res), 0), occ.shape[1] - 1)
         rr, cc = idx[0][r, c], idx[1][r, c]
         return ((cc + 0.5) * res, (rr + 0.5) * res)
-
-
-def _polyline_length(path: np.ndarray) -> float:
-    if len(path) < 2:
-        return 0.0
-    return float(np.sum(np.hypot(*np.diff(path, axis=0).T)))
 
 
 def resample(path: np.ndarray, spacing: float) -> np.ndarray:
@@ -245,7 +249,7 @@ def advance(path: np.ndarray, distance: float) -> tuple[np.ndarray, float]:
     out = [path[0]]
     left = distance
     heading = math.nan
-    for a, b in zip(path[:-1], path[1:]):
+    for a, b in zip(path[:-1], path[1:], strict=True):
         d = math.hypot(b[0] - a[0], b[1] - a[1])
         if d <= 1e-12:
             continue
@@ -358,7 +362,7 @@ def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
     give-way ship that cannot turn away in time slows down instead."""
     if traffic is None or not traffic.obstacles:
         return _plan_cycle_once(ctx, state, index, seed, clock, None)
-    fallback = None
+    fallback: CycleRecord | None = None
     for k, factor in enumerate(traffic.speed_factors):
         snap = replace(traffic, speed=traffic.speed * factor)
         rec = _plan_cycle_once(ctx, state, index, seed + k, clock, snap)
@@ -367,6 +371,7 @@ def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
             return rec
         if fallback is None or (len(fallback.smooth_path) < 2 and len(rec.smooth_path) >= 2):
             fallback = rec
+    assert fallback is not None, "traffic.speed_factors is empty"
     return fallback
 
 
@@ -380,7 +385,7 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
     # inside the inflation: pushed there, it must still get out) the recovery map, else raw.
     velocity = reference_velocity(ctx.reference_path, sub_point, params.speed)
     grid = None
-    recovery = None if ctx.safe_grid.is_free(*pos) else ctx.recovery_grid(pos)
+    recovery = None if ctx.safe.is_free(*pos) else ctx.recovery_grid(pos)
     for candidate in (ctx.planning_grid(velocity), ctx.safe_grid, recovery, ctx.grid):
         if candidate is not None and candidate.is_free(*pos):
             grid = candidate
@@ -395,7 +400,8 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
 
         traffic = relax_for_start(traffic)
         keep = 2.0 * grid.resolution
-        traffic_grid = lambda g: paint(g, traffic, pos, params.perceptual_radius, keep_free=pos, keep_radius=keep)  # noqa: E731
+        def traffic_grid(g):
+            return paint(g, traffic, pos, params.perceptual_radius, keep_free=pos, keep_radius=keep)
         plain_goal = _free_subgoal(ctx, grid, pos, sub_index, sub_point)
         grid = traffic_grid(grid)
         if plain_goal is not None and not grid.is_free(*plain_goal):
@@ -440,7 +446,8 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
                            result.iterations, empty, empty, False, result.tree_nodes, result.tree_parents,
                            reason=result.reason or "no local path")
 
-    cost_fn = (lambda p: path_cost(p, ctx.field, params))
+    def cost_fn(p):
+        return path_cost(p, ctx.field, params)
     local = prune(result.path, grid, cost_fn)
     radius = params.turn_radius_factor * params.speed
     # The bypass of a short leg must be clear of the safety-inflated map (the velocity
@@ -518,7 +525,7 @@ def _densify(path: np.ndarray, step: float) -> np.ndarray:
     if len(path) < 2:
         return path.copy()
     out = [path[:1]]
-    for a, b in zip(path[:-1], path[1:]):
+    for a, b in zip(path[:-1], path[1:], strict=True):
         n = max(int(math.ceil(math.hypot(*(b - a)) / step)), 1)
         out.append(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
     return np.concatenate(out)
@@ -536,7 +543,7 @@ def _termination(online: OnlineParams, clock: Callable[[], float]) -> Terminatio
 
 def _polyline_free(grid: OccupancyGrid, path: np.ndarray) -> bool:
     return all(grid.segment_free(float(a[0]), float(a[1]), float(b[0]), float(b[1]))
-               for a, b in zip(path[:-1], path[1:]))
+               for a, b in zip(path[:-1], path[1:], strict=True))
 
 
 def run_online(ctx: OnlineContext, start: VesselState, seed: int,
@@ -574,7 +581,7 @@ def run_online(ctx: OnlineContext, start: VesselState, seed: int,
         travelled, heading = advance(rec.smooth_path, step)
         rec.travelled = travelled
         executed.append(travelled[1:])
-        sailed = _polyline_length(travelled)
+        sailed = path_length(travelled)
         end = travelled[-1]
         state = VesselState(float(end[0]), float(end[1]),
                             state.heading if math.isnan(heading) else heading,
@@ -593,7 +600,7 @@ def run_online(ctx: OnlineContext, start: VesselState, seed: int,
         reached=reached, reason=reason, cycles=cycles, executed=path, final=state,
         search_time_s=float(sum(c.search_time_s for c in cycles)),
         planning_time_s=float(sum(c.planning_time_s for c in cycles)),
-        metrics={k: float(v) for k, v in metrics.items() if np.isscalar(v)},
+        metrics={k: float(v) for k, v in metrics.items() if np.isscalar(v)},  # type: ignore[arg-type]  # real numbers
     )
 
 
@@ -601,4 +608,4 @@ def make_context(grid: OccupancyGrid, goal: tuple[float, float], reference_path:
                  params: PlannerParams, online: OnlineParams, algorithm: str, field: Any = None) -> OnlineContext:
     """An :class:`OnlineContext` for ``algorithm`` (one of ``planner.ALGORITHMS``)."""
     return OnlineContext(grid=grid, goal=(float(goal[0]), float(goal[1])), reference_path=reference_path,
-                         params=replace(params, algorithm=algorithm), online=online, field=field)
+                         params=replace(params, algorithm=cast(AlgorithmName, algorithm)), online=online, field=field)

@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 ALGORITHM_NAMES = ("rrt-star", "informed-rrt-star", "ddrrt-star")
+AlgorithmName = Literal["rrt-star", "informed-rrt-star", "ddrrt-star"]
+Objective = Literal["length", "current"]
 DYNAMIC_DOMAINS = ("off", "constant", "adaptive")
 OBJECTIVES = ("length", "current")
 
@@ -26,9 +28,9 @@ def _p(help: str, unit: str = "", *, gt=None, ge=None, lt=None, le=None, default
 class PlannerParams:
     """Tuning of the sampling-based local planners (map frame: x east, y north, metres)."""
 
-    algorithm: Literal["rrt-star", "informed-rrt-star", "ddrrt-star"] = _p(
+    algorithm: AlgorithmName = _p(
         "planner: rrt-star | informed-rrt-star | ddrrt-star", default="ddrrt-star")
-    objective: Literal["length", "current"] = _p(
+    objective: Objective = _p(
         "path cost: 'length' (Euclidean) or 'current' (cost distance D_C of eq. (12))", default="current")
     step: float = _p("maximum extension length of one tree edge", "m", gt=0, default=4.0)
     speed: float = _p("planning speed v (DR = dr_factor v sigma_t, turning radius factor * v)", "m/s",

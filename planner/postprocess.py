@@ -8,8 +8,8 @@ form for the six words LSL, RSR, LSR, RSL, RLR, LRL on the pose normalised by th
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -71,7 +71,7 @@ class DubinsPath:
 
     def end(self) -> tuple[float, float, float]:
         x, y, th = self.q0
-        for kind, s in zip(self.word, self.segments):
+        for kind, s in zip(self.word, self.segments, strict=False):
             x, y, th = _advance(x, y, th, kind, s * self.radius, self.radius)
         return x, y, th
 
@@ -86,7 +86,7 @@ class DubinsPath:
 
     def _at(self, s: float) -> tuple[float, float, float]:
         x, y, th = self.q0
-        for kind, seg in zip(self.word, self.segments):
+        for kind, seg in zip(self.word, self.segments, strict=False):
             L = seg * self.radius
             use = min(s, L)
             x, y, th = _advance(x, y, th, kind, use, self.radius)
@@ -174,7 +174,8 @@ def dubins_path(q0, q1, radius: float, word: str | None = None) -> DubinsPath:
             best = (w, seg)
     if best is None:
         raise ValueError(f"no Dubins path of word {word!r} between these poses")
-    return DubinsPath((x0, y0, t0), float(radius), best[0], tuple(float(s) for s in best[1]))
+    s1, s2, s3 = best[1]
+    return DubinsPath((x0, y0, t0), float(radius), best[0], (float(s1), float(s2), float(s3)))
 
 
 # ---------------------------------------------------------------------------------------------

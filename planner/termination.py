@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 
 @dataclass(frozen=True)
@@ -29,9 +29,9 @@ class Termination:
     """A stop condition. Build with :meth:`iterations`, :meth:`deadline`, :meth:`exact_solution`
     and combine with :meth:`any_of`."""
 
-    def __init__(self, check: Callable[["Termination"], bool], *, max_iterations: int | None = None,
+    def __init__(self, check: Callable[[Termination], bool], *, max_iterations: int | None = None,
                  deadline: float | None = None, clock: Callable[[], float] | None = None,
-                 stop_on_exact: bool = False, children: tuple["Termination", ...] = ()) -> None:
+                 stop_on_exact: bool = False, children: tuple[Termination, ...] = ()) -> None:
         self._check = check
         self.max_iterations = max_iterations
         self.deadline_at = deadline
@@ -75,7 +75,7 @@ class Termination:
 
     _custom = False
 
-    def _leaves(self) -> list["Termination"]:
+    def _leaves(self) -> list[Termination]:
         if not self.children:
             return [self]
         out: list[Termination] = []
@@ -84,14 +84,14 @@ class Termination:
         return out
 
     @staticmethod
-    def iterations(n: int) -> "Termination":
+    def iterations(n: int) -> Termination:
         """Stop after ``n`` iterations (one iteration = one sample drawn)."""
         if n < 0:
             raise ValueError("iterations: must be >= 0")
         return Termination(lambda t: t.iterations_done >= n, max_iterations=int(n))
 
     @staticmethod
-    def deadline(seconds: float, clock: Callable[[], float] = time.monotonic) -> "Termination":
+    def deadline(seconds: float, clock: Callable[[], float] = time.monotonic) -> Termination:
         """Stop once ``clock()`` has advanced ``seconds`` from now (seconds >= 0)."""
         if not (seconds >= 0) or math.isinf(seconds):
             raise ValueError("deadline: seconds must be finite and >= 0")
@@ -99,20 +99,20 @@ class Termination:
         return Termination(lambda t: clock() >= at, deadline=at, clock=clock)
 
     @staticmethod
-    def exact_solution() -> "Termination":
+    def exact_solution() -> Termination:
         """Stop at the first exact solution. Unbounded on its own: combine it with an iteration
         count or a deadline (``solve`` refuses an unbounded condition)."""
         return Termination(lambda t: t.solved, stop_on_exact=True)
 
     @staticmethod
-    def custom(fn: Callable[[], bool]) -> "Termination":
+    def custom(fn: Callable[[], bool]) -> Termination:
         """Any Python predicate, polled after every iteration (unbounded on its own)."""
         t = Termination(lambda _t: fn())
         t._custom = True
         return t
 
     @staticmethod
-    def any_of(*conds: "Termination") -> "Termination":
+    def any_of(*conds: Termination) -> Termination:
         """Stop as soon as any of ``conds`` says stop."""
         if not conds:
             raise ValueError("any_of: needs at least one condition")

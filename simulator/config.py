@@ -160,9 +160,11 @@ class EscParams:
     """The thrusters' electronic speed controllers and propellers (both actuator paths; defaults as in
     configs/default.toml)."""
 
-    time_constant: float = param("first-order lag from thrust set-point to thrust; 0 = instantaneous", "s", ge=0, default=0.0)
+    time_constant: float = param("first-order lag from thrust set-point to thrust; 0 = instantaneous", "s", ge=0,
+                                 default=0.0)
     int14_resolution: bool = param(
-        "round commands to DroneCAN RawCommand's int14 resolution on the MAVLink path too (always on for CAN)", default=False)
+        "round commands to DroneCAN RawCommand's int14 resolution on the MAVLink path too (always on for CAN)",
+        default=False)
     max_rpm: float = param("propeller speed at full forward thrust (thrust ~ rpm^2)", "rpm", gt=0, default=992.0)
     max_power: float = param("electrical power at full forward thrust (power ~ rpm^3)", "W", gt=0, default=500.0)
     voltage: float = param("supply voltage reported in ESC Status", "V", gt=0, default=24.0)

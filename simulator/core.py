@@ -3,8 +3,8 @@
 One *frame* is the period of the IMU (``1 / sensors.imu.rate_hz``), an integer number of RK4
 steps of ``sim.dt``. :meth:`SimulatorCore.frame` encodes everything due at the current time as
 one datagram (HIL_SENSOR always; HIL_GPS, HIL_STATE_QUATERNION, the DVL's ODOMETRY and the
-range sensor's OBSTACLE_DISTANCE when their rate says so); :meth:`SimulatorCore.step` advances the truth by one frame with the newest
-command. The socket loops live in :mod:`simulator.server`.
+range sensor's OBSTACLE_DISTANCE when their rate says so); :meth:`SimulatorCore.step` advances the truth by
+one frame with the newest command. The socket loops live in :mod:`simulator.server`.
 """
 
 from __future__ import annotations
@@ -16,10 +16,10 @@ from typing import Any
 from common.current_field import CurrentField
 from common.dronecan_codec import RAW_COMMAND_MAX
 from common.geodesy import LocalFrame
-from common.mavlink import Codec, MAV_TYPE
+from common.mavlink import MAV_TYPE, Codec
 from simulator.integrator import rk4_step
 from simulator.rangefinder import Rangefinder, WorldMap
-from simulator.sensors import G, Compass, Dvl, Gps, Imu, sensor_rngs
+from simulator.sensors import Compass, Dvl, G, Gps, Imu, sensor_rngs
 from simulator.vessel import Vessel
 from simulator.waves import WaveModel
 
@@ -192,7 +192,7 @@ class SimulatorCore:
         for k in range(1, self.substeps + 1):
             tau_w, cur = self._env
             x0, y0 = self.state[0], self.state[1]
-            self.state = rk4_step(lambda s: dyn(s, tau, tau_w, cur), self.state, self.dt)
+            self.state = rk4_step(lambda s, tau_w=tau_w, cur=cur: dyn(s, tau, tau_w, cur), self.state, self.dt)
             self.distance += math.hypot(self.state[0] - x0, self.state[1] - y0)
             self.waves.advance(self.dt)
             self._env = self._environment(self.n * self.frame_dt + k * self.dt)

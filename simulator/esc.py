@@ -20,14 +20,15 @@ from __future__ import annotations
 
 import math
 import time
-from array import array
 from collections import Counter
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import can
 
 from common import dronecan_codec as dc
 from common.can_params import CanParams
+from common.transfer_times import TransferTimes
 
 RAW_COMMAND_OUT_OF_RANGE = "raw_command_out_of_range"
 RAW_COMMAND_MISSING_INDEX = "raw_command_missing_index"
@@ -59,9 +60,7 @@ class EscBank:
         self.send_errors = 0
         self.next_status_t = 0.0
         self.next_node_status_t = 0.0
-        self.applied_tid = array("b")               # latency records: transfer ID and wall time applied
-        self.applied_at = array("d")
-        self.record = False
+        self.applied_times = TransferTimes()        # latency records: transfer ID and wall time applied
         self.budget_stops = 0
 
     # -- receive ---------------------------------------------------------------------------
@@ -101,9 +100,8 @@ class EscBank:
         self.raw = (cmd[0], cmd[1])
         self.commands += 1
         self.commands_seen += 1
-        if self.record:
-            self.applied_tid.append(tr.transfer_id)
-            self.applied_at.append(self.clock())
+        if self.applied_times.enabled:
+            self.applied_times.add(tr.transfer_id, self.clock())
         return 1
 
     def controls(self) -> tuple[float, float] | None:

@@ -30,7 +30,7 @@ class WorldMap:
         self.resolution = float(resolution)
 
     @classmethod
-    def load(cls, path: str) -> "WorldMap":
+    def load(cls, path: str) -> WorldMap:
         """A ``.npz`` with ``occ`` (bool rows x cols) and ``resolution`` (m), as `hil run` writes."""
         with np.load(path) as z:
             return cls(z["occ"], float(z["resolution"]))
@@ -71,7 +71,7 @@ class Rangefinder:
         noisy = d + self.p.range_std * self.rng.standard_normal(d.shape)
         missed = self.rng.random(d.shape) < self.p.miss_probability
         out = []
-        for true, meas, miss in zip(d, noisy, missed):
+        for true, meas, miss in zip(d, noisy, missed, strict=False):
             if miss or not math.isfinite(true):
                 out.append(self.max_cm + NO_OBSTACLE_MARGIN_CM)
             else:

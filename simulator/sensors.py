@@ -25,7 +25,7 @@ STREAMS = ("gps", "imu", "compass", "dvl", "waves", "gps_events", "rangefinder")
 def sensor_rngs(seed: int) -> dict[str, np.random.Generator]:
     """One independent Generator per stream name, all derived from ``seed``."""
     children = np.random.SeedSequence(seed).spawn(len(STREAMS))
-    return {name: np.random.default_rng(c) for name, c in zip(STREAMS, children)}
+    return {name: np.random.default_rng(c) for name, c in zip(STREAMS, children, strict=False)}
 
 
 class Normals:

@@ -8,8 +8,8 @@ when ``duration`` simulated seconds have been run (0: never), or when ``stop()``
 from __future__ import annotations
 
 import time
-from typing import Any, Callable
-
+from collections.abc import Callable
+from typing import Any
 
 from common.percentiles import StreamingPercentiles
 from common.udp import UdpEndpoint

@@ -122,9 +122,7 @@ class Ship:
             self.legs.append((0.0, math.inf, self.points[0], np.array([math.cos(c), math.sin(c)]) * spec.speed))
 
     def state(self, t: float, turning_window: float = 5.0) -> ShipState:
-        for t0, t1, p0, vel in self.legs:
-            if t < t1:
-                break
+        t0, _, p0, vel = next((leg for leg in self.legs if t < leg[1]), self.legs[-1])
         p = p0 + vel * (max(t, 0.0) - t0)
         speed = float(np.hypot(*vel))
         course = math.atan2(vel[1], vel[0]) % (2 * math.pi) if speed > 0 else math.radians(self.spec.course)
@@ -171,7 +169,7 @@ class Traffic:
         self.ships = [Ship(s) for s in self.specs]
         self.rngs = [np.random.default_rng([int(self.seed), int(s.mmsi), 0xA15]) for s in self.specs]
         self.next_report = []
-        for ship, rng in zip(self.ships, self.rngs):
+        for ship, rng in zip(self.ships, self.rngs, strict=False):
             st = ship.state(0.0, self.params.turning_window)
             self.next_report.append(float(rng.uniform(0.0, report_interval(st.speed, st.turning, self.params))))
 
@@ -190,7 +188,7 @@ class Traffic:
         """AIS_VESSEL frames of the reports due at simulated time ``t`` (noisy; some lost)."""
         out = []
         p = self.params
-        for i, (ship, rng) in enumerate(zip(self.ships, self.rngs)):
+        for i, (ship, rng) in enumerate(zip(self.ships, self.rngs, strict=False)):
             if t + 1e-9 < self.next_report[i]:
                 continue
             st = ship.state(t, p.turning_window)

@@ -34,7 +34,8 @@ class Vessel:
         # eq. (5): inertia including added mass
         self.m11 = p.m + 0.05 * p.m
         self.m22 = p.m + 0.5 * (p.rho * math.pi * p.D ** 2 * p.L)
-        self.m33 = 0.083 * p.m * (p.L ** 2 + p.W ** 2) + 0.042 * (0.1 * p.m * p.B_u ** 2 + p.rho * math.pi * p.D ** 2 * p.L ** 3)
+        self.m33 = (0.083 * p.m * (p.L ** 2 + p.W ** 2)
+                    + 0.042 * (0.1 * p.m * p.B_u ** 2 + p.rho * math.pi * p.D ** 2 * p.L ** 3))
         # damping: d_x2 = 0.2 d_x, d_x3 = 0.1 d_x (section 2.3, after eq. (5))
         self.d_u, self.d_v, self.d_r = p.d_u, p.d_v, p.d_r
         self.d_u2, self.d_v2, self.d_r2 = 0.2 * p.d_u, 0.2 * p.d_v, 0.2 * p.d_r

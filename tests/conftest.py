@@ -17,7 +17,8 @@ def repo() -> Path:
     return REPO
 
 
-def run_hil(*args: str, timeout: float = 300, env: dict | None = None, cwd: Path | None = None) -> subprocess.CompletedProcess:
+def run_hil(*args: str, timeout: float = 300, env: dict | None = None,
+            cwd: Path | None = None) -> subprocess.CompletedProcess:
     """Run `python -m hil ARGS` as a subprocess (the way a user runs it) and capture its output."""
     full_env = dict(os.environ)
     full_env.update(env or {})
@@ -42,13 +43,13 @@ def hil():
 # A new test module must be listed here: collection fails otherwise, so no test falls through.
 UNIT_MODULES = frozenset("""
     can_codec can_esc collision_cone colregs colregs_oracle config config_layers control current_field geodesy
-    global_route mission_executor modes navigation online percentiles plan_commitment readiness
+    global_route mission_executor modes navigation navigation_fast online percentiles plan_commitment readiness
     planner_algorithms planner_config planner_cost planner_dynamic_domain planner_gridmap
-    planner_guidance planner_kgrowth planner_metrics planner_postprocess reactive route_planning
+    planner_guidance planner_kgrowth planner_metrics planner_postprocess process_logging reactive route_planning
     run_plot scenarios sim_sensors sim_vessel sim_waves tiers tracking_stats traffic_planning vehicle
 """.split())
 INTEGRATION_MODULES = frozenset("""
-    autopilot_link bench_planner cli connection cpu_load executors gcs_esc_telemetry gcs_fuzz gcs_security
+    autopilot_link bench_frame bench_planner cli connection cpu_load executors gcs_esc_telemetry gcs_fuzz gcs_security
     gcs_link gcs_mission montecarlo output plan_cli planner_warmup planning_worker range_sensing
     readme security_gates sim_link sim_udp startup_errors traffic_ais
 """.split())

@@ -12,12 +12,13 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 os.environ.setdefault("MAVLINK20", "1")  # before mavutil picks its dialect: MAVLink 2 frames
 
-from pymavlink import mavutil  # noqa: E402
+from pymavlink import mavutil
 
 REPO = Path(__file__).resolve().parent.parent
 M = mavutil.mavlink
@@ -68,7 +69,8 @@ class Gcs:
         self.drain()  # acks the boat sent to other ground stations earlier
         self.mav.command_long_send(self.target[0], self.target[1], cmd, 0, *p)
         me = (self.mav.srcSystem, self.mav.srcComponent)
-        return self.recv("COMMAND_ACK", timeout, lambda a: a.command == cmd and (a.target_system, a.target_component) == me)
+        return self.recv("COMMAND_ACK", timeout, lambda a: a.command == cmd and (a.target_system,
+                                                                                 a.target_component) == me)
 
     def arm(self, on: bool = True) -> Any:
         return self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0 if on else 0.0, float("nan"))

@@ -24,7 +24,8 @@ def test_crc16_ccitt_check_value():
 @pytest.mark.parametrize("msg,name", [
     (dc.make(dc.RAW_COMMAND, cmd=[8191, -8191]), dc.RAW_COMMAND),
     (status_msg(), dc.ESC_STATUS),
-    (dc.make(dc.NODE_STATUS, uptime_sec=77, health=1, mode=0, sub_mode=0, vendor_specific_status_code=5), dc.NODE_STATUS),
+    (dc.make(dc.NODE_STATUS, uptime_sec=77, health=1, mode=0, sub_mode=0, vendor_specific_status_code=5),
+     dc.NODE_STATUS),
 ])
 def test_frames_match_the_dronecan_package_transport(msg, name):
     """Our transport layer and the dronecan package's produce the same frames, byte for byte."""
@@ -98,7 +99,8 @@ def test_every_reject_reason_is_counted_and_nothing_is_returned():
     got += [rx.feed(fs[0]), rx.feed(other[1])]
     got += [rx.feed(fs[0]), rx.feed(other[0])]
     # unknown data type (GetNodeInfo-free message 1031 = esc.RPMCommand), unknown node, not DroneCAN
-    rpm_cmd = dc.to_frames("uavcan.equipment.esc.RPMCommand", dc.serialize(dc.make("uavcan.equipment.esc.RPMCommand", rpm=[1, 2])), 10, 0)
+    rpm_type = "uavcan.equipment.esc.RPMCommand"
+    rpm_cmd = dc.to_frames(rpm_type, dc.serialize(dc.make(rpm_type, rpm=[1, 2])), 10, 0)
     got += [rx.feed(f) for f in rpm_cmd]
     got += [rx.feed(f) for f in dc.to_frames(dc.RAW_COMMAND, dc.raw_command([1, 2]), 33, 0)]
     got.append(rx.feed(frame(0x123, b"\x00\xc0", ext=False)))
@@ -149,9 +151,11 @@ def test_fast_encoding_is_byte_identical_to_the_dronecan_package():
     rng = np.random.default_rng(7)
     for n in list(range(21)) * 20:
         cmd = [int(v) for v in rng.integers(-8192, 8192, n)]
-        assert dronecan_layout.pack(dronecan_layout.RAW_COMMAND, {}, cmd) == dc.serialize(dc.make(dc.RAW_COMMAND, cmd=cmd))
+        expected = dc.serialize(dc.make(dc.RAW_COMMAND, cmd=cmd))
+        assert dronecan_layout.pack(dronecan_layout.RAW_COMMAND, {}, cmd) == expected
     for _ in range(300):
-        f = {"uptime_sec": int(rng.integers(0, 2**32)), "health": int(rng.integers(0, 4)), "mode": int(rng.integers(0, 8)),
+        f = {"uptime_sec": int(rng.integers(0, 2**32)), "health": int(rng.integers(0, 4)),
+             "mode": int(rng.integers(0, 8)),
              "sub_mode": int(rng.integers(0, 8)), "vendor_specific_status_code": int(rng.integers(0, 2**16))}
         assert dronecan_layout.pack(dronecan_layout.NODE_STATUS, f) == dc.serialize(dc.make(dc.NODE_STATUS, **f))
     assert dc.raw_command([8191, -8191]) == dc.serialize(dc.make(dc.RAW_COMMAND, cmd=[8191, -8191]))

@@ -131,3 +131,27 @@ def test_int14_resolution_rounds_commands_like_raw_command():
         core = SimulatorCore(settings.load(None, overrides))
         core.apply(Command(0, 0.5, -0.3))
         assert core.controls == (4096 / 8191, -2457 / 8191)
+
+
+def test_transfer_times_spilled_to_files_keep_memory_constant_and_read_back_whole(tmp_path):
+    import numpy as np
+
+    from common.transfer_times import TransferTimes
+
+    rec = TransferTimes()
+    rec.add(1, 0.5)                                   # not recording yet: ignored
+    rec.start(spill_to=str(tmp_path / "sent"))
+    n = 3 * TransferTimes.CHUNK + 17
+    for k in range(n):
+        rec.add(k % 32, k * 0.01)
+        assert len(rec.tid) < TransferTimes.CHUNK and len(rec.at) < TransferTimes.CHUNK
+    tid, at = rec.arrays()
+    assert rec.count == n and len(tid) == len(at) == n
+    assert tid.tolist() == [k % 32 for k in range(n)] and np.allclose(at, np.arange(n) * 0.01)
+    rec.save(str(tmp_path / "sent.npz"))
+    z = np.load(tmp_path / "sent.npz")
+    assert z["tid"].tolist() == tid.tolist() and sorted(p.name for p in tmp_path.iterdir()) == ["sent.npz"]
+    kept = TransferTimes()                            # without a spill file: in memory (hil bench can)
+    kept.start()
+    kept.add(3, 1.0)
+    assert [a.tolist() for a in kept.arrays()] == [[3], [1.0]]

@@ -107,7 +107,8 @@ def test_lockstep_can_run_gives_the_same_summary_as_mavlink(vcan_batch):
                        text=True, timeout=600)
     mav = json.loads(r.stdout.strip().splitlines()[-1])
     assert can_run["actuators"] == "can" and mav["actuators"] == "mavlink"
-    strip = lambda s: {k: v for k, v in s.items() if k not in WALL_CLOCK_KEYS}  # noqa: E731
+    def strip(s):
+        return {k: v for k, v in s.items() if k not in WALL_CLOCK_KEYS}
     assert strip(_before_the_end(can_run)) == strip(_before_the_end(mav))
     assert can_run["outcome"] == "goal", can_run["events"]
     # The thrust really came over CAN: every frame's command was a RawCommand the ESCs applied.

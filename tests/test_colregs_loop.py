@@ -95,7 +95,8 @@ def test_same_seed_same_encounter_report_and_tlog_has_traffic(hil, tmp_path):
 
     a = _run(hil, tmp_path / "a", "colregs-crossing-right", 5)
     b = _run(hil, tmp_path / "b", "colregs-crossing-right", 5)
-    strip = lambda s: {k: v for k, v in s.items() if k not in WALL_CLOCK_KEYS}  # noqa: E731
+    def strip(s):
+        return {k: v for k, v in s.items() if k not in WALL_CLOCK_KEYS}
     assert strip(a) == strip(b)
     log = mavutil.mavlink_connection(a["tlog"])
     texts, ais = [], 0

@@ -22,7 +22,8 @@ MODEL = SurgeModel(m11=57.75, m22=112.82, d_u=31.915)
 
 
 def params(**kw) -> ControlParams:
-    base = dict(heading_kp=40.0, heading_ki=2.0, heading_kd=30.0, heading_integral_limit=10.0, heading_rate_feedforward=0.0,
+    base = dict(heading_kp=40.0, heading_ki=2.0, heading_kd=30.0, heading_integral_limit=10.0,
+                heading_rate_feedforward=0.0,
                 speed_bandwidth=1.0, speed_damping=1.0, speed_integral_limit=40.0,
                 speed_reference_time_constant=2.0, max_acceleration=0.5)
     base.update(kw)
@@ -173,3 +174,17 @@ def test_speed_falls_linearly_near_obstacles(clearance, cap):
 
     assert clearance_speed_cap(clearance, 2.0, 4.0, 0.6, 1.5) == pytest.approx(cap)
     assert clearance_speed_cap(clearance, 2.0, 2.0, 0.6, 1.5) == float("inf")
+
+
+def test_the_nominal_surge_model_from_the_configuration_is_the_simulators_hull():
+    """The vessel computer builds its model of eq. (5) from [vessel] without the simulator's class;
+    on the default hull both readings of eq. (5) agree."""
+    from autopilot_bridge.control import SurgeModel
+    from hil import settings
+    from simulator.vessel import Vessel
+
+    hull = settings.load(None, []).vessel
+    nominal = SurgeModel.from_hull(hull.m, hull.rho, hull.D, hull.L, hull.d_u)
+    truth = Vessel(hull)
+    assert nominal.m11 == pytest.approx(truth.m11, rel=1e-12)
+    assert nominal.m22 == pytest.approx(truth.m22, rel=1e-12)

@@ -45,7 +45,7 @@ def test_scalar_and_vectorised_agree(field):
     rng = np.random.default_rng(1)
     pts = rng.uniform([-300, -300, 0], [300, 300, 1000], (100, 3))
     un, ve = field.velocity(pts[:, 0], pts[:, 1], pts[:, 2])
-    for (x, y, t), a, b in zip(pts, un, ve):
+    for (x, y, t), a, b in zip(pts, un, ve, strict=False):
         assert field.velocity_at(x, y, t) == pytest.approx((a, b), abs=1e-12)
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from hil import experiment, executors, ports
+from hil import executors, experiment, ports
 
 FAST = ("--local-iterations", "500", "--cycle-time", "8")
 NEEDS_DASK = "dask.distributed is not installed (pip install 'usv-hil[cluster]')"
@@ -197,3 +197,25 @@ def test_traffic_campaign_on_dask_matches_local_threads(hil, tmp_path):
     assert (tmp_path / "local" / "runs.csv").read_text() == (tmp_path / "dask" / "runs.csv").read_text()
     for run in ("run0000", "run0001"):
         assert (tmp_path / "dask" / run / "summary.json").exists()
+
+
+def test_routes_campaign_on_dask_matches_local_threads(hil, tmp_path):
+    """`--routes` runs on the executors too: the same rows on local threads and on a LocalCluster."""
+    import csv
+
+    _distributed()
+    common = ("montecarlo", "--routes", "--runs", "2", "--jobs", "2", "--seed", "4", "--duration", "30", "--json")
+    a = hil(*common, "--out", str(tmp_path / "local"), timeout=900)
+    assert a.returncode == 0, a.stderr
+    b = hil(*common, "--out", str(tmp_path / "dask"), "--executor", "dask", timeout=900)
+    assert b.returncode == 0, b.stderr
+    assert "Dask LocalCluster of 2 worker" in b.stderr and "local thread" in a.stderr
+
+    def rows(folder):
+        with open(folder / "runs.csv") as fh:
+            return [{k: v for k, v in r.items() if k != "scenario"} for r in csv.DictReader(fh)]
+
+    ra, rb = rows(tmp_path / "local"), rows(tmp_path / "dask")
+    assert [r["run"] for r in ra] == ["0", "1"] and ra == rb
+    for run in ("run0000", "run0001"):
+        assert (tmp_path / "dask" / run / "hil" / "summary.json").exists()

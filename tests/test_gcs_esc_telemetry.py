@@ -9,6 +9,7 @@ from types import SimpleNamespace
 
 import can
 import pytest
+from test_gcs_link import read_until
 
 from autopilot_bridge.can_actuators import CanActuators
 from autopilot_bridge.gcs.config import GcsParams
@@ -20,7 +21,6 @@ from hil import settings
 from hil.hilrun import free_udp_port
 from simulator.core import SimulatorCore
 from simulator.esc import EscBank
-from test_gcs_link import read_until
 
 
 def _gcs_params(endpoint: str) -> GcsParams:

@@ -51,7 +51,7 @@ def read_until(sock: socket.socket, want: str, link: GcsLink, timeout: float = 5
         link.service()
         try:
             data = sock.recv(65535)
-        except (TimeoutError, socket.timeout):
+        except TimeoutError:
             continue
         for m in parser.parse_buffer(data) or []:
             if m.get_type() == want:
@@ -110,7 +110,7 @@ def test_udpin_answers_several_gcs_and_forward_sends_any_message_to_each_and_to_
         while True:
             for m in parser.parse_buffer(recorder.recv(65535)) or []:
                 got.add((m.get_type(), m.get_srcSystem()))
-    except (TimeoutError, socket.timeout):
+    except TimeoutError:
         pass
     assert {("HEARTBEAT", 255), ("HEARTBEAT", 254), ("AIS_VESSEL", 1)} <= got
 

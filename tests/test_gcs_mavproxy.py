@@ -96,7 +96,7 @@ def test_mavproxy_session(tmp_path):
         mp.expect("Saved 6 waypoints")
         got = [ln.split("\t") for ln in (state / "way.txt").read_text().splitlines()[1:]]
         assert len(got) == 6
-        for (x, y), row in zip(WAYPOINTS_MAP, got):
+        for (x, y), row in zip(WAYPOINTS_MAP, got, strict=False):
             lat, lon = GEO.sea_level_to_geodetic(y, x)
             # MAVProxy writes its file with 6 decimals (0.1 m); the exact comparison is test_gcs_session's.
             assert abs(float(row[8]) - lat) <= 6e-7 and abs(float(row[9]) - lon) <= 6e-7 and row[3] == "16"

@@ -24,7 +24,8 @@ import json
 import math
 import threading
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import pytest
 from gcs_client import HOME_MAP, check_mission_session, qgc_mission, start_run, stop_run
@@ -90,7 +91,8 @@ def _item(seq: int, x: float, y: float, command: int = M.MAV_CMD_NAV_WAYPOINT) -
 
 
 def _same(a: MissionItem, b: MissionItem) -> bool:
-    same = lambda u, v: (math.isnan(u) and math.isnan(v)) or u == v  # noqa: E731
+    def same(u, v):
+        return (math.isnan(u) and math.isnan(v)) or u == v
     return (a.seq, a.frame, a.command, a.x, a.y, a.mission_type) == (b.seq, b.frame, b.command, b.x, b.y,
                                                                       b.mission_type) and all(
         same(u, v) for u, v in ((a.param1, b.param1), (a.param2, b.param2), (a.param3, b.param3),
@@ -147,7 +149,7 @@ def test_mavsdk_session(tmp_path):
         # ... and MissionRaw, item by item as MAVLink has them: upload, download, compare exactly.
         assert mission.upload_mission(items) == MissionRawResult.SUCCESS
         got = mission.download_mission()
-        assert len(got) == 6 and all(_same(a, b) for a, b in zip(items, got)), [str(g) for g in got]
+        assert len(got) == 6 and all(_same(a, b) for a, b in zip(items, got, strict=False)), [str(g) for g in got]
         # A rejected upload (NAV_TAKEOFF in item 2) leaves it as it was.
         bad = list(items)
         bad[2] = _item(2, *WAYPOINTS_MAP[2], command=M.MAV_CMD_NAV_TAKEOFF)
@@ -155,7 +157,7 @@ def test_mavsdk_session(tmp_path):
             mission.upload_mission(bad)
         assert rejected.value.result == MissionRawResult.UNSUPPORTED
         got = mission.download_mission()
-        assert len(got) == 6 and all(_same(a, b) for a, b in zip(items, got))
+        assert len(got) == 6 and all(_same(a, b) for a, b in zip(items, got, strict=False))
 
         # Parameters: the list, a change in range, a refused one out of range.
         names = {p.name for p in param.get_all_params().float_params}
@@ -239,7 +241,7 @@ def test_mavsdk_mission_with_speed_loiter_and_return_to_launch(tmp_path):
         assert mission.upload_mission(items) == MissionRawResult.SUCCESS
         got = mission.download_mission()
         assert len(got) == 6
-        differ = [(str(a), str(b)) for a, b in zip(items, got) if not _same(a, b)]
+        differ = [(str(a), str(b)) for a, b in zip(items, got, strict=False) if not _same(a, b)]
         assert not differ, differ
         assert positions.wait(lambda p: True, 60) is not None
         assert action.arm() is not None

@@ -45,7 +45,8 @@ def test_upload_then_download_returns_the_same_items_addressed_to_the_gcs():
     assert count.name == "mission_count" and count.args[2] == 6
     for seq in range(6):
         (o,) = ms.handle(msg("mission_request_int", 1, 1, seq, 0), 1.0)
-        assert o.name == "mission_item_int" and o.args[2] == seq and o.args[11:13] == (LAT + 1000 * seq, LON + 1000 * seq)
+        assert o.name == "mission_item_int" and o.args[2] == seq and o.args[11:13] == (LAT + 1000 * seq,
+                                                                                       LON + 1000 * seq)
         assert math.isnan(o.args[10]) and o.args[8] == 2.0
 
 

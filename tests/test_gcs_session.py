@@ -11,10 +11,10 @@ import math
 import time
 
 import pytest
+from gcs_client import Gcs, M, start_run, stop_run
 
 from common.geodesy import LocalFrame
 from hil.hilrun import free_udp_port
-from gcs_client import M, Gcs, start_run, stop_run
 
 GEO = LocalFrame(38.92, 121.65, 0.0)  # [geodesy] of configs/default.toml
 # Six waypoints in the harbour's open water north-east of the start (map x east, y north; m).
@@ -29,7 +29,8 @@ def _item(x: float, y: float, radius: float = 3.0) -> tuple:
 
 def _same(sent: tuple, got) -> bool:
     fr, cmd, p1, p2, p3, p4, x, y, z = sent
-    fl = lambda a, b: (math.isnan(a) and math.isnan(b)) or a == b  # noqa: E731
+    def fl(a, b):
+        return (math.isnan(a) and math.isnan(b)) or a == b
     return (got.frame, got.command, got.x, got.y) == (fr, cmd, x, y) and all(
         fl(a, b) for a, b in ((p1, got.param1), (p2, got.param2), (p3, got.param3), (p4, got.param4), (z, got.z)))
 
@@ -76,7 +77,7 @@ def test_gcs_session_mission_commands_params_failsafe(live_run):
     assert gcs.requests == list(range(6))
     got = gcs.download()
     assert got is not None and len(got) == 6
-    assert all(_same(s, g) for s, g in zip(items, got))
+    assert all(_same(s, g) for s, g in zip(items, got, strict=False))
 
     # A rejected upload (an unsupported command in item 2) leaves the mission as it was.
     bad = list(items)
@@ -94,7 +95,7 @@ def test_gcs_session_mission_commands_params_failsafe(live_run):
     assert ack is not None and ack.type == M.MAV_MISSION_OPERATION_CANCELLED
     assert gcs.requests.count(1) >= 2  # item 1 was asked for again before giving up
     got = gcs.download()
-    assert got is not None and len(got) == 6 and all(_same(s, g) for s, g in zip(items, got))
+    assert got is not None and len(got) == 6 and all(_same(s, g) for s, g in zip(items, got, strict=False))
 
     # Arm, AUTO: the mission's current item advances and the boat moves.
     start = gcs.recv("GLOBAL_POSITION_INT", 10)

@@ -76,3 +76,15 @@ def test_origin_and_axes():
     assert lat > 38.92 and lon == pytest.approx(121.65, abs=1e-9)  # north is north
     lat, lon = f.sea_level_to_geodetic(0.0, 100.0)
     assert lon > 121.65  # east is east
+
+
+def test_map_and_ned_frames_convert_both_ways():
+    import math
+
+    from common.frames import map_to_ned, map_to_ned_path, ned_to_map
+
+    # The chart's x east 30 m, y north 10 m, heading north (pi/2 from east) is NED (10, 30), psi 0.
+    assert map_to_ned(30.0, 10.0, math.pi / 2) == (10.0, 30.0, 0.0)
+    assert ned_to_map(*map_to_ned(3.0, -4.0, 0.3)) == pytest.approx((3.0, -4.0, 0.3))
+    assert ned_to_map(1.0, 2.0) == (2.0, 1.0) and map_to_ned(2.0, 1.0) == (1.0, 2.0)
+    assert map_to_ned_path([[1.0, 2.0], [3.0, 4.0]]).tolist() == [[2.0, 1.0], [4.0, 3.0]]

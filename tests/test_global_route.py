@@ -55,7 +55,7 @@ def _cell(grid, p):
 def assert_free(grid: OccupancyGrid, path: np.ndarray) -> None:
     """Every segment free by the planner's exact traversal, except a piece inside one free cell
     (a waypoint to its cell's centre), which is free by definition."""
-    for a, b in zip(path[:-1], path[1:]):
+    for a, b in zip(path[:-1], path[1:], strict=True):
         if _cell(grid, a) == _cell(grid, b):
             assert grid.is_free(*a)
             continue

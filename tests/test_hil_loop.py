@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from hil.hilrun import WALL_CLOCK_KEYS   # figures that depend on the wall clock or the host, not the seed
+from hil.hilrun import WALL_CLOCK_KEYS  # figures that depend on the wall clock or the host, not the seed
 
 
 def _run(hil, tmp_path, *args: str, name: str = "run", traffic: bool = True) -> tuple[int, dict]:
@@ -57,7 +57,8 @@ def test_without_sensing_the_uncharted_obstacle_is_hit(hil, tmp_path):
 def test_same_seed_gives_the_same_summary(hil, tmp_path):
     _, a = _run(hil, tmp_path, "--scenario", "labyrinth", "--seed", "5", name="a")
     _, b = _run(hil, tmp_path, "--scenario", "labyrinth", "--seed", "5", name="b")
-    strip = lambda s: {k: v for k, v in s.items() if k not in WALL_CLOCK_KEYS}  # noqa: E731
+    def strip(s):
+        return {k: v for k, v in s.items() if k not in WALL_CLOCK_KEYS}
     assert strip(a) == strip(b)
 
 

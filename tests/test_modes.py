@@ -25,7 +25,10 @@ class Driver:
         return "navigate"
 
 
-def vehicle(mode: Mode = Mode.HOLD, mission=(waypoint(0.0, 10.0, 2.0),)) -> Vehicle:
+ONE_WAYPOINT = (waypoint(0.0, 10.0, 2.0),)
+
+
+def vehicle(mode: Mode = Mode.HOLD, mission=ONE_WAYPOINT) -> Vehicle:
     v = Vehicle(list(mission), armed=True, mode=mode)
     v.update(1.0, 2.0, 0.0)    # home
     return v

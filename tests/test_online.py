@@ -11,8 +11,16 @@ import pytest
 from hil import scenario as scenarios
 from hil.optimum import segment_clear
 from planner.gridmap import OccupancyGrid
-from planner.online import (OnlineParams, VesselState, _free_subgoal, advance, make_context, plan_cycle,
-                            resample, run_online)
+from planner.online import (
+    OnlineParams,
+    VesselState,
+    _free_subgoal,
+    advance,
+    make_context,
+    plan_cycle,
+    resample,
+    run_online,
+)
 from planner.params import PlannerParams
 
 
@@ -28,7 +36,7 @@ def _context(name: str, algorithm: str, **online):
 def _assert_sailed_safely(sc, res):
     path = res.executed
     assert np.allclose(path[0], sc.start)
-    for a, b in zip(path[:-1], path[1:]):
+    for a, b in zip(path[:-1], path[1:], strict=True):
         assert segment_clear(sc.occ, sc.resolution, a[0], a[1], b[0], b[1]), (a, b)
 
 
@@ -74,7 +82,8 @@ def test_cycle_with_injected_clock_stops_on_time():
     """A wall-clock budget reads the injected clock: 1 ms per call, 20 ms budget."""
     sc, ctx = _context("labyrinth", "ddrrt-star", local_iterations=0, local_time=0.02)
     ticks = iter(range(10**7))
-    clock = lambda: next(ticks) * 1e-3  # noqa: E731
+    def clock():
+        return next(ticks) * 1e-3
     rec = plan_cycle(ctx, VesselState(*sc.start, sc.start_heading), 0, seed=1, clock=clock)
     assert 0 < rec.iterations <= 25
     assert rec.start.x == sc.start[0]

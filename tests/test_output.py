@@ -70,7 +70,8 @@ def test_run_plot_has_start_goal_outcome_and_axis_labels(tmp_path):
     truth = {int(t * 1e6): (scen.start[1] + t, scen.start[0] + t, 1.0, 1.0) for t in range(20)}
     drawn = plot_run(tmp_path / "p.png", scen, truth, {}, load(), outcome="collision at 19.0 s")
     assert drawn["title"] == "HIL run: harbour: collision at 19.0 s"
-    assert any(t.startswith("start (") for t in drawn["legend"]) and any(t.startswith("goal (") for t in drawn["legend"])
+    assert any(t.startswith("start (") for t in drawn["legend"])
+    assert any(t.startswith("goal (") for t in drawn["legend"])
     assert drawn["xlabel"] == "x east (m)" and drawn["ylabel"] == "y north (m)"
 
 
@@ -86,7 +87,8 @@ def test_figure11_panels_have_axis_labels_and_start_goal_in_the_legend(tmp_path,
     monkeypatch.setattr(plots, "_save", keep)
     occ = np.zeros((40, 40), dtype=bool)
     panel = {"occ": occ, "resolution": 1.0, "start": (2, 2), "goal": (30, 30),
-             "reference_path": np.array([[2, 2], [30, 30]]), "paths": [("ddrrt-star", np.array([[2, 2], [30, 30]]), True)]}
+             "reference_path": np.array([[2, 2], [30, 30]]), "paths": [("ddrrt-star", np.array([[2, 2], [30, 30]]),
+                                                                        True)]}
     plots.plot_runs_grid(tmp_path / "f11.png", [panel, panel])
     assert all(x == "x east (m)" and y == "y north (m)" for x, y, on in seen["axes"] if on)
     assert {"start", "goal", "ddrrt-star"} <= set(seen["legend"])

@@ -87,7 +87,7 @@ def test_plan_json_path_is_valid(hil, wall_map, algorithm):
     assert d["status"] == "exact"
     pts = np.array(d["path"])
     assert np.allclose(pts[0], [3, 3]) and np.allclose(pts[-1], [17, 3])
-    for a, b in zip(pts[:-1], pts[1:]):
+    for a, b in zip(pts[:-1], pts[1:], strict=True):
         assert segment_clear(occ, 0.5, a[0], a[1], b[0], b[1]), (a, b)
     length = float(np.sum(np.hypot(*np.diff(pts, axis=0).T)))
     assert math.isclose(length, d["length"], rel_tol=1e-6)
@@ -152,7 +152,7 @@ def test_unseen_random_map_against_the_optimum(hil, tmp_path, algorithm):
     assert d["setup_s"] >= 0 and d["warm_up_s"] >= 0 and d["compiled"] in (True, False)
     inflated = OccupancyGrid(occ, 0.5).inflate(1.0).occ
     pts = np.array(d["path"])
-    for a, b in zip(pts[:-1], pts[1:]):
+    for a, b in zip(pts[:-1], pts[1:], strict=True):
         assert segment_clear(inflated, 0.5, a[0], a[1], b[0], b[1]), (a, b)
     opt = shortest_path(inflated, 0.5, (3, 3), (97, 97)).length
     assert opt - 1e-6 <= d["length"] <= 1.05 * opt

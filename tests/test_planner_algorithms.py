@@ -28,7 +28,7 @@ def corner_map() -> OccupancyGrid:
 
 
 def dense_free(grid: OccupancyGrid, path: np.ndarray, spacing: float) -> bool:
-    for a, b in zip(path[:-1], path[1:]):
+    for a, b in zip(path[:-1], path[1:], strict=True):
         n = max(2, int(math.ceil(np.hypot(*(b - a)) / spacing)) + 1)
         for t in np.linspace(0, 1, n):
             if not grid.is_free(*(a + t * (b - a))):
@@ -232,7 +232,6 @@ def test_ddrrt_sets_dynamic_domains_after_failed_extensions():
 
 def test_deadline_fallback_when_the_compiled_clock_is_unusable(monkeypatch):
     import planner.core as core
-
     from planner import warm_up
 
     warm_up()  # the first solve of a process loads the compiled core (~0.2 s)

@@ -12,7 +12,6 @@ from planner.cost import cost_distance, esd, min_cost_factor, path_cost, segment
 from planner.field import GridField, encounter_angle
 from planner.params import PlannerParams
 
-
 # Hand values, D_alpha = 1, gamma_alpha = 0.1, Ed = 10 m, DR = 40 m:
 #   alpha = 0:    x = cos 0 - 0.1 sin 0 = 1            D_C = 10 / (1 + e)        = 2.689414
 #                                                     ESD = 40 / (1 + e^-1)     = 29.242343

@@ -63,7 +63,8 @@ def test_png_crossing_target_hand_solved():
     solved below by bisection (independently of eqs. (7)-(8)).
     """
     lo, hi = 0.0, 0.1
-    f = lambda d: math.atan2(1 - 2 * math.sin(3 * d), 10 - 2 * math.cos(3 * d)) - d  # noqa: E731
+    def f(d):
+        return math.atan2(1 - 2 * math.sin(3 * d), 10 - 2 * math.cos(3 * d)) - d
     for _ in range(200):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if f(mid) > 0 else (lo, mid)

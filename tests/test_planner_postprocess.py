@@ -9,7 +9,7 @@ from planner import PlannerParams, PlanningProblem, Termination, make_planner
 from planner.cost import path_cost
 from planner.field import GridField
 from planner.gridmap import OccupancyGrid
-from planner.postprocess import DubinsPath, WORDS, check_and_replan, dubins_path, prune, smooth
+from planner.postprocess import WORDS, check_and_replan, dubins_path, prune, smooth
 
 
 def cluttered(seed: int) -> OccupancyGrid:
@@ -32,7 +32,8 @@ def test_prune_never_increases_cost_nor_collides(seed):
     res = make_planner("rrt-star", params, seed=seed).solve(
         PlanningProblem(grid, (1.0, 1.0), (48.0, 48.0), field=field), Termination.iterations(3000))
     assert res.status != "none"
-    cost_fn = lambda p: path_cost(p, field, params)  # noqa: E731
+    def cost_fn(p):
+        return path_cost(p, field, params)
     pruned = prune(res.path, grid, cost_fn)
     assert cost_fn(pruned) <= cost_fn(res.path) + 1e-9
     assert grid.path_free(pruned)

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import math
 
-import pytest
-
 from hil import experiment
 
 
@@ -57,6 +55,6 @@ def test_campaign_rows_identical_for_any_jobs():
 
     a, b = key(one.rows), key(two.rows)
     assert len(a) == 6
-    for ra, rb in zip(a, b):
-        for x, y in zip(ra, rb):
+    for ra, rb in zip(a, b, strict=False):
+        for x, y in zip(ra, rb, strict=False):
             assert x == y or (isinstance(x, float) and math.isnan(x) and math.isnan(y))

@@ -129,7 +129,8 @@ def test_uncharted_obstacle_is_confirmed_after_two_scans_through_the_link():
 
 def test_path_blocked_by_distance_to_the_polyline():
     path = np.array([[0.0, 0.0], [20.0, 0.0]])          # NED: north along east = 0
-    cell_at = lambda n, e: np.array([[int(n / RES), int(e / RES)]])  # noqa: E731
+    def cell_at(n, e):
+        return np.array([[int(n / RES), int(e / RES)]])
     assert path_blocked(path, cell_at(10.0, 1.0), RES, 2.0)      # 1.25 m from the path
     assert not path_blocked(path, cell_at(10.0, 3.0), RES, 2.0)  # 3.25 m
     assert not path_blocked(path, cell_at(23.0, 0.0), RES, 2.0)  # beyond the end

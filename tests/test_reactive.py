@@ -6,7 +6,8 @@ import math
 
 import numpy as np
 
-from autopilot_bridge.reactive import ReactiveAvoidance, wrap_angle
+from autopilot_bridge.angles import wrap_angle
+from autopilot_bridge.reactive import ReactiveAvoidance
 from planner.gridmap import OccupancyGrid
 
 RES = 0.5

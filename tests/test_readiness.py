@@ -19,9 +19,9 @@ def _child(code: str) -> tuple[subprocess.Popen, ReadyWait]:
 
 
 def test_the_message_a_child_announces_is_what_the_parent_reads():
-    proc, wait = _child("import os, sys; sys.path.insert(0, %r)\n"
+    proc, wait = _child(f"import os, sys; sys.path.insert(0, {os.getcwd()!r})\n"
                         "from common.readiness import Ready, announce\n"
-                        "announce(FD, Ready('autopilot', '127.0.0.1:5760', os.getpid()))" % os.getcwd())
+                        "announce(FD, Ready('autopilot', '127.0.0.1:5760', os.getpid()))")
     try:
         got = None
         for _ in range(600):                       # bounded: 600 x 0.05 s

@@ -12,11 +12,11 @@ from __future__ import annotations
 import math
 
 import pytest
+from gcs_client import Gcs, M, start_run, stop_run
+from test_sparse_routes import pond_scenario
 
 from common.geodesy import LocalFrame
-from gcs_client import M, Gcs, start_run, stop_run
 from hil.hilrun import free_udp_port
-from test_sparse_routes import pond_scenario
 
 GEO = LocalFrame(38.92, 121.65, 0.0)  # [geodesy] of configs/default.toml
 

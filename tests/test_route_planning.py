@@ -49,7 +49,8 @@ class Item:
 
 
 def test_item_numbers_count_every_item_and_skip_the_ones_without_a_position():
-    to_ned = lambda lat, lon: (lat * 1e7, lon * 1e7)   # noqa: E731  (items here carry metres)
+    def to_ned(lat, lon):
+        return (lat * 1e7, lon * 1e7)
     items = [Item(M.MAV_CMD_NAV_WAYPOINT, 20, 30), Item(M.MAV_CMD_DO_CHANGE_SPEED, 0, 0),
              Item(M.MAV_CMD_NAV_LOITER_TIME, 0, 0), Item(M.MAV_CMD_NAV_WAYPOINT, 30, 51)]
     assert check_mission_items(items, to_ned, pond_chart(), 2.0, (20.0, 10.0)) == (3, M.MAV_MISSION_INVALID,
@@ -71,5 +72,5 @@ def test_route_is_planned_and_replanned_round_a_sensed_obstacle():
     new = keeper2.on_sensed(cells, (20.0, 12.0))
     assert new is not None and np.allclose(new[0], (20.0, 12.0)) and np.allclose(new[-1], (20.0, 45.0))
     grid = keeper2.grid.inflate(2.0)
-    assert all(grid.segment_free(a[1], a[0], b[1], b[0]) for a, b in zip(new[:-1], new[1:]))
+    assert all(grid.segment_free(a[1], a[0], b[1], b[0]) for a, b in zip(new[:-1], new[1:], strict=True))
     assert keeper2.on_sensed(np.array([[150, 10]]), (20.0, 12.0)) is None      # far from the route: kept

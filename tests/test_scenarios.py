@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from hil import maps, scenario as scenarios
+from hil import maps
+from hil import scenario as scenarios
 from hil.errors import ConfigError, UsageError
 from hil.optimum import shortest_path
 
@@ -39,10 +40,10 @@ def test_harbour_chart_route_crosses_obstacles_and_the_global_route_goes_round()
     from hil.optimum import segment_clear
     sc = scenarios.load("harbour")
     wps = sc.waypoints
-    blocked = [not segment_clear(sc.occ, sc.resolution, *a, *b) for a, b in zip(wps[:-1], wps[1:])]
+    blocked = [not segment_clear(sc.occ, sc.resolution, *a, *b) for a, b in zip(wps[:-1], wps[1:], strict=True)]
     assert sum(blocked) >= 2
     ref = sc.reference_path
-    assert all(segment_clear(sc.occ, sc.resolution, *a, *b) for a, b in zip(ref[:-1], ref[1:]))
+    assert all(segment_clear(sc.occ, sc.resolution, *a, *b) for a, b in zip(ref[:-1], ref[1:], strict=True))
 
 
 def test_labyrinth_has_the_current():
@@ -166,7 +167,7 @@ def test_uncharted_obstacles_are_in_the_truth_not_on_the_chart():
     sc = scenarios.load("harbour-uncharted")
     truth = sc.truth_occ()
     assert (truth | sc.occ).sum() == truth.sum() and truth.sum() > sc.occ.sum()
-    for x, y, r in sc.uncharted:
+    for x, y, _r in sc.uncharted:
         row, col = int(y / sc.resolution), int(x / sc.resolution)
         assert truth[row, col] and not sc.occ[row, col]
 

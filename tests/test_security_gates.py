@@ -166,7 +166,8 @@ def test_link_and_navigation_fuzz_valid_crc_absurd_frames(cfg):
     try:
         for k in range(10_000):
             t = k * STEP if rng.random() < 0.9 else int(rng.integers(0, 2**63))
-            pick = lambda: absurd[int(rng.integers(0, len(absurd)))]  # noqa: E731
+            def pick():
+                return absurd[int(rng.integers(0, len(absurd)))]
             data = _sensor(sim, t, zgyro=pick(), xmag=pick(), ymag=pick())
             if rng.random() < 0.3:
                 data += sim.encode("hil_gps", t, 3, int(rng.integers(-2**31, 2**31)), int(rng.integers(-2**31, 2**31)),

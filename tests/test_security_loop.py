@@ -115,7 +115,8 @@ def _fuzz_datagrams(rng: np.random.Generator, codec: Codec, kind: str, n: int):
             continue
         a = absurd[k % len(absurd)]
         if kind == "sensor":
-            frame = codec.encode("hil_sensor", int(rng.integers(0, 2**63)), a, a, a, a, a, a, a, a, a, a, a, a, a, 0x1FF)
+            frame = codec.encode("hil_sensor", int(rng.integers(0, 2**63)), a, a, a, a, a, a, a, a, a, a, a, a, a,
+                                 0x1FF)
         else:
             frame = codec.encode("hil_actuator_controls", int(rng.integers(0, 2**63)), [a, -a] + [a] * 14, 0, 0)
         if r == 1:

@@ -97,3 +97,19 @@ def test_lockstep_resends_the_latest_frame_when_a_command_is_lost():
         client.close()
     summary = json.loads(out.strip().splitlines()[-1])
     assert summary["lockstep_resends"] >= 1 and summary["steps"] == 5
+
+
+def test_one_reject_classifier_for_every_mavlink_endpoint():
+    """The HIL codec and the ground-station link's parser share common.mavlink.bad_data_reason: a
+    corrupted checksum is bad_crc at both (they had diverged on the message's capitalisation)."""
+    from autopilot_bridge.gcs.framing import FrameParser
+    from common.mavlink import BAD_CRC, Codec, bad_data_reason, mavlink2
+
+    frame = bytearray(Codec(1, 1).encode("heartbeat", 0, 0, 0, 0, 0))
+    frame[-1] ^= 0xFF
+    _, rejects = Codec(2, 1, accept={"HEARTBEAT"}).decode(bytes(frame))
+    assert rejects == [BAD_CRC]
+    assert FrameParser(None).parse(bytes(frame), keep=False, max_frames=32).rejects == [BAD_CRC]
+    for text, want in (("invalid MAVLink prefix '0'", "not_mavlink"), ("invalid MAVLink CRC", "bad_crc"),
+                       ("invalid crc", "bad_crc"), ("Bad signature", "malformed")):
+        assert bad_data_reason(mavlink2.MAVLink_bad_data(b"x", text)) == want

@@ -109,7 +109,8 @@ def test_gps_dropout_window_and_glitches():
 
 def test_random_dropouts_are_seeded():
     over = ["sensors.gps.dropout_rate=0.2", "sensors.gps.dropout_duration=1.0"]
-    fix = lambda fr: [m["HIL_GPS"].fix_type for _, m in fr if "HIL_GPS" in m]  # noqa: E731
+    def fix(fr):
+        return [m["HIL_GPS"].fix_type for _, m in fr if "HIL_GPS" in m]
     a, b = fix(run_frames(over, 3000)[1]), fix(run_frames(over, 3000)[1])
     assert a == b and 0 in a and 3 in a
 

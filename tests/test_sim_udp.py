@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from common.mavlink import Codec
-from hil.commands.run import HilClient, stop_process
+from hil.processes import stop as stop_process
+from hil.sim_client import HilClient
 from tests.conftest import REPO
 
 FRAME_WAIT_S = 20.0  # bounded wait for any single frame

@@ -77,7 +77,8 @@ def test_rk4_matches_solve_ivp_over_60s_manoeuvre(cfg):
     ref = np.array(s)
     for seg in range(6):
         tau = _thrust_schedule(v, seg * 10.0)
-        f = lambda s_: v.dynamics(s_, tau, tau_w, cur)  # noqa: E731
+        def f(s_, tau=tau):
+            return v.dynamics(s_, tau, tau_w, cur)
         for _ in range(int(round(10.0 / dt))):
             s = rk4_step(f, s, dt)
         sol = solve_ivp(lambda t, y: f(tuple(y)), (0.0, 10.0), ref, method="DOP853", rtol=1e-11, atol=1e-11)
@@ -131,7 +132,8 @@ def test_vessel_at_rest_in_current_picks_up_the_current(cfg):
     v = Vessel(cfg.vessel)
     cur = (0.5, 0.2)
     s = (0.0, 0.0, 0.7, 0.0, 0.0, 0.0)
-    f = lambda s_: v.dynamics(s_, (0, 0, 0), (0, 0, 0), cur)  # noqa: E731
+    def f(s_):
+        return v.dynamics(s_, (0, 0, 0), (0, 0, 0), cur)
     for _ in range(6000):
         s = rk4_step(f, s, 0.01)
     d = f(s)

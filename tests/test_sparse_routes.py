@@ -126,5 +126,5 @@ def test_start_and_goal_alone_are_routed_round_the_wall(tmp_path):
     assert np.allclose(ref[0], scen.start) and np.allclose(ref[-1], scen.goal)
     assert ref[:, 1].max() > 60.0                       # round the end of the wall (y < 60 m)
     grid = OccupancyGrid(scen.occ, scen.resolution).inflate(2.0)
-    assert all(grid.segment_free(*a, *b) for a, b in zip(ref[:-1], ref[1:]))
+    assert all(grid.segment_free(*a, *b) for a, b in zip(ref[:-1], ref[1:], strict=True))
     assert np.max(np.hypot(*np.diff(ref, axis=0).T)) <= 10.0 + 1e-9

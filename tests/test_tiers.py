@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
 from conftest import E2E_MODULES, INTEGRATION_MODULES, UNIT_MODULES, tier_of
 
 TESTS = Path(__file__).resolve().parent

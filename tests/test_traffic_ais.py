@@ -63,7 +63,7 @@ def test_ais_reports_reach_the_link_over_udp_noisy_at_class_a_rates_truth_droppe
         reports = []
         for _ in range(int(31.0 / core.frame_dt)):
             tx.send(core.frame())
-            for f in link.receive(timeout=2.0):
+            for _frame in link.receive(timeout=2.0):
                 pass
             reports += link.take_ais()
             core.step()

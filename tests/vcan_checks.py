@@ -25,7 +25,8 @@ def main() -> None:
     good = dc.to_frames(dc.RAW_COMMAND, dc.raw_command([1000, -1000]), cfg.can.autopilot_node_id, 0)
     frames = good + [
         can.Message(arbitration_id=good[0].arbitration_id, data=b"", is_extended_id=True),       # no tail byte
-        *dc.to_frames(dc.RAW_COMMAND, dc.serialize(dc.make(dc.RAW_COMMAND, cmd=[-8192, 5])), cfg.can.autopilot_node_id, 1),
+        *dc.to_frames(dc.RAW_COMMAND, dc.serialize(dc.make(dc.RAW_COMMAND, cmd=[-8192, 5])),
+                      cfg.can.autopilot_node_id, 1),
         *dc.to_frames(dc.RAW_COMMAND, dc.raw_command([7, 7]), 99, 0),                              # unknown node
         can.Message(arbitration_id=0x123, data=b"\x01\xc0", is_extended_id=False),               # 11-bit frame
     ]

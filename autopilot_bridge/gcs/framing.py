@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from autopilot_bridge.gcs.signing import ReplayGuard
-from common.mavlink import mavlink2
+from common.mavlink import MALFORMED, TRUNCATED, UNKNOWN_MESSAGE, bad_data_reason, mavlink2
 
 BUFFER_LIMIT = 1 << 16   # bytes of a stream's unparsed backlog before it is dropped
 
@@ -24,11 +24,6 @@ class Parsed:
     msgs: list[Any] = field(default_factory=list)
     rejects: list[str] = field(default_factory=list)
     over_budget_bytes: int = 0
-
-
-def reject_reason(bad: Any) -> str:
-    reason = str(getattr(bad, "reason", ""))
-    return "not_mavlink" if "prefix" in reason else "bad_crc" if "CRC" in reason else "malformed"
 
 
 class FrameParser:
@@ -63,16 +58,16 @@ class FrameParser:
             m = mav.parse_char(data)
             while m is not None:
                 if isinstance(m, mavlink2.MAVLink_bad_data):
-                    out.rejects.append(reject_reason(m))
+                    out.rejects.append(bad_data_reason(m))
                 elif isinstance(m, mavlink2.MAVLink_unknown):
-                    out.rejects.append("unknown_message")
+                    out.rejects.append(UNKNOWN_MESSAGE)
                 else:
                     out.msgs.append(m)
                 if len(out.msgs) + len(out.rejects) >= max_frames:
                     break
                 m = mav.parse_char(b"")
         except Exception:
-            out.rejects.append("malformed")
+            out.rejects.append(MALFORMED)
             keep = False
         left = mav.buf_len()
         if left > 0 and len(out.msgs) + len(out.rejects) >= max_frames:
@@ -82,7 +77,7 @@ class FrameParser:
             return out
         if not keep:
             if left > 0:
-                out.rejects.append("truncated")
+                out.rejects.append(TRUNCATED)
             self._reset()
         elif left > BUFFER_LIMIT:  # a stream of garbage: do not let the buffer grow
             mav.buf, mav.buf_index = bytearray(), 0

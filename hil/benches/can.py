@@ -62,11 +62,10 @@ def _finish(proc: subprocess.Popen) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    import can
     import numpy as np
 
-    import can
-
-    from hil.can_path import esc_process_command, pair_latency, paced, recording_actuators, stats_ms
+    from hil.can_path import esc_process_command, paced, pair_latency, recording_actuators, stats_ms
     from hil.commands.can_options import can_overrides
 
     args.overrides = list(args.overrides) + can_overrides(args)
@@ -99,7 +98,8 @@ def run(args: argparse.Namespace) -> int:
                 k = seq[0]
                 seq[0] += 1
                 t = time.monotonic()
-                bus.send(can.Message(arbitration_id=BARE_REQUEST, data=bytes([k % 256, 0, 0, 0, 0]), is_extended_id=True))
+                bus.send(can.Message(arbitration_id=BARE_REQUEST, data=bytes([k % 256, 0, 0, 0, 0]),
+                                     is_extended_id=True))
                 sent_at.append(t)
                 sent_seq.append(k % 256)
                 pending[k % 256] = t
@@ -135,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
             if acts is not None:
                 acts.close()
         z = np.load(rec)
-        ours = pair_latency(np.frombuffer(acts.sent_tid, dtype=np.int8), np.frombuffer(acts.sent_at, dtype=float),
+        ours = pair_latency(*acts.sent_times.arrays(),
                             z["tid"], z["at"])
         result["ours_command_to_applied_ms"] = stats_ms(ours)
         result["ours_lost"] = acts.commands_sent - int(esc_summary.get("raw_commands_applied", 0))

@@ -22,11 +22,13 @@ and budgets, and the report gives our/OMPL ratios. ``ompl`` is not a project dep
 from __future__ import annotations
 
 import argparse
+import importlib
 import math
 import statistics
 import time
+from collections.abc import Callable
 from dataclasses import replace
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
 from hil import console
 from hil.errors import UsageError
@@ -116,7 +118,9 @@ class OmplRunner:
     """OMPL's geometric RRT* on the same grid, with a Python state-validity checker."""
 
     def __init__(self, occ: np.ndarray, resolution: float, start, goal, step: float) -> None:
-        from ompl import base as ob, geometric as og, util as ou
+        from ompl import base as ob
+        from ompl import geometric as og
+        from ompl import util as ou
         ou.setLogLevel(ou.LogLevel.LOG_NONE) if hasattr(ou.LogLevel, "LOG_NONE") else None
         self.ob, self.og = ob, og
         self.occ, self.res = occ, resolution
@@ -239,9 +243,9 @@ def run(args: argparse.Namespace) -> int:
     have_ompl = False
     if not args.no_ompl:
         try:
-            import ompl.base  # noqa: F401
-            import ompl.geometric  # noqa: F401
-            have_ompl, ompl_note = True, "ompl " + getattr(__import__("ompl"), "__version__", "installed")
+            importlib.import_module("ompl.base")  # the modules OmplRunner uses, not only the package
+            importlib.import_module("ompl.geometric")
+            have_ompl, ompl_note = True, "ompl " + getattr(importlib.import_module("ompl"), "__version__", "installed")
         except Exception as exc:  # ImportError or a broken binary wheel: report and go on
             ompl_note = f"skipped: cannot import ompl ({type(exc).__name__}: {exc}); pip install ompl to compare"
     console.progress(f"hil bench planner: {len(args.maps)} maps x {len(args.algorithms)} planners, {seeds_n} seeds, "
@@ -271,7 +275,8 @@ def run(args: argparse.Namespace) -> int:
                     entry["rrt_star_vs_ompl"] = {
                         "iterations_per_s": (ours["iterations_per_s"] or 0) / m["iterations_per_s"],
                         **{f"ratio_{b}": (ours["ratio"][b] / m["ratio"][b]
-                                          if ours["ratio"][b] and m["ratio"][b] and math.isfinite(m["ratio"][b]) else None)
+                                          if ours["ratio"][b] and m["ratio"][b] and math.isfinite(m["ratio"][b])
+                                          else None)
                            for b in ours["ratio"]},
                     }
             except Exception as exc:  # an OMPL API mismatch must not lose our own figures
@@ -299,7 +304,8 @@ def _f(v: Any, fmt: str) -> str:
 
 def _print_table(report: dict[str, Any]) -> None:
     budgets = [f"{b:g}" for b in report["budgets_s"]]
-    head = f"{'map':15} {'planner':18} {'iter/s':>9} {'first (ms)':>10} " + " ".join(f"{'x@' + b + 's':>8}" for b in budgets)
+    head = (f"{'map':15} {'planner':18} {'iter/s':>9} {'first (ms)':>10} "
+            + " ".join(f"{'x@' + b + 's':>8}" for b in budgets))
     lines = [head, "-" * len(head)]
     for name, e in report["maps"].items():
         rows = list(e["planners"].items())
@@ -320,7 +326,8 @@ def _print_table(report: dict[str, Any]) -> None:
             if "error" in r:
                 e2e_lines.append(f"{name:15} error: {r['error']}")
                 continue
-            e2e_lines.append(f"{name:15} {r['algorithm']:12} {r['deadline_s']:8g} {r['wall_s']:8.2f} {r['search_s']:8.3f} "
+            e2e_lines.append(f"{name:15} {r['algorithm']:12} {r['deadline_s']:8g} {r['wall_s']:8.2f} "
+                             f"{r['search_s']:8.3f} "
                              f"{r['setup_s'] * 1e3:9.1f} {r['warm_up_s']:8.2f} {r['startup_s']:9.2f} "
                              f"{_f(r.get('length_ratio'), '8.4f')}")
     if e2e_lines:

@@ -6,9 +6,10 @@ import argparse
 import subprocess
 import time
 
-from hil.commands.run import HilClient, sim_command, start_simulator, stop_process
 from hil.console import emit, load_settings, progress
 from hil.errors import RunFailed
+from hil.processes import stop as stop_process
+from hil.sim_client import HilClient, sim_command, start_simulator
 
 GOAL_LOCKSTEP_STEPS_PER_S = 2000.0
 
@@ -39,7 +40,8 @@ def bench_model(cfg, n: int) -> float:
     tau = vessel.propulsion(vessel.thrust(0.8), vessel.thrust(0.6))
     tau_w, cur = (1.0, 2.0, 0.3), (0.1, 0.2)
     s = (0.0,) * 6
-    f = lambda s: vessel.dynamics(s, tau, tau_w, cur)  # noqa: E731
+    def f(s):
+        return vessel.dynamics(s, tau, tau_w, cur)
     dt = cfg.sim.dt
     t0 = time.perf_counter()
     for _ in range(n):

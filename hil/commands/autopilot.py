@@ -4,18 +4,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing
 import os
 import signal
-import tempfile
-from pathlib import Path
 
 from common.readiness import Ready, announce
+from hil.commands.arg_types import receiving, sending
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
-from hil.commands.sim import receiving, sending
 from hil.console import emit, load_settings, progress
+from hil.files import write_json_atomic
 from planner.params import ALGORITHM_NAMES
-from hil.errors import UsageError
 
 
 def _gcs_endpoint(text: str) -> str:
@@ -119,135 +116,18 @@ def _overrides(args: argparse.Namespace) -> list[str]:
     return out + can_overrides(args)
 
 
-def _save_record(path: str, tids, times) -> None:
-    import numpy as np
-
-    np.savez(path, tid=np.frombuffer(tids, dtype=np.int8), at=np.frombuffer(times, dtype=float))
-
-
-def write_json_atomic(path: str | Path, data: dict) -> None:
-    """Write JSON to ``path`` via a temporary file and rename: never a half-written file."""
-    from hil.console import to_json
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(to_json(data) + "\n")
-        os.replace(tmp, path)
-    except BaseException:  # a full disk, an interrupt: never leave the temporary file behind
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-
-
-def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None = None,
-          sensors_from: str | None = None):
-    """The autopilot and its parts from a configuration and a scenario (used by `hil run` too)."""
-    from autopilot_bridge.autopilot import Autopilot, Propulsion
-    from autopilot_bridge.control import SurgeModel
-    from autopilot_bridge.hil_link import HilLink
-    from autopilot_bridge.local_planning import World
-    from autopilot_bridge.planning_worker import PlannerWorker
-    from autopilot_bridge.gcs.link import GcsLink
-    from common.geodesy import LocalFrame
-    from hil import scenario as scenarios
-    from simulator.vessel import Vessel
-
-    scen = scenarios.load(scenario_name, cfg.current, cfg.planner.safety_radius)
-    params = scenarios.planner_params(cfg.planner, scen.planner_overrides, f"scenario {scen.name}")
-    online = scenarios.online_params(scen.online_overrides, f"scenario {scen.name}")
-    world = World(occ=scen.occ, resolution=scen.resolution, goal=tuple(scen.goal),
-                  reference_path=scen.reference_path, field=scen.planning_field(),
-                  params=params, online=online, algorithm=params.algorithm)
-    vessel = Vessel(cfg.vessel)  # eq. (5): the vessel computer's nominal model of the same hull
-    propulsion = Propulsion(SurgeModel(vessel.m11, vessel.m22, cfg.vessel.d_u), cfg.vessel.B_u,
-                            cfg.vessel.T_max, cfg.vessel.T_min)
-    ap = cfg.autopilot
-    geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
-    try:
-        link = HilLink(ap.listen, ap.actuators_to, geo, declination=cfg.sensors.compass.declination,
-                       system_id=ap.system_id, component_id=ap.component_id, send_loss=ap.send_loss,
-                       recv_loss=ap.recv_loss, loss_seed=cfg.sim.seed + 7,
-                       truth_component_id=cfg.traffic.truth_component_id,
-                       sim_ids=(cfg.link.system_id, cfg.link.component_id), sensors_from=sensors_from,
-                       max_time_step=_max_time_step(cfg, lockstep))
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
-    actuators = None
-    if cfg.can.actuators == "can":
-        from autopilot_bridge.can_actuators import CanActuators
-        from common.can_params import open_bus
-
-        try:
-            actuators = CanActuators(open_bus(cfg.can), cfg.can, lockstep_token=link if lockstep else None)
-        except ValueError as exc:
-            link.close()
-            raise UsageError(str(exc)) from None
-    try:
-        telemetry = GcsLink(cfg.gcs, ap.system_id, ap.component_id, geo, mirror_to=ap.telemetry_to,
-                            chart_size=(scen.height, scen.width), log=progress)
-    except ValueError as exc:
-        link.close()
-        if actuators is not None:
-            actuators.close()
-        raise UsageError(str(exc)) from None
-    # Compile (first run on a machine: ~7 s) or load the planner's numba core here, once, before
-    # the control loop starts: forked workers inherit it, so no planning cycle pays for it.
-    # One real planning cycle from the start compiles everything a cycle uses (tree core, grid
-    # kernels of pruning and smoothing).
-    import time as _time
-
-    from autopilot_bridge.local_planning import CycleInput, online_cycle_handler
-
-    t0 = _time.monotonic()
-    warm_up = CycleInput(scen.start[0], scen.start[1], scen.start_heading, 0.0, 0)
-    online_cycle_handler(world, warm_up)
-    spent = _time.monotonic() - t0
-    if spent > 1.0:
-        progress(f"autopilot: planner compiled and warmed up in {spent:.1f} s (cached for next time)")
-    # fork: a restarted worker inherits the world instead of receiving it pickled; with spawn the
-    # parent blocks writing ~100 KB into a 64 KB pipe until the new interpreter has started, which
-    # stalls the control loop on every watchdog restart.
-    start_method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
-    if planner_factory:
-        worker = PlannerWorker(planner_factory, (), grace_s=ap.watchdog_grace, start_method=start_method)
-    else:
-        # Each (re)started worker warms up too (its first cycle would pay the fork's page faults).
-        worker = PlannerWorker("autopilot_bridge.local_planning:online_cycle_handler", (world, warm_up),
-                               grace_s=ap.watchdog_grace, start_method=start_method)
-    from autopilot_bridge.traffic_awareness import TrafficAwareness
-
-    traffic = TrafficAwareness(cfg.tracking, cfg.colregs, geo)  # AIS targets, COLREGs encounters
-    autopilot = Autopilot(ap, cfg.navigation, cfg.control, propulsion, world, link, worker, telemetry,
-                          lockstep=lockstep, seed=cfg.sim.seed, log=progress, traffic=traffic, actuators=actuators,
-                          int14_commands=cfg.esc.int14_resolution or cfg.can.actuators == "can",
-                          wait_for_arm=cfg.gcs.wait_for_arm,
-                          pace_speedup=cfg.gcs.pace_speedup if cfg.gcs.wait_for_arm else None)
-    telemetry.attach(autopilot)
-    return autopilot
-
-
-def _max_time_step(cfg, lockstep: bool) -> float:
-    """Largest forward step (s) of sensor time the link accepts: lockstep advances exactly one IMU
-    period per frame; real time skips lost datagrams (0.25 s: 25 in a row at 100 Hz)."""
-    period = 1.0 / cfg.sensors.imu.rate_hz
-    return 1.5 * period if lockstep else max(0.25, 3.0 * period)
-
-
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     args.overrides = list(args.overrides) + _overrides(args)
     cfg = load_settings(args)
     check_can(cfg, "hil autopilot (a process of its own)")
+    from hil.assembly import build
+
     autopilot = build(cfg, args.scenario, args.lockstep, args.planner_factory, getattr(args, "sensors_from", None))
     stop = {"flag": False}
     if args.can_record and autopilot.actuators is not autopilot.link:
-        autopilot.actuators.record = True
+        autopilot.actuators.sent_times.start(spill_to=args.can_record)
 
     def request_stop(*_):
         stop["flag"] = True
@@ -259,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
     gcs = autopilot.telemetry
     if gcs is not None and gcs.addresses:
         progress("autopilot: ground stations on " + ", ".join(
-            f"{spec} (local {h}:{p})" for spec, (h, p) in zip(cfg.gcs.endpoints, gcs.addresses)))
+            f"{spec} (local {h}:{p})" for spec, (h, p) in zip(cfg.gcs.endpoints, gcs.addresses, strict=False)))
     progress(f"autopilot: listening on {host}:{port}, {acts}, "
              f"scenario {args.scenario}, {'lockstep' if args.lockstep else 'real time'}"
              f"{', waiting for a GCS to arm' if cfg.gcs.wait_for_arm else ''}")
@@ -275,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
         if autopilot.actuators is not autopilot.link:
             autopilot.actuators.close()
             if args.can_record:
-                _save_record(args.can_record, autopilot.actuators.sent_tid, autopilot.actuators.sent_at)
+                autopilot.actuators.sent_times.save(args.can_record)
         if autopilot.telemetry is not None:
             autopilot.telemetry.close()
     summary = autopilot.summary()

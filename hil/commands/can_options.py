@@ -13,7 +13,8 @@ def add_can_arguments(p: argparse.ArgumentParser, actuators: bool = True) -> Non
                        help="thruster set-points as HIL_ACTUATOR_CONTROLS over UDP (mavlink) or as DroneCAN "
                             "ESC RawCommand over CAN with ESC Status back (can) (default: can.actuators = mavlink)")
     g.add_argument("--can-interface", metavar="NAME", default=None,
-                   help="python-can interface of the bus, e.g. socketcan, pcan, kvaser (default: can.interface = socketcan); "
+                   help="python-can interface of the bus, e.g. socketcan, pcan, kvaser "
+                        "(default: can.interface = socketcan); "
                         "it must reach across processes, so python-can's in-process 'virtual' is refused")
     g.add_argument("--can-channel", metavar="CHANNEL", default=None,
                    help="python-can channel of the bus, e.g. vcan0, can0 (default: can.channel = vcan0)")
@@ -56,7 +57,8 @@ def check_can(cfg, what: str) -> None:
         try:
             socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW).close()
         except (OSError, AttributeError) as exc:
-            raise UsageError(f"--actuators can: this kernel has no SocketCAN ({getattr(exc, 'strerror', None) or exc}); "
+            reason = getattr(exc, "strerror", None) or exc
+            raise UsageError(f"--actuators can: this kernel has no SocketCAN ({reason}); "
                              f"run inside `hil vcan -- hil ...`, which provides vcan0 (natively or in User-Mode "
                              f"Linux), or choose another --can-interface") from None
         if not os.path.exists(f"/sys/class/net/{can_cfg.channel}"):

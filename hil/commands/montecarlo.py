@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import time
 from pathlib import Path
@@ -136,20 +135,15 @@ def run_traffic(args: argparse.Namespace) -> int:
                          f"ship(s) each, on {ex.description}, seed {args.seed} -> {out}")
         t0 = time.monotonic()
         summary = run_campaign(args.scenario, args.runs, args.seed, draw, out, ex, job, progress)
-    summary["wall_time_s"] = round(time.monotonic() - t0, 1)
-    summary["files"] = {"runs": str(out / "runs.csv"), "summary": str(out / "summary.json")}
-    (out / "summary.json").write_text(console.to_json(summary))
-    console.progress(f"traffic: collision rate {summary['collision_rate']:.3f}, mean CPA {summary['mean_cpa_m']} m, "
-                     f"compliance {summary['compliance_rate']} over {summary['encounters']} encounters")
-    console.emit(args, summary)
-    return 0
+    return _finish(args, out, summary, t0,
+                   f"traffic: collision rate {summary['collision_rate']:.3f}, mean CPA {summary['mean_cpa_m']} m, "
+                   f"compliance {summary['compliance_rate']} over {summary['encounters']} encounters")
 
 
 def run_routes(args: argparse.Namespace, argv_scenario: str | None) -> int:
     """`hil montecarlo --routes`: HIL runs on random sparse routes."""
     from hil import scenario as scenarios
-    from hil.hilrun import RunOptions, run_loop
-    from hil.route_montecarlo import run_campaign
+    from hil.route_montecarlo import RouteJob, run_campaign
 
     name = argv_scenario or "random-route"
     spec = scenarios.load_spec(name)
@@ -164,30 +158,35 @@ def run_routes(args: argparse.Namespace, argv_scenario: str | None) -> int:
     bar = console.ProgressBar(args.runs, "montecarlo routes", every_s=2.0)
     ok = [0]
 
-    def make(i, path, folder):
-        return RunOptions(scenario=str(path), lockstep=True, duration=duration, seed=args.seed * 1000 + i,
-                          config=args.config, overrides=list(args.overrides), out=folder / "hil", plot=False)
-
     def progress(done, s):
         ok[0] += 1 if s["reached_goal"] else 0
         bar.update(done, f"reached {ok[0]}/{done}")
 
-    console.progress(f"hil montecarlo --routes: {args.runs} lockstep HIL runs on {spec.name}, {args.jobs} at a time, "
-                     f"seed {args.seed} -> {out}")
-    t0 = time.monotonic()
-    summary = run_campaign(name, args.runs, args.seed, out, args.jobs, cfg.planner.safety_radius, cfg.current, make,
-                           lambda o: run_loop(o, cfg), progress)
+    job = RouteJob(seed=args.seed, duration=duration, config=args.config, overrides=tuple(args.overrides))
+    with executors.make(args.executor, min(args.jobs, args.runs), args.scheduler, threads=True) as ex:
+        console.progress(f"hil montecarlo --routes: {args.runs} lockstep HIL runs on {spec.name}, on "
+                         f"{ex.description}, seed {args.seed} -> {out}")
+        t0 = time.monotonic()
+        summary = run_campaign(name, args.runs, args.seed, out, ex, cfg.planner.safety_radius, cfg.current, job,
+                               progress)
+    return _finish(args, out, summary, t0,
+                   f"routes: {summary['reached_without_collision']}/{args.runs} reached the goal without collision "
+                   f"(success rate {summary['success_rate']:.3f}); outcomes {summary['outcomes']}")
+
+
+def _finish(args: argparse.Namespace, out: Path, summary: dict, t0: float, line: str) -> int:
+    """The end of a HIL campaign: wall time and files into summary.json, one line, the summary."""
     summary["wall_time_s"] = round(time.monotonic() - t0, 1)
     summary["files"] = {"runs": str(out / "runs.csv"), "summary": str(out / "summary.json")}
     (out / "summary.json").write_text(console.to_json(summary))
-    console.progress(f"routes: {summary['reached_without_collision']}/{args.runs} reached the goal without collision "
-                     f"(success rate {summary['success_rate']:.3f}); outcomes {summary['outcomes']}")
+    console.progress(line)
     console.emit(args, summary)
     return 0
 
 
 def run(args: argparse.Namespace) -> int:
-    from hil import experiment, scenario as scenarios
+    from hil import experiment
+    from hil import scenario as scenarios
 
     if args.runs < 1:
         raise UsageError("--runs must be >= 1")
@@ -267,7 +266,8 @@ def run(args: argparse.Namespace) -> int:
         console.emit(args, summary)
     else:  # the table itself, as Markdown, is the human summary (the same text as table3.md)
         print(markdown.rstrip("\n"), flush=True)
-        print(f"\n{len(camp.rows)} runs ({args.runs} per algorithm) in {wall:.0f} s; files in {out} (table3.md, table3.csv, runs.csv"
+        print(f"\n{len(camp.rows)} runs ({args.runs} per algorithm) in {wall:.0f} s; files in {out} "
+              f"(table3.md, table3.csv, runs.csv"
               f"{', figures' if figures else ''}, summary.json)", flush=True)
     if camp.interrupted:
         return 130
@@ -275,7 +275,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _figures(args, spec, camp, out: Path) -> dict[str, str]:
-    from hil import experiment, plots, scenario as scenarios
+    from hil import experiment, plots
+    from hil import scenario as scenarios
 
     files = {}
     algs = [a for a in ("ddrrt-star", "informed-rrt-star", "rrt-star") if a in camp.details]

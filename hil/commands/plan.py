@@ -41,7 +41,8 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     src.add_argument("--scenario", metavar="NAME",
                      help=f"take map, start, goal, heading and current from configs/scenarios/NAME.toml "
                           f"({', '.join(scenario_names())})")
-    src.add_argument("--map", metavar="FILE", type=Path, help="occupancy map: .npy (bool/0-1) or .png (dark = obstacle)")
+    src.add_argument("--map", metavar="FILE", type=Path,
+                     help="occupancy map: .npy (bool/0-1) or .png (dark = obstacle)")
     src.add_argument("--resolution", metavar="R", type=float, help="map cell size (m per cell, > 0)")
     src.add_argument("--start", metavar="X,Y", type=_point, help="start position (m, map frame)")
     src.add_argument("--goal", metavar="X,Y", type=_point, help="goal position (m, map frame)")
@@ -95,12 +96,11 @@ def _problem_inputs(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
     import numpy as np
 
     from hil import scenario as scenarios
-
-    from dataclasses import replace
-
     from planner import make_planner, warm_up_info
     from planner.core import free_regions
     from planner.gridmap import OccupancyGrid

@@ -17,96 +17,18 @@ import math
 import re
 import signal
 import subprocess
-import sys
 import time
-from dataclasses import dataclass, field
 from typing import Any
 
 from hil import processes
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
-from hil.config import config_args
 from hil.console import emit, load_settings, progress
-from planner.params import ALGORITHM_NAMES
 from hil.errors import ConfigError, RunFailed, UsageError
+from hil.sim_client import HilClient, sim_command, start_simulator
+from planner.params import ALGORITHM_NAMES
 
 FRAME_TIMEOUT_S = 15.0  # wall seconds to wait for the simulator's next frame before giving up
 DEMO_CONTROLS = (0.6, 0.5)  # port, starboard: a gentle starboard turn
-
-
-@dataclass
-class Frame:
-    """The messages of one simulator datagram, by type."""
-
-    raw: bytes
-    time_usec: int | None
-    messages: dict[str, Any] = field(default_factory=dict)
-
-
-class HilClient:
-    """The vessel-computer side of the link: receives frames, answers with HIL_ACTUATOR_CONTROLS.
-
-    Bound to 127.0.0.1 on a free port (see :attr:`port`); commands go back to the address the
-    frames come from (the simulator sends from its command socket).
-    """
-
-    ACCEPT = ("HIL_SENSOR", "HIL_GPS", "HIL_STATE_QUATERNION", "ODOMETRY")
-
-    def __init__(self, bind: str = "127.0.0.1:0", system_id: int = 1, component_id: int = 1) -> None:
-        """``system_id``/``component_id``: the autopilot's (the simulator takes commands only from those)."""
-        from common.mavlink import Codec
-        from common.udp import UdpEndpoint
-
-        self.ep = UdpEndpoint(bind)
-        self.codec = Codec(system_id, component_id, accept=self.ACCEPT)
-        self.frames = self.commands = self.rejects = 0
-
-    @property
-    def port(self) -> int:
-        return self.ep.address[1]
-
-    def next_frame(self, timeout: float, latest: bool = False) -> Frame | None:
-        """The next datagram (``latest``: the newest queued one) decoded, or None on timeout."""
-        data = self.ep.drain_latest() if latest else None
-        if data is None:
-            data = self.ep.recv(timeout)
-        if data is None:
-            return None
-        msgs, rejects = self.codec.decode(data)
-        self.rejects += len(rejects)
-        self.frames += 1
-        f = Frame(data, None, {m.get_type(): m for m in msgs})
-        if "HIL_SENSOR" in f.messages:
-            f.time_usec = int(f.messages["HIL_SENSOR"].time_usec)
-        return f
-
-    def command(self, time_usec: int, port: float, stdb: float) -> bytes:
-        """Send one HIL_ACTUATOR_CONTROLS (controls[0] port, [1] starboard) to the simulator."""
-        data = self.codec.encode("hil_actuator_controls", time_usec, [port, stdb] + [0.0] * 14, 0, 0)
-        if self.ep.last_sender is not None:
-            self.ep.sock.sendto(data, self.ep.last_sender)
-            self.commands += 1
-        return data
-
-    def close(self) -> None:
-        self.ep.close()
-
-
-def sim_command(args: argparse.Namespace, client_port: int, lockstep: bool) -> list[str]:
-    cmd = [sys.executable, "-m", "hil", "sim", "--json", "--state-to", f"127.0.0.1:{client_port}",
-           "--commands-from", f"127.0.0.1:{client_port}",
-           "--commands-on", "127.0.0.1:0", "--duration", repr(float(args.duration))]
-    cmd += config_args(args.config)
-    for o in args.overrides:
-        cmd += ["--set", o]
-    if args.seed is not None:
-        cmd += ["--seed", str(args.seed)]
-    cmd += ["--lockstep"] if lockstep else ["--speedup", repr(float(args.speedup))]
-    return cmd
-
-
-def start_simulator(cmd: list[str], **kwargs: Any) -> subprocess.Popen:
-    """Start the simulator subprocess; it is stopped if this process dies."""
-    return processes.start(cmd, **kwargs)
 
 
 class Terminated(KeyboardInterrupt):
@@ -258,9 +180,11 @@ def human_summary(s: dict[str, Any]) -> list[str]:
     lines = [f"outcome: {outcome} (scenario {s.get('scenario')}, seed {s.get('seed')}, {s.get('mode')}, "
              f"actuators {s.get('actuators')})"]
     sim_t, wall = s.get("sim_time_s") or 0.0, s.get("wall_time_s") or 0.0
-    lines.append(f"time: {sim_t:.1f} s simulated in {wall:.1f} s wall" + (f" (x{sim_t / wall:.1f})" if wall > 0 else ""))
+    speed_up = f" (x{sim_t / wall:.1f})" if wall > 0 else ""
+    lines.append(f"time: {sim_t:.1f} s simulated in {wall:.1f} s wall" + speed_up)
     energy = s.get("energy_J")
-    lines.append(f"clearance: min {num(s.get('min_clearance_m'), ' m')}; path {num(s.get('path_length_m'), ' m', '.1f')}"
+    lines.append(f"clearance: min {num(s.get('min_clearance_m'), ' m')}; "
+                 f"path {num(s.get('path_length_m'), ' m', '.1f')}"
                  f"; energy {'-' if energy is None else f'{energy / 1000:.1f} kJ'}")
     tr, lat = s.get("tracking") or {}, s.get("control_latency_ms") or {}
     lines.append(f"errors: navigation RMSE {num(s.get('navigation_rmse_m'), ' m')}; cross-track RMS "
@@ -288,7 +212,7 @@ def _gcs_args(args: argparse.Namespace) -> list[str]:
     return out + (["--wait-for-arm"] if args.wait_for_arm else [])
 
 
-def _run_loop(args: argparse.Namespace, client: "HilClient", lockstep: bool) -> int:
+def _run_loop(args: argparse.Namespace, client: HilClient, lockstep: bool) -> int:
     proc = start_simulator(sim_command(args, client.port, lockstep), stdout=subprocess.PIPE, text=True)
     start = time.monotonic()
     end_usec = int(round(args.duration * 1e6))

@@ -7,26 +7,10 @@ import json
 import signal
 
 from common import connection
+from hil.commands.arg_types import receiving, sending
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, UsageError
-
-
-def _endpoint(role):
-    """An argparse type checking a connection string for ``role`` (common.connection)."""
-    def check(text: str) -> str:
-        try:
-            connection.parse(text, role)
-        except ValueError as exc:
-            raise argparse.ArgumentTypeError(str(exc)) from None
-        return text
-    check.__name__ = "connection string"
-    return check
-
-
-_hostport = _endpoint(connection.RECEIVE_UDP)   # a bound address (kept for older imports)
-sending = _endpoint(connection.SEND_UDP)
-receiving = _endpoint(connection.RECEIVE_UDP)
 
 
 def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
@@ -102,11 +86,10 @@ def scenario_overrides(scen, base_current) -> list[str]:
     """The ``--set`` overrides that put the simulator where `hil run` starts it on ``scen``: the
     start (map x east, y north, heading counter-clockwise from east) as NED ``sim.initial`` and the
     scenario's own ``[current]`` keys."""
-    import math
-
+    from common.frames import map_to_ned
     from hil.config import to_table
 
-    north, east, psi = scen.start[1], scen.start[0], math.pi / 2.0 - scen.start_heading
+    north, east, psi = map_to_ned(scen.start[0], scen.start[1], scen.start_heading)
     out = [f"sim.initial.x={north!r}", f"sim.initial.y={east!r}", f"sim.initial.psi={psi!r}"]
     base, mine = to_table(base_current), to_table(scen.current)
     out += [f"current.{k}={json.dumps(v)}" for k, v in mine.items() if base.get(k) != v]
@@ -165,7 +148,8 @@ def run(args: argparse.Namespace) -> int:
 
         try:
             esc = EscBank(open_bus(cfg.can), cfg.can, cfg.esc, core.vessel)
-            esc.record = bool(args.can_record)
+            if args.can_record:
+                esc.applied_times.start(spill_to=args.can_record)
         except ValueError as exc:
             endpoint.close()
             raise UsageError(str(exc)) from None
@@ -186,9 +170,7 @@ def run(args: argparse.Namespace) -> int:
         if esc is not None:
             esc.bus.shutdown()
             if args.can_record:
-                from hil.commands.autopilot import _save_record
-
-                _save_record(args.can_record, esc.applied_tid, esc.applied_at)
+                esc.applied_times.save(args.can_record)
     summary["commands_on"] = f"{host}:{port}"
     try:
         emit(args, summary)

@@ -177,9 +177,8 @@ def _can_checks(sides: dict[str, dict | None], problems: list[str]) -> dict[str,
 
 
 def _soak_loop(args: argparse.Namespace, cfg: Any, out: Path) -> dict[str, Any]:
-    from hil.hilrun import RunOptions, run_loop
-
     from hil.cpu_load import LoadWatch, overruns_allowed
+    from hil.hilrun import RunOptions, run_loop
 
     watch = ResourceWatch(_warmup(args))
     load = LoadWatch(every_s=1.0)
@@ -246,7 +245,7 @@ def _soak_can_path(args: argparse.Namespace, cfg: Any, out: Path) -> dict[str, A
     import numpy as np
 
     from hil import processes
-    from hil.can_path import esc_process_command, pair_latency, paced, recording_actuators, stats_ms
+    from hil.can_path import esc_process_command, paced, pair_latency, recording_actuators, stats_ms
 
     rec = out / "esc.npz"
     acts = recording_actuators(cfg)
@@ -285,9 +284,10 @@ def _soak_can_path(args: argparse.Namespace, cfg: Any, out: Path) -> dict[str, A
         raise RunFailed("the ESC node process printed no summary") from None
     behind = k - int(args.duration * args.rate)
     result: dict[str, Any] = {"mode": "can_path", "rate_hz": args.rate, "duration_s": args.duration,
-                              "commands_sent": acts.commands_sent, "commands_behind_schedule": -behind if behind < 0 else 0}
+                              "commands_sent": acts.commands_sent,
+                              "commands_behind_schedule": -behind if behind < 0 else 0}
     result["can"] = _can_checks({"autopilot": acts.summary(), "esc_nodes": esc_summary}, problems)
-    st, sa = np.frombuffer(acts.sent_tid, dtype=np.int8), np.frombuffer(acts.sent_at, dtype=float)
+    st, sa = acts.sent_times.arrays()
     at, aa = _load_record(rec)
     result["command_to_applied_ms"] = stats_ms(pair_latency(st, sa, at, aa))
     result["stale_failsafe_events"] = None  # no simulator clock on the bare path

@@ -4,6 +4,7 @@ come from the paper-setting campaign, restricted to the runs the eq. (12) campai
 
 Run: python docs/experiments/ddrrt/combine_tables.py PAPER_RUNS.csv[.gz] EQ12_RUNS.csv[.gz] OUT_PREFIX TITLE
 """
+
 import gzip
 import shutil
 import sys
@@ -24,13 +25,16 @@ def rows(path: str):
 
 paper, eq12, out, title = sys.argv[1], sys.argv[2], Path(sys.argv[3]), sys.argv[4]
 base = [r for r in rows(eq12) if r["algorithm"] in ("rrt-star", "informed-rrt-star")]
-done = {r["run"] for r in base if r["algorithm"] == "rrt-star"} & {r["run"] for r in base
-                                                                     if r["algorithm"] == "informed-rrt-star"}
+done = {r["run"] for r in base if r["algorithm"] == "rrt-star"} & {
+    r["run"] for r in base if r["algorithm"] == "informed-rrt-star"
+}
 dd_all = [r for r in rows(paper) if r["algorithm"] == "ddrrt-star"]
 done &= {r["run"] for r in dd_all}
 base = [r for r in base if r["run"] in done]
 dd = [r for r in dd_all if r["run"] in done]
 table = experiment.table3(base + dd)
 experiment.write_table_csv(out.with_suffix(".csv"), table)
-experiment.write_table_md(out.with_suffix(".md"), table, f"{title}: {len(done)} runs per algorithm (the runs both campaigns finished)")
+experiment.write_table_md(
+    out.with_suffix(".md"), table, f"{title}: {len(done)} runs per algorithm (the runs both campaigns finished)"
+)
 print(experiment.table_markdown(table, title))

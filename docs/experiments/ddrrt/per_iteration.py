@@ -2,6 +2,7 @@
 load counts less), RRT* vs DDRRT*, on Table 3 cycles of the labyrinth: to the first solution and
 over a whole 1500-iteration cycle. Minimum of 5 repetitions of 3 positions x 20 seeds.
 Run: python docs/experiments/ddrrt/per_iteration.py"""
+
 import time
 from dataclasses import replace
 
@@ -10,8 +11,7 @@ import numpy as np
 import planner
 import planner.core as core
 from hil import scenario as scenarios
-from planner import PlannerParams, make_planner
-from planner import _tree
+from planner import PlannerParams, _tree, make_planner
 from planner.gridmap import OccupancyGrid
 from planner.problem import PlanningProblem
 from planner.termination import Termination
@@ -41,21 +41,23 @@ core._tree = _Timed()
 POS = [(40.0, 62.0), (8.0, 8.0), (64.0, 45.0)]
 for alg, obj in (("rrt-star", "length"), ("rrt-star", "current"), ("ddrrt-star", "current")):
     out = []
-    for phase, term in (("to first solution", lambda: Termination.any_of(Termination.iterations(3000),
-                                                                        Termination.exact_solution())),
-                        ("1500-iteration cycle", lambda: Termination.iterations(1500))):
+    for phase, term in (
+        ("to first solution", lambda: Termination.any_of(Termination.iterations(3000), Termination.exact_solution())),
+        ("1500-iteration cycle", lambda: Termination.iterations(1500)),
+    ):
         p = replace(base, algorithm=alg, objective=obj)
         best = 1e9
-        for rep in range(5):
+        for _rep in range(5):
             n = 0
             acc[0] = 0.0
-            for (cx, cy) in POS:
+            for cx, cy in POS:
                 d = np.hypot(ref[:, 0] - cx, ref[:, 1] - cy)
                 k = int(np.argmin(d))
                 while k < len(ref) - 1 and np.hypot(ref[k, 0] - cx, ref[k, 1] - cy) < 28:
                     k += 1
-                prob = PlanningProblem(grid, (cx, cy), tuple(ref[k]), 0.0, field, ref, None, (cx, cy),
-                                       p.perceptual_radius)
+                prob = PlanningProblem(
+                    grid, (cx, cy), tuple(ref[k]), 0.0, field, ref, None, (cx, cy), p.perceptual_radius
+                )
                 for s in range(1, 21):
                     n += make_planner(alg, p, s).solve(prob, term()).iterations
             best = min(best, acc[0] / n)
