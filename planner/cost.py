@@ -11,6 +11,7 @@ at each piece's midpoint (tree edges are at most one step long, so they are one 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -62,11 +63,13 @@ def segment_cost(p, q, field, params) -> float:
     p, d, length, n = _pieces(p, q, params.step)
     if not _uses_current(field, params) or length == 0.0:
         return length
+    vx: Any
+    vy: Any
     if isinstance(field, GridField):  # one point at a time in Python floats: same values, faster
         vx, vy = [], []
         for i in range(n):
-            t = (i + 0.5) / n
-            ax, ay = field.at(float(p[0] + t * d[0]), float(p[1] + t * d[1]))
+            ti = (i + 0.5) / n
+            ax, ay = field.at(float(p[0] + ti * d[0]), float(p[1] + ti * d[1]))
             vx.append(ax)
             vy.append(ay)
     else:
