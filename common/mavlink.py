@@ -25,6 +25,14 @@ REJECT_REASONS = (NOT_MAVLINK, BAD_CRC, TRUNCATED, MALFORMED, UNKNOWN_MESSAGE, U
 MAV_TYPE = mavlink2  # the dialect module, for enums (e.g. MAV_FRAME_BODY_FRD)
 
 
+def reset_parser(mav: mavlink2.MAVLink) -> None:
+    """Forget whatever a pymavlink parser holds: the next bytes start a new frame."""
+    mav.buf = bytearray()
+    mav.buf_index = 0
+    mav.expected_length = mavlink2.HEADER_LEN_V1 + 2
+    mav.have_prefix_error = False
+
+
 def bad_data_reason(bad: mavlink2.MAVLink_bad_data) -> str:
     """The rejection reason of a frame pymavlink could not parse: the one classifier of every
     MAVLink endpoint (HIL link, simulator, ground-station link)."""
@@ -57,11 +65,7 @@ class Codec:
 
     # -- decoding --------------------------------------------------------------------------
     def _reset_parser(self) -> None:
-        m = self.mav
-        m.buf = bytearray()
-        m.buf_index = 0
-        m.expected_length = mavlink2.HEADER_LEN_V1 + 2
-        m.have_prefix_error = False
+        reset_parser(self.mav)
 
     def decode(self, datagram: bytes) -> tuple[list[mavlink2.MAVLink_message], list[str]]:
         """Accepted messages of one datagram, and the rejection reason of every rejected part."""

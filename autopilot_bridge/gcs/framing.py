@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from autopilot_bridge.gcs.signing import ReplayGuard
-from common.mavlink import MALFORMED, TRUNCATED, UNKNOWN_MESSAGE, bad_data_reason, mavlink2
+from common.mavlink import MALFORMED, TRUNCATED, UNKNOWN_MESSAGE, bad_data_reason, mavlink2, reset_parser
 
 BUFFER_LIMIT = 1 << 16   # bytes of a stream's unparsed backlog before it is dropped
 
@@ -36,11 +36,7 @@ class FrameParser:
             guard.install(self.mav)
 
     def _reset(self) -> None:
-        mav = self.mav
-        mav.buf = bytearray()
-        mav.buf_index = 0
-        mav.expected_length = mavlink2.HEADER_LEN_V1 + 2
-        mav.have_prefix_error = False
+        reset_parser(self.mav)
 
     def defer(self, data: bytes) -> bool:
         """Keep a stream's bytes for a later :meth:`parse` (no decoding now); False (and nothing kept)
