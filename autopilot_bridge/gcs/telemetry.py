@@ -148,28 +148,31 @@ class TelemetryService:
         if s is not None:
             self.out.send("attitude", self._t_ms(), 0.0, 0.0, s.psi, 0.0, 0.0, s.r)
 
+    def _fix(self, s: Any) -> tuple[float, float, int, int, int]:
+        """Velocity north/east (m/s) and position as MAVLink integers: lat, lon (degE7), alt (mm)."""
+        vn, ve = self._velocity(s)
+        geo = self.view.geo
+        lat, lon = geo.sea_level_to_geodetic(s.x, s.y)
+        return vn, ve, int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(geo.alt0 * 1000))
+
     def _global_position(self) -> None:
         s = self._nav()
         if s is None:
             return
-        vn, ve = self._velocity(s)
-        geo = self.view.geo
-        lat, lon = geo.sea_level_to_geodetic(s.x, s.y)
+        vn, ve, lat, lon, alt = self._fix(s)
         hdg = int(round(math.degrees(s.psi) % 360.0 * 100)) % 36000
-        self.out.send("global_position_int", self._t_ms(), int(round(lat * 1e7)), int(round(lon * 1e7)),
-                      int(round(geo.alt0 * 1000)), 0, int(round(vn * 100)), int(round(ve * 100)), 0, hdg)
+        self.out.send("global_position_int", self._t_ms(), lat, lon, alt, 0, int(round(vn * 100)),
+                      int(round(ve * 100)), 0, hdg)
 
     def _gps_raw(self) -> None:
         s = self._nav()
         if s is None:
             return
-        vn, ve = self._velocity(s)
-        geo = self.view.geo
-        lat, lon = geo.sea_level_to_geodetic(s.x, s.y)
+        vn, ve, lat, lon, alt = self._fix(s)
         cog = int(round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100)) % 36000
         eph = min(int(round(s.position_std * 100)), 65534)
-        self.out.send("gps_raw_int", self._t_us(), 3, int(round(lat * 1e7)), int(round(lon * 1e7)),
-                      int(round(geo.alt0 * 1000)), eph, 65535, int(round(math.hypot(vn, ve) * 100)), cog, 255)
+        self.out.send("gps_raw_int", self._t_us(), 3, lat, lon, alt, eph, 65535,
+                      int(round(math.hypot(vn, ve) * 100)), cog, 255)
 
     def _vfr_hud(self) -> None:
         s = self._nav()
