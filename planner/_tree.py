@@ -720,8 +720,12 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
             if ne == 0:
                 st[S_REJ] += 1
                 continue
-            _sort_by(ext_k, ext_i, ne)
-            q0 = ext_i[0]
+            # q0: the first of the smallest D_C (the head of a stable sort of ext by D_C)
+            b0 = 0
+            for a in range(1, ne):
+                if ext_k[a] < ext_k[b0]:
+                    b0 = a
+            q0 = ext_i[b0]
             d0 = math.hypot(sx - X[q0, 0], sy - X[q0, 1])
             if d0 < 1e-9:
                 continue
@@ -731,23 +735,30 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
             else:
                 nx = sx
                 ny = sy
-            # ---- lines 12-17: extendable nodes in order of the cost through them
-            nc = 0
+            # ---- lines 12-17: extendable nodes in order of the cost through them. Only those within
+            # a step of q_new take part, in D_C order: a stable sort of that subset (kn_d holds its
+            # keys) gives the order that sorting all of ext would give it.
+            ns = 0
             for a in range(ne):
                 i = ext_i[a]
-                ex = nx - X[i, 0]
-                ey = ny - X[i, 1]
-                if _within(ex, ey, step * (1.0 + 1e-9)):
-                    near_i[nc] = i
-                    if lower_bounds:
-                        # a lower bound of the key; _first_valid_parent makes exact only the keys
-                        # that may be the minimum (an eq. (12) edge costs an exp and a field look-up)
-                        near_c[nc] = cost[i] + lbf * math.sqrt(ex * ex + ey * ey) * (1.0 - lb_margin)
-                        near_x[nc] = False
-                    else:
-                        near_c[nc], near_x[nc] = _parent_key(i, nx, ny, X, cost, fc, ic, fvx, fvy)
-                    nc += 1
-            p, pc = _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, occ, fc, ic, fvx, fvy, st, X, cost, head,
+                if _within(nx - X[i, 0], ny - X[i, 1], step * (1.0 + 1e-9)):
+                    rw_i[ns] = i
+                    kn_d[ns] = ext_k[a]
+                    ns += 1
+            _sort_by(kn_d, rw_i, ns)
+            for a in range(ns):
+                i = rw_i[a]
+                near_i[a] = i
+                if lower_bounds:
+                    # a lower bound of the key; _first_valid_parent makes exact only the keys that
+                    # may be the minimum (an eq. (12) edge costs an exp and a field look-up)
+                    ex = nx - X[i, 0]
+                    ey = ny - X[i, 1]
+                    near_c[a] = cost[i] + lbf * math.sqrt(ex * ex + ey * ey) * (1.0 - lb_margin)
+                    near_x[a] = False
+                else:
+                    near_c[a], near_x[a] = _parent_key(i, nx, ny, X, cost, fc, ic, fvx, fvy)
+            p, pc = _first_valid_parent(near_i, near_c, near_x, ns, nx, ny, occ, fc, ic, fvx, fvy, st, X, cost, head,
                                         max_turn, dd, True, lower_bounds)
             if p < 0:
                 continue
@@ -757,12 +768,10 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                             bucket_head, node_next, st, nv, fvx, fvy)
             hx = math.cos(head[new])
             hy = math.sin(head[new])
-            # ---- lines 18-21: rewire the other extendable nodes through q_new
-            for a in range(ne):
-                j = ext_i[a]
+            # ---- lines 18-21: rewire the other extendable nodes (within a step of q_new) through it
+            for a in range(ns):
+                j = rw_i[a]
                 if j == p or j == new:
-                    continue
-                if not _within(X[j, 0] - nx, X[j, 1] - ny, step * (1.0 + 1e-9)):
                     continue
                 if _rewire_cannot_pay(j, new, nx, ny, X, cost, lbf, lb_margin):
                     continue
