@@ -46,7 +46,7 @@ UNIT_MODULES = frozenset("""
     global_route mission_executor modes navigation navigation_fast online percentiles plan_commitment readiness
     planner_algorithms planner_config planner_cost planner_dynamic_domain planner_gridmap
     planner_guidance planner_kgrowth planner_metrics planner_postprocess process_logging reactive route_planning
-    run_plot scenarios sim_sensors sim_vessel sim_waves tiers tracking_stats traffic_planning vehicle
+    run_plot scenarios sim_sensors sim_vessel sim_waves summaries tiers tracking_stats traffic_planning vehicle
 """.split())
 INTEGRATION_MODULES = frozenset("""
     autopilot_link bench_frame bench_planner cli connection cpu_load executors gcs_esc_telemetry gcs_fuzz gcs_security

@@ -34,7 +34,7 @@ def test_hung_planner_is_killed_and_costs_the_control_loop_nothing(tmp_path, mon
 
     load.sample([os.getpid()], force=True)
     s = _run(tmp_path, scenario="harbour", lockstep=False, speedup=1.0, duration=20.0, seed=1, hooks=[watch],
-             extra_autopilot_args=["--planner-factory", "planner_doubles:hanging_handler"])
+             extra_autopilot_args=["--planner-factory", "support.planner_doubles:hanging_handler"])
     load.sample([os.getpid()], force=True)
     busy = overruns_allowed(0, load.report(), 5.0)   # 0 on a quiet machine
     assert s["plans_accepted"] == 0
