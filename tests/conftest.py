@@ -1,4 +1,5 @@
-"""Shared fixtures: the repository root and a runner for the `hil` command as a real subprocess."""
+"""Shared fixtures: the repository root and runners for the `hil` command, as a real subprocess and
+in-process (hil.cli.main); the test tiers."""
 
 from __future__ import annotations
 
@@ -31,6 +32,17 @@ def run_hil(*args: str, timeout: float = 300, env: dict | None = None,
 @pytest.fixture
 def hil():
     return run_hil
+
+
+@pytest.fixture
+def hil_main(capsys):
+    """Like ``hil``, but in-process through hil.cli.main (argument and configuration errors)."""
+    from support.cli import run_cli
+
+    def run(*args: str, timeout: float | None = None) -> subprocess.CompletedProcess:
+        return run_cli(capsys, *args)   # no timeout in-process: nothing runs long
+
+    return run
 
 
 # -- test tiers --------------------------------------------------------------------------------
