@@ -73,7 +73,7 @@ def test_twenty_percent_datagram_loss_both_ways(tmp_path):
              overrides=["autopilot.send_loss=0.2", "autopilot.recv_loss=0.2", "sim.lockstep_resend=0.003"])
     assert s.outcome == "goal" and s.collisions == 0
     # The loss really happened, 20 % each way as injected (counted by the autopilot's link)...
-    loss = s.security["autopilot"]["loss_injected"]
+    loss = s.security.autopilot["loss_injected"]
     assert 0.17 < loss["dropped_out"] / (loss["sent"] + loss["dropped_out"]) < 0.23
     assert 0.17 < loss["dropped_in"] / (loss["received"] + loss["dropped_in"]) < 0.23
     # ...and cost a re-send for at least the (1 - 0.8 * 0.8) / (0.8 * 0.8) = 0.56 of the steps it
