@@ -147,6 +147,12 @@ def edge_cost(x0, y0, x1, y1, use_field, fvx, fvy, fres, fox, foy, step, d_alpha
     length = math.hypot(dx, dy)
     if not use_field or length == 0.0:
         return length
+    if length <= step:  # one piece (then length / step <= 1, so n below is 1): the tree's edges
+        vx, vy = field_at(fvx, fvy, fres, fox, foy, x0 + 0.5 * dx, y0 + 0.5 * dy)
+        arg, ok = sigmoid_arg(dx, dy, length, vx, vy, gamma_alpha)
+        if not ok:
+            return length
+        return min(length, d_alpha * length / (1.0 + math.exp(arg)))
     n = max(1, int(math.ceil(length / step - 1e-12)))
     piece = length / n
     total = 0.0

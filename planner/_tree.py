@@ -445,7 +445,7 @@ def _parent_key(j, nx, ny, X, cost, fc, ic, fvx, fvy):
 
 @njit(cache=True)
 def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, occ, fc, ic, fvx, fvy, st, X, cost, head, max_turn,
-                        dd, track_failed):
+                        dd, track_failed, lower_bounds):
     """RRT*'s choose-parent: the first candidate, in ascending cost order, whose edge to (nx, ny)
     is in its fan and collision-free; returns (node, cost through it) or (-1, 0.0). With
     ``track_failed`` (DDRRT*) a colliding candidate counts as a failed extension and bounds or
@@ -459,7 +459,11 @@ def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, occ, fc, ic, fvx, fv
     Keys flagged inexact in near_x (see _parent_key; all keys are >= 0) are made exact where they
     may be the minimum: a key above m (1 + 1e-12) + 1e-12, m the smallest key, is above the
     minimum whatever its rounding, so the chosen candidate and its cost are the exact ones.
-    After LAZY_TRIES refused candidates (with the fan limit, the cheapest candidates often point
+    With ``lower_bounds`` (eq. (12): inexact keys are cost[j] + f x length, f from
+    _edge_lower_factor, below the exact key by any amount) the pass repeats with the new smallest
+    key until every key within its window is exact: an inexact key outside the window is then
+    above the minimum, so the choice is again the exact one, and most edges never pay for their
+    exp and field look-up. After LAZY_TRIES refused candidates (with the fan limit, the cheapest candidates often point
     backwards), the rest is sorted once instead (exact keys, stable merge sort: the same order)."""
     left = nc
     tries = 0
@@ -481,6 +485,22 @@ def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, occ, fc, ic, fvx, fv
                         _dd_failed(j, dd, fc)
             return -1, 0.0
         tries += 1
+        if lower_bounds:  # make exact every key that may be the minimum, until none is left
+            while True:
+                m = near_c[0]
+                for a in range(1, left):
+                    if near_c[a] < m:
+                        m = near_c[a]
+                window = m * (1.0 + 1e-12) + 1e-12
+                exacted = False
+                for a in range(left):
+                    if near_c[a] <= window and not near_x[a]:
+                        i = near_i[a]
+                        near_c[a] = cost[i] + _cost(X[i, 0], X[i, 1], nx, ny, fc, ic, fvx, fvy)
+                        near_x[a] = True
+                        exacted = True
+                if not exacted:
+                    break
         m = near_c[0]
         for a in range(1, left):
             if near_c[a] < m:
@@ -490,7 +510,7 @@ def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, occ, fc, ic, fvx, fv
         kb = 0.0
         for a in range(left):
             if near_c[a] <= window:
-                if not near_x[a]:
+                if not near_x[a]:  # square-root keys (see above): one pass decides
                     i = near_i[a]
                     near_c[a] = cost[i] + _cost(X[i, 0], X[i, 1], nx, ny, fc, ic, fvx, fvy)
                     near_x[a] = True
@@ -605,6 +625,17 @@ def _edge_lower_factor(fc, ic):
 
 
 @njit(cache=True)
+def _esd_floor(a, gamma):
+    """A value below eq. (11)'s second term a / (1 + exp(-arg)) for every alpha_y, whatever its
+    rounding: arg = cos a - gamma sin a >= -1 - gamma when gamma >= 0 (-inf, no floor, otherwise),
+    and the term grows with arg."""
+    if not (a > 0.0 and gamma >= 0.0):
+        return -math.inf
+    e = math.exp(-1.0 - gamma)
+    return a * e / (1.0 + e) * (1.0 - 1e-12)
+
+
+@njit(cache=True)
 def node_direction(i, x, y, nv, fvx, fvy, fc):
     """Entry point for the solve loop: the root's current direction (see _set_direction)."""
     _set_direction(i, x, y, nv, fvx, fvy, fc)
@@ -633,6 +664,11 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
     # length: the edge cost is hypot, within 4e-16 of the square root; eq. (12): exp and the sum
     # of pieces round too, so a wider margin
     lb_margin = 2e-15 if ic[I_FIELD] == 0 else 1e-9
+    lower_bounds = use_field and lbf > 0.0  # choose-parent keys start as lower bounds (eq. (12))
+    d_alpha = fc[C_DALPHA]
+    gamma = fc[C_GAMMA]
+    esd_plain = d_alpha * fc[C_DR]
+    esd_floor = _esd_floor(esd_plain, gamma)
     cp, cf, fan_usable = _fan_bounds(max_turn)
     fb = np.array([cp, cf, 1.0 if fan_usable else 0.0])
     for _ in range(max_iter):
@@ -669,14 +705,15 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                     continue  # outside the node's dynamic domain (a disc of radius DD, Yershova 2005)
                 # eq. (12) with one alpha_y, the current at q_i (the same alpha_y as eq. (11)'s)
                 dc = ed
-                second = fc[C_DALPHA] * fc[C_DR]
-                if ic[I_FIELD] != 0 and ed > 0.0 and (nv[i, 0] != 0.0 or nv[i, 1] != 0.0):
+                accept = dc <= esd_plain
+                if use_field and ed > 0.0 and (nv[i, 0] != 0.0 or nv[i, 1] != 0.0):
                     c = ((sx - X[i, 0]) * nv[i, 0] + (sy - X[i, 1]) * nv[i, 1]) / ed
                     c = min(1.0, max(-1.0, c))
-                    e = math.exp(c - fc[C_GAMMA] * math.sqrt(max(0.0, 1.0 - c * c)))
-                    dc = min(ed, fc[C_DALPHA] * ed / (1.0 + e))
-                    second = fc[C_DALPHA] * fc[C_DR] * e / (1.0 + e)  # D_alpha DR / (1 + exp(-arg))
-                if dc <= second:
+                    e = math.exp(c - gamma * math.sqrt(max(0.0, 1.0 - c * c)))
+                    dc = min(ed, d_alpha * ed / (1.0 + e))
+                    # D_alpha DR / (1 + exp(-arg)), computed only where esd_floor does not decide
+                    accept = dc <= esd_floor or dc <= esd_plain * e / (1.0 + e)
+                if accept:
                     ext_i[ne] = i
                     ext_k[ne] = dc
                     ne += 1
@@ -698,12 +735,20 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
             nc = 0
             for a in range(ne):
                 i = ext_i[a]
-                if _within(nx - X[i, 0], ny - X[i, 1], step * (1.0 + 1e-9)):
+                ex = nx - X[i, 0]
+                ey = ny - X[i, 1]
+                if _within(ex, ey, step * (1.0 + 1e-9)):
                     near_i[nc] = i
-                    near_c[nc], near_x[nc] = _parent_key(i, nx, ny, X, cost, fc, ic, fvx, fvy)
+                    if lower_bounds:
+                        # a lower bound of the key; _first_valid_parent makes exact only the keys
+                        # that may be the minimum (an eq. (12) edge costs an exp and a field look-up)
+                        near_c[nc] = cost[i] + lbf * math.sqrt(ex * ex + ey * ey) * (1.0 - lb_margin)
+                        near_x[nc] = False
+                    else:
+                        near_c[nc], near_x[nc] = _parent_key(i, nx, ny, X, cost, fc, ic, fvx, fvy)
                     nc += 1
             p, pc = _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, occ, fc, ic, fvx, fvy, st, X, cost, head,
-                                        max_turn, dd, True)
+                                        max_turn, dd, True, lower_bounds)
             if p < 0:
                 continue
             if not math.isinf(dd[p]):
@@ -753,20 +798,23 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                 if j == q0:
                     has_q0 = True
                 near_i[nc] = j
-                if use_field:
-                    near_c[nc], near_x[nc] = _parent_key(j, nx, ny, X, cost, fc, ic, fvx, fvy)
-                else:  # _parent_key's length case, written out: a call per near node is costly
-                    ex = nx - X[j, 0]
-                    ey = ny - X[j, 1]
+                ex = nx - X[j, 0]
+                ey = ny - X[j, 1]
+                if not use_field:  # _parent_key's length case, written out: a call per near node is costly
                     near_c[nc] = cost[j] + math.sqrt(ex * ex + ey * ey)
                     near_x[nc] = False
+                elif lower_bounds:  # see DDRRT*'s choose-parent above
+                    near_c[nc] = cost[j] + lbf * math.sqrt(ex * ex + ey * ey) * (1.0 - lb_margin)
+                    near_x[nc] = False
+                else:
+                    near_c[nc], near_x[nc] = _parent_key(j, nx, ny, X, cost, fc, ic, fvx, fvy)
                 nc += 1
             if not has_q0 and nc < NEAR_CAP:
                 near_i[nc] = q0
                 near_c[nc], near_x[nc] = _parent_key(q0, nx, ny, X, cost, fc, ic, fvx, fvy)
                 nc += 1
             p, pc = _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, occ, fc, ic, fvx, fvy, st, X, cost, head,
-                                        max_turn, dd, False)
+                                        max_turn, dd, False, lower_bounds)
             if p < 0:
                 continue
             new = _add_node(nx, ny, p, pc, X, parent, cost, head, dd, first_child, next_sib, fc, ic,

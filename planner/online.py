@@ -222,7 +222,7 @@ class OnlineContext:
         r = min(max(int(point[1] / res), 0), occ.shape[0] - 1)
         c = min(max(int(point[0] / res), 0), occ.shape[1] - 1)
         rr, cc = idx[0][r, c], idx[1][r, c]
-        return ((cc + 0.5) * res, (rr + 0.5) * res)
+        return (float((cc + 0.5) * res), float((rr + 0.5) * res))
 
 
 def resample(path: np.ndarray, spacing: float) -> np.ndarray:
@@ -280,11 +280,18 @@ def reference_velocity(reference_path: np.ndarray, point: tuple[float, float], s
 def _free_subgoal(ctx: OnlineContext, grid: OccupancyGrid, position: tuple[float, float],
                   index: int, point: tuple[float, float]) -> tuple[float, float] | None:
     """A free stand-in for a subgoal inside an obstacle: back along the reference path towards
-    the vessel (inside the perceptual domain), else the nearest free cell."""
+    the vessel (inside the perceptual domain, and at least one tree step away from the vessel),
+    else the nearest free cell to the subgoal.
+
+    Without the minimum distance, an obstacle (or its inflation) that covers the reference path
+    from just ahead of the vessel gave a stand-in at the vessel itself: every cycle then planned
+    "start is the goal" and the run failed without moving (24 of 1,000 random-map runs per
+    planner, `hil montecarlo --scenario random --runs 1000 --seed 1`, before this rule)."""
     if grid.is_free(*point):
         return point
     ref = ctx.reference_path
     radius = ctx.params.perceptual_radius
+    min_gap = ctx.params.step
     pts = [np.asarray(point)]
     # Walk back along the reference path from the subgoal (and along the segment into it).
     for k in range(min(index, len(ref) - 1), 0, -1):
@@ -292,7 +299,7 @@ def _free_subgoal(ctx: OnlineContext, grid: OccupancyGrid, position: tuple[float
         n = max(int(math.hypot(*(b - a)) / (0.5 * grid.resolution)), 1)
         pts.extend(b + (a - b) * (i / n) for i in range(1, n + 1))
     for q in pts:
-        if math.hypot(q[0] - position[0], q[1] - position[1]) > radius:
+        if not min_gap <= math.hypot(q[0] - position[0], q[1] - position[1]) <= radius:
             continue
         if grid.is_free(float(q[0]), float(q[1])):
             return (float(q[0]), float(q[1]))

@@ -78,6 +78,34 @@ def test_subgoal_inside_obstacle_is_moved_to_free_water():
     assert q is not None and ctx.safe_grid.is_free(*q)
 
 
+def test_subgoal_stand_in_is_never_at_the_vessel():
+    """Random-map runs the project did not design (Figure 11's generator, seed 1): the straight
+    reference path enters an obstacle's velocity inflation right ahead of the start. The free
+    stand-in for the blocked subgoal used to be a point within ~1 m of the vessel, every cycle then
+    planned "start is the goal", and the run failed without moving; now it lies at least one tree
+    step away, a cycle finds a path, and the runs reach their goals."""
+    from hil import experiment
+    from planner.online import reference_velocity, select_local_subgoal
+
+    for run in (48, 207, 456):
+        sc = experiment.scenario_instance("random", 1, run)
+        task = experiment.make_tasks("random", run + 1, ["rrt-star"], 1, {}, None, (), 0, "length")[run]
+        ctx = experiment._context(task, sc)
+        pos = (float(sc.start[0]), float(sc.start[1]))
+        sub, idx, _ = select_local_subgoal(ctx, pos)
+        grid = ctx.planning_grid(reference_velocity(ctx.reference_path, sub, ctx.params.speed))
+        assert grid.is_free(*pos) and not grid.is_free(*sub)
+        q = _free_subgoal(ctx, grid, pos, idx, sub)
+        assert q is not None and grid.is_free(*q)
+        assert math.dist(q, pos) >= ctx.params.step, run
+        rec = plan_cycle(ctx, VesselState(*pos, sc.start_heading), 0, seed=1)
+        assert rec.status != "none" and len(rec.local_path) >= 2, (run, rec.reason)
+        for alg in ("rrt-star", "ddrrt-star"):
+            task = experiment.make_tasks("random", run + 1, [alg], 1, {}, None, (), 0, "length")[run]
+            row = experiment.run_task(task)
+            assert row["reached"], (run, alg, row["reason"])
+
+
 def test_cycle_with_injected_clock_stops_on_time():
     """A wall-clock budget reads the injected clock: 1 ms per call, 20 ms budget."""
     sc, ctx = _context("labyrinth", "ddrrt-star", local_iterations=0, local_time=0.02)

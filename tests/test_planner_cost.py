@@ -145,10 +145,63 @@ def test_lazy_choose_parent_matches_stable_sort():
         st = np.zeros(_tree.N_ISTATE, dtype=np.int64)
         head = np.full(n, np.nan)
         got, got_c = _tree._first_valid_parent(near_i, near_c, near_x, n, nx, ny, occ, fc, ic, no_field, no_field,
-                                               st, X, cost, head, math.pi, np.full(n, np.inf), False)
+                                               st, X, cost, head, math.pi, np.full(n, np.inf), False, False)
         assert got == want
         if want >= 0:
             assert got_c == want_c  # bit-identical cost, not only close
+
+
+def test_lazy_choose_parent_on_lower_bounds_matches_stable_sort_of_eq12_costs():
+    """With a current (eq. (12)), choose-parent starts from lower bounds cost[j] + f x length and
+    makes exact only the keys that may be the minimum: the same parent and the same cost as a
+    stable sort of the exact eq. (12) keys, on random fields and near-tied candidates."""
+    rng = np.random.default_rng(12)
+    lbf = 1.0 / (1.0 + math.e)  # _edge_lower_factor for D_alpha = 1, gamma >= 0
+    for trial in range(300):
+        n = int(rng.integers(1, 120))
+        occ, X, cost, fc, ic = _setup(rng, n)
+        ic[_tree.I_FIELD] = 1
+        fc[_tree.C_DALPHA] = 1.0
+        fc[_tree.C_GAMMA] = 0.1
+        fvx = rng.normal(scale=0.5, size=(25, 25))
+        fvy = rng.normal(scale=0.5, size=(25, 25))
+        if trial % 3 == 0:
+            fvx[:] = 0.4  # a uniform current: many keys that differ by rounding only
+            fvy[:] = -0.1
+        assert _tree._edge_lower_factor(fc, ic) == lbf
+        nx, ny = (17.0 + 1e-3 * trial, 14.0) if trial % 2 else tuple(rng.uniform(0, 20, size=2))
+        idx = rng.permutation(n)
+        exact = np.array([cost[j] + _tree._cost(X[j, 0], X[j, 1], nx, ny, fc, ic, fvx, fvy) for j in idx])
+        want, want_c = -1, 0.0
+        for o in np.argsort(exact, kind="stable"):
+            j = idx[o]
+            if segment_free(occ, 0.5, X[j, 0], X[j, 1], nx, ny):
+                want, want_c = j, exact[o]
+                break
+        near_i = idx.astype(np.int64).copy()
+        near_c = np.array([cost[j] + lbf * math.sqrt((nx - X[j, 0]) ** 2 + (ny - X[j, 1]) ** 2) * (1.0 - 1e-9)
+                           for j in idx])
+        assert (near_c <= exact).all()
+        near_x = np.zeros(n, dtype=np.bool_)
+        st = np.zeros(_tree.N_ISTATE, dtype=np.int64)
+        head = np.full(n, np.nan)
+        got, got_c = _tree._first_valid_parent(near_i, near_c, near_x, n, nx, ny, occ, fc, ic, fvx, fvy,
+                                               st, X, cost, head, math.pi, np.full(n, np.inf), False, True)
+        assert got == want
+        if want >= 0:
+            assert got_c == want_c
+
+
+def test_esd_floor_is_below_the_second_term_of_eq11():
+    rng = np.random.default_rng(13)
+    for a, gamma in ((40.0, 0.1), (40.0, 0.0), (3.0, 2.0), (0.5, 0.1)):
+        floor = _tree._esd_floor(a, gamma)
+        for c in np.r_[rng.uniform(-1.0, 1.0, 20000), -1.0, 1.0, 0.0]:
+            e = math.exp(c - gamma * math.sqrt(max(0.0, 1.0 - c * c)))
+            assert floor <= a * e / (1.0 + e)
+        assert floor > 0.99 * a * math.exp(-1 - gamma) / (1 + math.exp(-1 - gamma))
+    assert _tree._esd_floor(40.0, -0.1) == -math.inf
+    assert _tree._esd_floor(40.0, math.nan) == -math.inf
 
 
 def test_knn_matches_brute_force_with_ties():
