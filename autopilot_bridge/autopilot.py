@@ -66,6 +66,7 @@ from autopilot_bridge.plan_commitment import CommitmentParams, keep_current
 from autopilot_bridge.planning_worker import PlannerWorker, PlanRequest
 from autopilot_bridge.reactive import ReactiveAvoidance
 from autopilot_bridge.route_planning import RouteKeeper, check_mission_items
+from autopilot_bridge.summary import AutopilotSummary, ControlLatency, NavigationCounts, WorkerStartup
 from autopilot_bridge.telemetry import Telemetry
 from autopilot_bridge.tracking_stats import TrackingStats
 from autopilot_bridge.vehicle import Vehicle, Waypoint
@@ -725,38 +726,39 @@ class Autopilot:
         self.last_frame_usec = f.time_usec
         self._send(f.time_usec, self.zero_thrust, received_at)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> AutopilotSummary:
         lat = self.stats.latency_ms
         w = self.worker.stats
-        return {
-            "mode": self.behaviour.state.value,
-            "vehicle_mode": self.vehicle.mode.name,
-            "mission_complete": self.complete_t is not None,
-            "complete_time_s": self.complete_t,
-            "frames": self.stats.frames,
-            "duplicate_frames": self.stats.duplicate_frames,
-            "commands_sent": self.stats.commands,
-            "planning_cycles": self.stats.planning_cycles,
-            "plans_accepted": self.stats.plans_accepted,
-            "plans_rejected": dict(self.stats.plans_rejected),
-            "deadline_overruns": w.overruns + w.killed,
-            "worker_kills": w.killed,
-            "worker_restarts": w.restarts,
-            "worker_startup_s": {"count": len(w.startup_s), "max": round(max(w.startup_s), 3) if w.startup_s else None},
-            "plans_skipped_worker_starting": w.not_ready_rejections,
-            "fallback_activations": self.stats.fallback_activations,
-            "tracking": self.tracking.summary(),
-            "simulator_restarts": self.stats.simulator_restarts,
-            "navigation": {"updates": dict(self.nav.stats.updates), "rejected": dict(self.nav.stats.rejected),
-                           "position_resets": self.nav.stats.position_resets},
-            "sensed_obstacles": {**self.sensed.summary(), "replans": self.stats.sensed_replans},
-            "link_rejects": dict(self.link.rejects),
-            "truth_messages_ignored": self.link.truth_ignored,
-            "control_latency_ms": {"p50": lat.percentile(50) or 0.0, "p99": lat.percentile(99) or 0.0,
-                                   "max": max(lat.max, 0.0), "frames": lat.count},
-            "lockstep_planner_waits": self.stats.planner_waits,
-            "lockstep_planner_wait_ms_max": max(self.stats.planner_wait_ms, default=0.0),
-            "events": [f"{t:.2f}s {e}" for t, e in self.stats.events],
-            **({"can": self.actuators.summary()} if self.actuators is not self.link else {}),
-            "traffic": None if self.traffic is None else self.traffic.summary(),
-        }
+        return AutopilotSummary(
+            mode=self.behaviour.state.value,
+            vehicle_mode=self.vehicle.mode.name,
+            mission_complete=self.complete_t is not None,
+            complete_time_s=self.complete_t,
+            frames=self.stats.frames,
+            duplicate_frames=self.stats.duplicate_frames,
+            commands_sent=self.stats.commands,
+            planning_cycles=self.stats.planning_cycles,
+            plans_accepted=self.stats.plans_accepted,
+            plans_rejected=dict(self.stats.plans_rejected),
+            deadline_overruns=w.overruns + w.killed,
+            worker_kills=w.killed,
+            worker_restarts=w.restarts,
+            worker_startup_s=WorkerStartup(count=len(w.startup_s),
+                                           max=round(max(w.startup_s), 3) if w.startup_s else None),
+            plans_skipped_worker_starting=w.not_ready_rejections,
+            fallback_activations=self.stats.fallback_activations,
+            tracking=self.tracking.summary(),
+            simulator_restarts=self.stats.simulator_restarts,
+            navigation=NavigationCounts(updates=dict(self.nav.stats.updates), rejected=dict(self.nav.stats.rejected),
+                                        position_resets=self.nav.stats.position_resets),
+            sensed_obstacles={**self.sensed.summary(), "replans": self.stats.sensed_replans},
+            link_rejects=dict(self.link.rejects),
+            truth_messages_ignored=self.link.truth_ignored,
+            control_latency_ms=ControlLatency(p50=lat.percentile(50) or 0.0, p99=lat.percentile(99) or 0.0,
+                                              max=max(lat.max, 0.0), frames=lat.count),
+            lockstep_planner_waits=self.stats.planner_waits,
+            lockstep_planner_wait_ms_max=max(self.stats.planner_wait_ms, default=0.0),
+            events=tuple(f"{t:.2f}s {e}" for t, e in self.stats.events),
+            can=self.actuators.summary() if self.actuators is not self.link else None,
+            traffic=None if self.traffic is None else self.traffic.summary(),
+        )

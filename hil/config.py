@@ -29,6 +29,7 @@ import typing
 from pathlib import Path
 from typing import Any, Literal, TypeVar, get_args, get_origin
 
+from common.tables import to_table as to_table  # the serialiser, re-exported
 from hil.errors import ConfigError
 
 T = TypeVar("T")
@@ -55,6 +56,10 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
     origin = get_origin(tp)
     if tp is Any:
         return value
+    if tp is type(None):  # JSON's null (summaries); TOML has none
+        if value is not None:
+            raise ValueError(f"{key}: expected null, got {value!r}")
+        return None
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
             raise ValueError(f"{key}: expected a table, got {type(value).__name__}")
@@ -323,17 +328,6 @@ def load(cls: type[T], path: str | Path | typing.Sequence[str | Path] | None = N
     for text in overrides or []:
         layers.add_override(text)
     return from_table(cls, layers.table, layers.source_of)
-
-
-def to_table(obj: Any) -> Any:
-    """A dataclass instance back to plain TOML-able data (for run folders and --json)."""
-    if dataclasses.is_dataclass(obj):
-        return {f.name: to_table(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
-    if isinstance(obj, tuple):
-        return [to_table(v) for v in obj]
-    if isinstance(obj, dict):
-        return {k: to_table(v) for k, v in obj.items()}
-    return obj
 
 
 def field_docs(cls: type) -> list[tuple[str, str, str]]:

@@ -30,7 +30,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -41,10 +41,12 @@ from common.frames import map_to_ned
 from common.geodesy import LocalFrame
 from common.mavlink import Codec, mavlink2
 from common.readiness import ReadyWait
+from common.tables import to_table
 from common.udp import UdpEndpoint
 from hil import config, processes
 from hil import scenario as scenarios
 from hil.errors import RunFailed, UsageError
+from hil.run_summary import RunSecurity, RunSummary, read_autopilot_summary
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -491,7 +493,7 @@ class HilRun:
             return None
 
     # -- the run -----------------------------------------------------------------------------------
-    def execute(self) -> dict[str, Any]:
+    def execute(self) -> RunSummary:
         opts = self.opts
         wall0 = time.monotonic()
         outcome, collision_at = "timeout", None
@@ -571,7 +573,7 @@ class HilRun:
         return self._summary(outcome, collision_at, min_clearance, wall, ap_summary, sim_summary, decided)
 
     def _summary(self, outcome: str, collision_at: float | None, min_clearance: float, wall: float,
-                 ap: dict | None, sim: dict | None, decided: int | None = None) -> dict[str, Any]:
+                 ap_table: dict | None, sim: dict | None, decided: int | None = None) -> RunSummary:
         # The run is judged up to the deciding sample: what arrived while the processes were being
         # stopped depends on the wall clock.
         times = [t for t in sorted(self.tap.truth) if decided is None or t <= decided]
@@ -580,73 +582,70 @@ class HilRun:
         length = float(np.sum(np.hypot(*np.diff(track, axis=0).T))) if len(track) > 1 else 0.0
         energy = self._energy(times, speeds)
         rmse = self._nav_rmse(decided)
-        ap = ap or {}
+        ap = None if ap_table is None else read_autopilot_summary(ap_table)
         reached = outcome == "goal" and collision_at is None
-        summary = {
-            "scenario": self.opts.scenario,
-            "seed": self.opts.seed,
-            "mode": "lockstep" if self.opts.lockstep else f"realtime x{self.opts.speedup:g}",
-            "outcome": outcome,
-            "reached_goal": reached,
-            "collisions": 0 if collision_at is None else 1,
-            "collision_time_s": collision_at,
-            "min_clearance_m": None if not math.isfinite(min_clearance) else round(min_clearance, 3),
-            "sim_time_s": round(times[-1] * 1e-6, 3) if times else 0.0,
-            "wall_time_s": round(wall, 2),
-            "path_length_m": round(length, 2),
-            "energy_J": round(energy, 1),
-            "planning_cycles": ap.get("planning_cycles"),
-            "plans_accepted": ap.get("plans_accepted"),
-            "deadline_overruns": ap.get("deadline_overruns"),
-            "worker_restarts": ap.get("worker_restarts"),
-            "fallback_activations": ap.get("fallback_activations"),
-            "tracking": ap.get("tracking"),     # cross-track and heading errors on local paths
-            "navigation_rmse_m": None if rmse is None else round(rmse, 3),
-            "control_latency_ms": ap.get("control_latency_ms"),
-            "simulator_restarts": self.sim_restarts,
-            "navigation": ap.get("navigation"),
-            "sensed_obstacles": ap.get("sensed_obstacles"),
-            "simulator": None if sim is None else {k: sim.get(k) for k in (
-                "steps", "commands_received", "malformed_dropped", "stale_command_events", "lockstep_resends",
-                "jitter_ms")},
-            # Every refused frame by reason, per endpoint, with the kernel's drops (docs/security.md).
-            "security": {
-                "simulator": None if sim is None else {"rejects": sim.get("rejects"),
-                                                       **(sim.get("command_port") or {})},
-                "autopilot": ap.get("link"),
-                "autopilot_navigation_numeric": {k: v for k,
-                                                 v in ((ap.get("navigation") or {}).get("rejected") or {}).items()
-                                                 if k.startswith("numeric_")},
-                "tap": self.tap.counters_at_close,
-            },
-            "tlog": str(self.out / "run.tlog"),
-            "tlog_messages": self.tap.frames,
-            "events": ap.get("events", []),
-            "actuators": self.cfg.can.actuators,
-        }
-        if self.warnings:
-            summary["warnings"] = list(self.warnings)
-        if ap.get("gcs") is not None:
-            # The ground-station link's counters (datagrams, rejects, missions, command acks, signing,
-            # failsafe): what a GCS did during the run. Wall-clock dependent (heartbeats per wall second).
-            summary["gcs"] = ap["gcs"]
+        encounters = traffic = None
         if self.encounter_judge is not None:
             from hil.encounter_report import totals
 
             enc = self.encounter_judge.report({t: self.tap.truth[t] for t in times})   # up to the deciding sample
-            summary["encounters"] = enc
-            summary["traffic"] = {**totals(enc), "ais": (ap.get("traffic") or {}).get("ais"),
-                                  "ais_forwarded_to_gcs": self.tap.ais_forwarded,
-                                  "ship_collision": None if self.encounter_judge.collision is None else
-                                  {"time_s": self.encounter_judge.collision[0],
-                                   "mmsi": self.encounter_judge.collision[1]}}
+            encounters = tuple(enc)
+            traffic = {**totals(enc), "ais": (ap.traffic or {}).get("ais") if ap is not None else None,
+                       "ais_forwarded_to_gcs": self.tap.ais_forwarded,
+                       "ship_collision": None if self.encounter_judge.collision is None else
+                       {"time_s": self.encounter_judge.collision[0], "mmsi": self.encounter_judge.collision[1]}}
+        can = None
         if self.cfg.can.actuators == "can":
             # The CAN path's counters: transport, ESC status, rejects (wall-clock dependent).
-            summary["can"] = {"autopilot": ap.get("can"), "simulator": None if sim is None else sim.get("can"),
-                              **self.can_log}
-            if not self.opts.lockstep:
-                summary["energy_J"] = None  # commands travel only on CAN: the tap cannot see them
-        return summary
+            can = {"autopilot": None if ap is None else ap.can, "simulator": None if sim is None else sim.get("can"),
+                   **self.can_log}
+        return RunSummary(
+            scenario=self.opts.scenario,
+            seed=self.opts.seed,
+            mode="lockstep" if self.opts.lockstep else f"realtime x{self.opts.speedup:g}",
+            outcome=outcome,
+            reached_goal=reached,
+            collisions=0 if collision_at is None else 1,
+            collision_time_s=collision_at,
+            min_clearance_m=None if not math.isfinite(min_clearance) else round(min_clearance, 3),
+            sim_time_s=round(times[-1] * 1e-6, 3) if times else 0.0,
+            wall_time_s=round(wall, 2),
+            path_length_m=round(length, 2),
+            # With CAN in real time the commands travel only on CAN: the tap cannot see them.
+            energy_J=None if can is not None and not self.opts.lockstep else round(energy, 1),
+            planning_cycles=None if ap is None else ap.planning_cycles,
+            plans_accepted=None if ap is None else ap.plans_accepted,
+            deadline_overruns=None if ap is None else ap.deadline_overruns,
+            worker_restarts=None if ap is None else ap.worker_restarts,
+            fallback_activations=None if ap is None else ap.fallback_activations,
+            tracking=None if ap is None else ap.tracking,     # cross-track and heading errors on local paths
+            navigation_rmse_m=None if rmse is None else round(rmse, 3),
+            control_latency_ms=None if ap is None else ap.control_latency_ms,
+            simulator_restarts=self.sim_restarts,
+            navigation=None if ap is None else ap.navigation,
+            sensed_obstacles=None if ap is None else ap.sensed_obstacles,
+            simulator=None if sim is None else {k: sim.get(k) for k in (
+                "steps", "commands_received", "malformed_dropped", "stale_command_events", "lockstep_resends",
+                "jitter_ms")},
+            security=RunSecurity(
+                simulator=None if sim is None else {"rejects": sim.get("rejects"), **(sim.get("command_port") or {})},
+                autopilot=None if ap is None else ap.link,
+                autopilot_navigation_numeric={} if ap is None else
+                {k: v for k, v in ap.navigation.rejected.items() if k.startswith("numeric_")},
+                tap=self.tap.counters_at_close,
+            ),
+            tlog=str(self.out / "run.tlog"),
+            tlog_messages=self.tap.frames,
+            events=() if ap is None else ap.events,
+            actuators=self.cfg.can.actuators,
+            warnings=tuple(self.warnings) if self.warnings else None,
+            # The ground-station link's counters (datagrams, rejects, missions, command acks, signing,
+            # failsafe): what a GCS did during the run. Wall-clock dependent (heartbeats per wall second).
+            gcs=None if ap is None else ap.gcs,
+            encounters=encounters,
+            traffic=traffic,
+            can=can,
+        )
 
     def _energy(self, times: list[int], speeds: np.ndarray) -> float:
         """Integral of (|T_port| + |T_stdb|) * speed dt, the commands held between truth samples."""
@@ -699,7 +698,7 @@ def _remove_partial(out: Path, names: tuple[str, ...] = ("summary.json", "plot.p
             pass
 
 
-def run_loop(opts: RunOptions, cfg: Any) -> dict[str, Any]:
+def run_loop(opts: RunOptions, cfg: Any) -> RunSummary:
     """Run the HIL loop and write the run folder (tlog, summary.json, plot.png); returns the summary.
 
     A folder that cannot be written (a full disk) ends the run with one line (RunFailed, exit 1)
@@ -715,28 +714,28 @@ def run_loop(opts: RunOptions, cfg: Any) -> dict[str, Any]:
         raise _disk_full(opts.out, exc) from None
 
 
-def _run_loop(opts: RunOptions, cfg: Any) -> dict[str, Any]:
+def _run_loop(opts: RunOptions, cfg: Any) -> RunSummary:
     from hil.files import write_json_atomic
 
     run = HilRun(opts, cfg)
     summary = run.execute()
     if run.tap.write_error is not None:
         raise run.tap.write_error
-    summary["run_folder"] = str(opts.out)
+    summary = replace(summary, run_folder=str(opts.out))
     if opts.plot:
         try:
             from hil.run_plot import plot_run
 
             ap_path = opts.out / "autopilot.json"
-            ap = json.loads(ap_path.read_text()) if ap_path.exists() else {}
+            ap = read_autopilot_summary(json.loads(ap_path.read_text()), str(ap_path)) if ap_path.exists() else None
             plot_run(opts.out / "plot.png", run.scen, run.tap.truth, ap, cfg,
                      ships=run.encounter_judge.ships if run.encounter_judge is not None else None,
-                     encounters=summary.get("encounters"),
-                     outcome="goal reached" if summary.get("reached_goal") else
-                     f"{summary.get('outcome')}" + (f" at {summary['collision_time_s']:.1f} s"
-                                                     if summary.get("collision_time_s") is not None else ""))
-            summary["plot"] = str(opts.out / "plot.png")
+                     encounters=summary.encounters,
+                     outcome="goal reached" if summary.reached_goal else
+                     f"{summary.outcome}" + (f" at {summary.collision_time_s:.1f} s"
+                                             if summary.collision_time_s is not None else ""))
+            summary = replace(summary, plot=str(opts.out / "plot.png"))
         except Exception as exc:  # a plot must never lose the run's data
-            summary["plot_error"] = f"{type(exc).__name__}: {exc}"
-    write_json_atomic(opts.out / "summary.json", summary)
+            summary = replace(summary, plot_error=f"{type(exc).__name__}: {exc}")
+    write_json_atomic(opts.out / "summary.json", to_table(summary))
     return summary

@@ -14,9 +14,12 @@ import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from hil.run_summary import RunSummary
 
 
 def _toml_value(v: Any) -> str:
@@ -61,7 +64,7 @@ class RouteJob:
     config: Any                # --config file(s), as hil.settings.load takes them
     overrides: tuple[str, ...]
 
-    def __call__(self, item: tuple[int, str, str]) -> dict:
+    def __call__(self, item: tuple[int, str, str]) -> RunSummary:
         from hil import settings
         from hil.hilrun import RunOptions, run_loop
 
@@ -72,8 +75,8 @@ class RouteJob:
 
 
 def run_campaign(scenario: str, runs: int, seed: int, out: Path, executor: Any, safety_radius: float,
-                 base_current: Any, run_one: Callable[[tuple[int, str, str]], dict],
-                 progress: Callable[[int, dict], None] = lambda _i, _s: None) -> dict[str, Any]:
+                 base_current: Any, run_one: Callable[[tuple[int, str, str]], RunSummary],
+                 progress: Callable[[int, RunSummary], None] = lambda _i, _s: None) -> dict[str, Any]:
     """``runs`` HIL runs of ``run_one((run, scenario_file, folder))`` on instances of the random
     ``scenario``, on ``executor``; writes ``runs.csv`` and ``summary.json``."""
     from hil import scenario as scenarios
@@ -91,12 +94,12 @@ def run_campaign(scenario: str, runs: int, seed: int, out: Path, executor: Any, 
         _, scen, path, _ = plans[i]
         wps = np.asarray(scen.waypoints)
         legs = np.hypot(*np.diff(wps, axis=0).T)
-        rows.append({"run": i, "outcome": s["outcome"], "reached": bool(s["reached_goal"]),
-                     "collisions": s["collisions"], "min_clearance_m": s["min_clearance_m"],
-                     "sim_time_s": s["sim_time_s"], "waypoints": len(wps) - 1,
+        rows.append({"run": i, "outcome": s.outcome, "reached": bool(s.reached_goal),
+                     "collisions": s.collisions, "min_clearance_m": s.min_clearance_m,
+                     "sim_time_s": s.sim_time_s, "waypoints": len(wps) - 1,
                      "longest_leg_m": round(float(legs.max()), 1), "route_length_m":
                      round(float(np.sum(np.hypot(*np.diff(scen.reference_path, axis=0).T))), 1),
-                     "path_length_m": s["path_length_m"], "fallbacks": s["fallback_activations"],
+                     "path_length_m": s.path_length_m, "fallbacks": s.fallback_activations,
                      "scenario": str(path)})
         progress(done, s)
     rows.sort(key=lambda r: r["run"])

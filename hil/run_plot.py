@@ -4,8 +4,9 @@ Figures 9 and 10."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
 
@@ -13,10 +14,14 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+if TYPE_CHECKING:
+    from autopilot_bridge.summary import AutopilotSummary
 
-def plot_run(path: Path, scen: Any, truth: dict[int, tuple], autopilot: dict, cfg: Any,
-             ships: dict | None = None, encounters: list | None = None, outcome: str | None = None) -> dict:
-    """``ships``: MMSI -> ``hil.encounter_report.ShipTrack`` (their truth); ``encounters``: the
+
+def plot_run(path: Path, scen: Any, truth: dict[int, tuple], autopilot: AutopilotSummary | None, cfg: Any,
+             ships: dict | None = None, encounters: Sequence[dict] | None = None, outcome: str | None = None) -> dict:
+    """``autopilot``: the autopilot's summary (sensed cells, local paths, estimated track), None when
+    it left none; ``ships``: MMSI -> ``hil.encounter_report.ShipTrack`` (their truth); ``encounters``: the
     summary's per-ship report (CPA time and distance, type, compliance); ``outcome``: the run's
     outcome for the title (e.g. "goal reached", "collision at 45.2 s").
 
@@ -34,14 +39,14 @@ def plot_run(path: Path, scen: Any, truth: dict[int, tuple], autopilot: dict, cf
     for i, (x, y, r) in enumerate(getattr(scen, "uncharted", ())):
         ax.add_patch(plt.Circle((x, y), r, color="tab:purple", alpha=0.35,
                                 label="uncharted obstacles (truth)" if i == 0 else None))
-    sensed = np.asarray(autopilot.get("sensed_cells", []), dtype=float).reshape(-1, 2)
+    sensed = np.asarray((autopilot and autopilot.sensed_cells) or [], dtype=float).reshape(-1, 2)
     if len(sensed):
         res = scen.resolution
         ax.plot((sensed[:, 1] + 0.5) * res, (sensed[:, 0] + 0.5) * res, "s", color="tab:purple", ms=2,
                 label="sensed obstacles (range sensor)")
     ref = np.asarray(scen.reference_path)
     ax.plot(ref[:, 0], ref[:, 1], ":", color="green", lw=1.5, label="global reference path")
-    for i, lp in enumerate(autopilot.get("local_paths", [])):
+    for i, lp in enumerate((autopilot and autopilot.local_paths) or []):
         p = np.asarray(lp["path_ned"])
         if len(p):
             ax.plot(p[:, 1], p[:, 0], "-", color="tab:orange", lw=0.7, alpha=0.6,
@@ -49,7 +54,7 @@ def plot_run(path: Path, scen: Any, truth: dict[int, tuple], autopilot: dict, cf
     if truth:
         tr = np.array([truth[t][:2] for t in sorted(truth)])
         ax.plot(tr[:, 1], tr[:, 0], "-", color="red", lw=1.8, label="true track")
-    est = np.asarray(autopilot.get("estimated_track", []))
+    est = np.asarray((autopilot and autopilot.estimated_track) or [])
     if len(est):
         ax.plot(est[:, 2], est[:, 1], "--", color="black", lw=0.8, label="estimated track")
     _plot_ships(ax, ships or {}, encounters or [], truth)

@@ -24,11 +24,14 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from simulator.traffic import ShipSpec
+
+if TYPE_CHECKING:
+    from hil.run_summary import RunSummary
 
 
 @dataclass(frozen=True)
@@ -89,7 +92,7 @@ class TrafficJob:
     overrides: tuple[str, ...]
     out: str                   # campaign folder
 
-    def __call__(self, item: tuple[int, tuple[ShipSpec, ...]]) -> dict:
+    def __call__(self, item: tuple[int, tuple[ShipSpec, ...]]) -> RunSummary:
         from hil import settings
         from hil.hilrun import RunOptions, run_loop
 
@@ -101,24 +104,24 @@ class TrafficJob:
 
 
 def run_campaign(scenario: str, runs: int, seed: int, draw: TrafficDraw, out: Path, executor: Any,
-                 run_one: Callable[[tuple[int, tuple[ShipSpec, ...]]], dict],
-                 progress: Callable[[int, dict], None] = lambda _i, _s: None) -> dict[str, Any]:
+                 run_one: Callable[[tuple[int, tuple[ShipSpec, ...]]], RunSummary],
+                 progress: Callable[[int, RunSummary], None] = lambda _i, _s: None) -> dict[str, Any]:
     """``runs`` HIL runs of ``run_one((run, ships))`` on ``executor`` (:mod:`hil.executors`);
     returns the campaign summary and writes ``runs.csv`` and ``summary.json``."""
     from hil import scenario as scenarios
 
     scen = scenarios.load(scenario)
     plans = [(i, draw_ships(scen.reference_path, draw, seed, i)) for i in range(runs)]
-    results: dict[int, dict] = {}
+    results: dict[int, RunSummary] = {}
     for done, (i, s) in enumerate(executor.map_unordered(run_one, plans), start=1):
         results[i] = s
         progress(done, s)
     rows = []
     for i in sorted(results):       # the same rows in the same order whatever the executor
         s, ships = results[i], plans[i][1]
-        for e in s.get("encounters", []):
+        for e in s.encounters or ():
             spec = next(sh for sh in ships if sh.mmsi == e["mmsi"])
-            rows.append({"run": i, "outcome": s["outcome"], "mmsi": e["mmsi"], "start_x": round(spec.start[0], 2),
+            rows.append({"run": i, "outcome": s.outcome, "mmsi": e["mmsi"], "start_x": round(spec.start[0], 2),
                          "start_y": round(spec.start[1], 2), "speed": round(spec.speed, 3),
                          "course_deg": round(spec.course, 1), "type": e.get("type"), "cpa_m": e.get("cpa_m"),
                          "action": e.get("action"), "collision": e.get("collision"),
@@ -136,9 +139,9 @@ def run_campaign(scenario: str, runs: int, seed: int, draw: TrafficDraw, out: Pa
     summary = {
         "scenario": scenario, "runs": runs, "seed": seed, "ships_per_run": draw.ships,
         "draw": {"bearing_deg": draw.bearing, "speed_m_s": draw.speed, "miss_m": draw.miss, "meet_s": draw.meet},
-        "outcomes": {k: sum(1 for s in results.values() if s["outcome"] == k) for k in
-                     sorted({s["outcome"] for s in results.values()})},
-        "collision_rate": round(sum(1 for s in results.values() if s["collisions"]) / max(runs, 1), 4),
+        "outcomes": {k: sum(1 for s in results.values() if s.outcome == k) for k in
+                     sorted({s.outcome for s in results.values()})},
+        "collision_rate": round(sum(1 for s in results.values() if s.collisions) / max(runs, 1), 4),
         "mean_cpa_m": round(float(np.mean(cpas)), 2) if cpas else None,
         "min_cpa_m": round(float(np.min(cpas)), 2) if cpas else None,
         "encounters": len(risky),

@@ -1,4 +1,5 @@
-"""Shared fixtures: the repository root and a runner for the `hil` command as a real subprocess."""
+"""Shared fixtures: the repository root and runners for the `hil` command, as a real subprocess and
+in-process (hil.cli.main); the test tiers."""
 
 from __future__ import annotations
 
@@ -33,6 +34,17 @@ def hil():
     return run_hil
 
 
+@pytest.fixture
+def hil_main(capsys):
+    """Like ``hil``, but in-process through hil.cli.main (argument and configuration errors)."""
+    from support.cli import run_cli
+
+    def run(*args: str, timeout: float | None = None) -> subprocess.CompletedProcess:
+        return run_cli(capsys, *args)   # no timeout in-process: nothing runs long
+
+    return run
+
+
 # -- test tiers --------------------------------------------------------------------------------
 # Every test is in exactly one tier, from its module (and `slow`, which always means e2e):
 #   unit         in-process, no sockets, no subprocesses: seconds for the whole tier;
@@ -46,7 +58,7 @@ UNIT_MODULES = frozenset("""
     global_route mission_executor modes navigation navigation_fast online percentiles plan_commitment readiness
     planner_algorithms planner_config planner_cost planner_dynamic_domain planner_gridmap
     planner_guidance planner_kgrowth planner_metrics planner_postprocess process_logging reactive route_planning
-    run_plot scenarios sim_sensors sim_vessel sim_waves tiers tracking_stats traffic_planning vehicle
+    run_plot scenarios sim_sensors sim_vessel sim_waves summaries tiers tracking_stats traffic_planning vehicle
 """.split())
 INTEGRATION_MODULES = frozenset("""
     autopilot_link bench_frame bench_planner cli connection cpu_load executors gcs_esc_telemetry gcs_fuzz gcs_security

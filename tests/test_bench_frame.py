@@ -29,8 +29,8 @@ def test_bench_frame_json(hil, flt):
     assert len(d["top_own_time"]) == 5
 
 
-def test_bench_frame_bad_arguments(hil):
-    p = hil("bench", "frame", "--steps", "10")
+def test_bench_frame_bad_arguments(hil_main):
+    p = hil_main("bench", "frame", "--steps", "10")
     assert p.returncode == 2 and "Traceback" not in p.stderr
-    p = hil("bench", "frame", "--scenario", "random", "--steps", "100")
+    p = hil_main("bench", "frame", "--scenario", "random", "--steps", "100")
     assert p.returncode == 2 and "Traceback" not in p.stderr

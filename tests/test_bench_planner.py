@@ -99,6 +99,6 @@ def test_bench_planner_quick_json(hil):
         assert r["search_s"] >= r["deadline_s"] * 0.5     # the deadline is spent on the search
 
 
-def test_bench_planner_bad_budget(hil):
-    p = hil("bench", "planner", "--budgets", "0,1")
+def test_bench_planner_bad_budget(hil_main):
+    p = hil_main("bench", "planner", "--budgets", "0,1")
     assert p.returncode == 2 and "Traceback" not in p.stderr

@@ -70,7 +70,7 @@ def vcan_batch(tmp_path_factory):
     watcher.start()
     jobs = [
         uml.Job("run_can", [PY, *RUN, "--actuators", "can", "--out", str(tmp / "run-can")], cwd=str(REPO), timeout=600),
-        uml.Job("bad_frames", [PY, str(REPO / "tests" / "vcan_checks.py")], cwd=str(REPO), timeout=60),
+        uml.Job("bad_frames", [PY, str(REPO / "tests" / "support" / "vcan_checks.py")], cwd=str(REPO), timeout=60),
         # The planner may overrun its 0.3 s real-time deadline now and then inside User-Mode Linux
         # (every syscall and fork is slower there): a budget of 3 a minute on a quiet host, more
         # only for the load the host saw (test_soak_60s_is_clean), not a free pass.

@@ -57,11 +57,11 @@ def test_unknown_command_and_option_are_one_line_exit_2(hil):
 
 
 @pytest.mark.parametrize("overrides", [["vessel.m=-3"], ["vessel.bogus=1"], ["vessel.m=fast"]])
-def test_config_errors_are_one_line_exit_2(hil, overrides):
+def test_config_errors_are_one_line_exit_2(hil_main, overrides):
     args = ["sim", "--duration", "0.1", "--json"]
     for o in overrides:
         args += ["--set", o]
-    r = hil(*args)
+    r = hil_main(*args)
     assert r.returncode == 2, r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("hil sim: error: "), r.stderr
@@ -69,8 +69,8 @@ def test_config_errors_are_one_line_exit_2(hil, overrides):
     assert r.stdout == ""
 
 
-def test_missing_config_file_is_one_line(hil, tmp_path):
-    r = hil("sim", "--config", str(tmp_path / "missing.toml"), "--duration", "0.1")
+def test_missing_config_file_is_one_line(hil_main, tmp_path):
+    r = hil_main("sim", "--config", str(tmp_path / "missing.toml"), "--duration", "0.1")
     assert r.returncode == 2
     assert r.stderr.strip().endswith("missing.toml: no such file")
 

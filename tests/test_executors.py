@@ -38,6 +38,7 @@ def _local_cluster(n: int):
                                     dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
 
 
+@pytest.mark.slow   # e2e: two campaigns, one on a LocalCluster of worker processes
 def test_local_processes_and_a_two_worker_local_cluster_give_the_same_runs(hil, tmp_path):
     _distributed()
     a, b = tmp_path / "local", tmp_path / "dask"
@@ -54,6 +55,7 @@ def test_local_processes_and_a_two_worker_local_cluster_give_the_same_runs(hil, 
     assert "Dask LocalCluster of 2 worker" in pb.stderr and "montecarlo: 9/9" in pb.stderr   # progress as before
 
 
+@pytest.mark.slow   # e2e: campaigns on a LocalCluster of worker processes
 def test_scheduler_address_runs_on_an_existing_cluster(hil, tmp_path):
     cluster = _local_cluster(1)
     try:
@@ -69,6 +71,7 @@ def test_scheduler_address_runs_on_an_existing_cluster(hil, tmp_path):
         cluster.close()
 
 
+@pytest.mark.slow   # e2e: waits out the 30 s connect timeout of hil.executors
 def test_unreachable_scheduler_is_a_one_line_error(hil, tmp_path):
     _distributed()
     p = hil("montecarlo", "--runs", "1", "--out", str(tmp_path), "--scheduler", "tcp://127.0.0.1:9",
@@ -88,6 +91,7 @@ def test_missing_dask_is_a_one_line_error_with_the_install_hint(hil, tmp_path):
     assert len(p.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow   # e2e: a campaign on a LocalCluster of worker processes
 def test_a_worker_killed_mid_campaign_loses_no_run_and_duplicates_none(tmp_path):
     _distributed()
     tasks = experiment.make_tasks("labyrinth", 6, experiment.ALGORITHMS, 7, {"local_iterations": 500,
@@ -121,6 +125,7 @@ def test_a_worker_killed_mid_campaign_loses_no_run_and_duplicates_none(tmp_path)
     assert det(camp.rows) == det(reference.rows)
 
 
+@pytest.mark.slow   # e2e: a campaign on a LocalCluster, interrupted
 def test_ctrl_c_on_dask_cancels_and_keeps_finished_runs(repo, tmp_path):
     _distributed()
     out = tmp_path / "mc"
@@ -199,6 +204,7 @@ def test_traffic_campaign_on_dask_matches_local_threads(hil, tmp_path):
         assert (tmp_path / "dask" / run / "summary.json").exists()
 
 
+@pytest.mark.slow   # e2e: four whole HIL runs
 def test_routes_campaign_on_dask_matches_local_threads(hil, tmp_path):
     """`--routes` runs on the executors too: the same rows on local threads and on a LocalCluster."""
     import csv

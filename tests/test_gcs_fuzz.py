@@ -9,7 +9,7 @@ import math
 import socket
 
 import numpy as np
-from gcs_client import Gcs, M, start_run, stop_run
+from support.gcs_client import Gcs, M, start_run, stop_run
 
 from common.mavlink import mavlink2
 from hil.hilrun import free_udp_port

@@ -20,7 +20,16 @@ import time
 from pathlib import Path
 
 import pytest
-from gcs_client import MISSION_SPEED, Gcs, at_home, check_mission_session, qgc_mission, qgc_wpl, start_run, stop_run
+from support.gcs_client import (
+    MISSION_SPEED,
+    Gcs,
+    at_home,
+    check_mission_session,
+    qgc_mission,
+    qgc_wpl,
+    start_run,
+    stop_run,
+)
 
 from common.geodesy import LocalFrame
 from hil.hilrun import free_udp_port

@@ -28,7 +28,7 @@ from collections.abc import Callable
 from typing import Any
 
 import pytest
-from gcs_client import HOME_MAP, check_mission_session, qgc_mission, start_run, stop_run
+from support.gcs_client import HOME_MAP, check_mission_session, qgc_mission, start_run, stop_run
 
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE as M

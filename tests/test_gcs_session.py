@@ -11,7 +11,7 @@ import math
 import time
 
 import pytest
-from gcs_client import Gcs, M, start_run, stop_run
+from support.gcs_client import Gcs, M, start_run, stop_run
 
 from common.geodesy import LocalFrame
 from hil.hilrun import free_udp_port

@@ -34,20 +34,20 @@ def test_hung_planner_is_killed_and_costs_the_control_loop_nothing(tmp_path, mon
 
     load.sample([os.getpid()], force=True)
     s = _run(tmp_path, scenario="harbour", lockstep=False, speedup=1.0, duration=20.0, seed=1, hooks=[watch],
-             extra_autopilot_args=["--planner-factory", "planner_doubles:hanging_handler"])
+             extra_autopilot_args=["--planner-factory", "support.planner_doubles:hanging_handler"])
     load.sample([os.getpid()], force=True)
     busy = overruns_allowed(0, load.report(), 5.0)   # 0 on a quiet machine
-    assert s["plans_accepted"] == 0
-    assert s["worker_restarts"] >= 5 and s["deadline_overruns"] >= 5
-    assert any("killed" in e for e in s["events"])
+    assert s.plans_accepted == 0
+    assert s.worker_restarts >= 5 and s.deadline_overruns >= 5
+    assert any("killed" in e for e in s.events)
     # The control loop kept answering every frame: the simulator never hit its stale-command
     # failsafe and received a command for (nearly) every step it ran.
-    sim = s["simulator"]
+    sim = s.simulator
     assert sim["stale_command_events"] <= busy, (sim, load.report())
     assert sim["commands_received"] >= (0.95 if busy == 0 else 0.85) * sim["steps"]
     # The reactive behaviour kept the vessel clear of obstacles and moving towards the goal.
-    assert s["collisions"] == 0 and s["min_clearance_m"] >= 1.0
-    assert s["path_length_m"] > 10.0
+    assert s.collisions == 0 and s.min_clearance_m >= 1.0
+    assert s.path_length_m > 10.0
 
 
 @pytest.mark.slow
@@ -60,9 +60,9 @@ def test_simulator_restart_mid_run_still_reaches_the_goal(tmp_path):
             run.restart_simulator()
 
     s = _run(tmp_path, scenario="harbour", lockstep=True, duration=300.0, seed=2, hooks=[restart_once])
-    assert restarted and s["simulator_restarts"] == 1
-    assert any("simulator restarted" in e for e in s["events"])
-    assert s["outcome"] == "goal" and s["collisions"] == 0
+    assert restarted and s.simulator_restarts == 1
+    assert any("simulator restarted" in e for e in s.events)
+    assert s.outcome == "goal" and s.collisions == 0
 
 
 @pytest.mark.slow
@@ -71,12 +71,12 @@ def test_twenty_percent_datagram_loss_both_ways(tmp_path):
     # costs the simulator's re-send timeout (3 ms here instead of 1 s) in wall time only.
     s = _run(tmp_path, scenario="labyrinth", lockstep=True, duration=300.0, seed=1,
              overrides=["autopilot.send_loss=0.2", "autopilot.recv_loss=0.2", "sim.lockstep_resend=0.003"])
-    assert s["outcome"] == "goal" and s["collisions"] == 0
+    assert s.outcome == "goal" and s.collisions == 0
     # The loss really happened, 20 % each way as injected (counted by the autopilot's link)...
-    loss = s["security"]["autopilot"]["loss_injected"]
+    loss = s.security.autopilot["loss_injected"]
     assert 0.17 < loss["dropped_out"] / (loss["sent"] + loss["dropped_out"]) < 0.23
     assert 0.17 < loss["dropped_in"] / (loss["received"] + loss["dropped_in"]) < 0.23
     # ...and cost a re-send for at least the (1 - 0.8 * 0.8) / (0.8 * 0.8) = 0.56 of the steps it
     # hit. Only a lower bound: a slow answer on a loaded machine also triggers a re-send.
-    sim = s["simulator"]
+    sim = s.simulator
     assert sim["lockstep_resends"] > 0.4 * sim["steps"]

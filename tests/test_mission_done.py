@@ -24,8 +24,8 @@ def _after_goal(tmp_path, behaviour: str) -> tuple[dict, list[float]]:
     run = HilRun(RunOptions(scenario="harbour", seed=1, duration=END_S, stop_at_goal=False, plot=False,
                             out=tmp_path / behaviour, overrides=overrides), cfg)
     s = run.execute()
-    done = [float(m.group(1)) for e in s["events"] if (m := re.match(r"([\d.]+)s mission complete", e))]
-    assert done, s["events"]
+    done = [float(m.group(1)) for e in s.events if (m := re.match(r"([\d.]+)s mission complete", e))]
+    assert done, s.events
     gn, ge = run.judge.goal
     dist = [math.hypot(n - gn, e - ge) for t, (n, e, _, _) in sorted(run.tap.truth.items())
             if t * 1e-6 >= done[0] + SETTLE_S]
@@ -37,7 +37,7 @@ def _after_goal(tmp_path, behaviour: str) -> tuple[dict, list[float]]:
 def test_loiter_keeps_station_at_the_final_goal(tmp_path):
     cfg = settings.load(None, [])
     s, dist = _after_goal(tmp_path, "loiter")
-    assert s["outcome"] == "timeout" and s["collisions"] == 0, s["events"]
+    assert s.outcome == "timeout" and s.collisions == 0, s.events
     # The way back starts at the radius; turning round at walking pace overshoots it by ~1.5 m.
     assert max(dist) <= cfg.autopilot.loiter_radius + 2.0
     assert dist[-1] <= cfg.autopilot.loiter_radius

@@ -23,6 +23,7 @@ def _deterministic(path):
     return [{k: r[k] for k in experiment.DETERMINISTIC} for r in rows]
 
 
+@pytest.mark.slow   # e2e: three campaigns, on worker processes
 def test_reproducible_from_the_seed_whatever_the_jobs(hil, tmp_path):
     a, b, c = tmp_path / "a", tmp_path / "b", tmp_path / "c"
     pa = hil("montecarlo", "--scenario", "labyrinth", "--runs", "2", "--jobs", "2", "--seed", "5", "--out", str(a),
@@ -65,8 +66,8 @@ def test_random_scenario_runs_differ_per_run(hil, tmp_path):
 
 @pytest.mark.parametrize("args", [("--runs", "0"), ("--jobs", "0"), ("--algorithms", "dijkstra"),
                                   ("--scenario", "atlantis"), ("--local-iterations", "0", "--local-time", "0")])
-def test_bad_arguments_exit_2(hil, tmp_path, args):
-    p = hil("montecarlo", "--out", str(tmp_path), *args)
+def test_bad_arguments_exit_2(hil_main, tmp_path, args):
+    p = hil_main("montecarlo", "--out", str(tmp_path), *args)
     assert p.returncode == 2
     assert "Traceback" not in p.stderr and p.stderr.strip()
 
@@ -118,6 +119,7 @@ def test_seeds_depend_on_run_and_algorithm_only():
     assert experiment.planner_seed(1, 7, "ddrrt-star") != experiment.planner_seed(2, 7, "ddrrt-star")
 
 
+@pytest.mark.slow   # e2e: a campaign on worker processes, interrupted
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_ctrl_c_keeps_finished_runs(repo, tmp_path, sig):
     out = tmp_path / "mc"

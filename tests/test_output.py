@@ -10,23 +10,24 @@ import struct
 
 import numpy as np
 import pytest
+from support.summaries import run_summary
 
+from autopilot_bridge.summary import ControlLatency, NavigationCounts
 from hil import cli, console, plots
 from hil.commands.run import human_summary
 
-SUMMARY = {
-    "scenario": "harbour", "seed": 1, "mode": "lockstep", "outcome": "collision", "reached_goal": False,
-    "collisions": 1, "collision_time_s": 45.25, "min_clearance_m": 0.0, "sim_time_s": 45.3, "wall_time_s": 12.0,
-    "path_length_m": 50.1, "energy_J": 4000.0, "planning_cycles": 45, "plans_accepted": 40,
-    "deadline_overruns": 3, "worker_restarts": 0, "fallback_activations": 2,
-    "tracking": {"frames": 100, "cross_track_rms_m": 0.2, "cross_track_max_m": 0.9},
-    "navigation_rmse_m": 0.1, "control_latency_ms": {"p50": 0.4, "p99": 6.0, "max": 80.0, "frames": 100},
-    "navigation": {"updates": {"gps_pos": 450}, "rejected": {"gps_pos": 4}, "position_resets": 0},
-    "simulator": {"steps": 4530, "malformed_dropped": 0, "stale_command_events": 1, "jitter_ms": None},
-    "events": [f"{t:.2f}s fallback: reactive avoidance, no valid local path " + "x" * 300 for t in range(2000)],
-    "gcs": {"rejects": {f"reason_{i}": i + 1 for i in range(60)}, "received": {}, "signing": False},
-    "actuators": "mavlink", "run_folder": "/tmp/run", "plot": "/tmp/run/plot.png",
-}
+SUMMARY = run_summary(
+    outcome="collision", reached_goal=False, collisions=1, collision_time_s=45.25, min_clearance_m=0.0, sim_time_s=45.3,
+    wall_time_s=12.0, path_length_m=50.1, energy_J=4000.0, planning_cycles=45, plans_accepted=40,
+    deadline_overruns=3, worker_restarts=0, fallback_activations=2,
+    tracking={"frames": 100, "cross_track_rms_m": 0.2, "cross_track_max_m": 0.9},
+    navigation_rmse_m=0.1, control_latency_ms=ControlLatency(p50=0.4, p99=6.0, max=80.0, frames=100),
+    navigation=NavigationCounts(updates={"gps_pos": 450}, rejected={"gps_pos": 4}, position_resets=0),
+    simulator={"steps": 4530, "malformed_dropped": 0, "stale_command_events": 1, "jitter_ms": None},
+    events=tuple(f"{t:.2f}s fallback: reactive avoidance, no valid local path " + "x" * 300 for t in range(2000)),
+    gcs={"rejects": {f"reason_{i}": i + 1 for i in range(60)}, "received": {}, "signing": False},
+    actuators="mavlink", run_folder="/tmp/run", plot="/tmp/run/plot.png",
+)
 
 
 def test_the_run_summary_is_short_and_has_what_matters():

@@ -29,49 +29,49 @@ def wall_map(tmp_path):
     return path, occ
 
 
-def test_missing_map_file(hil, tmp_path):
-    p = hil("plan", "--map", str(tmp_path / "nope.npy"), "--resolution", "0.5", "--start", "1,1", "--goal", "5,5")
+def test_missing_map_file(hil_main, tmp_path):
+    p = hil_main("plan", "--map", str(tmp_path / "nope.npy"), "--resolution", "0.5", "--start", "1,1", "--goal", "5,5")
     _one_line_error(p)
     assert "no such file" in p.stderr
 
 
-def test_map_not_a_grid(hil, tmp_path):
+def test_map_not_a_grid(hil_main, tmp_path):
     bad = tmp_path / "bad.npy"
     np.save(bad, np.zeros(10))               # 1-D: not a grid
-    p = hil("plan", "--map", str(bad), "--resolution", "0.5", "--start", "1,1", "--goal", "2,2")
+    p = hil_main("plan", "--map", str(bad), "--resolution", "0.5", "--start", "1,1", "--goal", "2,2")
     _one_line_error(p)
     text = tmp_path / "text.png"
     text.write_text("this is not an image")
-    p = hil("plan", "--map", str(text), "--resolution", "0.5", "--start", "1,1", "--goal", "2,2")
+    p = hil_main("plan", "--map", str(text), "--resolution", "0.5", "--start", "1,1", "--goal", "2,2")
     _one_line_error(p)
 
 
 @pytest.mark.parametrize("res", ["0", "-1"])
-def test_resolution_not_positive(hil, wall_map, res):
+def test_resolution_not_positive(hil_main, wall_map, res):
     path, _ = wall_map
-    p = hil("plan", "--map", str(path), f"--resolution={res}", "--start", "1,1", "--goal", "5,5")
+    p = hil_main("plan", "--map", str(path), f"--resolution={res}", "--start", "1,1", "--goal", "5,5")
     _one_line_error(p)
     assert "resolution" in p.stderr
 
 
 @pytest.mark.parametrize("start", ["25,1", "1,-3", "-1,1"])
-def test_start_outside_map(hil, wall_map, start):
+def test_start_outside_map(hil_main, wall_map, start):
     path, _ = wall_map
-    p = hil("plan", "--map", str(path), "--resolution", "0.5", f"--start={start}", "--goal", "5,5")
+    p = hil_main("plan", "--map", str(path), "--resolution", "0.5", f"--start={start}", "--goal", "5,5")
     _one_line_error(p)
     assert "outside" in p.stderr
 
 
-def test_bad_point_syntax_and_obstacle_start(hil, wall_map):
+def test_bad_point_syntax_and_obstacle_start(hil_main, wall_map):
     path, _ = wall_map
-    _one_line_error(hil("plan", "--map", str(path), "--resolution", "0.5", "--start", "1;1", "--goal", "5,5"))
-    p = hil("plan", "--map", str(path), "--resolution", "0.5", "--start", "10,5", "--goal", "15,5")
+    _one_line_error(hil_main("plan", "--map", str(path), "--resolution", "0.5", "--start", "1;1", "--goal", "5,5"))
+    p = hil_main("plan", "--map", str(path), "--resolution", "0.5", "--start", "10,5", "--goal", "15,5")
     _one_line_error(p)
     assert "obstacle" in p.stderr
 
 
-def test_unknown_scenario(hil):
-    _one_line_error(hil("plan", "--scenario", "atlantis", "--json"))
+def test_unknown_scenario(hil_main):
+    _one_line_error(hil_main("plan", "--scenario", "atlantis", "--json"))
 
 
 @pytest.mark.parametrize("algorithm", ["rrt-star", "informed-rrt-star", "ddrrt-star"])

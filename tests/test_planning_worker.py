@@ -9,7 +9,7 @@ import pytest
 
 from autopilot_bridge.planning_worker import PlannerWorker, PlanRequest
 
-FACTORY = "planner_doubles:scripted_factory"
+FACTORY = "support.planner_doubles:scripted_factory"
 
 
 def request(cycle: int, behaviour: str, deadline: float = 0.2, iterations: int | None = None) -> PlanRequest:
@@ -91,7 +91,7 @@ def test_planner_exception_is_reported_not_fatal():
 def test_a_starting_worker_takes_no_request_so_its_start_up_is_never_an_overrun():
     """A start-up longer than deadline + grace must not be charged to the first request: else each
     restarted worker overruns, is killed, and the next one too (the cascade seen in User-Mode Linux)."""
-    with PlannerWorker("planner_doubles:slow_start_factory", (1.0,), grace_s=0.1) as w:
+    with PlannerWorker("support.planner_doubles:slow_start_factory", (1.0,), grace_s=0.1) as w:
         assert not w.submit(request(1, "echo", deadline=0.2))
         assert w.stats.not_ready_rejections == 1 and w.stats.submitted == 0
         assert not w.watchdog()                       # starting up is not hanging
@@ -111,7 +111,7 @@ def test_a_starting_worker_takes_no_request_so_its_start_up_is_never_an_overrun(
 
 
 def test_a_worker_that_never_starts_is_killed_after_its_start_up_limit():
-    with PlannerWorker("planner_doubles:slow_start_factory", (3600.0,), startup_timeout_s=0.5) as w:
+    with PlannerWorker("support.planner_doubles:slow_start_factory", (3600.0,), startup_timeout_s=0.5) as w:
         t0 = time.monotonic()
         old = w.pid
         assert not w.watchdog(now=t0)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from gcs_client import Gcs, M, start_run, stop_run
+from support.gcs_client import Gcs, M, start_run, stop_run
 from test_sparse_routes import pond_scenario
 
 from common.geodesy import LocalFrame

@@ -41,14 +41,14 @@ def _same_as_baseline(baseline, attacked) -> None:
     (s0, truth0, _, _), (s1, truth1, _, _) = baseline, attacked
     # Up to the deciding sample, as the run is judged: what arrives while the processes are being
     # stopped depends on the wall clock.
-    end = int(round(s0["sim_time_s"] * 1e6))
+    end = int(round(s0.sim_time_s * 1e6))
     truth0 = {t: v for t, v in truth0.items() if t <= end}
-    truth1 = {t: v for t, v in truth1.items() if t <= int(round(s1["sim_time_s"] * 1e6))}
-    assert s1["outcome"] == s0["outcome"]
-    assert s1["collisions"] == s0["collisions"]
+    truth1 = {t: v for t, v in truth1.items() if t <= int(round(s1.sim_time_s * 1e6))}
+    assert s1.outcome == s0.outcome
+    assert s1.collisions == s0.collisions
     assert sorted(truth1) == sorted(truth0)
     assert all(truth1[t] == truth0[t] for t in truth0), "the attacked run's true track differs"
-    assert s1["path_length_m"] == s0["path_length_m"]
+    assert s1.path_length_m == s0.path_length_m
 
 
 def _once(after_usec: int, attack):
@@ -97,11 +97,11 @@ def test_forged_frames_on_every_port_change_nothing_and_are_counted(baseline, tm
     finally:
         sock.close()
     _same_as_baseline(baseline, attacked)
-    sec = attacked[0]["security"]
-    assert sec["autopilot"]["wrong_source"] == sent["sensor"]
-    assert sec["simulator"]["wrong_source_address"] == sent["command"]
-    assert sec["tap"]["refused"]["truth_wrong_source_address"] == sent["truth"]
-    assert attacked[0]["outcome"] != "goal"
+    sec = attacked[0].security
+    assert sec.autopilot["wrong_source"] == sent["sensor"]
+    assert sec.simulator["wrong_source_address"] == sent["command"]
+    assert sec.tap["refused"]["truth_wrong_source_address"] == sent["truth"]
+    assert attacked[0].outcome != "goal"
 
 
 def _fuzz_datagrams(rng: np.random.Generator, codec: Codec, kind: str, n: int):
@@ -152,8 +152,8 @@ def test_fuzz_of_sensor_and_command_ports_leaves_the_lockstep_result_unchanged(b
     finally:
         sock.close()
     _same_as_baseline(baseline, attacked)
-    sec = attacked[0]["security"]
-    ap, sim = sec["autopilot"], sec["simulator"]
+    sec = attacked[0].security
+    ap, sim = sec.autopilot, sec.simulator
     print(f"sensor port: {ap['wrong_source']} refused by address, {ap['kernel_drops']} kernel drops; "
           f"command port: {sim['wrong_source_address']} refused by address, {sim['kernel_drops']} kernel drops; "
           f"not sent (own buffer full): {lost}")
@@ -191,8 +191,8 @@ def test_sigkill_of_a_child_ends_the_run_promptly_with_what_it_has(child, tmp_pa
     summary, truth, _, _ = _run(tmp_path / "run", [_once(2_000_000, attack)], duration=60.0)
     ended = time.monotonic() - killed["at"]
     print(f"hil run ended {ended:.2f} s after the SIGKILL of the {child} process")
-    assert summary["outcome"] == ("autopilot_exited" if child == "ap" else "simulator_exited")
-    assert truth and summary["sim_time_s"] >= 2.0
+    assert summary.outcome == ("autopilot_exited" if child == "ap" else "simulator_exited")
+    assert truth and summary.sim_time_s >= 2.0
     assert not _group_alive(killed["pgid"]), "a process of the killed child's group survived"
     # 2 s is the goal (docs/security.md); the bound here leaves room for a loaded machine.
     assert ended < 10.0, f"hil run took {ended:.1f} s to end after the SIGKILL"

@@ -168,14 +168,15 @@ def test_realtime_applies_newest_command():
     assert summary["final_state"]["u"] > 1.0
 
 
-def test_sim_cli_errors_are_one_line(hil):
+def test_sim_cli_errors_are_one_line(hil_main):
     for args in (["sim", "--commands-on", "nonsense"], ["sim", "--set", "sensors.imu.rate_hz=30.0"],
                  ["sim", "--duration", "-1"]):
-        r = hil(*args, timeout=60)
+        r = hil_main(*args, timeout=60)
         assert r.returncode == 2, r.stderr
         assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
 
 
+@pytest.mark.slow   # e2e: two whole `hil run --demo` loops (simulator process + vessel client)
 def test_hil_run_lockstep_demo(hil):
     r = hil("run", "--demo", "--duration", "10", "--json", timeout=120)
     assert r.returncode == 0, r.stderr

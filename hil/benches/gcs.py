@@ -6,10 +6,14 @@ import argparse
 import json
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from common.tables import to_table
 from hil.console import emit, load_settings, progress
 from hil.errors import UsageError
+
+if TYPE_CHECKING:
+    from hil.run_summary import RunSummary
 
 GOAL_P99_MS = 2.0
 
@@ -92,13 +96,13 @@ def flood(port: int, rate: float, stop: Any, result: Any) -> None:
                            "send_errors": send_errors}))
 
 
-def _leg(summary: dict) -> dict:
-    sim = summary.get("simulator") or {}
-    gcs = summary.get("gcs") or {}
-    return {"control_latency_ms": summary["control_latency_ms"], "step_jitter_ms": sim.get("jitter_ms"),
+def _leg(summary: RunSummary) -> dict:
+    sim = summary.simulator or {}
+    gcs = summary.gcs or {}
+    return {"control_latency_ms": to_table(summary.control_latency_ms), "step_jitter_ms": sim.get("jitter_ms"),
             "stale_command_events": sim.get("stale_command_events"), "gcs_frames_in": gcs.get("frames_in"),
             "gcs_service_ms": gcs.get("service_ms"),
-            "gcs_security_rejects": gcs.get("security_rejects"), "outcome": summary["outcome"]}
+            "gcs_security_rejects": gcs.get("security_rejects"), "outcome": summary.outcome}
 
 
 def run(args: argparse.Namespace) -> int:

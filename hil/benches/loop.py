@@ -5,9 +5,14 @@ from __future__ import annotations
 import argparse
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
+from common.tables import to_table
 from hil.console import emit, load_settings, progress
 from hil.errors import UsageError
+
+if TYPE_CHECKING:
+    from hil.run_summary import RunSummary
 
 GOAL_LOCKSTEP_STEPS_PER_S = 3000.0
 
@@ -40,21 +45,21 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.set_defaults(func=run)
 
 
-def _leg(summary: dict) -> dict:
-    sim = summary.get("simulator") or {}
+def _leg(summary: RunSummary) -> dict:
+    sim = summary.simulator or {}
     steps = sim.get("steps") or 0
     return {
-        "sim_time_s": summary["sim_time_s"],
-        "wall_time_s": summary["wall_time_s"],
-        "steps_per_wall_s": round(steps / summary["wall_time_s"], 1) if summary["wall_time_s"] else None,
-        "control_latency_ms": summary["control_latency_ms"],
+        "sim_time_s": summary.sim_time_s,
+        "wall_time_s": summary.wall_time_s,
+        "steps_per_wall_s": round(steps / summary.wall_time_s, 1) if summary.wall_time_s else None,
+        "control_latency_ms": to_table(summary.control_latency_ms),
         "simulator_steps": steps,
         "commands_received": sim.get("commands_received"),
         "stale_command_events": sim.get("stale_command_events"),
         "step_jitter_ms": sim.get("jitter_ms"),
-        "planning_cycles": summary["planning_cycles"],
-        "deadline_overruns": summary["deadline_overruns"],
-        "outcome": summary["outcome"],
+        "planning_cycles": summary.planning_cycles,
+        "deadline_overruns": summary.deadline_overruns,
+        "outcome": summary.outcome,
     }
 
 

@@ -6,8 +6,10 @@ import argparse
 import json
 import os
 import signal
+from dataclasses import replace
 
 from common.readiness import Ready, announce
+from common.tables import to_table
 from hil.commands.arg_types import receiving, sending
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.console import emit, load_settings, progress
@@ -158,17 +160,19 @@ def run(args: argparse.Namespace) -> int:
                 autopilot.actuators.sent_times.save(args.can_record)
         if autopilot.telemetry is not None:
             autopilot.telemetry.close()
-    summary = autopilot.summary()
-    summary["link"] = link_summary  # refusals by reason, source address, kernel drops (docs/security.md)
-    if autopilot.telemetry is not None:
-        summary["gcs"] = autopilot.telemetry.summary()
-    summary["local_paths"] = autopilot.local_paths
-    summary["estimated_track"] = np.frombuffer(autopilot.track, dtype=float).reshape(-1, 4).round(3).tolist()
-    summary["sensed_cells"] = autopilot.sensed.cells().tolist()
+    summary = replace(
+        autopilot.summary(),
+        link=link_summary,  # refusals by reason, source address, kernel drops (docs/security.md)
+        gcs=None if autopilot.telemetry is None else autopilot.telemetry.summary(),
+        local_paths=tuple(autopilot.local_paths),
+        estimated_track=tuple(map(tuple, np.frombuffer(autopilot.track, dtype=float).reshape(-1, 4).round(3).tolist())),
+        sensed_cells=tuple(map(tuple, autopilot.sensed.cells().tolist())),
+    )
+    table = to_table(summary)
     if args.summary_out:
-        write_json_atomic(args.summary_out, summary)
+        write_json_atomic(args.summary_out, table)
     if args.json:
-        emit(args, summary)
+        emit(args, table)
     else:
-        emit(args, {k: v for k, v in summary.items() if k not in ("local_paths", "estimated_track", "sensed_cells")})
+        emit(args, {k: v for k, v in table.items() if k not in summary.BULKY})
     return 0

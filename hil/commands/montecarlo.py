@@ -125,7 +125,7 @@ def run_traffic(args: argparse.Namespace) -> int:
     bad = [0]
 
     def progress(done, s):
-        bad[0] += 1 if s["collisions"] else 0
+        bad[0] += 1 if s.collisions else 0
         bar.update(done, f"collisions {bad[0]}")
 
     job = TrafficJob(scenario=args.scenario, seed=args.seed, duration=args.duration, config=args.config,
@@ -159,7 +159,7 @@ def run_routes(args: argparse.Namespace, argv_scenario: str | None) -> int:
     ok = [0]
 
     def progress(done, s):
-        ok[0] += 1 if s["reached_goal"] else 0
+        ok[0] += 1 if s.reached_goal else 0
         bar.update(done, f"reached {ok[0]}/{done}")
 
     job = RouteJob(seed=args.seed, duration=duration, config=args.config, overrides=tuple(args.overrides))

@@ -18,14 +18,18 @@ import re
 import signal
 import subprocess
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from common.tables import to_table
 from hil import processes
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, RunFailed, UsageError
 from hil.sim_client import HilClient, sim_command, start_simulator
 from planner.params import ALGORITHM_NAMES
+
+if TYPE_CHECKING:
+    from hil.run_summary import RunSummary
 
 FRAME_TIMEOUT_S = 15.0  # wall seconds to wait for the simulator's next frame before giving up
 DEMO_CONTROLS = (0.6, 0.5)  # port, starboard: a gentle starboard turn
@@ -154,11 +158,11 @@ def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
     progress(f"run: scenario {args.scenario}, {pacing}, "
              f"actuators {cfg.can.actuators}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
     summary = run_loop(opts, cfg)
-    emit(args, summary, human_summary(summary))
-    if summary["outcome"] == "interrupted":
+    emit(args, to_table(summary), human_summary(summary))
+    if summary.outcome == "interrupted":
         progress(f"run: interrupted; summary in {out}")
         return 130
-    return 0 if summary["reached_goal"] else 1
+    return 0 if summary.reached_goal else 1
 
 
 # Counters worth a human's attention: something was refused, lost, late, restarted or failed.
@@ -166,7 +170,7 @@ PROBLEM_COUNTER = re.compile(r"reject|refus|drop|overrun|restart|error|lost|loss
                              r"collision|fallback|malformed|invalid|overflow|kill", re.I)
 
 
-def human_summary(s: dict[str, Any]) -> list[str]:
+def human_summary(s: RunSummary) -> list[str]:
     """The run in at most 15 lines: outcome, time, clearance, errors, non-zero problem counters
     (everything else: --json and summary.json)."""
     from hil.console import MAX_LINES, clip, fmt, nonzero_counters, wrap_items
@@ -174,36 +178,33 @@ def human_summary(s: dict[str, Any]) -> list[str]:
     def num(v: Any, unit: str = "", digits: str = ".3g") -> str:
         return "-" if v is None else f"{v:{digits}}{unit}"
 
-    outcome = "goal reached" if s.get("reached_goal") else str(s.get("outcome", "?")).upper()
-    if s.get("collision_time_s") is not None:
-        outcome += f" at {s['collision_time_s']:.1f} s"
-    lines = [f"outcome: {outcome} (scenario {s.get('scenario')}, seed {s.get('seed')}, {s.get('mode')}, "
-             f"actuators {s.get('actuators')})"]
-    sim_t, wall = s.get("sim_time_s") or 0.0, s.get("wall_time_s") or 0.0
+    outcome = "goal reached" if s.reached_goal else s.outcome.upper()
+    if s.collision_time_s is not None:
+        outcome += f" at {s.collision_time_s:.1f} s"
+    lines = [f"outcome: {outcome} (scenario {s.scenario}, seed {s.seed}, {s.mode}, actuators {s.actuators})"]
+    sim_t, wall = s.sim_time_s, s.wall_time_s
     speed_up = f" (x{sim_t / wall:.1f})" if wall > 0 else ""
     lines.append(f"time: {sim_t:.1f} s simulated in {wall:.1f} s wall" + speed_up)
-    energy = s.get("energy_J")
-    lines.append(f"clearance: min {num(s.get('min_clearance_m'), ' m')}; "
-                 f"path {num(s.get('path_length_m'), ' m', '.1f')}"
+    energy = s.energy_J
+    lines.append(f"clearance: min {num(s.min_clearance_m, ' m')}; "
+                 f"path {num(s.path_length_m, ' m', '.1f')}"
                  f"; energy {'-' if energy is None else f'{energy / 1000:.1f} kJ'}")
-    tr, lat = s.get("tracking") or {}, s.get("control_latency_ms") or {}
-    lines.append(f"errors: navigation RMSE {num(s.get('navigation_rmse_m'), ' m')}; cross-track RMS "
+    tr, lat = s.tracking or {}, s.control_latency_ms
+    lines.append(f"errors: navigation RMSE {num(s.navigation_rmse_m, ' m')}; cross-track RMS "
                  f"{num(tr.get('cross_track_rms_m'), ' m')} (max {num(tr.get('cross_track_max_m'), ' m')}); "
-                 f"control latency p99 {num(lat.get('p99'), ' ms')}")
-    lines.append(f"planning: {fmt(s.get('planning_cycles'))} cycles, {fmt(s.get('plans_accepted'))} plans accepted")
-    traffic = s.get("traffic")
-    if isinstance(traffic, dict):
-        shown = {k: v for k, v in traffic.items() if not isinstance(v, (dict, list)) and v is not None}
+                 f"control latency p99 {num(None if lat is None else lat.p99, ' ms')}")
+    lines.append(f"planning: {fmt(s.planning_cycles)} cycles, {fmt(s.plans_accepted)} plans accepted")
+    if s.traffic is not None:
+        shown = {k: v for k, v in s.traffic.items() if not isinstance(v, (dict, list)) and v is not None}
         lines.append("traffic: " + ", ".join(f"{k} {fmt(v)}" for k, v in list(shown.items())[:6]))
-    problems = [c for c in nonzero_counters({k: v for k, v in s.items() if k not in ("collisions",)})
+    problems = [c for c in nonzero_counters({k: v for k, v in to_table(s).items() if k not in ("collisions",)})
                 if PROBLEM_COUNTER.search(c.partition("=")[0])]
     lines += wrap_items("counters (non-zero)", problems or ["none"], 3)
-    events = s.get("events") or []
-    if events:
-        lines.append(f"events: {len(events)}, last: {fmt(events[-1])}")
-    if s.get("plot_error"):
-        lines.append(f"plot: failed: {s['plot_error']}")
-    lines.append(f"folder: {s.get('run_folder')} (summary.json has everything; --json prints it)")
+    if s.events:
+        lines.append(f"events: {len(s.events)}, last: {fmt(s.events[-1])}")
+    if s.plot_error:
+        lines.append(f"plot: failed: {s.plot_error}")
+    lines.append(f"folder: {s.run_folder} (summary.json has everything; --json prints it)")
     return [clip(line) for line in lines[:MAX_LINES]]
 
 

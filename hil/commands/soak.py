@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     import numpy as np
 
+from common.tables import to_table
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, RunFailed, UsageError
@@ -201,32 +202,32 @@ def _soak_loop(args: argparse.Namespace, cfg: Any, out: Path) -> dict[str, Any]:
                       extra_sim_args=["--can-record", str(sim_rec)] if on_can else [])
     summary = run_loop(opts, cfg)
     problems: list[str] = []
-    if summary["outcome"] not in ("timeout", "goal"):
-        problems.append(f"run ended early: {summary['outcome']}")
-    sim = summary.get("simulator") or {}
+    if summary.outcome not in ("timeout", "goal"):
+        problems.append(f"run ended early: {summary.outcome}")
+    sim = summary.simulator or {}
     result: dict[str, Any] = {
         "mode": "hil_loop", "actuators": cfg.can.actuators, "duration_s": args.duration,
-        "outcome": summary["outcome"], "sim_time_s": summary["sim_time_s"],
+        "outcome": summary.outcome, "sim_time_s": summary.sim_time_s,
         "stale_failsafe_events": sim.get("stale_command_events"),
-        "deadline_overruns": summary.get("deadline_overruns"),
-        "events": summary.get("events"),
+        "deadline_overruns": summary.deadline_overruns,
+        "events": list(summary.events),
     }
     seen_load = load.report()
     allowed = overruns_allowed(args.max_overruns, seen_load, args.load_per_overrun)
     result["load"] = seen_load
     result["overruns_allowed"] = allowed
-    if (summary.get("deadline_overruns") or 0) > allowed:
+    if (summary.deadline_overruns or 0) > allowed:
         why = ("" if seen_load is None else f" (foreign load {seen_load['foreign_cpu_s']:.1f} CPU-s of "
                f"{seen_load['wall_s'] * seen_load['cpus']:.0f} in {seen_load['wall_s']:.0f} s)")
-        problems.append(f"planner deadline overruns {summary['deadline_overruns']} > {allowed} allowed{why}")
+        problems.append(f"planner deadline overruns {summary.deadline_overruns} > {allowed} allowed{why}")
     if on_can:
-        can = summary.get("can") or {}
+        can = summary.can or {}
         result["can"] = _can_checks({"autopilot": can.get("autopilot"), "simulator": can.get("simulator")}, problems)
         result["can_log"] = can.get("can_log")
         lat = _latency(ap_rec, sim_rec)
         result["command_to_applied_ms"] = lat
     else:
-        result["control_latency_ms"] = summary.get("control_latency_ms")
+        result["control_latency_ms"] = to_table(summary.control_latency_ms)
     res, res_problems = watch.report(args.max_rss_growth, args.rss_noise, args.max_fd_growth)
     result["resources"] = res
     result["problems"] = problems + res_problems

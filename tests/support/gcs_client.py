@@ -20,7 +20,7 @@ os.environ.setdefault("MAVLINK20", "1")  # before mavutil picks its dialect: MAV
 
 from pymavlink import mavutil
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 M = mavutil.mavlink
 
 

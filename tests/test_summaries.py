@@ -1,0 +1,81 @@
+"""The typed summaries (autopilot_bridge/summary.py, hil/run_summary.py): what crosses the process
+boundary and what goes on disk survives table -> JSON -> table unchanged, keeps the keys the files
+always had, and a key that does not fit is one line naming it, never a KeyError."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import pytest
+from support.summaries import autopilot_summary, run_summary
+
+from common.tables import to_table
+from hil.errors import ConfigError, RunFailed
+from hil.run_summary import read_autopilot_summary, read_summary
+
+
+def _through_json(summary):
+    return json.loads(json.dumps(to_table(summary), allow_nan=False))
+
+
+@pytest.mark.parametrize("summary", [
+    run_summary(),
+    run_summary(outcome="collision", reached_goal=False, collisions=1, collision_time_s=45.25, energy_J=None,
+                warnings=("another hil run streams with system id 1",), gcs={"rejects": {}},
+                encounters=({"mmsi": 412000103, "type": "crossing-give-way", "cpa_m": 10.5},),
+                traffic={"encounters": 1, "ais": None}, can={"autopilot": None}, plot=None, plot_error="OSError: x"),
+    run_summary(planning_cycles=None, plans_accepted=None, deadline_overruns=None, worker_restarts=None,
+                fallback_activations=None, tracking=None, control_latency_ms=None, navigation=None,
+                sensed_obstacles=None, simulator=None, run_folder=None, plot=None),   # the autopilot was killed
+])
+def test_a_run_summary_round_trips_through_json(summary):
+    assert read_summary(_through_json(summary)) == summary
+
+
+@pytest.mark.parametrize("summary", [
+    autopilot_summary(),
+    autopilot_summary(complete_time_s=None, mission_complete=False, worker_startup_s=dataclasses.replace(
+        autopilot_summary().worker_startup_s, count=0, max=None), can={"raw_commands_sent": 3},
+        traffic={"ais": {"tracked": 1}}, gcs={"rejects": {}}),
+    autopilot_summary(link=None, local_paths=None, estimated_track=None, sensed_cells=None),  # Autopilot.summary()
+])
+def test_an_autopilot_summary_round_trips_through_json(summary):
+    assert read_autopilot_summary(_through_json(summary)) == summary
+
+
+def test_the_files_keep_their_keys_and_optional_sections_stay_absent():
+    table = to_table(run_summary())
+    assert list(table)[:4] == ["scenario", "seed", "mode", "outcome"]
+    assert list(table)[-4:] == ["events", "actuators", "run_folder", "plot"]
+    for absent in ("warnings", "gcs", "encounters", "traffic", "can", "plot_error"):
+        assert absent not in table
+    assert table["control_latency_ms"] == {"p50": 0.4, "p99": 6.0, "max": 80.0, "frames": 100}
+    assert set(table["security"]) == {"simulator", "autopilot", "autopilot_navigation_numeric", "tap"}
+    assert table["collision_time_s"] is None      # None where the key always appears
+    ap = to_table(autopilot_summary(can=None, gcs=None))
+    assert "can" not in ap and "gcs" not in ap and ap["traffic"] is None
+    assert list(ap)[-5:] == ["traffic", "link", "local_paths", "estimated_track", "sensed_cells"]
+
+
+def test_an_unknown_or_missing_key_is_one_line_naming_it():
+    table = to_table(run_summary())
+    with pytest.raises(ConfigError) as exc:
+        read_summary({**table, "outcom": "goal"}, "run/summary.json")
+    assert str(exc.value) == "run/summary.json: outcom: unknown key (did you mean 'outcome'?)"
+    del table["sim_time_s"]
+    with pytest.raises(ConfigError, match=r"^summary.json: sim_time_s: missing key$"):
+        read_summary(table)
+    nested = to_table(run_summary())
+    del nested["security"]["tap"]
+    with pytest.raises(ConfigError, match=r"^summary.json: security.tap: missing key$"):
+        read_summary(nested)
+    with pytest.raises(ConfigError, match=r"^summary.json: expected a JSON object, got list$"):
+        read_summary([1, 2])
+    ap = to_table(autopilot_summary())
+    ap["control_latency_ms"]["p99"] = "fast"
+    with pytest.raises(RunFailed) as exc:
+        read_autopilot_summary(ap)
+    assert str(exc.value) == "the autopilot's summary: control_latency_ms.p99: expected a number, got 'fast'"
+    assert "\n" not in str(exc.value)
+
