@@ -90,6 +90,44 @@ class Propulsion:
     T_min: float     # N (<= 0)
 
 
+@dataclass(frozen=True)
+class ComputerConfig:
+    """How the vessel computer is tuned: its own parameters, the filter's and the controllers',
+    and what it knows of the propulsion."""
+
+    params: AutopilotParams
+    nav: NavigationParams
+    control: ControlParams
+    propulsion: Propulsion
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How this run drives the computer: lockstep (answer every frame, wait for the planner in
+    simulated time) or real time, the seed of its planning cycles, int14 thruster commands
+    (DroneCAN resolution), whether it waits disarmed in HOLD for a ground station, and the pace
+    (x wall time) of lockstep with a ground station attached (None: 1x while disarmed only)."""
+
+    lockstep: bool
+    seed: int
+    int14_commands: bool = False
+    wait_for_arm: bool = False
+    pace_speedup: float | None = None
+
+
+@dataclass(frozen=True)
+class Devices:
+    """What the computer talks to: the simulator's HIL link, the planner worker process, the
+    ground-station link (or None), AIS traffic awareness (or None) and the thruster back-end
+    (None: HIL_ACTUATOR_CONTROLS on the HIL link; else e.g. CanActuators)."""
+
+    link: HilLink
+    worker: PlannerWorker
+    telemetry: Telemetry | None = None
+    traffic: Any = None
+    actuators: Any = None
+
+
 @dataclass
 class AutopilotStats:
     frames: int = 0
@@ -110,21 +148,19 @@ class AutopilotStats:
 class Autopilot:
     """One vessel computer: owns its link, navigation filter, planner worker and controllers."""
 
-    def __init__(self, params: AutopilotParams, nav: NavigationParams, control: ControlParams,
-                 propulsion: Propulsion, world: World, link: HilLink, worker: PlannerWorker,
-                 telemetry: Telemetry | None = None, *, lockstep: bool, seed: int,
-                 log: Callable[[str], None] | None = None, traffic: Any = None, actuators: Any | None = None,
-                 int14_commands: bool = False, wait_for_arm: bool = False,
-                 pace_speedup: float | None = None) -> None:
-        self.p, self.nav_params, self.control_params = params, nav, control
-        self.prop, self.world, self.link, self.worker = propulsion, world, link, worker
+    def __init__(self, config: ComputerConfig, world: World, devices: Devices, options: RunOptions,
+                 log: Callable[[str], None] | None = None) -> None:
+        params, propulsion = config.params, config.propulsion
+        self.p, self.nav_params, self.control_params = params, config.nav, config.control
+        self.prop, self.world, self.link, self.worker = propulsion, world, devices.link, devices.worker
         self.zero_thrust = allocate(0.0, 0.0, propulsion.B_u, propulsion.T_max, propulsion.T_min)
-        self.telemetry = telemetry
-        self.traffic = traffic  # autopilot_bridge.traffic_awareness.TrafficAwareness, or None
+        self.telemetry = devices.telemetry
+        self.traffic = devices.traffic  # autopilot_bridge.traffic_awareness.TrafficAwareness, or None
         # send_controls(time_usec, port, stdb): the HIL link itself, or CanActuators (service(), summary())
-        self.actuators: Any = actuators if actuators is not None else link
-        self.int14_commands = int14_commands
-        self.lockstep, self.seed = lockstep, seed
+        self.actuators: Any = devices.actuators if devices.actuators is not None else devices.link
+        self.int14_commands = options.int14_commands
+        self.lockstep, self.seed = options.lockstep, options.seed
+        wait_for_arm, pace_speedup = options.wait_for_arm, options.pace_speedup
         self.log = log or _logger.info
         self.goal_ned = (world.goal[1], world.goal[0])
         self.reference_ned = map_to_ned_path(world.reference_path)

@@ -17,7 +17,7 @@ from hil.errors import UsageError
 def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None = None,
           sensors_from: str | None = None):
     """The autopilot and its parts from a configuration and a scenario (used by `hil run` too)."""
-    from autopilot_bridge.autopilot import Autopilot, Propulsion
+    from autopilot_bridge.autopilot import Autopilot, ComputerConfig, Devices, Propulsion, RunOptions
     from autopilot_bridge.control import SurgeModel
     from autopilot_bridge.gcs.link import GcsLink
     from autopilot_bridge.hil_link import HilLink
@@ -91,11 +91,13 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     from autopilot_bridge.traffic_awareness import TrafficAwareness
 
     traffic = TrafficAwareness(cfg.tracking, cfg.colregs, geo)  # AIS targets, COLREGs encounters
-    autopilot = Autopilot(ap, cfg.navigation, cfg.control, propulsion, world, link, worker, telemetry,
-                          lockstep=lockstep, seed=cfg.sim.seed, traffic=traffic, actuators=actuators,
-                          int14_commands=cfg.esc.int14_resolution or cfg.can.actuators == "can",
-                          wait_for_arm=cfg.gcs.wait_for_arm,
-                          pace_speedup=cfg.gcs.pace_speedup if cfg.gcs.wait_for_arm else None)
+    autopilot = Autopilot(
+        ComputerConfig(ap, cfg.navigation, cfg.control, propulsion), world,
+        Devices(link, worker, telemetry, traffic=traffic, actuators=actuators),
+        RunOptions(lockstep=lockstep, seed=cfg.sim.seed,
+                   int14_commands=cfg.esc.int14_resolution or cfg.can.actuators == "can",
+                   wait_for_arm=cfg.gcs.wait_for_arm,
+                   pace_speedup=cfg.gcs.pace_speedup if cfg.gcs.wait_for_arm else None))
     telemetry.attach(autopilot)
     return autopilot
 
