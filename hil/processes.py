@@ -32,3 +32,27 @@ def stop(proc: subprocess.Popen, timeout: float = 5.0) -> None:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait(timeout)
+
+
+def wait_for_marker(proc: subprocess.Popen, marker: bytes, timeout: float = 60.0) -> None:
+    """Read the child's stderr until ``marker``; RunFailed after ``timeout`` seconds or if it ends."""
+    import os
+    import selectors
+    import time
+
+    from hil.errors import RunFailed
+
+    sel = selectors.DefaultSelector()
+    sel.register(proc.stderr, selectors.EVENT_READ)
+    seen = b""
+    deadline = time.monotonic() + timeout
+    while marker not in seen:
+        left = deadline - time.monotonic()
+        if left <= 0 or proc.poll() is not None:
+            raise RunFailed(f"child not ready: {seen.decode(errors='replace').strip()[-300:]}")
+        if sel.select(min(left, 0.2)):
+            chunk = os.read(proc.stderr.fileno(), 4096)
+            if not chunk:
+                continue
+            seen += chunk
+    sel.close()

@@ -468,3 +468,18 @@ def load_traffic(source: str) -> tuple[ShipSpec, ...]:
             raise UsageError(f"--traffic {source}: expected a JSON list of ship tables")
         return tuple(config.from_table(ShipSpec, r, source, prefix=f"traffic[{i}]") for i, r in enumerate(rows))
     return load_spec(source).traffic
+
+
+def simulator_overrides(scen, base_current) -> list[str]:
+    """The ``--set`` overrides that put the simulator where `hil run` starts it on ``scen``: the
+    start (map x east, y north, heading counter-clockwise from east) as NED ``sim.initial`` and the
+    scenario's own ``[current]`` keys."""
+    import json
+
+    from common.frames import map_to_ned
+
+    north, east, psi = map_to_ned(scen.start[0], scen.start[1], scen.start_heading)
+    out = [f"sim.initial.x={north!r}", f"sim.initial.y={east!r}", f"sim.initial.psi={psi!r}"]
+    base, mine = config.to_table(base_current), config.to_table(scen.current)
+    out += [f"current.{k}={json.dumps(v)}" for k, v in mine.items() if base.get(k) != v]
+    return out

@@ -43,10 +43,10 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
 
 def _child(cmd: list[str]) -> subprocess.Popen:
     from hil import processes
-    from hil.commands.soak import _wait_ready
+    from hil.processes import wait_for_marker
 
     proc = processes.start(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    _wait_ready(proc, b"ready")
+    wait_for_marker(proc, b"ready")
     return proc
 
 

@@ -82,20 +82,6 @@ def config_overrides(args: argparse.Namespace) -> list[str]:
     return out + can_overrides(args)
 
 
-def scenario_overrides(scen, base_current) -> list[str]:
-    """The ``--set`` overrides that put the simulator where `hil run` starts it on ``scen``: the
-    start (map x east, y north, heading counter-clockwise from east) as NED ``sim.initial`` and the
-    scenario's own ``[current]`` keys."""
-    from common.frames import map_to_ned
-    from hil.config import to_table
-
-    north, east, psi = map_to_ned(scen.start[0], scen.start[1], scen.start_heading)
-    out = [f"sim.initial.x={north!r}", f"sim.initial.y={east!r}", f"sim.initial.psi={psi!r}"]
-    base, mine = to_table(base_current), to_table(scen.current)
-    out += [f"current.{k}={json.dumps(v)}" for k, v in mine.items() if base.get(k) != v]
-    return out
-
-
 def run(args: argparse.Namespace) -> int:
     from common.udp import UdpEndpoint
     from simulator.core import SimulatorCore
@@ -118,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
         if spec.kind != "fixed":
             raise UsageError(f"--scenario {args.scenario}: draws a new map per run; hil sim needs a fixed scenario")
         scen = scenarios.instance(spec, None, base.current)
-        args.overrides = scenario_overrides(scen, base.current) + list(args.overrides)
+        args.overrides = scenarios.simulator_overrides(scen, base.current) + list(args.overrides)
         world = WorldMap(scen.truth_occ(), scen.resolution)
         traffic = tuple(scen.traffic)
     args.overrides = list(args.overrides) + config_overrides(args)

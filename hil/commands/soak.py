@@ -254,7 +254,7 @@ def _soak_can_path(args: argparse.Namespace, cfg: Any, out: Path) -> dict[str, A
     esc = processes.start(esc_process_command(args, rec), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     problems: list[str] = []
     try:
-        _wait_ready(esc, b"esc: ready")
+        processes.wait_for_marker(esc, b"esc: ready")
         progress(f"soak: CAN path at {args.rate:g} Hz for {args.duration:g} s on {cfg.can.interface}:{cfg.can.channel}")
         period = 1.0 / args.rate
         t0 = time.monotonic()
@@ -297,23 +297,3 @@ def _soak_can_path(args: argparse.Namespace, cfg: Any, out: Path) -> dict[str, A
     result["resources"] = res
     result["problems"] = problems + res_problems
     return result
-
-
-def _wait_ready(proc: subprocess.Popen, marker: bytes, timeout: float = 60.0) -> None:
-    """Read the child's stderr until ``marker`` (bounded)."""
-    import selectors
-
-    sel = selectors.DefaultSelector()
-    sel.register(proc.stderr, selectors.EVENT_READ)
-    seen = b""
-    deadline = time.monotonic() + timeout
-    while marker not in seen:
-        left = deadline - time.monotonic()
-        if left <= 0 or proc.poll() is not None:
-            raise RunFailed(f"child not ready: {seen.decode(errors='replace').strip()[-300:]}")
-        if sel.select(min(left, 0.2)):
-            chunk = os.read(proc.stderr.fileno(), 4096)
-            if not chunk:
-                continue
-            seen += chunk
-    sel.close()
