@@ -265,7 +265,7 @@ def test_with_signing_on_every_state_or_rate_changing_message_needs_a_good_signa
 
 def test_tlog_and_summaries_are_owner_only_when_a_key_is_set(tmp_path):
     from hil.files import write_json_atomic
-    from hil.hilrun import Tap
+    from hil.tap import Tap
 
     old = tmp_path / "run.tlog"
     old.write_bytes(b"")

@@ -100,7 +100,7 @@ def test_lockstep_tlog_stamps_follow_simulated_time(tmp_path):
 
     from common.geodesy import LocalFrame
     from common.mavlink import Codec
-    from hil.hilrun import Tap
+    from hil.tap import Tap
 
     tap = Tap(tmp_path / "run.tlog", LocalFrame(38.9, 121.6, 0.0), lockstep=True)
     sim = Codec(1, 51)
