@@ -36,113 +36,43 @@ import logging
 import math
 import time
 from array import array
-from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from autopilot_bridge.behaviour import STATION, Behaviour, BehaviourMachine
-from autopilot_bridge.config import AutopilotParams
+from autopilot_bridge.computer_setup import AutopilotStats, ComputerConfig, Devices, RunOptions
 from autopilot_bridge.control import (
-    ControlParams,
     HeadingPID,
     SpeedController,
-    SurgeModel,
     Thrust,
     allocate,
     clearance_speed_cap,
 )
 from autopilot_bridge.guidance import GuidanceOutput, LineOfSight
-from autopilot_bridge.hil_link import HilLink, RangeScan, SensorFrame
-from autopilot_bridge.local_planning import CycleInput, LocalPlan, World, map_to_ned_path, ned_to_map
+from autopilot_bridge.hil_link import RangeScan, SensorFrame
+from autopilot_bridge.local_planning import LocalPlan, World, map_to_ned_path
 from autopilot_bridge.mission_commands import MissionCommand
 from autopilot_bridge.modes import Mode
-from autopilot_bridge.navigation import NavigationFilter, NavigationParams, NavState
+from autopilot_bridge.navigation import NavigationFilter, NavState
 from autopilot_bridge.obstacle_map import SensedObstacles, path_blocked
 from autopilot_bridge.parameters import Param, ParamTable
 from autopilot_bridge.plan_commitment import CommitmentParams, keep_current
-from autopilot_bridge.planning_worker import PlannerWorker, PlanRequest
+from autopilot_bridge.plan_handoff import PlanHandoff
 from autopilot_bridge.reactive import ReactiveAvoidance
 from autopilot_bridge.route_planning import RouteKeeper, check_mission_items
 from autopilot_bridge.summary import AutopilotSummary, ControlLatency, NavigationCounts, WorkerStartup
-from autopilot_bridge.telemetry import Telemetry
 from autopilot_bridge.tracking_stats import TrackingStats
 from autopilot_bridge.vehicle import Vehicle, Waypoint
 from autopilot_bridge.vehicle_api import Result, VehicleStatus
 from common.dronecan_codec import RAW_COMMAND_MAX, quantize
 from common.mavlink import MAV_TYPE as M
-from common.percentiles import StreamingPercentiles
 
 _logger = logging.getLogger(__name__)
 
 SPEED_RANGE = (0.2, 3.0)   # m/s: speed set-points a GCS may give (3 m/s: the hull's top speed)
-
-
-@dataclass(frozen=True)
-class Propulsion:
-    """What the controller knows of the vessel: nominal surge model and the thrusters."""
-
-    surge: SurgeModel
-    B_u: float       # m
-    T_max: float     # N
-    T_min: float     # N (<= 0)
-
-
-@dataclass(frozen=True)
-class ComputerConfig:
-    """How the vessel computer is tuned: its own parameters, the filter's and the controllers',
-    and what it knows of the propulsion."""
-
-    params: AutopilotParams
-    nav: NavigationParams
-    control: ControlParams
-    propulsion: Propulsion
-
-
-@dataclass(frozen=True)
-class RunOptions:
-    """How this run drives the computer: lockstep (answer every frame, wait for the planner in
-    simulated time) or real time, the seed of its planning cycles, int14 thruster commands
-    (DroneCAN resolution), whether it waits disarmed in HOLD for a ground station, and the pace
-    (x wall time) of lockstep with a ground station attached (None: 1x while disarmed only)."""
-
-    lockstep: bool
-    seed: int
-    int14_commands: bool = False
-    wait_for_arm: bool = False
-    pace_speedup: float | None = None
-
-
-@dataclass(frozen=True)
-class Devices:
-    """What the computer talks to: the simulator's HIL link, the planner worker process, the
-    ground-station link (or None), AIS traffic awareness (or None) and the thruster back-end
-    (None: HIL_ACTUATOR_CONTROLS on the HIL link; else e.g. CanActuators)."""
-
-    link: HilLink
-    worker: PlannerWorker
-    telemetry: Telemetry | None = None
-    traffic: Any = None
-    actuators: Any = None
-
-
-@dataclass
-class AutopilotStats:
-    frames: int = 0
-    duplicate_frames: int = 0
-    commands: int = 0
-    planning_cycles: int = 0
-    plans_accepted: int = 0
-    plans_rejected: Counter = field(default_factory=Counter)
-    fallback_activations: int = 0
-    simulator_restarts: int = 0
-    latency_ms: StreamingPercentiles = field(default_factory=StreamingPercentiles)
-    planner_waits: int = 0          # lockstep frames that waited for the planner (by design)
-    planner_wait_ms: list[float] = field(default_factory=list)
-    sensed_replans: int = 0         # local paths found blocked by newly sensed obstacles
-    events: list[tuple[float, str]] = field(default_factory=list)
 
 
 class Autopilot:
@@ -175,7 +105,6 @@ class Autopilot:
         # route, re-planned when sensed obstacles block it.
         self.routes = RouteKeeper(self.grid, world.params.safety_radius, log=self.log)
         self.routes.adopt(self.reference_ned)
-        self._sensed_at_submit = 0
         self.reactive = ReactiveAvoidance(self.grid, params.fallback_range, params.min_clearance, params.fallback_speed)
         self.stats = AutopilotStats()
         self.tracking = TrackingStats()
@@ -192,12 +121,12 @@ class Autopilot:
         self.planner_overrides: dict[str, float] = {}   # PlannerParams changed by a GCS (parameters)
         self._route_version = 0
         self._world_version = 0
-        self._stale_cycle = 0        # plans of cycles up to this one were for an older route
         # Lockstep with a ground station attached: simulated time passes at most pace_speedup x wall
         # time (None: only while disarmed, at 1x), so that a person can follow the boat.
         self.pace_speedup = pace_speedup
         self._pace_anchor: tuple[float, float, float] | None = None
         self._status: VehicleStatus | None = None
+        self.planning = PlanHandoff(self.worker, params, self.lockstep, self.seed, self.stats, self._event)
         self._reset()
         self.param_table = ParamTable(self.parameters())
 
@@ -209,9 +138,7 @@ class Autopilot:
         self.behaviour = BehaviourMachine()
         self.los: LineOfSight | None = None
         self.next_plan_t = 0.0
-        self.cycle = 0
-        self._stale_cycle = 0
-        self.pending_since: float | None = None  # simulated time of the pending request
+        self.planning.reset()
         self.last_frame_usec: int | None = None
         self.last_command: Thrust | None = None
         self.last_t: float | None = None
@@ -219,7 +146,6 @@ class Autopilot:
         self.target = self.goal_ned
         self.speed_factor = 1.0
         self._path_invalid = False   # the followed path is blocked (sensed) or traffic asks for a new one
-        self._traffic_planned = False
         if self.traffic is not None:
             self.traffic.reset()
 
@@ -247,62 +173,12 @@ class Autopilot:
 
     # -- planning ------------------------------------------------------------------------------
     def _submit_plan(self, s: NavState) -> None:
-        lead = self.p.planning_deadline
-        north = s.x + (s.u * math.cos(s.psi) - s.v * math.sin(s.psi)) * lead
-        east = s.y + (s.u * math.sin(s.psi) + s.v * math.cos(s.psi)) * lead
-        x, y, heading = ned_to_map(north, east, s.psi)
-        self.cycle += 1
-        self._sensed_at_submit = self.sensed.count
-        snap = None if self.traffic is None else self.traffic.snapshot(s.t + lead, x, y, heading, self.p.cruise_speed)
-        self._traffic_planned = snap is not None   # ships move: their cycle's newest plan always wins
-        request = PlanRequest(
-            cycle=self.cycle,
-            problem=CycleInput(x, y, heading, s.t + lead, self.seed * 100003 + self.cycle,
-                               self.sensed.cells() if self._sensed_at_submit else None, self.sensed.version,
-                               traffic=snap, world=self.world_update()),
-            deadline_s=self.p.planning_deadline,
-            iterations=self.p.lockstep_iterations if self.lockstep else None,
-        )
-        if self.lockstep:
-            # Simulated time stands still while a (re)started worker starts up: lockstep stays repeatable.
-            self.worker.wait_ready(self.p.lockstep_planner_timeout)
-        if self.worker.submit(request):
-            self.stats.planning_cycles += 1
-            self.pending_since = s.t
+        self.planning.submit(s, self.sensed, self.traffic, self.world_update())
 
     def _collect_plan(self, t: float) -> LocalPlan | None:
-        if self.pending_since is None:
-            return None
-        if self.lockstep:
-            if t + 1e-9 < self.pending_since + self.p.planning_deadline:
-                return None
-            # Simulated time stands still while we wait: bounded by the watchdog's wall limit.
-            # Such a frame measures the planner, not the control loop: reported apart.
-            self._waited = True
-            w0 = time.perf_counter()
-            reply = self.worker.wait(self.p.lockstep_planner_timeout)
-            self.stats.planner_waits += 1
-            self.stats.planner_wait_ms.append((time.perf_counter() - w0) * 1e3)
-            if reply is None and self.worker.busy and self.worker.watchdog(now=time.monotonic() + 1e9):
-                self._event(t, "planner hung: worker killed and restarted")
-        else:
-            reply = self.worker.poll()
-            if reply is None:
-                if self.worker.watchdog():
-                    self._event(t, "planner overran its deadline: worker killed and restarted")
-                    self.pending_since = None
-                return None
-        self.pending_since = None
-        if reply is None:
-            return None
-        if reply.error:
-            self.stats.plans_rejected["planner_error"] += 1
-            self._event(t, f"planner error: {reply.error}")
-            return None
-        if reply.cycle <= self._stale_cycle:
-            self.stats.plans_rejected["for_an_older_route"] += 1
-            return None
-        return reply.result
+        plan, waited = self.planning.collect(t)
+        self._waited = self._waited or waited
+        return plan
 
     def _accept(self, plan: LocalPlan, s: NavState) -> bool:
         if plan.status == "none" or len(plan.path) < 2:
@@ -317,7 +193,7 @@ class Autopilot:
             if not self.grid.segment_free(x0, y0, x1, y1):
                 self.stats.plans_rejected["collides"] += 1
                 return False
-        since = self.sensed.cells()[self._sensed_at_submit:]
+        since = self.sensed.cells()[self.planning.sensed_at_submit:]
         if path_blocked(ned, since, self.grid.resolution, self.p.sensed_path_clearance):
             # Planned before these obstacles were seen: plan again at once.
             self.stats.plans_rejected["sensed_since_planning"] += 1
@@ -341,7 +217,7 @@ class Autopilot:
         planned for, the followed path is not an exact one, or the vessel is off it by more than the
         look-ahead."""
         if (self.behaviour.state is not Behaviour.PLANNED or self.los is None or self._path_invalid
-                or self._traffic_planned):
+                or self.planning.traffic_planned):
             return False
         if self.local_paths and self.local_paths[-1]["status"] != "exact":
             # The followed path stopped short of its subgoal (the tree found no way there): it may
@@ -448,7 +324,7 @@ class Autopilot:
                     self._event(t, f"following local path (cycle {plan.cycle}, {plan.status})")
             elif self.los is None:
                 self._to_fallback(t, f"no valid local path ({plan.reason or plan.status})")
-        if self.pending_since is None and t + 1e-9 >= self.next_plan_t:
+        if self.planning.pending_since is None and t + 1e-9 >= self.next_plan_t:
             self.next_plan_t = t + self.p.planning_period
             self._submit_plan(s)
         preview = max(self.p.lookahead, 3.0 * self.speed_setpoint())  # ~3 s of travel
@@ -501,7 +377,7 @@ class Autopilot:
         self.los = None
         self.behaviour.new_route()
         self.complete_t = None
-        self._stale_cycle = self.cycle   # whatever the worker is planning now is for the old route
+        self.planning.route_changed()   # whatever the worker is planning now is for the old route
         self.next_plan_t = t
         self._world_version += 1
 
@@ -746,7 +622,7 @@ class Autopilot:
                     self._numeric_fault(f, received_at, exc)
             if not frames and not self.lockstep and self.worker.watchdog():
                 self._event(self.last_t or 0.0, "planner overran its deadline: worker killed and restarted")
-                self.pending_since = None
+                self.planning.pending_since = None
             if self.telemetry is not None:
                 self.telemetry.service()
             if self.actuators is not self.link:

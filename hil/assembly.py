@@ -17,7 +17,8 @@ from hil.errors import UsageError
 def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None = None,
           sensors_from: str | None = None):
     """The autopilot and its parts from a configuration and a scenario (used by `hil run` too)."""
-    from autopilot_bridge.autopilot import Autopilot, ComputerConfig, Devices, Propulsion, RunOptions
+    from autopilot_bridge.autopilot import Autopilot
+    from autopilot_bridge.computer_setup import ComputerConfig, Devices, Propulsion, RunOptions
     from autopilot_bridge.control import SurgeModel
     from autopilot_bridge.gcs.link import GcsLink
     from autopilot_bridge.hil_link import HilLink

@@ -299,9 +299,11 @@ class HilRun:
             self.opts.on_progress("warning: " + msg)
 
     @staticmethod
-    def _stop(proc: subprocess.Popen | None, kill: bool = False) -> dict[str, Any] | None:
+    def _signal(proc: subprocess.Popen | None, kill: bool = False) -> bool:
+        """SIGTERM (SIGKILL with ``kill`` or when its leader is already dead) to the process group
+        of ``proc``; returns whether it was already dead."""
         if proc is None:
-            return None
+            return True
         dead = proc.poll() is not None
         try:
             # The whole process group, also when its leader is already dead: a SIGKILLed autopilot
@@ -309,6 +311,13 @@ class HilRun:
             os.killpg(proc.pid, signal.SIGKILL if (kill or dead) else signal.SIGTERM)
         except (ProcessLookupError, PermissionError):
             pass
+        return dead
+
+    @staticmethod
+    def _collect(proc: subprocess.Popen | None, dead: bool, kill: bool = False) -> dict[str, Any] | None:
+        """Wait for a signalled process (SIGKILL after 20 s) and read its JSON summary (last line)."""
+        if proc is None:
+            return None
         try:
             out, _ = proc.communicate(timeout=1.0 if dead else 20.0)
         except subprocess.TimeoutExpired:
@@ -328,6 +337,10 @@ class HilRun:
             return json.loads(lines[-1]) if lines else None
         except json.JSONDecodeError:
             return None
+
+    @classmethod
+    def _stop(cls, proc: subprocess.Popen | None, kill: bool = False) -> dict[str, Any] | None:
+        return cls._collect(proc, cls._signal(proc, kill), kill)
 
     # -- the run -----------------------------------------------------------------------------------
     def execute(self) -> RunSummary:
@@ -396,8 +409,12 @@ class HilRun:
         finally:
             if self._sysid_lock is not None:
                 self._sysid_lock.close()
-            ap_summary = self._stop(self.ap)
-            sim_summary = self._stop(self.sim)
+            # Both at once: stopped one after the other, the simulator ran on (in real time) while
+            # the autopilot wrote its summary, and counted a stale-command failsafe that was only the
+            # shutdown's.
+            ap_dead, sim_dead = self._signal(self.ap), self._signal(self.sim)
+            ap_summary = self._collect(self.ap, ap_dead)
+            sim_summary = self._collect(self.sim, sim_dead)
             self.tap.pump(timeout=0.0)
             self.tap.counters_at_close = self.tap.counters()
             self.tap.close()
