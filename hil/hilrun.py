@@ -409,12 +409,11 @@ class HilRun:
         finally:
             if self._sysid_lock is not None:
                 self._sysid_lock.close()
-            # Both at once: stopped one after the other, the simulator ran on (in real time) while
-            # the autopilot wrote its summary, and counted a stale-command failsafe that was only the
-            # shutdown's.
-            ap_dead, sim_dead = self._signal(self.ap), self._signal(self.sim)
-            ap_summary = self._collect(self.ap, ap_dead)
-            sim_summary = self._collect(self.sim, sim_dead)
+            # The autopilot first, so that the simulator receives every command it sent (the CAN
+            # counters of both sides must agree); in real time the simulator may meanwhile count a
+            # stale-command failsafe after the run's end: the summary counts those apart.
+            ap_summary = self._stop(self.ap)
+            sim_summary = self._stop(self.sim)
             self.tap.pump(timeout=0.0)
             self.tap.counters_at_close = self.tap.counters()
             self.tap.close()
@@ -425,6 +424,20 @@ class HilRun:
                 self.can_log = self.can_recorder.close()
         wall = time.monotonic() - wall0
         return self._summary(outcome, collision_at, min_clearance, wall, ap_summary, sim_summary, decided)
+
+    @staticmethod
+    def _simulator_part(sim: dict, end_s: float) -> dict[str, Any]:
+        """The simulator's counters for the run summary. Stale-command failsafes are those up to the
+        run's judged end (s of simulated time); those after it, while the processes were being
+        stopped, are counted apart (the simulator runs on in real time while the autopilot exits)."""
+        out = {k: sim.get(k) for k in ("steps", "commands_received", "malformed_dropped", "stale_command_events",
+                                       "lockstep_resends", "jitter_ms")}
+        times = sim.get("stale_command_times_s")
+        if times is not None:
+            after = sum(1 for t in times if t > end_s + 1e-9)
+            out["stale_command_events"] = (sim.get("stale_command_events") or 0) - after
+            out["stale_command_events_after_end"] = after
+        return out
 
     def _summary(self, outcome: str, collision_at: float | None, min_clearance: float, wall: float,
                  ap_table: dict | None, sim: dict | None, decided: int | None = None) -> RunSummary:
@@ -478,9 +491,7 @@ class HilRun:
             simulator_restarts=self.sim_restarts,
             navigation=None if ap is None else ap.navigation,
             sensed_obstacles=None if ap is None else ap.sensed_obstacles,
-            simulator=None if sim is None else {k: sim.get(k) for k in (
-                "steps", "commands_received", "malformed_dropped", "stale_command_events", "lockstep_resends",
-                "jitter_ms")},
+            simulator=None if sim is None else self._simulator_part(sim, times[-1] * 1e-6 if times else 0.0),
             security=RunSecurity(
                 simulator=None if sim is None else {"rejects": sim.get("rejects"), **(sim.get("command_port") or {})},
                 autopilot=None if ap is None else ap.link,

@@ -25,6 +25,7 @@ from simulator.waves import WaveModel
 
 # Rejections counted by the simulator besides the codec's framing reasons.
 INVALID_CONTROLS = "invalid_controls"      # NaN/inf control: previous command kept
+STALE_TIMES_KEPT = 1000   # stale-command failsafe times kept for the summary (the count is exact)
 OUT_OF_STEP = "out_of_step_command"        # lockstep: time_usec is not the current frame's
 WRONG_SOURCE_ID = "wrong_source_id"        # a command not from the autopilot's system/component id
 
@@ -98,6 +99,7 @@ class SimulatorCore:
         self.last_command_t = 0.0
         self.stale = False
         self.stale_command_events = 0
+        self.stale_command_times: list[float] = []   # s of simulated time, the first STALE_TIMES_KEPT
         self.commands_received = 0
         self.clamped_controls = 0
         self.messages_sent: Counter = Counter()
@@ -167,6 +169,8 @@ class SimulatorCore:
             if not self.stale:
                 self.stale = True
                 self.stale_command_events += 1
+                if len(self.stale_command_times) < STALE_TIMES_KEPT:
+                    self.stale_command_times.append(self.t)
             return 0.0, 0.0
         return self.vessel.thrust(self.controls[0]), self.vessel.thrust(self.controls[1])
 

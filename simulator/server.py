@@ -197,6 +197,7 @@ class SimulatorServer:
             "malformed_dropped": sum(v for k, v in c.rejects.items() if k != OUT_OF_STEP),
             "clamped_controls": c.clamped_controls,
             "stale_command_events": c.stale_command_events,
+            "stale_command_times_s": [round(t, 3) for t in c.stale_command_times],
             "lockstep_resends": self.lockstep_resends,
             "command_port": {"source": None if self.ep.peer is None else f"{self.ep.peer[0]}:{self.ep.peer[1]}",
                              "wrong_source_address": self.ep.wrong_source,
