@@ -299,11 +299,9 @@ class HilRun:
             self.opts.on_progress("warning: " + msg)
 
     @staticmethod
-    def _signal(proc: subprocess.Popen | None, kill: bool = False) -> bool:
-        """SIGTERM (SIGKILL with ``kill`` or when its leader is already dead) to the process group
-        of ``proc``; returns whether it was already dead."""
+    def _stop(proc: subprocess.Popen | None, kill: bool = False) -> dict[str, Any] | None:
         if proc is None:
-            return True
+            return None
         dead = proc.poll() is not None
         try:
             # The whole process group, also when its leader is already dead: a SIGKILLed autopilot
@@ -311,13 +309,6 @@ class HilRun:
             os.killpg(proc.pid, signal.SIGKILL if (kill or dead) else signal.SIGTERM)
         except (ProcessLookupError, PermissionError):
             pass
-        return dead
-
-    @staticmethod
-    def _collect(proc: subprocess.Popen | None, dead: bool, kill: bool = False) -> dict[str, Any] | None:
-        """Wait for a signalled process (SIGKILL after 20 s) and read its JSON summary (last line)."""
-        if proc is None:
-            return None
         try:
             out, _ = proc.communicate(timeout=1.0 if dead else 20.0)
         except subprocess.TimeoutExpired:
@@ -337,10 +328,6 @@ class HilRun:
             return json.loads(lines[-1]) if lines else None
         except json.JSONDecodeError:
             return None
-
-    @classmethod
-    def _stop(cls, proc: subprocess.Popen | None, kill: bool = False) -> dict[str, Any] | None:
-        return cls._collect(proc, cls._signal(proc, kill), kill)
 
     # -- the run -----------------------------------------------------------------------------------
     def execute(self) -> RunSummary:

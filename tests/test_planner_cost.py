@@ -124,6 +124,16 @@ def _setup(rng, n):
     return occ, X, cost, fc, ic
 
 
+def _first_free_by_stable_sort(exact, idx, occ, X, nx, ny):
+    """The reference choose-parent: the first candidate of a stable sort by exact key whose edge to
+    (nx, ny) is free; (node, key) or (-1, 0.0)."""
+    for o in np.argsort(exact, kind="stable"):
+        j = idx[o]
+        if segment_free(occ, 0.5, X[j, 0], X[j, 1], nx, ny):
+            return j, exact[o]
+    return -1, 0.0
+
+
 def test_lazy_choose_parent_matches_stable_sort():
     rng = np.random.default_rng(11)
     no_field = np.zeros((1, 1))
@@ -133,12 +143,7 @@ def test_lazy_choose_parent_matches_stable_sort():
         nx, ny = (17.0 + 1e-3 * trial, 14.0) if trial % 2 else tuple(rng.uniform(0, 20, size=2))
         idx = rng.permutation(n)
         exact = np.array([cost[j] + _hyp(nx - X[j, 0], ny - X[j, 1]) for j in idx])
-        want, want_c = -1, 0.0
-        for o in np.argsort(exact, kind="stable"):
-            j = idx[o]
-            if segment_free(occ, 0.5, X[j, 0], X[j, 1], nx, ny):
-                want, want_c = j, exact[o]
-                break
+        want, want_c = _first_free_by_stable_sort(exact, idx, occ, X, nx, ny)
         near_i = idx.astype(np.int64).copy()
         near_c = np.array([cost[j] + math.sqrt((nx - X[j, 0]) ** 2 + (ny - X[j, 1]) ** 2) for j in idx])
         near_x = np.zeros(n, dtype=np.bool_)
@@ -172,12 +177,7 @@ def test_lazy_choose_parent_on_lower_bounds_matches_stable_sort_of_eq12_costs():
         nx, ny = (17.0 + 1e-3 * trial, 14.0) if trial % 2 else tuple(rng.uniform(0, 20, size=2))
         idx = rng.permutation(n)
         exact = np.array([cost[j] + _tree._cost(X[j, 0], X[j, 1], nx, ny, fc, ic, fvx, fvy) for j in idx])
-        want, want_c = -1, 0.0
-        for o in np.argsort(exact, kind="stable"):
-            j = idx[o]
-            if segment_free(occ, 0.5, X[j, 0], X[j, 1], nx, ny):
-                want, want_c = j, exact[o]
-                break
+        want, want_c = _first_free_by_stable_sort(exact, idx, occ, X, nx, ny)
         near_i = idx.astype(np.int64).copy()
         near_c = np.array([cost[j] + lbf * math.sqrt((nx - X[j, 0]) ** 2 + (ny - X[j, 1]) ** 2) * (1.0 - 1e-9)
                            for j in idx])
