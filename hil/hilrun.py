@@ -418,7 +418,7 @@ class HilRun:
         run's judged end (s of simulated time); those after it, while the processes were being
         stopped, are counted apart (the simulator runs on in real time while the autopilot exits)."""
         out = {k: sim.get(k) for k in ("steps", "commands_received", "malformed_dropped", "stale_command_events",
-                                       "lockstep_resends", "jitter_ms")}
+                                       "lockstep_resends", "jitter_ms", "stepping")}
         times = sim.get("stale_command_times_s")
         if times is not None:
             after = sum(1 for t in times if t > end_s + 1e-9)

@@ -18,6 +18,7 @@ import math
 import numpy as np
 
 from simulator.config import RangefinderParams
+from simulator.raycast import first_returns
 
 NO_OBSTACLE_MARGIN_CM = 1   # MAVLink: max_distance + 1 = nothing within range
 
@@ -50,8 +51,19 @@ class Rangefinder:
         self.max_cm = int(round(params.max_range * 100))
         self.min_cm = int(round(params.min_range * 100))
 
+        self._first = np.empty(len(self.bearings))
+        self.true_ranges(0.0, 0.0, 0.0)  # compiles (or loads) the ray march now, not in the first scan
+
     def true_ranges(self, north: float, east: float, psi: float) -> np.ndarray:
         """Nearest obstacle per sector (m), ``inf`` where none within range (no noise)."""
+        ang = psi + self.bearings                                   # clockwise from north
+        first_returns(north, east, np.cos(ang), np.sin(ang), self.ranges, self.world.occ,
+                      self.world.resolution, self._first)
+        return self._first.reshape(self.p.sectors, self.p.rays_per_sector).min(axis=1)
+
+    def true_ranges_numpy(self, north: float, east: float, psi: float) -> np.ndarray:
+        """:meth:`true_ranges` as one numpy evaluation of every sample of every ray (the reference
+        the compiled march is tested against)."""
         occ, res = self.world.occ, self.world.resolution
         ang = psi + self.bearings                                   # clockwise from north
         n = north + np.outer(np.cos(ang), self.ranges)

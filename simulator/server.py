@@ -48,6 +48,10 @@ class SimulatorServer:
         self.lateness = StreamingPercentiles()  # real time: lateness of each step vs its ideal wall time (ms)
         self._stop = False
         self.wall_time = 0.0
+        # lockstep: wall clock (time.monotonic) of the first and the last step, so the loop's speed
+        # can be read without the processes' start-up and shut-down (one-off costs)
+        self.first_step_at: float | None = None
+        self.last_step_at: float | None = None
 
     def stop(self) -> None:
         """Ask the loop to end after the current step (safe from a signal handler)."""
@@ -106,6 +110,9 @@ class SimulatorServer:
                         self._apply_can(cmd)
                     core.step()
                     stepped = True
+                    self.last_step_at = time.monotonic()
+                    if self.first_step_at is None:
+                        self.first_step_at = self.last_step_at
                 else:
                     core.rejects[OUT_OF_STEP] += 1
             if stepped:
@@ -181,6 +188,16 @@ class SimulatorServer:
             return None
         return {"p50": j.percentile(50), "p99": j.percentile(99), "max": j.max}
 
+    def stepping(self) -> dict[str, float] | None:
+        """Lockstep: the steps from the first to the last and the wall time between them (s), i.e.
+        the loop's speed without start-up and shut-down; None before two steps or in real time."""
+        if self.first_step_at is None or self.last_step_at is None or self.core.n < 2:
+            return None
+        wall = self.last_step_at - self.first_step_at
+        steps = self.core.n - 1
+        return {"steps": steps, "wall_s": round(wall, 6),
+                "steps_per_s": round(steps / wall, 1) if wall > 0 else None}
+
     def summary(self) -> dict[str, Any]:
         c = self.core
         return {
@@ -190,6 +207,7 @@ class SimulatorServer:
             "sim_time_s": c.t,
             "wall_time_s": self.wall_time,
             "steps_per_wall_s": c.n / self.wall_time if self.wall_time > 0 else None,
+            "stepping": self.stepping(),
             "messages_sent": dict(sorted(c.messages_sent.items())),
             "datagrams_sent": self.datagrams_sent,
             "commands_received": c.commands_received,

@@ -61,6 +61,26 @@ def test_a_sector_reports_its_nearest_ray_and_nothing_beyond_max_range():
     assert len(scan) == 72 and scan[0] == far.max_cm + 1     # MAVLink: max_distance + 1 = no obstacle
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_compiled_ray_march_equals_the_numpy_evaluation_bit_for_bit(seed):
+    """simulator/raycast.py (issue 17) against the numpy evaluation of every sample of every ray, on
+    random clutter, at random poses inside, on the edge of and outside the grid."""
+    rng = np.random.default_rng(seed)
+    occ = rng.random((120, 160)) < 0.02 * (seed + 1)
+    occ[rng.integers(0, 120, 5), :] = True                   # a few walls across the map
+    rf = quiet_rangefinder(occ, rays_per_sector=int(rng.integers(1, 6)))
+    rows, cols = occ.shape
+    returns = 0
+    for _ in range(60):
+        n = rng.uniform(-10.0, rows * RES + 10.0)
+        e = rng.uniform(-10.0, cols * RES + 10.0)
+        psi = rng.uniform(-4.0, 4.0)
+        got, want = rf.true_ranges(n, e, psi), rf.true_ranges_numpy(n, e, psi)
+        assert np.array_equal(got, want), (n, e, psi)
+        returns += int(np.isfinite(want).sum())
+    assert returns > 200  # sectors that saw something: the comparison is not between two empty scans
+
+
 def test_simulator_sends_obstacle_distance_at_its_rate_only_with_a_world():
     cfg = load(None, QUIET + ["sim.initial.x=10.0", "sim.initial.y=50.0"])
     dec = Codec(255, 0, accept=("HIL_SENSOR", "HIL_GPS", "HIL_STATE_QUATERNION", "OBSTACLE_DISTANCE"))

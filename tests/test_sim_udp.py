@@ -8,6 +8,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -129,6 +130,30 @@ def test_fuzzed_command_port_keeps_stepping_and_counts_every_rejection():
     assert all(np.isfinite(v) for v in summary["final_state"].values())
 
 
+def test_lockstep_stepping_window_leaves_out_the_wait_before_the_first_step():
+    """`stepping` (what `hil bench loop` reports as the loop's speed) spans the first to the last
+    step: a peer that takes 0.3 s before its first command adds 0.3 s to wall_time_s, not to it."""
+    steps, pause = 50, 0.3
+    client = HilClient()
+    proc = start_sim(client.port, "--lockstep", "--duration", repr(steps / 100.0))
+    try:
+        for k in range(steps + 1):
+            frame = client.next_frame(timeout=FRAME_WAIT_S)
+            assert frame is not None, f"no frame {k}"
+            if k == 0:
+                time.sleep(pause)  # a slow start-up on the other side, before the first step
+            if k < steps:
+                client.command(frame.time_usec, 0.8, 0.6)
+        summary = finish(proc)
+    finally:
+        stop_process(proc)
+        client.close()
+    st = summary["stepping"]
+    assert st["steps"] == steps - 1  # intervals between the first and the last step
+    assert 0.0 < st["wall_s"] <= summary["wall_time_s"] - pause
+    assert st["steps_per_s"] == pytest.approx(st["steps"] / st["wall_s"], rel=1e-3)
+
+
 def test_realtime_stale_commands_and_sigterm_summary():
     """Real time x20 with no commands: the failsafe fires once; SIGTERM ends with a summary, exit 0."""
     client = HilClient()
@@ -144,6 +169,7 @@ def test_realtime_stale_commands_and_sigterm_summary():
     assert summary["mode"] == "realtime" and summary["steps"] >= 199
     assert summary["stale_command_events"] == 1 and summary["commands_received"] == 0
     assert set(summary["jitter_ms"]) == {"p50", "p99", "max"}
+    assert summary["stepping"] is None  # a lockstep figure only
     assert summary["final_state"]["u"] < 1.0  # coasting down without thrust
 
 
