@@ -28,11 +28,15 @@ from __future__ import annotations
 import math
 from collections import Counter
 from dataclasses import dataclass
+from functools import cache
+from typing import TYPE_CHECKING
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 
 from common.params import param
+
+if TYPE_CHECKING:
+    from filterpy.kalman import KalmanFilter
 
 KNOT = 1852.0 / 3600.0
 
@@ -95,9 +99,18 @@ class Target:
         return math.atan2(self.ve, self.vn) % (2 * math.pi)
 
 
+@cache
+def _kalman_filter() -> type[KalmanFilter]:
+    """filterpy's KalmanFilter, imported by the tracker's constructor (the vessel computer's set-up):
+    filterpy imports scipy.stats (~0.6 s), which the configuration (hil.settings) need not pay."""
+    from filterpy.kalman import KalmanFilter
+
+    return KalmanFilter
+
+
 class _Track:
     def __init__(self, r: AisReport, north: float, east: float, p: TrackerParams) -> None:
-        kf = KalmanFilter(dim_x=4, dim_z=4)
+        kf = _kalman_filter()(dim_x=4, dim_z=4)
         vn, ve = _velocity(r)
         kf.x = np.array([north, east, vn or 0.0, ve or 0.0])
         kf.P = np.diag([p.pos_std ** 2, p.pos_std ** 2, (p.vel_std if vn is not None else p.max_speed) ** 2,
@@ -128,6 +141,7 @@ class AisTracker:
     """Tracks of every MMSI heard, with rejection counters (see the module docstring)."""
 
     def __init__(self, params: TrackerParams, geo) -> None:
+        _kalman_filter()  # imported now, not when the first ship is heard (in a frame)
         self.p, self.geo = params, geo
         self.tracks: dict[int, _Track] = {}
         self.rejected: Counter = Counter()

@@ -67,7 +67,7 @@ from autopilot_bridge.summary import AutopilotSummary, ControlLatency, Navigatio
 from autopilot_bridge.tracking_stats import TrackingStats
 from autopilot_bridge.vehicle import Vehicle, Waypoint
 from autopilot_bridge.vehicle_api import Result, VehicleStatus
-from common.dronecan_codec import RAW_COMMAND_MAX, quantize
+from common.dronecan_layout import RAW_COMMAND_MAX, quantize
 from common.mavlink import MAV_TYPE as M
 
 _logger = logging.getLogger(__name__)

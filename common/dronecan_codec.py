@@ -34,13 +34,13 @@ import dronecan
 from dronecan.transport import bits_from_bytes, bytes_from_bits
 
 from common import dronecan_layout
+from common.dronecan_layout import RAW_COMMAND_MAX, quantize  # noqa: F401  (both sides' names for them)
 
 # Data type IDs and full names (DroneCAN standard data types).
 RAW_COMMAND = "uavcan.equipment.esc.RawCommand"   # 1030
 ESC_STATUS = "uavcan.equipment.esc.Status"        # 1034
 NODE_STATUS = "uavcan.protocol.NodeStatus"        # 341
 
-RAW_COMMAND_MAX = 8191          # int14 command range [-8191, 8191]; negative = reverse
 TRANSFER_ID_MODULO = 32         # 5-bit transfer ID on CAN 2.0
 
 # Priorities (0 highest, 31 lowest). ArduPilot sends RawCommand at a high priority.
@@ -322,12 +322,6 @@ def raw_command(values: Iterable[int]) -> bytes:
     if any(abs(v) > RAW_COMMAND_MAX for v in vals):
         raise ValueError(f"RawCommand values must lie in [-{RAW_COMMAND_MAX}, {RAW_COMMAND_MAX}]: {vals}")
     return dronecan_layout.pack(dronecan_layout.RAW_COMMAND, {}, vals)
-
-
-def quantize(normalised: float) -> int:
-    """A normalised thruster command in [-1, 1] as a RawCommand value (the ESC's resolution)."""
-    x = max(-1.0, min(1.0, float(normalised)))
-    return int(round(x * RAW_COMMAND_MAX))
 
 
 @cache

@@ -14,7 +14,7 @@ from collections import Counter
 from typing import Any
 
 from common.current_field import CurrentField
-from common.dronecan_codec import RAW_COMMAND_MAX
+from common.dronecan_layout import RAW_COMMAND_MAX
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE, Codec
 from simulator.integrator import rk4_step

@@ -129,7 +129,7 @@ class SimulatorServer:
 
     def _apply_can(self, token: Command) -> None:
         """Lockstep over CAN: apply the ESCs' RawCommand that ``token`` announces (bounded wait)."""
-        from common.dronecan_codec import quantize
+        from common.dronecan_layout import quantize
 
         want = (quantize(token.port), quantize(token.stdb))
         deadline = time.monotonic() + self.can_lockstep_wait

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from autopilot_bridge.navigation import NavigationFilter, NavigationParams, wrap_angle
+from autopilot_bridge.navigation import NavigationFilter, NavigationParams, chi2_quantile, wrap_angle
 
 GPS_STD = 0.5
 COMPASS_STD = 0.02
@@ -137,3 +137,24 @@ def test_ground_velocity_is_rotated_by_heading(heading):
     s = f.state()
     assert s.u == pytest.approx(2.0, abs=0.05)
     assert s.v == pytest.approx(0.0, abs=0.05)
+
+
+def test_gate_quantile_equals_scipy_stats_chi2_ppf():
+    """The NIS gate's quantile without scipy.stats (a process start pays ~0.6 s for it) is the same
+    number scipy.stats.chi2.ppf gives, for every measurement dimension."""
+    from scipy.stats import chi2
+
+    for p in [0.5, 0.9, 0.95, 0.99, 0.997, 0.9973, 0.999999, *np.random.default_rng(3).uniform(0.01, 0.99, 50)]:
+        for dof in (1, 2, 3, 4):
+            assert chi2_quantile(float(p), dof) == float(chi2.ppf(p, dof))
+
+
+def test_configuration_does_not_import_filterpy_or_scipy_stats():
+    """`hil` commands load the configuration; only the vessel computer's set-up pays for filterpy."""
+    import subprocess
+    import sys
+
+    code = ("import sys, hil.settings, autopilot_bridge.navigation, autopilot_bridge.ais_tracking; "
+            "print(sorted(m for m in sys.modules if m.startswith(('filterpy', 'scipy.stats'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
