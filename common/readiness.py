@@ -3,6 +3,10 @@
 The parent makes a pipe and passes its write end to the child (``--ready-fd N``). Once the child
 serves (its sockets are bound, its planner is warmed up), it writes one :class:`Ready` as a JSON
 line and closes the descriptor. End of file without a line means the child died while starting.
+
+The other way round, a child set up ahead of time waits on ``--start-fd N`` (:func:`wait_for_start`)
+until its parent says go: `hil run` starts the simulator beside the vessel computer, so that both
+import and set up at once, and lets it send its first frame once the computer serves.
 """
 
 from __future__ import annotations
@@ -83,5 +87,27 @@ class ReadyWait:
     def close(self) -> None:
         try:
             os.close(self.fd)
+        except OSError:
+            pass
+
+
+GO = b"g"
+
+
+def wait_for_start(fd: int | None, stopped, poll_s: float = 0.05) -> bool:
+    """Block until the parent writes :data:`GO` on ``fd`` (True), or closes it without a word or
+    ``stopped()`` turns true (False: do not start). Closes ``fd``; None: start at once."""
+    if fd is None:
+        return True
+    try:
+        while not stopped():
+            if select.select([fd], [], [], poll_s)[0]:
+                return os.read(fd, 1) == GO
+        return False
+    except OSError:
+        return False
+    finally:
+        try:
+            os.close(fd)
         except OSError:
             pass

@@ -38,7 +38,7 @@ from scipy import ndimage
 
 from common.frames import map_to_ned
 from common.geodesy import LocalFrame
-from common.readiness import ReadyWait
+from common.readiness import GO, ReadyWait
 from common.tables import to_table
 from hil import config, processes
 from hil import scenario as scenarios
@@ -222,8 +222,9 @@ class HilRun:
                                pass_fds=pass_fds)
 
     def start(self, ready_timeout: float = 180.0) -> None:
-        """The autopilot first, and the simulator once the autopilot is listening (its start-up may
-        include compiling the planner core), so that no frame is sent into the void."""
+        """Both processes at once (their imports and set-up overlap on two cores), the simulator told
+        to send its first frame only once the autopilot is listening (its start-up may include
+        compiling the planner core), so that no frame is sent into the void."""
         if self.cfg.can.actuators == "can" and self.cfg.can.log:
             from hil.can_log import CanRecorder
 
@@ -238,6 +239,18 @@ class HilRun:
                                   pass_fds=(write_end,))
         finally:
             os.close(write_end)
+        go_read, go_write = os.pipe()
+        try:
+            self.sim = self._spawn([*self.sim_command(), "--start-fd", str(go_read)], "sim", pass_fds=(go_read,))
+        finally:
+            os.close(go_read)
+        try:
+            self._wait_for_autopilot(read_end, ready_timeout)
+            os.write(go_write, GO)
+        finally:
+            os.close(go_write)  # without GO: the simulator exits without running
+
+    def _wait_for_autopilot(self, read_end: int, ready_timeout: float) -> None:
         log = self.out / "autopilot.log"
         deadline = time.monotonic() + ready_timeout
         wait = ReadyWait(read_end)
@@ -258,12 +271,18 @@ class HilRun:
                     if self.ap.returncode == 2 and cause:  # a user mistake (a busy port ...): say which, exit 2
                         raise UsageError(f"the autopilot could not start: {cause}")
                     raise RunFailed(f"the autopilot exited during start-up{': ' + cause if cause else ''} (see {log})")
+                if self.sim is not None and self.sim.poll() is not None:
+                    sim_log = self.out / "sim.log"
+                    cause = startup_error(sim_log)
+                    if self.sim.returncode == 2 and cause:
+                        raise UsageError(f"the simulator could not start: {cause}")
+                    raise RunFailed(f"the simulator exited during start-up{': ' + cause if cause else ''} "
+                                    f"(see {sim_log})")
                 if time.monotonic() > deadline:
                     raise _NotReady(f"the autopilot was not ready after {ready_timeout:g} s (see {log})")
                 self.tap.pump(timeout=0.0)
         finally:
             wait.close()
-        self.sim = self._spawn(self.sim_command(), "sim")
 
     def restart_simulator(self) -> None:
         """Kill the simulator and start it again where the truth last was (fault injection)."""

@@ -57,6 +57,11 @@ class SimulatorServer:
         """Ask the loop to end after the current step (safe from a signal handler)."""
         self._stop = True
 
+    @property
+    def stopped(self) -> bool:
+        """:meth:`stop` was called."""
+        return self._stop
+
     def _done(self) -> bool:
         return self._stop or (self.end_frame is not None and self.core.n >= self.end_frame)
 

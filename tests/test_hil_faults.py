@@ -80,3 +80,14 @@ def test_twenty_percent_datagram_loss_both_ways(tmp_path):
     # hit. Only a lower bound: a slow answer on a loaded machine also triggers a re-send.
     sim = s.simulator
     assert sim["lockstep_resends"] > 0.4 * sim["steps"]
+
+
+def test_a_simulator_that_cannot_start_is_one_line_not_a_hang(tmp_path):
+    """The simulator starts beside the autopilot (hil run's start-up): when it exits during that
+    start-up, the run says why in one line (here a user mistake, exit 2) instead of waiting."""
+    from hil.errors import UsageError
+
+    bad = tmp_path / "not_a_world.npz"
+    bad.write_text("no map here")
+    with pytest.raises(UsageError, match="the simulator could not start: --world .*not a world map"):
+        _run(tmp_path, scenario="harbour", lockstep=True, duration=5.0, extra_sim_args=["--world", str(bad)])

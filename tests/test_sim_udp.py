@@ -154,6 +154,58 @@ def test_lockstep_stepping_window_leaves_out_the_wait_before_the_first_step():
     assert st["steps_per_s"] == pytest.approx(st["steps"] / st["wall_s"], rel=1e-3)
 
 
+def _sim_waiting_on_start_fd(client: HilClient) -> tuple[subprocess.Popen, int]:
+    """`hil sim --start-fd`, returned once it has said on stderr that it is set up (it prints its
+    addresses just before it waits); the write end of the pipe is the caller's."""
+    r, w = os.pipe()
+    cmd = [sys.executable, "-m", "hil", "sim", "--json", "--state-to", f"127.0.0.1:{client.port}",
+           "--commands-on", "127.0.0.1:0", "--lockstep", "--duration", "0.05", "--start-fd", str(r)]
+    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, pass_fds=(r,))
+    os.close(r)
+    line = proc.stderr.readline()          # bounded by the process: EOF if it dies
+    assert line.startswith("sim: commands on"), line
+    return proc, w
+
+
+def test_start_fd_holds_the_first_frame_until_the_parent_says_go():
+    """How `hil run` starts the simulator beside the autopilot: set up, then no frame before GO."""
+    from common.readiness import GO
+
+    client = HilClient()
+    proc, w = _sim_waiting_on_start_fd(client)
+    try:
+        assert client.next_frame(timeout=0.3) is None   # set up and waiting: nothing sent yet
+        os.write(w, GO)
+        os.close(w)
+        w = -1
+        for k in range(6):
+            frame = client.next_frame(timeout=FRAME_WAIT_S)
+            assert frame is not None and frame.time_usec == k * 10_000
+            if k < 5:
+                client.command(frame.time_usec, 0.5, 0.5)
+        out, _ = proc.communicate(timeout=30)
+        assert proc.returncode == 0 and json.loads(out.strip().splitlines()[-1])["steps"] == 5
+    finally:
+        if w >= 0:
+            os.close(w)
+        stop_process(proc)
+        client.close()
+
+
+def test_start_fd_closed_without_go_exits_without_a_frame():
+    """The parent gave up (the autopilot failed to start): the simulator ends quietly, exit 0."""
+    client = HilClient()
+    proc, w = _sim_waiting_on_start_fd(client)
+    try:
+        os.close(w)
+        out, err = proc.communicate(timeout=30)
+        assert proc.returncode == 0 and "not started" in err and out.strip() == ""
+        assert client.next_frame(timeout=0.0) is None
+    finally:
+        stop_process(proc)
+        client.close()
+
+
 def test_realtime_stale_commands_and_sigterm_summary():
     """Real time x20 with no commands: the failsafe fires once; SIGTERM ends with a summary, exit 0."""
     client = HilClient()

@@ -7,6 +7,7 @@ import json
 import signal
 
 from common import connection
+from common.readiness import wait_for_start
 from hil.commands.arg_types import receiving, sending
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.console import emit, load_settings, progress
@@ -59,6 +60,10 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                    help="ship traffic to sail and report by AIS_VESSEL (settings in [traffic]): a scenario "
                         "name or .toml file with [[traffic]] tables, or a .json list of such tables "
                         "(default: no traffic)")
+    p.add_argument("--start-fd", type=int, default=None, metavar="FD",
+                   help="set up, then wait until the parent writes one byte 'g' to this inherited file "
+                        "descriptor before the first frame (end of file: exit without running); how `hil run` "
+                        "starts the simulator beside the autopilot")
     p.add_argument("--can-record", default=None, help=argparse.SUPPRESS)  # hil soak: RawCommand apply times (.npz)
     add_can_arguments(p)
     p.set_defaults(func=run)
@@ -148,6 +153,9 @@ def run(args: argparse.Namespace) -> int:
     progress(f"sim: commands on {host}:{port}, state to {', '.join(cfg.link.state_to)}, {mode}, "
              f"duration {cfg.sim.duration:g} s, seed {cfg.sim.seed}")
     try:
+        if not wait_for_start(getattr(args, "start_fd", None), lambda: server.stopped):
+            progress("sim: not started (the parent closed --start-fd or a signal came first)")
+            return 0
         summary = server.run()
     finally:
         for sig, handler in previous.items():
