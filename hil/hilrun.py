@@ -234,21 +234,27 @@ class HilRun:
                 raise UsageError(str(exc)) from None
         # Readiness comes on a pipe (common/readiness.py): one JSON line once the autopilot serves.
         read_end, write_end = os.pipe()
-        try:
-            self.ap = self._spawn([*self.autopilot_command(), "--ready-fd", str(write_end)], "autopilot",
-                                  pass_fds=(write_end,))
-        finally:
-            os.close(write_end)
         go_read, go_write = os.pipe()
+        waiting = False   # the wait owns (and closes) read_end
         try:
-            self.sim = self._spawn([*self.sim_command(), "--start-fd", str(go_read)], "sim", pass_fds=(go_read,))
-        finally:
-            os.close(go_read)
-        try:
+            try:
+                self.ap = self._spawn([*self.autopilot_command(), "--ready-fd", str(write_end)], "autopilot",
+                                      pass_fds=(write_end,))
+                self.sim = self._spawn([*self.sim_command(), "--start-fd", str(go_read)], "sim",
+                                       pass_fds=(go_read,))
+            finally:
+                os.close(write_end)  # the children hold their own copies
+                os.close(go_read)
+            waiting = True
             self._wait_for_autopilot(read_end, ready_timeout)
-            os.write(go_write, GO)
+            try:
+                os.write(go_write, GO)
+            except BrokenPipeError:
+                pass  # the simulator died meanwhile: the run's loop finds it exited and says why
         finally:
             os.close(go_write)  # without GO: the simulator exits without running
+            if not waiting:
+                os.close(read_end)  # a spawn failed
 
     def _wait_for_autopilot(self, read_end: int, ready_timeout: float) -> None:
         log = self.out / "autopilot.log"
@@ -271,18 +277,21 @@ class HilRun:
                     if self.ap.returncode == 2 and cause:  # a user mistake (a busy port ...): say which, exit 2
                         raise UsageError(f"the autopilot could not start: {cause}")
                     raise RunFailed(f"the autopilot exited during start-up{': ' + cause if cause else ''} (see {log})")
-                if self.sim is not None and self.sim.poll() is not None:
-                    sim_log = self.out / "sim.log"
-                    cause = startup_error(sim_log)
-                    if self.sim.returncode == 2 and cause:
-                        raise UsageError(f"the simulator could not start: {cause}")
-                    raise RunFailed(f"the simulator exited during start-up{': ' + cause if cause else ''} "
-                                    f"(see {sim_log})")
+                if self.sim.poll() is not None:
+                    self._simulator_start_failed()
                 if time.monotonic() > deadline:
                     raise _NotReady(f"the autopilot was not ready after {ready_timeout:g} s (see {log})")
                 self.tap.pump(timeout=0.0)
         finally:
             wait.close()
+
+    def _simulator_start_failed(self) -> None:
+        """The simulator exited before its first frame: its one-line reason (a user mistake: exit 2)."""
+        sim_log = self.out / "sim.log"
+        cause = startup_error(sim_log)
+        if self.sim is not None and self.sim.returncode == 2 and cause:
+            raise UsageError(f"the simulator could not start: {cause}")
+        raise RunFailed(f"the simulator exited during start-up{': ' + cause if cause else ''} (see {sim_log})")
 
     def restart_simulator(self) -> None:
         """Kill the simulator and start it again where the truth last was (fault injection)."""
@@ -398,6 +407,9 @@ class HilRun:
                     outcome = "autopilot_exited"
                     break
                 if self.sim.poll() is not None:
+                    self.tap.pump(timeout=0.0)
+                    if not self.tap.truth and not self.sim_restarts:
+                        self._simulator_start_failed()  # it never sent a frame: why, in one line
                     outcome = "simulator_exited"
                     break
                 for hook in opts.hooks:

@@ -4,7 +4,7 @@ A scan casts 360 rays of up to 160 samples each (40 m at half the 0.5 m cell); e
 numpy array for every sample of every ray it cost ~1.8 ms a scan, ~90 us per 100 Hz step at the
 scan rate of 5 Hz. Here each ray stops at its first return. The arithmetic is the numpy version's,
 term for term (``north + cos * range``, floor of the division by the resolution), so the returns
-are the same bit for bit (tests/test_rangefinder.py compares the two).
+are the same bit for bit (tests/test_range_sensing.py compares the two).
 """
 
 from __future__ import annotations

@@ -248,7 +248,7 @@ def test_realtime_applies_newest_command():
 
 def test_sim_cli_errors_are_one_line(hil_main):
     for args in (["sim", "--commands-on", "nonsense"], ["sim", "--set", "sensors.imu.rate_hz=30.0"],
-                 ["sim", "--duration", "-1"]):
+                 ["sim", "--duration", "-1"], ["sim", "--start-fd", "-1"], ["sim", "--start-fd", "1000000"]):
         r = hil_main(*args, timeout=60)
         assert r.returncode == 2, r.stderr
         assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr

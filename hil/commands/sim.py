@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 
 from common import connection
@@ -112,6 +113,12 @@ def run(args: argparse.Namespace) -> int:
         args.overrides = scenarios.simulator_overrides(scen, base.current) + list(args.overrides)
         world = WorldMap(scen.truth_occ(), scen.resolution)
         traffic = tuple(scen.traffic)
+    start_fd = getattr(args, "start_fd", None)
+    if start_fd is not None:
+        try:
+            os.fstat(start_fd)
+        except (OSError, OverflowError, ValueError):
+            raise UsageError(f"--start-fd {start_fd}: not an open file descriptor") from None
     args.overrides = list(args.overrides) + config_overrides(args)
     cfg = load_settings(args)
     check_can(cfg, "hil sim (a process of its own)")
@@ -153,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
     progress(f"sim: commands on {host}:{port}, state to {', '.join(cfg.link.state_to)}, {mode}, "
              f"duration {cfg.sim.duration:g} s, seed {cfg.sim.seed}")
     try:
-        if not wait_for_start(getattr(args, "start_fd", None), lambda: server.stopped):
+        if not wait_for_start(start_fd, lambda: server.stopped):
             progress("sim: not started (the parent closed --start-fd or a signal came first)")
             return 0
         summary = server.run()
