@@ -375,7 +375,9 @@ class HilRun:
             checked = 0
             while True:
                 self.tap.pump(timeout=0.05)
-                times = sorted(self.tap.truth)
+                # The tap keeps the truth's times sorted: sorting all of them on every pass cost 0.06 ms
+                # at the end of a 3-minute run (8,450 samples) and 1.8 ms after an hour's soak.
+                times = self.tap.truth_times
                 # Sample by sample, so the deciding sample does not depend on how datagrams were batched.
                 for tu in times[checked:]:
                     n, e, _, _ = self.tap.truth[tu]

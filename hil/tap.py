@@ -5,6 +5,7 @@ takes the truth only from the simulator's stream and the commands only from the 
 
 from __future__ import annotations
 
+import bisect
 import math
 import os
 import struct
@@ -38,6 +39,7 @@ class Tap:
         self.tlog = os.fdopen(fd, "wb")
         self.geo = geo
         self.truth: dict[int, tuple[float, float, float, float]] = {}  # time_usec -> (north, east, vn, ve)
+        self.truth_times: list[int] = []   # the keys of truth, ascending (kept so, not sorted per read)
         self.estimate: dict[tuple[int, int], tuple[float, float]] = {}  # (segment, ms) -> (north, east)
         self.commands: list[tuple[int, float, float]] = []             # (time_usec, port, stdb)
         self.statustext: list[str] = []
@@ -131,6 +133,7 @@ class Tap:
                 if t not in self.truth:
                     n, e = self.geo.geodetic_to_sea_level(m.lat * 1e-7, m.lon * 1e-7)
                     self.truth[t] = (n, e, m.vx * 0.01, m.vy * 0.01)
+                    bisect.insort(self.truth_times, t)   # at the end, unless a datagram came late
                     self.truth_raw[(self._segment["truth"], int(m.time_usec))] = (n, e, t)
                     q = m.attitude_quaternion
                     own = (t, n, e, 2.0 * math.atan2(q[3], q[0]))

@@ -121,6 +121,23 @@ def test_lockstep_tlog_stamps_follow_simulated_time(tmp_path):
     assert struct.unpack(">Q", raw[:8])[0] == pytest.approx(t0 * 1e6, abs=1)
 
 
+def test_tap_keeps_the_truth_times_sorted_whatever_order_they_come_in(tmp_path):
+    """hil run judges the truth sample by sample from Tap.truth_times (kept sorted, not sorted on
+    every pass): a late datagram takes its place, a repeated one is not counted twice."""
+    from common.geodesy import LocalFrame
+    from common.mavlink import Codec
+    from hil.tap import Tap
+
+    tap = Tap(tmp_path / "run.tlog", LocalFrame(38.9, 121.6, 0.0), lockstep=True)
+    sim = Codec(1, 51)
+    order = [0.0, 0.02, 0.06, 0.04, 0.08, 0.06, 0.10]     # 0.04 s comes late, 0.06 s twice
+    for t in order:
+        tap._handle(sim.encode("hil_state_quaternion", int(t * 1e6), [1, 0, 0, 0], 0, 0, 0,
+                               389000000, 1216000000, 0, 100, 0, 0, 0, 0, 0, 0, 0))
+    tap.close()
+    assert tap.truth_times == sorted(tap.truth) == [int(t * 1e6) for t in sorted(set(order))]
+
+
 def test_montecarlo_prints_the_markdown_table(tmp_path, capsys):
     rc = cli.main(["montecarlo", "--scenario", "labyrinth", "--runs", "1", "--jobs", "1", "--seed", "3",
                    "--local-iterations", "500", "--cycle-time", "8", "--no-plots", "--out", str(tmp_path)])
