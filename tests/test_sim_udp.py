@@ -21,10 +21,11 @@ from tests.conftest import REPO
 FRAME_WAIT_S = 20.0  # bounded wait for any single frame
 
 
-def start_sim(client_port: int, *extra: str) -> subprocess.Popen:
+def start_sim(client_port: int, *extra: str, pass_fds: tuple[int, ...] = ()) -> subprocess.Popen:
     cmd = [sys.executable, "-m", "hil", "sim", "--json", "--state-to", f"127.0.0.1:{client_port}",
            "--commands-on", "127.0.0.1:0", *extra]
-    return subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            pass_fds=pass_fds)
 
 
 def finish(proc: subprocess.Popen) -> dict:
@@ -158,9 +159,7 @@ def _sim_waiting_on_start_fd(client: HilClient) -> tuple[subprocess.Popen, int]:
     """`hil sim --start-fd`, returned once it has said on stderr that it is set up (it prints its
     addresses just before it waits); the write end of the pipe is the caller's."""
     r, w = os.pipe()
-    cmd = [sys.executable, "-m", "hil", "sim", "--json", "--state-to", f"127.0.0.1:{client.port}",
-           "--commands-on", "127.0.0.1:0", "--lockstep", "--duration", "0.05", "--start-fd", str(r)]
-    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, pass_fds=(r,))
+    proc = start_sim(client.port, "--lockstep", "--duration", "0.05", "--start-fd", str(r), pass_fds=(r,))
     os.close(r)
     line = proc.stderr.readline()          # bounded by the process: EOF if it dies
     assert line.startswith("sim: commands on"), line
