@@ -94,4 +94,5 @@ print(f"tree: {st[_tree.S_N]} nodes, buckets of {fc[_tree.C_BUCKET]:g} m")
 for k in (1, 5, 15):
     print(f"k-nearest, k = {k:2d}: {per_query(_queries, Q, k, *tree):6.0f} ns/query")
 for rings in (2, 3):
-    print(f"scan of the {2 * rings + 1} x {2 * rings + 1} block, no ordering: {per_query(_scans, Q, rings, *tree):6.0f} ns/query")
+    t = per_query(_scans, Q, rings, *tree)
+    print(f"scan of the {2 * rings + 1} x {2 * rings + 1} block, no ordering: {t:6.0f} ns/query")
