@@ -547,8 +547,7 @@ class Autopilot:
             # LOS gives the course to steer; the hull must point the drift angle beta = atan2(v, u)
             # (current, sway in turns) away from it. Uncompensated, each cycle's new path (starting
             # where the vessel is) forgave the drift, and a cross-current set the boat onto walls.
-            beta = math.atan2(s.v, s.u) if s.u > self.p.min_turn_speed else 0.0
-            psi_ref, u_ref = g.heading - beta, self.speed_setpoint() * self.speed_factor
+            psi_ref, u_ref = g.heading - s.drift_angle(self.p.min_turn_speed), self.speed_setpoint() * self.speed_factor
             self.tracking.add(g.cross_track, psi_ref, s.psi)
             r_ref = max(s.u, 0.0) * g.curvature   # the path turns at u kappa: feed it forward
             # Slow down for sharp turns ahead so the yaw rate they need (u kappa) stays within reach.

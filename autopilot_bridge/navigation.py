@@ -119,6 +119,15 @@ class NavState:
     def speed(self) -> float:
         return math.hypot(self.u, self.v)
 
+    def drift_angle(self, min_speed: float) -> float:
+        """beta = atan2(v, u) (rad): the course over ground minus the heading (current, sway in
+        turns); 0 below ``min_speed`` m/s of surge, where the velocity's direction is noise."""
+        return math.atan2(self.v, self.u) if self.u > min_speed else 0.0
+
+    def course(self, min_speed: float) -> float:
+        """Course over ground (rad, NED): the heading plus :meth:`drift_angle`."""
+        return self.psi + self.drift_angle(min_speed)
+
 
 class FastEkf:
     """State ``x`` (7x1) and covariance ``P`` (7x7) of the ``"fast"`` filter; each step of

@@ -56,7 +56,11 @@ class PlanHandoff:
         lead = self.p.planning_deadline
         north = s.x + (s.u * math.cos(s.psi) - s.v * math.sin(s.psi)) * lead
         east = s.y + (s.u * math.sin(s.psi) + s.v * math.cos(s.psi)) * lead
-        x, y, heading = ned_to_map(north, east, s.psi)
+        # The path is a ground track that the guidance steers as a course (Autopilot._control turns
+        # the hull by the drift angle): it starts along the course over ground, not the heading.
+        # From the heading, in a cross-current each cycle's path began turned by the drift angle,
+        # the compensation turned the hull further the same way, and the vessel spiralled off.
+        x, y, heading = ned_to_map(north, east, s.course(self.p.min_turn_speed))
         self.cycle += 1
         self.sensed_at_submit = sensed.count
         snap = None if traffic is None else traffic.snapshot(s.t + lead, x, y, heading, self.p.cruise_speed)

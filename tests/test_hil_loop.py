@@ -20,7 +20,10 @@ def _run(hil, tmp_path, *args: str, name: str = "run", traffic: bool = True) -> 
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("scenario, seed", [("harbour", 1), ("harbour", 2), ("labyrinth", 1), ("labyrinth", 3)])
+# Labyrinth seeds 2 and 4 hit a wall while each cycle's path started along the hull's heading instead
+# of the course over ground (tests/test_plan_start_course.py).
+@pytest.mark.parametrize("scenario, seed", [("harbour", 1), ("harbour", 2), ("labyrinth", 1), ("labyrinth", 2),
+                                            ("labyrinth", 4)])
 def test_lockstep_run_reaches_the_goal_without_collision(hil, tmp_path, scenario, seed):
     code, s = _run(hil, tmp_path, "--scenario", scenario, "--seed", str(seed))
     assert s["outcome"] == "goal", s["events"]
