@@ -9,6 +9,7 @@ from pathlib import Path
 
 from hil import console
 from hil.errors import UsageError
+from hil.files import PLOT_SUFFIXES, check_output_file
 from hil.scenario_names import available as scenario_names
 from planner.params import ALGORITHM_NAMES
 
@@ -113,6 +114,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--iterations must be >= 0")
     if args.inflate is not None and not (args.inflate >= 0):
         raise UsageError("--inflate must be >= 0 m")
+    if args.plot is not None:
+        check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
     settings = console.load_settings(args)
     occ, res, start, goal, heading, sc, overrides, label = _problem_inputs(args)
     params = scenarios.planner_params(scenarios.base_planner_params(settings), overrides,
