@@ -14,7 +14,9 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
+from typing import Any
 
 from hil import console
 from hil.errors import HilError
@@ -24,7 +26,13 @@ COMMANDS = ("run", "sim", "autopilot", "plan", "montecarlo", "bench", "soak", "v
 
 
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line (and exit code 2), not usage plus message."""
+    """argparse, but a usage error is one line (and exit code 2), not usage plus message, and a value that
+    starts with a minus and a digit (``--miss -6,-2``, ``--start -1.5,3``, ``--heading -1e-3``) is a value,
+    not an unknown option (argparse 3.11 only knows bare negative numbers; 3.13 reads them this way)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-\.?\d")
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")

@@ -175,3 +175,16 @@ def test_plan_plot_to_a_folder_or_an_unknown_format_is_one_line(hil, tmp_path):
     r = hil(*_wall(tmp_path), "--plot", str(tmp_path / "new" / "plan.png"))
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "new" / "plan.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("argv, dest, value", [
+    (["montecarlo", "--traffic", "--miss", "-6,-2"], "miss", (-6.0, -2.0)),
+    (["plan", "--start", "-3.5,2"], "start", (-3.5, 2.0)),
+])
+def test_negative_pairs_are_values_not_options(argv, dest, value):
+    """`--miss -6,-2` (the help's own sign convention: negative = to port) is a value, as `--miss=-6,-2` is."""
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:
+        raise AssertionError(f"{argv} did not parse") from exc
+    assert tuple(getattr(args, dest)) == value

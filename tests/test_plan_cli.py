@@ -84,6 +84,26 @@ def test_goal_in_the_safety_margin_is_a_usage_error(hil_main, wall_map):
     assert p.returncode == 0, p.stderr
 
 
+@pytest.mark.parametrize("extra", [["--heading", "inf"], ["--heading", "nan"], ["--seed", str(2 ** 64)],
+                                   ["--set", f"planner.seed={2 ** 63}"]])
+def test_non_finite_heading_and_oversized_seed_are_usage_errors(hil_main, wall_map, extra):
+    """A heading that is not a finite angle and a seed the planner's generator cannot take (it holds a
+    signed 64-bit integer) are one line, exit 2, not a traceback or a silently ignored NaN."""
+    path, _ = wall_map
+    p = hil_main("plan", "--map", str(path), "--resolution", "0.5", "--start", "3,3", "--goal", "17,3",
+                 "--deadline", "0.05", *extra)
+    _one_line_error(p)
+    assert ("heading" if extra[1] in ("inf", "nan") else "seed") in p.stderr.strip().splitlines()[-1]
+
+
+def test_negative_coordinates_read_as_values(hil_main, wall_map):
+    """`--start -1,5` is a point left of the map (its one-line 'outside'), not an unknown option."""
+    path, _ = wall_map
+    p = hil_main("plan", "--map", str(path), "--resolution", "0.5", "--start", "-1,5", "--goal", "17,3")
+    _one_line_error(p)
+    assert "outside" in p.stderr
+
+
 def test_unknown_scenario(hil_main):
     _one_line_error(hil_main("plan", "--scenario", "atlantis", "--json"))
 

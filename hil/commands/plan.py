@@ -11,7 +11,7 @@ from hil import console
 from hil.errors import UsageError
 from hil.files import PLOT_SUFFIXES, check_output_file
 from hil.scenario_names import available as scenario_names
-from planner.params import ALGORITHM_NAMES
+from planner.params import ALGORITHM_NAMES, SEED_MAX
 
 ALGORITHMS = ALGORITHM_NAMES
 
@@ -27,6 +27,16 @@ def _point(text: str) -> tuple[float, float]:
     if not (math.isfinite(x) and math.isfinite(y)):
         raise argparse.ArgumentTypeError(f"expected finite X,Y, got {text!r}")
     return x, y
+
+
+def _angle(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an angle in radians, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite angle in radians, got {text!r}")
+    return value
 
 
 def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
@@ -47,7 +57,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     src.add_argument("--resolution", metavar="R", type=float, help="map cell size (m per cell, > 0)")
     src.add_argument("--start", metavar="X,Y", type=_point, help="start position (m, map frame)")
     src.add_argument("--goal", metavar="X,Y", type=_point, help="goal position (m, map frame)")
-    src.add_argument("--heading", metavar="RAD", type=float, default=None,
+    src.add_argument("--heading", metavar="RAD", type=_angle, default=None,
                      help="start heading (rad, counter-clockwise from east); enables the turning-radius fan at the "
                           "root (default: the scenario's, none with --map)")
     alg = p.add_argument_group("planner")
@@ -122,8 +132,8 @@ def run(args: argparse.Namespace) -> int:
                                       f"scenario {label}")
     params = scenarios.with_overrides(params, algorithm=args.algorithm, objective=args.objective, seed=args.seed,
                                       safety_radius=args.inflate)
-    if params.seed < 0:
-        raise UsageError("--seed must be >= 0")
+    if not 0 <= params.seed <= SEED_MAX:
+        raise UsageError(f"--seed must be in 0..{SEED_MAX} (the planner's generator holds a signed 64-bit integer)")
     raw = OccupancyGrid(occ, res)
     for what, pt in (("--start", start), ("--goal", goal)):
         if not raw.contains(*pt):
