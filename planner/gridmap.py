@@ -29,8 +29,10 @@ class OccupancyGrid:
         if occ.ndim != 2 or occ.shape[0] < 1 or occ.shape[1] < 1:
             raise MapError(f"map must be a 2-D grid, got shape {occ.shape}")
         if occ.dtype != bool:
-            if not np.issubdtype(occ.dtype, np.integer) or not np.isin(occ, (0, 1)).all():
-                raise MapError(f"map must be boolean (True = obstacle) or 0/1 integers, got {occ.dtype}")
+            numeric = np.issubdtype(occ.dtype, np.integer) or np.issubdtype(occ.dtype, np.floating)
+            if not numeric or not np.isin(occ, (0, 1)).all():
+                raise MapError(f"map must be boolean (True = obstacle) or 0/1 numbers, got {occ.dtype}"
+                               + ("" if not numeric else " holding other values"))
             occ = occ.astype(bool)
         if isinstance(resolution, bool) or not (isinstance(resolution, numbers.Real) and math.isfinite(resolution)
                                                 and resolution > 0):

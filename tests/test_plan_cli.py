@@ -104,6 +104,25 @@ def test_negative_coordinates_read_as_values(hil_main, wall_map):
     assert "outside" in p.stderr
 
 
+def test_a_float_map_of_zeros_and_ones_is_a_map(hil_main, wall_map, tmp_path):
+    """np.zeros() is float64: a 0.0/1.0 .npy is the same map as the bool one (the help says 0-1); other
+    values stay refused, naming them."""
+    _, occ = wall_map
+    floats = tmp_path / "wall_f.npy"
+    np.save(floats, occ.astype(np.float64))
+    p = hil_main("plan", "--map", str(floats), "--resolution", "0.5", "--start", "10,5", "--goal", "15,5")
+    _one_line_error(p)
+    assert "obstacle" in p.stderr          # the wall is read as a wall
+    p = hil_main("plan", "--map", str(floats), "--resolution", "0.5", "--start", "3,3", "--goal", "17,3",
+                 "--deadline", "0.05", "--json")
+    assert p.returncode == 0, p.stderr
+    half = tmp_path / "half.npy"
+    np.save(half, occ * 0.5)
+    p = hil_main("plan", "--map", str(half), "--resolution", "0.5", "--start", "3,3", "--goal", "17,3")
+    _one_line_error(p)
+    assert "0/1" in p.stderr
+
+
 def test_unknown_scenario(hil_main):
     _one_line_error(hil_main("plan", "--scenario", "atlantis", "--json"))
 
