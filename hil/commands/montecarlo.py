@@ -173,7 +173,8 @@ def run_routes(args: argparse.Namespace, argv_scenario: str | None) -> int:
         summary = run_campaign(name, args.runs, args.seed, out, ex, cfg.planner.safety_radius, cfg.current, job,
                                progress)
     return _finish(args, out, summary, t0,
-                   f"routes: {summary['reached_without_collision']}/{args.runs} reached the goal without collision "
+                   f"routes: {summary['reached_without_collision']}/{summary['runs_done']} reached the goal without "
+                   f"collision "
                    f"(success rate {summary['success_rate']:.3f}); outcomes {summary['outcomes']}")
 
 
@@ -182,8 +183,12 @@ def _finish(args: argparse.Namespace, out: Path, summary: dict, t0: float, line:
     summary["wall_time_s"] = round(time.monotonic() - t0, 1)
     summary["files"] = {"runs": str(out / "runs.csv"), "summary": str(out / "summary.json")}
     (out / "summary.json").write_text(console.to_json(summary))
-    console.progress(line)
     console.emit(args, summary)
+    if summary.get("interrupted"):
+        console.progress(f"interrupted: kept the {summary['runs_done']} of {summary['runs']} runs that finished "
+                         f"(runs.csv, summary.json in {out}); over them, {line}")
+        return 130
+    console.progress(line)
     return 0
 
 
