@@ -21,6 +21,24 @@ class MapError(ValueError):
     """A map file or array that cannot be used (one-line message)."""
 
 
+def _png_levels(p: Path) -> np.ndarray:
+    """A PNG's samples scaled to [0, 1] (as matplotlib.image.imread gives them), decoded with Pillow
+    alone: importing matplotlib.image took longer than a short planning deadline."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(p) as im:
+            if im.format != "PNG":
+                raise MapError(f"{p}: not a readable PNG: a {im.format} image")
+            if im.mode.startswith("I;16"):
+                return np.asarray(im, dtype=np.float64) / 65535.0
+            if im.mode not in ("L", "RGB", "RGBA"):
+                im = im.convert("RGBA")
+            return np.asarray(im, dtype=np.float64) / 255.0
+    except (UnidentifiedImageError, ValueError, OSError, SyntaxError) as exc:
+        raise MapError(f"{p}: not a readable PNG: {exc}") from None
+
+
 class OccupancyGrid:
     """Binary occupancy grid with exact segment checks and obstacle inflation."""
 
@@ -57,13 +75,7 @@ class OccupancyGrid:
             except (ValueError, OSError) as exc:
                 raise MapError(f"{p}: not a readable .npy array: {exc}") from None
         elif suffix == ".png":
-            import matplotlib.image as mpimg
-
-            try:
-                img = mpimg.imread(p)
-            except (ValueError, OSError, SyntaxError) as exc:
-                raise MapError(f"{p}: not a readable PNG: {exc}") from None
-            img = np.asarray(img, dtype=np.float64)  # matplotlib scales PNG samples to [0, 1]
+            img = _png_levels(p)
             if img.ndim == 3:
                 img = img[..., :3].mean(axis=2) if img.shape[2] >= 3 else img[..., 0]
             occ = np.flipud(img < 0.5)
