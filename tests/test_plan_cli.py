@@ -123,6 +123,23 @@ def test_a_float_map_of_zeros_and_ones_is_a_map(hil_main, wall_map, tmp_path):
     assert "0/1" in p.stderr
 
 
+def test_ddrrt_star_on_a_map_far_larger_than_its_domain_says_why(hil, tmp_path):
+    """DDRRT* (the default) rejects every sample farther than its ESD (<= 29 m) from the tree: on a 400 m open
+    map it ends 'approximate' after rejecting nearly all samples, where RRT* reaches the goal. The reason and
+    the way out are said (stderr and the JSON's 'hint'); a successful or RRT* query has no hint."""
+    np.save(tmp_path / "open.npy", np.zeros((200, 200), dtype=bool))
+    base = ("plan", "--map", str(tmp_path / "open.npy"), "--resolution", "2", "--start", "10,10", "--goal", "390,390",
+            "--deadline", "60", "--iterations", "5000", "--json")
+    p = hil(*base, "--algorithm", "ddrrt-star")
+    out = json.loads(p.stdout)
+    assert out["status"] != "exact" and out["samples_rejected"] > 0.9 * out["iterations"]
+    assert "ESD" in out["hint"] and "--algorithm rrt-star" in out["hint"]
+    assert "hint" in p.stderr
+    p = hil(*base, "--algorithm", "rrt-star")
+    out = json.loads(p.stdout)
+    assert p.returncode == 0 and out["status"] == "exact" and "hint" not in out
+
+
 def test_unknown_scenario(hil_main):
     _one_line_error(hil_main("plan", "--scenario", "atlantis", "--json"))
 

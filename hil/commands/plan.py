@@ -106,6 +106,20 @@ def _problem_inputs(args: argparse.Namespace):
     return occ, args.resolution, args.start, args.goal, args.heading, None, {}, args.map.name
 
 
+def _ddrrt_hint(params, result, grid) -> str | None:
+    """Why DDRRT* failed where the ESD test threw away most samples, and what to use instead."""
+    if params.algorithm != "ddrrt-star" or result.status == "exact" or not result.iterations:
+        return None
+    if result.samples_rejected < 0.5 * result.iterations:
+        return None
+    # eq. (11) at its largest (alpha_y = 0)
+    esd_max = params.d_alpha * params.dynamic_domain_radius / (1.0 + math.exp(-1.0))
+    return (f"DDRRT* rejected {result.samples_rejected} of {result.iterations} samples by its ESD test (a sample "
+            f"farther than at most {esd_max:.0f} m from the tree, eq. (11)): it is the paper's local planner for a "
+            f"{params.perceptual_radius:g} m perceptual domain, not for a {grid.width:g} m x {grid.height:g} m map; "
+            f"use --algorithm rrt-star or informed-rrt-star there")
+
+
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
@@ -184,6 +198,10 @@ def run(args: argparse.Namespace) -> int:
         "tree_size": int(len(result.tree_nodes)),
         "samples_rejected": result.samples_rejected,
     }
+    hint = _ddrrt_hint(params, result, raw)
+    if hint:
+        summary["hint"] = hint
+        console.progress(f"hil plan: hint: {hint}")
     if args.tree:
         summary["tree_nodes"] = np.asarray(result.tree_nodes).tolist()
         summary["tree_parents"] = np.asarray(result.tree_parents).tolist()
