@@ -188,3 +188,12 @@ def test_negative_pairs_are_values_not_options(argv, dest, value):
     except SystemExit as exc:
         raise AssertionError(f"{argv} did not parse") from exc
     assert tuple(getattr(args, dest)) == value
+
+
+def test_an_unknown_option_is_named_with_its_command(hil):
+    """`hil autopilot --duration 1` (an option of another command) says 'hil autopilot: error: ...' and points
+    to `hil autopilot --help`, not 'hil: error:' and the top-level help."""
+    r = hil("autopilot", "--duration", "1")
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert r.stderr.startswith("hil autopilot: error: unrecognized arguments: --duration 1"), r.stderr
+    assert "hil autopilot --help" in r.stderr
