@@ -133,11 +133,22 @@ def test_ddrrt_star_on_a_map_far_larger_than_its_domain_says_why(hil, tmp_path):
     p = hil(*base, "--algorithm", "ddrrt-star")
     out = json.loads(p.stdout)
     assert out["status"] != "exact" and out["samples_rejected"] > 0.9 * out["iterations"]
+    assert p.returncode == 1          # a path to the closest node does not reach the goal
     assert "ESD" in out["hint"] and "--algorithm rrt-star" in out["hint"]
     assert "hint" in p.stderr
     p = hil(*base, "--algorithm", "rrt-star")
     out = json.loads(p.stdout)
     assert p.returncode == 0 and out["status"] == "exact" and "hint" not in out
+
+
+def test_a_path_that_does_not_reach_the_goal_is_exit_1(hil, wall_map):
+    """'approximate' (the path to the node closest to the goal, printed) is not success: exit 1, as 'none'."""
+    path, _ = wall_map
+    p = hil("plan", "--map", str(path), "--resolution", "0.5", "--start", "3,3", "--goal", "17,3",
+            "--algorithm", "rrt-star", "--deadline", "60", "--iterations", "3", "--json")
+    out = json.loads(p.stdout)
+    assert out["status"] == "approximate" and out["path"], out
+    assert p.returncode == 1, p.stderr
 
 
 def test_unknown_scenario(hil_main):

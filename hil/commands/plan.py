@@ -45,8 +45,9 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
         help="plan one path on a map or a scenario (RRT*, Informed-RRT*, DDRRT*)",
         description="Plan one path from --start to --goal on an occupancy map (x east, y north, metres; "
                     "map row 0 at y = 0) or on a scenario of configs/scenarios/. Obstacles are inflated by "
-                    "the [planner] safety_radius (or --inflate). Exit 0 with a path, 1 when no path was "
-                    "found within the budget, 2 on bad input.",
+                    "the [planner] safety_radius (or --inflate). Exit 0 with a path to the goal, 1 when none "
+                    "was found within the budget (status 'approximate': the path to the node closest to the "
+                    "goal, still printed; or 'none'), 2 on bad input.",
     )
     src = p.add_argument_group("problem (either --scenario or --map/--resolution/--start/--goal)")
     src.add_argument("--scenario", metavar="NAME",
@@ -213,4 +214,4 @@ def run(args: argparse.Namespace) -> int:
         summary["plot"] = str(args.plot)
         console.progress(f"hil plan: plot written to {args.plot}")
     console.emit(args, summary)
-    return 0 if result.status != "none" else 1
+    return 0 if result.status == "exact" else 1   # 'approximate' stops short of the goal
