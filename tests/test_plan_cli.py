@@ -70,7 +70,7 @@ def test_bad_point_syntax_and_obstacle_start(hil_main, wall_map):
     assert "obstacle" in p.stderr
 
 
-def test_goal_in_the_safety_margin_is_a_usage_error(hil_main, wall_map):
+def test_start_or_goal_in_the_safety_margin_is_a_usage_error(hil_main, wall_map):
     """A goal in free water but within the inflation radius of the wall can never be reached: one line
     naming the margin (exit 2), not 'no path' (exit 1) with 'inside an obstacle or outside the map'."""
     path, _ = wall_map
@@ -78,6 +78,10 @@ def test_goal_in_the_safety_margin_is_a_usage_error(hil_main, wall_map):
                  "--inflate", "2", "--deadline", "0.05")
     _one_line_error(p)
     assert "--goal 8,3" in p.stderr and "margin" in p.stderr and "--inflate" in p.stderr
+    p = hil_main("plan", "--map", str(path), "--resolution", "0.5", "--start", "8,3", "--goal", "3,3",
+                 "--inflate", "2", "--deadline", "0.05")
+    _one_line_error(p)
+    assert "--start 8,3" in p.stderr and "margin" in p.stderr
     # the same goal with a smaller margin is fine
     p = hil_main("plan", "--map", str(path), "--resolution", "0.5", "--start", "3,3", "--goal", "8,3",
                  "--inflate", "0.5", "--deadline", "0.05", "--json")

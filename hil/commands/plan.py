@@ -162,11 +162,11 @@ def run(args: argparse.Namespace) -> int:
                          f"before the clock started")
     t_setup = time.monotonic()
     grid = raw.inflate(params.safety_radius) if params.safety_radius > 0 else raw
-    if not grid.is_free(*goal):
-        # The planner can leave a margin it starts in, but can never end inside one.
-        raise UsageError(f"--goal {goal[0]:g},{goal[1]:g}: within the {params.safety_radius:g} m safety margin of an "
-                         f"obstacle or the map edge (the map inflated by [planner] safety_radius); move the goal "
-                         f"or lower --inflate")
+    for what, pt in (("--start", start), ("--goal", goal)):
+        if not grid.is_free(*pt):  # the planner neither starts nor ends in the inflated map's obstacles
+            raise UsageError(f"{what} {pt[0]:g},{pt[1]:g}: within the {params.safety_radius:g} m safety margin of an "
+                             f"obstacle or the map edge (the map inflated by [planner] safety_radius); move it "
+                             f"or lower --inflate")
     free_regions(grid)  # labelled once here (cached on the grid), not inside the search budget
     field = sc.planning_field() if (sc is not None and params.objective == "current") else None
     problem = PlanningProblem(grid=grid, start=tuple(start), goal=tuple(goal), start_heading=heading, field=field)
