@@ -19,10 +19,17 @@ from autopilot_bridge.config import AutopilotParams
 from autopilot_bridge.local_planning import CycleInput, LocalPlan, ned_to_map
 from autopilot_bridge.navigation import NavState
 from autopilot_bridge.planning_worker import PlannerWorker, PlanRequest
+from planner.params import SEED_MAX
 
 if TYPE_CHECKING:
     from autopilot_bridge.computer_setup import AutopilotStats
     from autopilot_bridge.obstacle_map import SensedObstacles
+
+
+def cycle_seed(run_seed: int, cycle: int) -> int:
+    """The planner's seed of planning cycle ``cycle`` of a run seeded ``run_seed``: the two mixed, kept
+    within the planner's signed 64 bits (``planner.params.SEED_MAX``; identity for the seeds that fit)."""
+    return (run_seed * 100003 + cycle) % (SEED_MAX + 1)
 
 
 class PlanHandoff:
@@ -67,7 +74,7 @@ class PlanHandoff:
         self.traffic_planned = snap is not None   # ships move: their cycle's newest plan always wins
         request = PlanRequest(
             cycle=self.cycle,
-            problem=CycleInput(x, y, heading, s.t + lead, self.seed * 100003 + self.cycle,
+            problem=CycleInput(x, y, heading, s.t + lead, cycle_seed(self.seed, self.cycle),
                                sensed.cells() if self.sensed_at_submit else None, sensed.version,
                                traffic=snap, world=world_update),
             deadline_s=self.p.planning_deadline,

@@ -14,7 +14,9 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
+from typing import Any
 
 from hil import console
 from hil.errors import HilError
@@ -24,7 +26,13 @@ COMMANDS = ("run", "sim", "autopilot", "plan", "montecarlo", "bench", "soak", "v
 
 
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line (and exit code 2), not usage plus message."""
+    """argparse, but a usage error is one line (and exit code 2), not usage plus message, and a value that
+    starts with a minus and a digit (``--miss -6,-2``, ``--start -1.5,3``, ``--heading -1e-3``) is a value,
+    not an unknown option (argparse 3.11 only knows bare negative numbers; 3.13 reads them this way)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-\.?\d")
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
@@ -63,7 +71,10 @@ def build_parser() -> ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:  # reported by the command's own parser: 'hil COMMAND: error: ...', its --help named
+        commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+        commands.choices[args.command].error(f"unrecognized arguments: {' '.join(extra)}")
     if getattr(args, "config", None) is not None:
         args.config = tuple(args.config)
     console.configure_logging()

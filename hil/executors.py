@@ -95,6 +95,28 @@ class Executor:
         self.close()
 
 
+def collect(executor: Executor, fn: Callable[[Any], Any], items: Sequence[Any],
+            take: Callable[[int, Any], None]) -> bool:
+    """Run ``fn`` over ``items`` on ``executor``, handing each ``(index, result)`` to ``take`` as it
+    finishes. Ctrl-C (or SIGTERM, in the main thread) cancels the rest: returns True when interrupted,
+    what ``take`` got so far being the finished work."""
+    def on_term(signum, frame):
+        raise KeyboardInterrupt
+
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, on_term) if main else None
+    try:
+        for i, result in executor.map_unordered(fn, items):
+            take(i, result)
+        return False
+    except KeyboardInterrupt:
+        executor.cancel()
+        return True
+    finally:
+        if main:
+            signal.signal(signal.SIGTERM, previous)
+
+
 class LocalProcesses(Executor):
     """``jobs`` spawned worker processes (``jobs <= 1``: in this process)."""
 

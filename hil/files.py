@@ -24,3 +24,47 @@ def write_json_atomic(path: str | Path, data: dict) -> None:
         except OSError:
             pass
         raise
+
+
+# What matplotlib's savefig writes (its own list, fixed here so that checking a name imports nothing).
+PLOT_SUFFIXES = (".png", ".pdf", ".svg", ".svgz", ".jpg", ".jpeg", ".tif", ".tiff", ".webp", ".eps", ".ps")
+
+
+def _first_existing(path: Path) -> Path:
+    p = path
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    return p
+
+
+def check_output_folder(path: str | Path, option: str) -> Path:
+    """``path`` as a folder a command may create and fill, or a UsageError naming ``option``
+    (checked before anything runs; nothing is created here)."""
+    from hil.errors import UsageError
+
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise UsageError(f"{option} {path}: is a file, not a folder")
+    base = _first_existing(path.absolute())
+    if not base.is_dir():
+        raise UsageError(f"{option} {path}: {base} is a file, not a folder")
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise UsageError(f"{option} {path}: {base} is not writable")
+    return path
+
+
+def check_output_file(path: str | Path, option: str, suffixes: tuple[str, ...]) -> Path:
+    """``path`` as a file a command may write (its folder created if missing), or a UsageError naming
+    ``option``: not a folder, a known suffix, a writable place (checked before anything runs)."""
+    from hil.errors import UsageError
+
+    path = Path(path)
+    if path.is_dir():
+        raise UsageError(f"{option} {path}: is a folder; give a file name ending {suffixes[0]}")
+    if path.suffix.lower() not in suffixes:
+        raise UsageError(f"{option} {path}: unknown file type {path.suffix or '(none)'}; "
+                         f"use one of {', '.join(suffixes)}")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise UsageError(f"{option} {path}: is not writable")
+    check_output_folder(path.parent, option)
+    return path

@@ -78,7 +78,8 @@ def run_campaign(scenario: str, runs: int, seed: int, out: Path, executor: Any, 
                  base_current: Any, run_one: Callable[[tuple[int, str, str]], RunSummary],
                  progress: Callable[[int, RunSummary], None] = lambda _i, _s: None) -> dict[str, Any]:
     """``runs`` HIL runs of ``run_one((run, scenario_file, folder))`` on instances of the random
-    ``scenario``, on ``executor``; writes ``runs.csv`` and ``summary.json``."""
+    ``scenario``, on ``executor``; writes ``runs.csv`` and ``summary.json``. Ctrl-C or SIGTERM keeps
+    the finished runs (``interrupted``, ``runs_done``; rates over the runs done)."""
     from hil import scenario as scenarios
 
     spec = scenarios.load_spec(scenario)
@@ -88,9 +89,12 @@ def run_campaign(scenario: str, runs: int, seed: int, out: Path, executor: Any, 
         folder = out / f"run{i:04d}"
         plans.append((i, scen, write_instance(scen, spec, folder, f"{spec.name}-{seed}-{i}"), folder))
 
-    rows = []
+    from hil.executors import collect
+
+    rows: list[dict[str, Any]] = []
     items = [(i, str(path), str(folder)) for i, _, path, folder in plans]
-    for done, (i, s) in enumerate(executor.map_unordered(run_one, items), start=1):
+
+    def take(i: int, s: RunSummary) -> None:
         _, scen, path, _ = plans[i]
         wps = np.asarray(scen.waypoints)
         legs = np.hypot(*np.diff(wps, axis=0).T)
@@ -101,25 +105,27 @@ def run_campaign(scenario: str, runs: int, seed: int, out: Path, executor: Any, 
                      round(float(np.sum(np.hypot(*np.diff(scen.reference_path, axis=0).T))), 1),
                      "path_length_m": s.path_length_m, "fallbacks": s.fallback_activations,
                      "scenario": str(path)})
-        progress(done, s)
+        progress(len(rows), s)
+
+    interrupted = collect(executor, run_one, items, take)
     rows.sort(key=lambda r: r["run"])
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "runs.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]) if rows else ["run"])
         w.writeheader()
         w.writerows(rows)
     ok = sum(1 for r in rows if r["reached"])
     clear = [r["min_clearance_m"] for r in rows if r["min_clearance_m"] is not None]
     summary = {
-        "scenario": scenario, "runs": runs, "seed": seed,
-        "success_rate": round(ok / max(runs, 1), 4), "reached_without_collision": ok,
+        "scenario": scenario, "runs": runs, "seed": seed, "interrupted": interrupted, "runs_done": len(rows),
+        "success_rate": round(ok / max(len(rows), 1), 4), "reached_without_collision": ok,
         "outcomes": {k: sum(1 for r in rows if r["outcome"] == k) for k in sorted({r["outcome"] for r in rows})},
         "collisions": sum(1 for r in rows if r["collisions"]),
         "failed_runs": [r["run"] for r in rows if not r["reached"]],
         "waypoints": {k: sum(1 for r in rows if r["waypoints"] == k) for k in sorted({r["waypoints"] for r in rows})},
-        "longest_leg_m_median": round(float(np.median([r["longest_leg_m"] for r in rows])), 1),
+        "longest_leg_m_median": round(float(np.median([r["longest_leg_m"] for r in rows])), 1) if rows else None,
         "min_clearance_m": round(float(min(clear)), 3) if clear else None,
-        "mean_sim_time_s": round(float(np.mean([r["sim_time_s"] for r in rows])), 1),
+        "mean_sim_time_s": round(float(np.mean([r["sim_time_s"] for r in rows])), 1) if rows else None,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     return summary

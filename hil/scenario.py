@@ -211,6 +211,10 @@ def load_spec(name: str) -> ScenarioSpec:
     if not path.exists():
         raise UsageError(f"unknown scenario {name!r} (no {path}; available: {', '.join(available())})")
     table = config.read_toml(path)
+    if table.get("kind") == "fixed":
+        for key in ("start", "goal"):   # defaults only for random scenarios, which draw them
+            if key not in table:
+                raise ConfigError(f"{path}: {key}: missing key (a fixed scenario gives [x, y] in m)")
     spec = config.from_table(ScenarioSpec, table, str(path))
     object.__setattr__(spec, "path", str(path))
     return spec

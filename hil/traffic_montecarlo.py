@@ -107,15 +107,21 @@ def run_campaign(scenario: str, runs: int, seed: int, draw: TrafficDraw, out: Pa
                  run_one: Callable[[tuple[int, tuple[ShipSpec, ...]]], RunSummary],
                  progress: Callable[[int, RunSummary], None] = lambda _i, _s: None) -> dict[str, Any]:
     """``runs`` HIL runs of ``run_one((run, ships))`` on ``executor`` (:mod:`hil.executors`);
-    returns the campaign summary and writes ``runs.csv`` and ``summary.json``."""
+    returns the campaign summary and writes ``runs.csv`` and ``summary.json``. Ctrl-C or SIGTERM keeps
+    the finished runs (``interrupted``, ``runs_done``; rates over the runs done)."""
     from hil import scenario as scenarios
 
     scen = scenarios.load(scenario)
     plans = [(i, draw_ships(scen.reference_path, draw, seed, i)) for i in range(runs)]
+    from hil.executors import collect
+
     results: dict[int, RunSummary] = {}
-    for done, (i, s) in enumerate(executor.map_unordered(run_one, plans), start=1):
+
+    def take(i: int, s: RunSummary) -> None:
         results[i] = s
-        progress(done, s)
+        progress(len(results), s)
+
+    interrupted = collect(executor, run_one, plans, take)
     rows = []
     for i in sorted(results):       # the same rows in the same order whatever the executor
         s, ships = results[i], plans[i][1]
@@ -137,11 +143,12 @@ def run_campaign(scenario: str, runs: int, seed: int, draw: TrafficDraw, out: Pa
     for r in risky:
         by_type.setdefault(r["type"], []).append(r)
     summary = {
-        "scenario": scenario, "runs": runs, "seed": seed, "ships_per_run": draw.ships,
+        "scenario": scenario, "runs": runs, "seed": seed, "interrupted": interrupted, "runs_done": len(results),
+        "ships_per_run": draw.ships,
         "draw": {"bearing_deg": draw.bearing, "speed_m_s": draw.speed, "miss_m": draw.miss, "meet_s": draw.meet},
         "outcomes": {k: sum(1 for s in results.values() if s.outcome == k) for k in
                      sorted({s.outcome for s in results.values()})},
-        "collision_rate": round(sum(1 for s in results.values() if s.collisions) / max(runs, 1), 4),
+        "collision_rate": round(sum(1 for s in results.values() if s.collisions) / max(len(results), 1), 4),
         "mean_cpa_m": round(float(np.mean(cpas)), 2) if cpas else None,
         "min_cpa_m": round(float(np.min(cpas)), 2) if cpas else None,
         "encounters": len(risky),

@@ -21,6 +21,24 @@ class MapError(ValueError):
     """A map file or array that cannot be used (one-line message)."""
 
 
+def _png_levels(p: Path) -> np.ndarray:
+    """A PNG's samples scaled to [0, 1] (as matplotlib.image.imread gives them), decoded with Pillow
+    alone: importing matplotlib.image took longer than a short planning deadline."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(p) as im:
+            if im.format != "PNG":
+                raise MapError(f"{p}: not a readable PNG: a {im.format} image")
+            if im.mode.startswith("I;16"):
+                return np.asarray(im, dtype=np.float64) / 65535.0
+            if im.mode not in ("L", "RGB", "RGBA"):
+                im = im.convert("RGBA")
+            return np.asarray(im, dtype=np.float64) / 255.0
+    except (UnidentifiedImageError, ValueError, OSError, SyntaxError) as exc:
+        raise MapError(f"{p}: not a readable PNG: {exc}") from None
+
+
 class OccupancyGrid:
     """Binary occupancy grid with exact segment checks and obstacle inflation."""
 
@@ -29,8 +47,10 @@ class OccupancyGrid:
         if occ.ndim != 2 or occ.shape[0] < 1 or occ.shape[1] < 1:
             raise MapError(f"map must be a 2-D grid, got shape {occ.shape}")
         if occ.dtype != bool:
-            if not np.issubdtype(occ.dtype, np.integer) or not np.isin(occ, (0, 1)).all():
-                raise MapError(f"map must be boolean (True = obstacle) or 0/1 integers, got {occ.dtype}")
+            numeric = np.issubdtype(occ.dtype, np.integer) or np.issubdtype(occ.dtype, np.floating)
+            if not numeric or not np.isin(occ, (0, 1)).all():
+                raise MapError(f"map must be boolean (True = obstacle) or 0/1 numbers, got {occ.dtype}"
+                               + ("" if not numeric else " holding other values"))
             occ = occ.astype(bool)
         if isinstance(resolution, bool) or not (isinstance(resolution, numbers.Real) and math.isfinite(resolution)
                                                 and resolution > 0):
@@ -55,13 +75,7 @@ class OccupancyGrid:
             except (ValueError, OSError) as exc:
                 raise MapError(f"{p}: not a readable .npy array: {exc}") from None
         elif suffix == ".png":
-            import matplotlib.image as mpimg
-
-            try:
-                img = mpimg.imread(p)
-            except (ValueError, OSError, SyntaxError) as exc:
-                raise MapError(f"{p}: not a readable PNG: {exc}") from None
-            img = np.asarray(img, dtype=np.float64)  # matplotlib scales PNG samples to [0, 1]
+            img = _png_levels(p)
             if img.ndim == 3:
                 img = img[..., :3].mean(axis=2) if img.shape[2] >= 3 else img[..., 0]
             occ = np.flipud(img < 0.5)

@@ -17,6 +17,7 @@ AlgorithmName = Literal["rrt-star", "informed-rrt-star", "ddrrt-star"]
 Objective = Literal["length", "current"]
 DYNAMIC_DOMAINS = ("off", "constant", "adaptive")
 OBJECTIVES = ("length", "current")
+SEED_MAX = 2**63 - 1  # the compiled generator (numpy.random.seed under numba) takes a signed 64-bit integer
 
 
 def _p(help: str, unit: str = "", *, gt=None, ge=None, lt=None, le=None, default=None):
@@ -78,7 +79,7 @@ class PlannerParams:
     perceptual_radius: float = _p("radius of the perceptual domain (33 m in section 4.2)", "m", gt=0,
                                   default=33.0)
     max_nodes: int = _p("capacity of the tree (the planner stops when full)", "", ge=2, default=200_000)
-    seed: int = _p("seed of the planner's random numbers (same seed -> same path)", "", ge=0, default=1)
+    seed: int = _p("seed of the planner's random numbers (same seed -> same path)", "", ge=0, le=SEED_MAX, default=1)
 
     def __post_init__(self) -> None:
         if self.algorithm not in ALGORITHM_NAMES:

@@ -126,3 +126,74 @@ def test_one_algorithm_registry():
     for command in ("run", "autopilot", "plan"):
         algo = next(a for a in sub.choices[command]._actions if a.dest == "algorithm")
         assert tuple(algo.choices) == ALGORITHM_NAMES
+
+
+def _one_line_exit_2(r, command: str) -> str:
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    assert "Traceback" not in r.stderr, r.stderr
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith(f"hil {command}: error: "), r.stderr
+    return last
+
+
+@pytest.mark.parametrize("argv", [
+    ["run", "--duration", "1"],
+    ["montecarlo", "--runs", "1", "--algorithms", "rrt-star", "--no-plots"],
+    ["montecarlo", "--routes", "--runs", "1"],
+])
+def test_an_output_folder_that_is_a_file_is_one_line(hil, tmp_path, argv):
+    """--out naming an existing file (or a folder under one) is a user mistake: one line, exit 2,
+    before anything runs, and the file is left as it was."""
+    blocker = tmp_path / "results.txt"
+    blocker.write_text("keep me")
+    for out in (blocker, blocker / "sub"):
+        r = hil(*argv, "--out", str(out), timeout=120)
+        assert "--out" in _one_line_exit_2(r, argv[0])
+    assert blocker.read_text() == "keep me"
+
+
+def _wall(tmp_path):
+    import numpy as np
+    occ = np.zeros((40, 40), dtype=bool)
+    occ[0:28, 18:22] = True
+    np.save(tmp_path / "wall.npy", occ)
+    return ["plan", "--map", str(tmp_path / "wall.npy"), "--resolution", "0.5", "--start", "3,3",
+            "--goal", "17,3", "--deadline", "0.05"]
+
+
+def test_plan_plot_to_a_folder_or_an_unknown_format_is_one_line(hil, tmp_path):
+    """The plot goes to the file the user named or the command stops before planning: no 'plot written to
+    DIR' while matplotlib wrote DIR.png, no traceback after the search for a .txt name or a path under a file."""
+    folder = tmp_path / "plots"
+    folder.mkdir()
+    (tmp_path / "afile").write_text("x")
+    for plot in (folder, tmp_path / "plan.txt", tmp_path / "afile" / "plan.png", tmp_path / "plan"):
+        r = hil(*_wall(tmp_path), "--plot", str(plot))
+        assert "--plot" in _one_line_exit_2(r, "plan")
+    assert list(folder.iterdir()) == [] and not (tmp_path / "plots.png").exists()
+    assert not (tmp_path / "plan.png").exists()
+    r = hil(*_wall(tmp_path), "--plot", str(tmp_path / "new" / "plan.png"))
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "new" / "plan.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("argv, dest, value", [
+    (["montecarlo", "--traffic", "--miss", "-6,-2"], "miss", (-6.0, -2.0)),
+    (["plan", "--start", "-3.5,2"], "start", (-3.5, 2.0)),
+])
+def test_negative_pairs_are_values_not_options(argv, dest, value):
+    """`--miss -6,-2` (the help's own sign convention: negative = to port) is a value, as `--miss=-6,-2` is."""
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:
+        raise AssertionError(f"{argv} did not parse") from exc
+    assert tuple(getattr(args, dest)) == value
+
+
+def test_an_unknown_option_is_named_with_its_command(hil):
+    """`hil autopilot --duration 1` (an option of another command) says 'hil autopilot: error: ...' and points
+    to `hil autopilot --help`, not 'hil: error:' and the top-level help."""
+    r = hil("autopilot", "--duration", "1")
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert r.stderr.startswith("hil autopilot: error: unrecognized arguments: --duration 1"), r.stderr
+    assert "hil autopilot --help" in r.stderr

@@ -286,3 +286,36 @@ def test_guided_goto_by_position_target_and_by_reposition(closing):
     text = read_until(gcs, "STATUSTEXT", link)
     assert text is not None and "off the chart" in text.text
     assert vehicle.route.path[-1] == pytest.approx([12.0, 30.0], abs=0.01)
+
+
+def test_a_long_statustext_arrives_whole_in_chunks(closing):
+    """STATUSTEXT holds 50 characters; a longer text (a refused mission item's reason) goes out in MAVLink 2
+    chunks (same non-zero id, chunk_seq 0, 1, ..., the last one shorter than 50 or NUL-terminated) that a
+    ground station joins, instead of being cut after 50 characters. A short one is one message, id 0."""
+    port = free_udp_port()
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    closing(gcs)
+    gcs.bind(("127.0.0.1", port))
+    link = GcsLink(params(f"udpout:127.0.0.1:{port}"), 1, 1, GEO)
+    closing(link)
+    long = "mission item 1 rejected: waypoint 2000 m north is off the chart (0-150)"
+    exact = "x" * 100                                   # a multiple of 50: a NUL-terminated empty chunk ends it
+    for text in ("armed", long, exact, long):
+        link.statustext(text)
+    parser = mavlink2.MAVLink(None, 255, 190)
+    gcs.settimeout(1.0)
+    got: list = []
+    while len(got) < 1 + 2 + 3 + 2:
+        for m in parser.parse_buffer(gcs.recv(65535)) or []:
+            if m.get_type() == "STATUSTEXT":
+                got.append(m)
+
+    def join(msgs) -> str:
+        assert [m.chunk_seq for m in msgs] == list(range(len(msgs)))
+        assert len({m.id for m in msgs}) == 1 and msgs[0].id != 0
+        return "".join(m.text for m in msgs)
+
+    assert got[0].text == "armed" and got[0].id == 0
+    assert join(got[1:3]) == long
+    assert join(got[3:6]) == exact and got[5].text == ""
+    assert join(got[6:8]) == long and got[6].id != got[1].id     # each text its own id

@@ -146,3 +146,40 @@ def test_ctrl_c_keeps_finished_runs(repo, tmp_path, sig):
     rows = experiment.read_runs_csv(out / "runs.csv")
     assert 2 <= len(rows) < 900
     assert "INTERRUPTED" in (out / "table3.md").read_text()
+
+
+@pytest.mark.slow   # e2e: whole HIL runs on threads, interrupted
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_ctrl_c_keeps_finished_route_runs(repo, tmp_path, sig):
+    """`hil montecarlo --routes`: Ctrl-C (SIGINT to the terminal's process group) or SIGTERM keeps the runs
+    that finished in runs.csv and summary.json (interrupted, runs_done) and says so, exit 130; it used
+    to end with 'hil montecarlo: interrupted' and no runs.csv."""
+    import os
+
+    out = tmp_path / "mc"
+    proc = subprocess.Popen([sys.executable, "-m", "hil", "montecarlo", "--routes", "--runs", "8", "--jobs", "2",
+                             "--seed", "3", "--duration", "20", "--out", str(out), "--json"],
+                            cwd=repo, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline:   # wait (bounded) until a run has finished
+            if list(out.glob("run*/hil/summary.json")) or proc.poll() is not None:
+                break
+            time.sleep(0.1)
+        assert proc.poll() is None, "finished before it could be interrupted"
+        os.killpg(proc.pid, sig) if sig == signal.SIGINT else proc.send_signal(sig)
+        stdout, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary == json.loads(stdout)
+    assert summary["interrupted"] is True and 1 <= summary["runs_done"] < 8, summary
+    with open(out / "runs.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == summary["runs_done"]
+    assert "interrupted" in err.strip().splitlines()[-1] and f"{len(rows)} of 8" in err.strip().splitlines()[-1]

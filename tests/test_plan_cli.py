@@ -70,6 +70,91 @@ def test_bad_point_syntax_and_obstacle_start(hil_main, wall_map):
     assert "obstacle" in p.stderr
 
 
+def test_start_or_goal_in_the_safety_margin_is_a_usage_error(hil_main, wall_map):
+    """A goal in free water but within the inflation radius of the wall can never be reached: one line
+    naming the margin (exit 2), not 'no path' (exit 1) with 'inside an obstacle or outside the map'."""
+    path, _ = wall_map
+    p = hil_main("plan", "--map", str(path), "--resolution", "0.5", "--start", "3,3", "--goal", "8,3",
+                 "--inflate", "2", "--deadline", "0.05")
+    _one_line_error(p)
+    assert "--goal 8,3" in p.stderr and "margin" in p.stderr and "--inflate" in p.stderr
+    p = hil_main("plan", "--map", str(path), "--resolution", "0.5", "--start", "8,3", "--goal", "3,3",
+                 "--inflate", "2", "--deadline", "0.05")
+    _one_line_error(p)
+    assert "--start 8,3" in p.stderr and "margin" in p.stderr
+    # the same goal with a smaller margin is fine
+    p = hil_main("plan", "--map", str(path), "--resolution", "0.5", "--start", "3,3", "--goal", "8,3",
+                 "--inflate", "0.5", "--deadline", "0.05", "--json")
+    assert p.returncode == 0, p.stderr
+
+
+@pytest.mark.parametrize("extra", [["--heading", "inf"], ["--heading", "nan"], ["--seed", str(2 ** 64)],
+                                   ["--set", f"planner.seed={2 ** 63}"]])
+def test_non_finite_heading_and_oversized_seed_are_usage_errors(hil_main, wall_map, extra):
+    """A heading that is not a finite angle and a seed the planner's generator cannot take (it holds a
+    signed 64-bit integer) are one line, exit 2, not a traceback or a silently ignored NaN."""
+    path, _ = wall_map
+    p = hil_main("plan", "--map", str(path), "--resolution", "0.5", "--start", "3,3", "--goal", "17,3",
+                 "--deadline", "0.05", *extra)
+    _one_line_error(p)
+    assert ("heading" if extra[1] in ("inf", "nan") else "seed") in p.stderr.strip().splitlines()[-1]
+
+
+def test_negative_coordinates_read_as_values(hil_main, wall_map):
+    """`--start -1,5` is a point left of the map (its one-line 'outside'), not an unknown option."""
+    path, _ = wall_map
+    p = hil_main("plan", "--map", str(path), "--resolution", "0.5", "--start", "-1,5", "--goal", "17,3")
+    _one_line_error(p)
+    assert "outside" in p.stderr
+
+
+def test_a_float_map_of_zeros_and_ones_is_a_map(hil_main, wall_map, tmp_path):
+    """np.zeros() is float64: a 0.0/1.0 .npy is the same map as the bool one (the help says 0-1); other
+    values stay refused, naming them."""
+    _, occ = wall_map
+    floats = tmp_path / "wall_f.npy"
+    np.save(floats, occ.astype(np.float64))
+    p = hil_main("plan", "--map", str(floats), "--resolution", "0.5", "--start", "10,5", "--goal", "15,5")
+    _one_line_error(p)
+    assert "obstacle" in p.stderr          # the wall is read as a wall
+    p = hil_main("plan", "--map", str(floats), "--resolution", "0.5", "--start", "3,3", "--goal", "17,3",
+                 "--deadline", "0.05", "--json")
+    assert p.returncode == 0, p.stderr
+    half = tmp_path / "half.npy"
+    np.save(half, occ * 0.5)
+    p = hil_main("plan", "--map", str(half), "--resolution", "0.5", "--start", "3,3", "--goal", "17,3")
+    _one_line_error(p)
+    assert "0/1" in p.stderr
+
+
+def test_ddrrt_star_on_a_map_far_larger_than_its_domain_says_why(hil, tmp_path):
+    """DDRRT* (the default) rejects every sample farther than its ESD (<= 29 m) from the tree: on a 400 m open
+    map it ends 'approximate' after rejecting nearly all samples, where RRT* reaches the goal. The reason and
+    the way out are said (stderr and the JSON's 'hint'); a successful or RRT* query has no hint."""
+    np.save(tmp_path / "open.npy", np.zeros((200, 200), dtype=bool))
+    base = ("plan", "--map", str(tmp_path / "open.npy"), "--resolution", "2", "--start", "10,10", "--goal", "390,390",
+            "--deadline", "60", "--iterations", "5000", "--json")
+    p = hil(*base, "--algorithm", "ddrrt-star")
+    out = json.loads(p.stdout)
+    assert out["status"] != "exact" and out["samples_rejected"] > 0.9 * out["iterations"]
+    assert p.returncode == 1          # a path to the closest node does not reach the goal
+    assert "ESD" in out["hint"] and "--algorithm rrt-star" in out["hint"]
+    assert "hint" in p.stderr
+    p = hil(*base, "--algorithm", "rrt-star")
+    out = json.loads(p.stdout)
+    assert p.returncode == 0 and out["status"] == "exact" and "hint" not in out
+
+
+def test_a_path_that_does_not_reach_the_goal_is_exit_1(hil, wall_map):
+    """'approximate' (the path to the node closest to the goal, printed) is not success: exit 1, as 'none'."""
+    path, _ = wall_map
+    p = hil("plan", "--map", str(path), "--resolution", "0.5", "--start", "3,3", "--goal", "17,3",
+            "--algorithm", "rrt-star", "--deadline", "60", "--iterations", "3", "--json")
+    out = json.loads(p.stdout)
+    assert out["status"] == "approximate" and out["path"], out
+    assert p.returncode == 1, p.stderr
+
+
 def test_unknown_scenario(hil_main):
     _one_line_error(hil_main("plan", "--scenario", "atlantis", "--json"))
 

@@ -23,6 +23,48 @@ def test_npy_and_png_orientation(tmp_path):
     assert np.array_equal(gp.occ, occ)
 
 
+def _matplotlib_reading(path) -> np.ndarray:
+    """What the loader gave when it read PNGs with matplotlib: the mean of the colour channels < 0.5."""
+    img = np.asarray(mpimg.imread(path), dtype=np.float64)
+    if img.ndim == 3:
+        img = img[..., :3].mean(axis=2) if img.shape[2] >= 3 else img[..., 0]
+    return np.flipud(img < 0.5)
+
+
+@pytest.mark.parametrize("mode", ["1", "L", "LA", "P", "RGB", "RGBA", "I;16"])
+def test_png_of_every_kind_reads_as_matplotlib_read_it(tmp_path, mode):
+    """PNG maps are decoded with Pillow (matplotlib.image alone took 0.2-0.5 s of `hil plan`'s wait); every
+    PNG kind an editor writes gives the same grid as before, grey levels near the threshold included."""
+    from PIL import Image
+
+    rng = np.random.default_rng(len(mode))
+    grey = rng.integers(0, 256, size=(37, 53)).astype(np.uint8)
+    grey[:, :8] = np.arange(120, 136, 2, dtype=np.uint8)     # levels around 127.5, the threshold
+    if mode == "I;16":
+        img = Image.fromarray(grey.astype(np.uint16) * 257)
+    elif mode in ("RGB", "RGBA"):
+        rgb = np.stack([grey, np.roll(grey, 1, axis=1), np.roll(grey, 2, axis=0)], axis=2)
+        img = Image.fromarray(rgb).convert(mode)
+    else:
+        img = Image.fromarray(grey).convert(mode)
+    path = tmp_path / f"map_{mode.replace(';', '_')}.png"
+    img.save(path)
+    got = OccupancyGrid.load(path, 0.5).occ
+    assert np.array_equal(got, _matplotlib_reading(path))
+    assert got.any() and not got.all()
+
+
+def test_loading_a_png_map_does_not_import_matplotlib(tmp_path):
+    import subprocess
+    import sys
+
+    mpimg.imsave(tmp_path / "m.png", np.ones((4, 6, 3)))
+    code = ("import sys; from planner.gridmap import OccupancyGrid; OccupancyGrid.load(sys.argv[1], 1.0); "
+            "assert 'matplotlib' not in sys.modules, 'matplotlib imported'")
+    r = subprocess.run([sys.executable, "-c", code, str(tmp_path / "m.png")], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+
+
 def test_bad_maps(tmp_path):
     with pytest.raises(MapError, match="no such map"):
         OccupancyGrid.load(tmp_path / "missing.npy", 1.0)

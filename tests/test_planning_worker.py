@@ -147,3 +147,27 @@ def test_submit_to_a_dead_worker_restarts_it_instead_of_raising():
         assert w.stats.restarts == 1 and w.pid != dead
         started(w)
         assert w.submit(request(2, "echo")) and wait_for_reply(w).cycle == 2
+
+
+@pytest.mark.parametrize("run_seed", [0, 1, 10**15, 2**64 + 5])
+def test_every_run_seed_gives_planning_cycles_a_seed_the_planner_takes(run_seed):
+    """`hil run --seed 1000000000000000` planned nothing (every cycle 'planner error: OverflowError'): a
+    cycle's seed is the run's seed mixed with the cycle number, kept within the planner's signed 64 bits
+    (unchanged for the seeds that already fitted, so their runs stay as they were)."""
+    import numpy as np
+
+    from autopilot_bridge.plan_handoff import cycle_seed
+    from planner import make_planner
+    from planner.gridmap import OccupancyGrid
+    from planner.params import SEED_MAX, PlannerParams
+    from planner.problem import PlanningProblem
+    from planner.termination import Termination
+
+    seeds = [cycle_seed(run_seed, c) for c in (1, 2, 1000)]
+    assert all(0 <= s <= SEED_MAX for s in seeds) and len(set(seeds)) == 3
+    if run_seed * 100003 + 1000 <= SEED_MAX:
+        assert seeds == [run_seed * 100003 + c for c in (1, 2, 1000)]
+    grid = OccupancyGrid(np.zeros((20, 20), dtype=bool), 1.0)
+    problem = PlanningProblem(grid=grid, start=(2.0, 2.0), goal=(15.0, 15.0), start_heading=None, field=None)
+    result = make_planner("rrt-star", PlannerParams(seed=seeds[-1])).solve(problem, Termination.iterations(50))
+    assert result.status != "none"

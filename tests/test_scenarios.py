@@ -182,3 +182,16 @@ def test_random_spec_needs_table(tmp_path):
     path.write_text('name = "r"\ndescription = "x"\nkind = "random"\n')
     with pytest.raises(ConfigError, match="random"):
         scenarios.load_spec(str(path))
+
+
+@pytest.mark.parametrize("key", ["start", "goal"])
+def test_a_fixed_scenario_without_start_or_goal_says_so(tmp_path, key):
+    """A forgotten `goal` was read as (0, 0): 'goal: (0.0, 0.0) m is inside an obstacle' on this map, and a
+    run to the map's corner where (0, 0) is open water. It is a missing key (random scenarios draw both)."""
+    import re
+
+    path = tmp_path / "t.toml"
+    path.write_text(re.sub(rf"(?m)^{key} = .*\n", "", BASE))
+    with pytest.raises(ConfigError, match=f"{key}: missing key") as err:
+        scenarios.load_spec(str(path))
+    assert "\n" not in str(err.value)

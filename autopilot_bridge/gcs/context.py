@@ -47,6 +47,23 @@ def text_of(v: Any) -> str:
     return (v.decode(errors="replace") if isinstance(v, (bytes, bytearray)) else str(v)).rstrip("\x00")
 
 
+STATUSTEXT_BYTES = 50          # the text field of STATUSTEXT
+STATUSTEXT_MAX_CHUNKS = 8      # a text of up to 400 bytes arrives whole
+
+
+def _utf8_chunks(text: str, size: int) -> list[bytes]:
+    """``text`` as UTF-8 pieces of at most ``size`` bytes, never splitting a character."""
+    chunks, cur = [], b""
+    for ch in text:
+        b = ch.encode()
+        if len(cur) + len(b) > size:
+            chunks.append(cur)
+            cur = b""
+        cur += b
+    chunks.append(cur)
+    return chunks
+
+
 class Outbox:
     """Encodes messages with the vessel's ids and sends each frame to every transport and to the recorder."""
 
@@ -61,6 +78,7 @@ class Outbox:
         self.commands: Counter[str] = Counter()        # "MAV_CMD_...:MAV_RESULT_..." of every COMMAND_ACK sent
         self.command_acks: Counter[str] = Counter()    # COMMAND_ACKs sent, by MAV_RESULT (refusals included)
         self.mission_acks: Counter[str] = Counter()    # MISSION_ACKs sent, by MAV_MISSION_RESULT
+        self._statustext_id = 0                        # id of the last chunked STATUSTEXT (1-65535)
 
     def record(self, data: bytes) -> None:
         """Copy a frame to the recorder only (inbound frames that passed the security gate)."""
@@ -90,7 +108,19 @@ class Outbox:
             self.mission_acks[enum_name("MAV_MISSION_RESULT", args[2])] += 1
 
     def statustext(self, text: str, severity: int = M.MAV_SEVERITY_INFO) -> None:
-        self.send("statustext", severity, text[:50].encode())
+        """One STATUSTEXT, or for a text over its 50 bytes MAVLink 2 chunks that ground stations join
+        (same non-zero ``id``, ``chunk_seq`` 0, 1, ...; the last shorter than 50 bytes, else an empty
+        NUL-terminated one follows), at most ``STATUSTEXT_MAX_CHUNKS``."""
+        data = text.encode()
+        if len(data) <= STATUSTEXT_BYTES:
+            self.send("statustext", severity, data)
+            return
+        chunks = _utf8_chunks(text, STATUSTEXT_BYTES)[:STATUSTEXT_MAX_CHUNKS]
+        if len(chunks[-1]) == STATUSTEXT_BYTES and len(chunks) < STATUSTEXT_MAX_CHUNKS:
+            chunks.append(b"")
+        self._statustext_id = self._statustext_id % 0xFFFF + 1
+        for seq, chunk in enumerate(chunks):
+            self.send("statustext", severity, chunk, self._statustext_id, seq)
 
     def close(self) -> None:
         if self.mirror is not None:

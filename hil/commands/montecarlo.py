@@ -9,6 +9,7 @@ from pathlib import Path
 
 from hil import console, executors
 from hil.errors import RunFailed, UsageError
+from hil.files import check_output_folder
 from hil.scenario_names import available as scenario_names
 from planner.params import ALGORITHM_NAMES
 
@@ -119,6 +120,7 @@ def run_traffic(args: argparse.Namespace) -> int:
     if spec.kind != "fixed":
         raise UsageError(f"--traffic needs a fixed scenario (its route is the USV's voyage); {spec.name!r} is random")
     out = args.out or Path("runs") / f"montecarlo-traffic-{spec.name}-s{args.seed}"
+    check_output_folder(out, "--out")
     draw = TrafficDraw(ships=args.ships, bearing=args.bearing, speed=args.speed, miss=args.miss,
                        cruise_speed=cfg.autopilot.cruise_speed)
     bar = console.ProgressBar(args.runs, "montecarlo traffic", every_s=2.0)
@@ -155,6 +157,7 @@ def run_routes(args: argparse.Namespace, argv_scenario: str | None) -> int:
         raise UsageError("--duration must be > 0")
     cfg = console.load_settings(args)
     out = args.out or Path("runs") / f"montecarlo-routes-{spec.name}-s{args.seed}"
+    check_output_folder(out, "--out")
     bar = console.ProgressBar(args.runs, "montecarlo routes", every_s=2.0)
     ok = [0]
 
@@ -170,7 +173,8 @@ def run_routes(args: argparse.Namespace, argv_scenario: str | None) -> int:
         summary = run_campaign(name, args.runs, args.seed, out, ex, cfg.planner.safety_radius, cfg.current, job,
                                progress)
     return _finish(args, out, summary, t0,
-                   f"routes: {summary['reached_without_collision']}/{args.runs} reached the goal without collision "
+                   f"routes: {summary['reached_without_collision']}/{summary['runs_done']} reached the goal without "
+                   f"collision "
                    f"(success rate {summary['success_rate']:.3f}); outcomes {summary['outcomes']}")
 
 
@@ -179,8 +183,12 @@ def _finish(args: argparse.Namespace, out: Path, summary: dict, t0: float, line:
     summary["wall_time_s"] = round(time.monotonic() - t0, 1)
     summary["files"] = {"runs": str(out / "runs.csv"), "summary": str(out / "summary.json")}
     (out / "summary.json").write_text(console.to_json(summary))
-    console.progress(line)
     console.emit(args, summary)
+    if summary.get("interrupted"):
+        console.progress(f"interrupted: kept the {summary['runs_done']} of {summary['runs']} runs that finished "
+                         f"(runs.csv, summary.json in {out}); over them, {line}")
+        return 130
+    console.progress(line)
     return 0
 
 
@@ -213,6 +221,7 @@ def run(args: argparse.Namespace) -> int:
         experiment.scenario_instance(args.scenario, args.seed, 0, args.config, tuple(args.overrides))
 
     out = args.out or Path("runs") / f"montecarlo-{spec.name}-s{args.seed}"
+    check_output_folder(out, "--out")
     out.mkdir(parents=True, exist_ok=True)
     tasks = experiment.make_tasks(args.scenario, args.runs, args.algorithms, args.seed, online_ov, args.config,
                                   args.overrides, args.figure_runs, args.baseline_objective)

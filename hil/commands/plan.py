@@ -9,8 +9,9 @@ from pathlib import Path
 
 from hil import console
 from hil.errors import UsageError
+from hil.files import PLOT_SUFFIXES, check_output_file
 from hil.scenario_names import available as scenario_names
-from planner.params import ALGORITHM_NAMES
+from planner.params import ALGORITHM_NAMES, SEED_MAX
 
 ALGORITHMS = ALGORITHM_NAMES
 
@@ -28,14 +29,25 @@ def _point(text: str) -> tuple[float, float]:
     return x, y
 
 
+def _angle(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an angle in radians, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite angle in radians, got {text!r}")
+    return value
+
+
 def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "plan", parents=parents,
         help="plan one path on a map or a scenario (RRT*, Informed-RRT*, DDRRT*)",
         description="Plan one path from --start to --goal on an occupancy map (x east, y north, metres; "
                     "map row 0 at y = 0) or on a scenario of configs/scenarios/. Obstacles are inflated by "
-                    "the [planner] safety_radius (or --inflate). Exit 0 with a path, 1 when no path was "
-                    "found within the budget, 2 on bad input.",
+                    "the [planner] safety_radius (or --inflate). Exit 0 with a path to the goal, 1 when none "
+                    "was found within the budget (status 'approximate': the path to the node closest to the "
+                    "goal, still printed; or 'none'), 2 on bad input.",
     )
     src = p.add_argument_group("problem (either --scenario or --map/--resolution/--start/--goal)")
     src.add_argument("--scenario", metavar="NAME",
@@ -46,7 +58,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     src.add_argument("--resolution", metavar="R", type=float, help="map cell size (m per cell, > 0)")
     src.add_argument("--start", metavar="X,Y", type=_point, help="start position (m, map frame)")
     src.add_argument("--goal", metavar="X,Y", type=_point, help="goal position (m, map frame)")
-    src.add_argument("--heading", metavar="RAD", type=float, default=None,
+    src.add_argument("--heading", metavar="RAD", type=_angle, default=None,
                      help="start heading (rad, counter-clockwise from east); enables the turning-radius fan at the "
                           "root (default: the scenario's, none with --map)")
     alg = p.add_argument_group("planner")
@@ -95,6 +107,20 @@ def _problem_inputs(args: argparse.Namespace):
     return occ, args.resolution, args.start, args.goal, args.heading, None, {}, args.map.name
 
 
+def _ddrrt_hint(params, result, grid) -> str | None:
+    """Why DDRRT* failed where the ESD test threw away most samples, and what to use instead."""
+    if params.algorithm != "ddrrt-star" or result.status == "exact" or not result.iterations:
+        return None
+    if result.samples_rejected < 0.5 * result.iterations:
+        return None
+    # eq. (11) at its largest (alpha_y = 0)
+    esd_max = params.d_alpha * params.dynamic_domain_radius / (1.0 + math.exp(-1.0))
+    return (f"DDRRT* rejected {result.samples_rejected} of {result.iterations} samples by its ESD test (a sample "
+            f"farther than at most {esd_max:.0f} m from the tree, eq. (11)): it is the paper's local planner for a "
+            f"{params.perceptual_radius:g} m perceptual domain, not for a {grid.width:g} m x {grid.height:g} m map; "
+            f"use --algorithm rrt-star or informed-rrt-star there")
+
+
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
@@ -113,14 +139,16 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--iterations must be >= 0")
     if args.inflate is not None and not (args.inflate >= 0):
         raise UsageError("--inflate must be >= 0 m")
+    if args.plot is not None:
+        check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
     settings = console.load_settings(args)
     occ, res, start, goal, heading, sc, overrides, label = _problem_inputs(args)
     params = scenarios.planner_params(scenarios.base_planner_params(settings), overrides,
                                       f"scenario {label}")
     params = scenarios.with_overrides(params, algorithm=args.algorithm, objective=args.objective, seed=args.seed,
                                       safety_radius=args.inflate)
-    if params.seed < 0:
-        raise UsageError("--seed must be >= 0")
+    if not 0 <= params.seed <= SEED_MAX:
+        raise UsageError(f"--seed must be in 0..{SEED_MAX} (the planner's generator holds a signed 64-bit integer)")
     raw = OccupancyGrid(occ, res)
     for what, pt in (("--start", start), ("--goal", goal)):
         if not raw.contains(*pt):
@@ -134,6 +162,11 @@ def run(args: argparse.Namespace) -> int:
                          f"before the clock started")
     t_setup = time.monotonic()
     grid = raw.inflate(params.safety_radius) if params.safety_radius > 0 else raw
+    for what, pt in (("--start", start), ("--goal", goal)):
+        if not grid.is_free(*pt):  # the planner neither starts nor ends in the inflated map's obstacles
+            raise UsageError(f"{what} {pt[0]:g},{pt[1]:g}: within the {params.safety_radius:g} m safety margin of an "
+                             f"obstacle or the map edge (the map inflated by [planner] safety_radius); move it "
+                             f"or lower --inflate")
     free_regions(grid)  # labelled once here (cached on the grid), not inside the search budget
     field = sc.planning_field() if (sc is not None and params.objective == "current") else None
     problem = PlanningProblem(grid=grid, start=tuple(start), goal=tuple(goal), start_heading=heading, field=field)
@@ -166,6 +199,10 @@ def run(args: argparse.Namespace) -> int:
         "tree_size": int(len(result.tree_nodes)),
         "samples_rejected": result.samples_rejected,
     }
+    hint = _ddrrt_hint(params, result, raw)
+    if hint:
+        summary["hint"] = hint
+        console.progress(f"hil plan: hint: {hint}")
     if args.tree:
         summary["tree_nodes"] = np.asarray(result.tree_nodes).tolist()
         summary["tree_parents"] = np.asarray(result.tree_parents).tolist()
@@ -177,4 +214,4 @@ def run(args: argparse.Namespace) -> int:
         summary["plot"] = str(args.plot)
         console.progress(f"hil plan: plot written to {args.plot}")
     console.emit(args, summary)
-    return 0 if result.status != "none" else 1
+    return 0 if result.status == "exact" else 1   # 'approximate' stops short of the goal

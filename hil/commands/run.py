@@ -129,6 +129,7 @@ def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
     from pathlib import Path
 
     from hil import scenario as scenarios
+    from hil.files import check_output_folder
     from hil.hilrun import REPO, RunOptions, run_loop
 
     spec = scenarios.load_spec(args.scenario)  # one-line error on an unknown or bad scenario
@@ -138,6 +139,7 @@ def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
     seed = cfg.sim.seed if args.seed is None else args.seed
     stamp = time.strftime('%Y%m%d-%H%M%S')
     out = Path(args.out) if args.out else REPO / "runs" / f"{scenarios.folder_name(spec)}-seed{seed}-{stamp}"
+    check_output_folder(out, "--out")
     overrides = list(args.overrides)
     if args.algorithm:
         overrides.append(f"planner.algorithm={json.dumps(args.algorithm)}")

@@ -10,6 +10,7 @@ from hil import soak
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, UsageError
+from hil.files import check_output_folder
 
 LOOP_RATE_HZ = 100.0  # the HIL loop commands the thrusters once per IMU frame (sensors.imu.rate_hz)
 
@@ -69,6 +70,8 @@ def run(args: argparse.Namespace) -> int:
     args.overrides = list(args.overrides) + can_overrides(args)
     cfg = load_settings(args)
     check_can(cfg, "hil soak")
+    if args.out:
+        check_output_folder(args.out, "--out")
     with tempfile.TemporaryDirectory(prefix="hil-soak-") as tmp:
         out = Path(args.out) if args.out else Path(tmp)
         out.mkdir(parents=True, exist_ok=True)
