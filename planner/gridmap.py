@@ -32,9 +32,8 @@ def _png_levels(p: Path) -> np.ndarray:
                 raise MapError(f"{p}: not a readable PNG: a {im.format} image")
             if im.mode.startswith("I;16"):
                 return np.asarray(im, dtype=np.float64) / 65535.0
-            if im.mode not in ("L", "RGB", "RGBA"):
-                im = im.convert("RGBA")
-            return np.asarray(im, dtype=np.float64) / 255.0
+            rgba = im if im.mode in ("L", "RGB", "RGBA") else im.convert("RGBA")
+            return np.asarray(rgba, dtype=np.float64) / 255.0
     except (UnidentifiedImageError, ValueError, OSError, SyntaxError) as exc:
         raise MapError(f"{p}: not a readable PNG: {exc}") from None
 
