@@ -4,6 +4,7 @@ in-process (hil.cli.main); the test tiers."""
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -74,6 +75,12 @@ TIERS = ("unit", "integration", "e2e")
 
 
 def pytest_configure(config: pytest.Config) -> None:
+    # A suite started as a background job of a non-interactive shell (`cmd &`) has SIGINT ignored, and
+    # an ignored signal stays ignored across exec: every `hil` subprocess would then ignore the Ctrl-C
+    # that the interrupt tests send. Python's own handler is reset by exec, so the children start with
+    # SIGINT as a terminal gives it.
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     for tier, what in zip(TIERS, ("in-process, no sockets or subprocesses",
                                   "one component over real sockets, subprocesses or buses",
                                   "whole HIL runs, ground-station sessions, User-Mode Linux"), strict=True):
