@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from autopilot_bridge.angles import wrap_angle
 from autopilot_bridge.behaviour import STATION, Behaviour, BehaviourMachine
 from autopilot_bridge.computer_setup import AutopilotStats, ComputerConfig, Devices, RunOptions
 from autopilot_bridge.control import (
@@ -554,6 +555,8 @@ class Autopilot:
             if g.curvature_ahead > 1e-6:
                 u_ref = min(u_ref, max(self.p.min_turn_speed, self.p.max_turn_rate / g.curvature_ahead))
             u_ref = min(u_ref, self._near_obstacle_speed(s))
+            if abs(wrap_angle(psi_ref - s.psi)) > self.p.turn_in_place_angle:
+                u_ref = min(u_ref, self.p.min_turn_speed)   # the turning circle shrinks with the speed
             if g.remaining < 2.0 * self.p.lookahead and self.los.path[-1].tolist() == list(self.goal_ned):
                 u_ref = max(0.5, self.speed_setpoint() * g.remaining / (2.0 * self.p.lookahead))
         else:

@@ -22,6 +22,10 @@ class AutopilotParams:
     lookahead: float = param("line-of-sight look-ahead distance", "m", gt=0)
     max_turn_rate: float = param("speed is reduced so that sharp turns ahead need at most this yaw rate", "rad/s", gt=0)
     min_turn_speed: float = param("lowest speed of that reduction (steerage way)", "m/s", gt=0)
+    turn_in_place_angle: float = param(
+        "a heading error above this turns the boat at min_turn_speed, not at cruise: a new path that starts "
+        "behind the boat is a tight turn, not a wide one (ArduPilot Rover likewise slows for its turns)", "rad",
+        gt=0, le=3.1416)
     slow_clearance: float = param(
         "closer than this to an obstacle the speed set-point falls linearly, to min_turn_speed at the planner's "
         "safety radius: path-following error grows with speed, and the margin there is what is left", "m", gt=0)
