@@ -42,7 +42,6 @@ from typing import Any
 
 import numpy as np
 
-from autopilot_bridge.angles import wrap_angle
 from autopilot_bridge.behaviour import STATION, Behaviour, BehaviourMachine
 from autopilot_bridge.computer_setup import AutopilotStats, ComputerConfig, Devices, RunOptions
 from autopilot_bridge.control import (
@@ -51,6 +50,7 @@ from autopilot_bridge.control import (
     Thrust,
     allocate,
     clearance_speed_cap,
+    heading_error_speed_cap,
 )
 from autopilot_bridge.guidance import GuidanceOutput, LineOfSight
 from autopilot_bridge.hil_link import RangeScan, SensorFrame
@@ -555,8 +555,8 @@ class Autopilot:
             if g.curvature_ahead > 1e-6:
                 u_ref = min(u_ref, max(self.p.min_turn_speed, self.p.max_turn_rate / g.curvature_ahead))
             u_ref = min(u_ref, self._near_obstacle_speed(s))
-            if abs(wrap_angle(psi_ref - s.psi)) > self.p.turn_in_place_angle:
-                u_ref = min(u_ref, self.p.min_turn_speed)   # the turning circle shrinks with the speed
+            u_ref = min(u_ref, heading_error_speed_cap(psi_ref - s.psi, self.p.turn_in_place_angle,
+                                                        self.p.min_turn_speed, math.inf))
             if g.remaining < 2.0 * self.p.lookahead and self.los.path[-1].tolist() == list(self.goal_ned):
                 u_ref = max(0.5, self.speed_setpoint() * g.remaining / (2.0 * self.p.lookahead))
         else:

@@ -145,6 +145,13 @@ def clearance_speed_cap(clearance: float, inner: float, outer: float, v_min: flo
     return v_min + f * (v_max - v_min)
 
 
+def heading_error_speed_cap(error: float, angle: float, v_min: float, v_max: float) -> float:
+    """Speed cap (m/s) for a heading error of ``error`` rad (any multiple of 2 pi): ``v_max`` within
+    ``angle`` rad, ``v_min`` beyond it, where the boat must turn sharply and the turning circle
+    shrinks with the speed (u / r at the yaw rate the thrusters give)."""
+    return v_max if abs(wrap_angle(error)) <= angle else v_min
+
+
 def normalise(thrust: float, t_max: float, t_min: float) -> float:
     """Thrust (N) to the simulator's command in [-1, 1] (u >= 0: u T_max; u < 0: |u| T_min)."""
     if thrust >= 0.0:

@@ -188,3 +188,10 @@ def test_the_nominal_surge_model_from_the_configuration_is_the_simulators_hull()
     truth = Vessel(hull)
     assert nominal.m11 == pytest.approx(truth.m11, rel=1e-12)
     assert nominal.m22 == pytest.approx(truth.m22, rel=1e-12)
+
+
+@pytest.mark.parametrize("error, cap", [(0.0, 1.5), (0.78, 1.5), (-0.78, 1.5), (0.80, 0.6), (-2.5, 0.6), (3.1, 0.6),
+                                        (2.0 * math.pi - 0.1, 1.5), (-2.0 * math.pi + 0.1, 1.5)])
+def test_a_heading_error_beyond_the_angle_turns_at_steerage_way(error, cap):
+    from autopilot_bridge.control import heading_error_speed_cap
+    assert heading_error_speed_cap(error, 0.785, 0.6, 1.5) == cap
