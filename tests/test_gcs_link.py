@@ -67,13 +67,19 @@ def closing():
         it.close()
 
 
-def test_udpout_reaches_a_listening_gcs_without_it_talking_first(closing):
+def _listening_gcs_and_udpout_link(closing):
+    """A ground station's socket bound on a free loopback port, and a link sending to it (udpout)."""
     port = free_udp_port()
     gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     closing(gcs)
     gcs.bind(("127.0.0.1", port))
     link = GcsLink(params(f"udpout:127.0.0.1:{port}"), 1, 1, GEO)
     closing(link)
+    return gcs, link
+
+
+def test_udpout_reaches_a_listening_gcs_without_it_talking_first(closing):
+    gcs, link = _listening_gcs_and_udpout_link(closing)
     link.heartbeat()
     hb = read_until(gcs, "HEARTBEAT", link)
     assert hb is not None and hb.type == M.MAV_TYPE_SURFACE_BOAT and hb.get_srcSystem() == 1
@@ -292,12 +298,7 @@ def test_a_long_statustext_arrives_whole_in_chunks(closing):
     """STATUSTEXT holds 50 characters; a longer text (a refused mission item's reason) goes out in MAVLink 2
     chunks (same non-zero id, chunk_seq 0, 1, ..., the last one shorter than 50 or NUL-terminated) that a
     ground station joins, instead of being cut after 50 characters. A short one is one message, id 0."""
-    port = free_udp_port()
-    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    closing(gcs)
-    gcs.bind(("127.0.0.1", port))
-    link = GcsLink(params(f"udpout:127.0.0.1:{port}"), 1, 1, GEO)
-    closing(link)
+    gcs, link = _listening_gcs_and_udpout_link(closing)
     long = "mission item 1 rejected: waypoint 2000 m north is off the chart (0-150)"
     exact = "x" * 100                                   # a multiple of 50: a NUL-terminated empty chunk ends it
     for text in ("armed", long, exact, long):
