@@ -80,8 +80,10 @@ def run(args: argparse.Namespace) -> int:
     if args.duration <= 0 or args.realtime_duration < 0 or args.sim_steps < 0:
         raise UsageError("--duration must be > 0, --realtime-duration and --sim-steps >= 0")
     cfg = load_settings(args)
+    from common.mavlink import CRC_BACKEND
+
     result: dict = {"scenario": args.scenario, "goal_p99_ms": 2.0,
-                    "goal_lockstep_steps_per_s": GOAL_LOCKSTEP_STEPS_PER_S}
+                    "goal_lockstep_steps_per_s": GOAL_LOCKSTEP_STEPS_PER_S, "mavlink_crc": CRC_BACKEND}
     sim_alone = None
     if args.sim_steps > 0:
         from hil.benches.sim import bench_lockstep

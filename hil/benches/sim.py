@@ -88,6 +88,8 @@ def bench_lockstep(args: argparse.Namespace, cfg, n: int) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    from common.mavlink import CRC_BACKEND
+
     cfg = load_settings(args)
     progress(f"bench sim: RK4 model, {args.model_steps} steps")
     model = bench_model(cfg, args.model_steps)
@@ -105,6 +107,7 @@ def run(args: argparse.Namespace) -> int:
         "lockstep_times_real_time": lock["steps_per_s"] / rate,
         "goal_lockstep_steps_per_s": GOAL_LOCKSTEP_STEPS_PER_S,
         "goal_met": lock["steps_per_s"] >= GOAL_LOCKSTEP_STEPS_PER_S,
+        "mavlink_crc": CRC_BACKEND,
     }
     emit(args, summary)
     return 0
