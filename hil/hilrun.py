@@ -141,6 +141,10 @@ class HilRun:
             self.scen.traffic = tuple(opts.traffic)
         self.out = opts.out
         self.out.mkdir(parents=True, exist_ok=True)
+        # A reused run folder: the processes' logs of this run start empty (_spawn), and the logs
+        # of an earlier run's simulator restarts, which this run may not have, go.
+        for stale in self.out.glob("sim-restart*.log"):
+            stale.unlink(missing_ok=True)
         self.geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
         from hil.encounter_report import EncounterJudge
 
@@ -217,7 +221,7 @@ class HilRun:
         return args
 
     def _spawn(self, cmd: list[str], name: str, pass_fds: tuple[int, ...] = ()) -> subprocess.Popen:
-        log = open(self.out / f"{name}.log", "ab")
+        log = open(self.out / f"{name}.log", "wb")  # one process per name in a run
         return processes.start(cmd, stdout=subprocess.PIPE, stderr=log, cwd=REPO, start_new_session=True,
                                pass_fds=pass_fds)
 

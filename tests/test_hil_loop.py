@@ -81,6 +81,19 @@ def test_tlog_is_readable_by_pymavlink(hil, tmp_path):
             "HEARTBEAT"} <= kinds
 
 
+def test_a_reused_run_folder_holds_only_the_new_runs_logs(hil, tmp_path):
+    """`hil run --out DIR` twice: each process log holds one run (they used to be appended to), and
+    an earlier run's simulator-restart log, which the new run did not have, is gone."""
+    _run(hil, tmp_path, "--scenario", "harbour", "--duration", "2")
+    (tmp_path / "run" / "sim-restart1.log").write_text("sim: an earlier run's restart\n")
+    _run(hil, tmp_path, "--scenario", "harbour", "--duration", "2")
+    sim_log = (tmp_path / "run" / "sim.log").read_text()
+    ap_log = (tmp_path / "run" / "autopilot.log").read_text()
+    assert sim_log.count("sim: commands on") == 1, sim_log
+    assert ap_log.count("autopilot: listening on") == 1, ap_log
+    assert not (tmp_path / "run" / "sim-restart1.log").exists()
+
+
 def test_unknown_scenario_is_one_line_exit_2(hil):
     r = hil("run", "--scenario", "atlantis", timeout=60)
     assert r.returncode == 2
