@@ -59,6 +59,9 @@ class AutopilotParams:
     send_loss: float = param("fault injection: probability of dropping an outgoing HIL datagram", ge=0, le=1)
     recv_loss: float = param("fault injection: probability of dropping an incoming HIL datagram", ge=0, le=1)
     sim_restart_gap: float = param("sensor time going back by more than this means the simulator restarted", "s", gt=0)
+    lockstep_busy_poll: float = param(
+        "lockstep: wait for the next sensor frame polling the socket this long before sleeping on it "
+        "(common.udp.BusyPoll; 0 = sleep at once)", "s", ge=0, le=0.1)
     mission_done: Literal["loiter", "hold"] = param(
         "after the final goal: loiter (hold position at the goal, as ArduPilot boats do in LOITER) or hold "
         "(thrusters off, drift)", default="loiter")

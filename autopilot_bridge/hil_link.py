@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from autopilot_bridge.ais_tracking import AisReport
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE, Codec
-from common.udp import UdpEndpoint
+from common.udp import BusyPoll, UdpEndpoint
 
 TAKEN = ("HIL_SENSOR", "HIL_GPS", "ODOMETRY", "OBSTACLE_DISTANCE", "HIL_STATE_QUATERNION", "AIS_VESSEL")
 UINT16_MAX = 65535
@@ -94,12 +94,15 @@ class HilLink:
                  system_id: int = 1, component_id: int = 1, send_loss: float = 0.0, recv_loss: float = 0.0,
                  loss_seed: int = 0, extra_destinations: tuple[str, ...] = (), truth_component_id: int = 52,
                  sim_ids: tuple[int, int] | None = None, sensors_from: str | None = None,
-                 max_time_step: float = 1.0) -> None:
+                 max_time_step: float = 1.0, busy_poll: float = 0.0) -> None:
         """``sim_ids``: (system, component) id of the simulator (None: any); ``sensors_from``:
         "HOST:PORT" of the simulator's socket (None: any address); ``max_time_step``: largest
-        forward step (s) of sensor time between consecutive accepted frames."""
+        forward step (s) of sensor time between consecutive accepted frames; ``busy_poll``: (lockstep)
+        each wait for a frame polls the socket up to this long (s) before it sleeps."""
         self.ep = UdpEndpoint(listen, list(actuators_to) + list(extra_destinations),
                               send_loss=send_loss, recv_loss=recv_loss, loss_seed=loss_seed)
+        # lockstep: wait for the next frame polling the socket first (common.udp.BusyPoll)
+        self.busy = BusyPoll(busy_poll) if busy_poll > 0 else None
         if sensors_from:
             try:
                 self.ep.set_peer(sensors_from)
@@ -246,7 +249,7 @@ class HilLink:
 
     def receive(self, timeout: float) -> list[SensorFrame]:
         """Every sensor frame queued now (waiting up to ``timeout`` s for the first), oldest first."""
-        first = self.ep.recv(timeout=timeout)
+        first = self.ep.recv(timeout=timeout, poll=self.busy)
         if first is None:
             return []
         out = []
@@ -277,6 +280,7 @@ class HilLink:
         timeline switches (simulator restarts or long gaps accepted); with fault injection on, the
         datagrams it dropped on purpose each way."""
         out = {"rejects": dict(sorted(self.rejects.items())), "frames": self.frames,
+               "busy_poll": None if self.busy is None else self.busy.summary(),
                "truth_ignored": self.truth_ignored, "timeline_switches": self.timeline_switches,
                "sensors_from": None if self.ep.peer is None else f"{self.ep.peer[0]}:{self.ep.peer[1]}",
                **self.ep.counters()}

@@ -12,7 +12,7 @@ from collections.abc import Callable
 from typing import Any
 
 from common.percentiles import StreamingPercentiles
-from common.udp import UdpEndpoint
+from common.udp import BusyPoll, UdpEndpoint
 from simulator.core import OUT_OF_STEP, Command, SimulatorCore
 
 POLL_S = 0.05  # longest wait before the stop flag is looked at again (wall seconds)
@@ -26,9 +26,11 @@ class SimulatorServer:
     def __init__(self, core: SimulatorCore, endpoint: UdpEndpoint, *, lockstep: bool, duration: float,
                  speedup: float = 1.0, lockstep_resend: float = 1.0,
                  progress: Callable[[str], None] | None = None, progress_every_s: float = 5.0,
-                 esc: Any | None = None, can_lockstep_wait: float = 1.0, command_source: str | None = None) -> None:
+                 esc: Any | None = None, can_lockstep_wait: float = 1.0, command_source: str | None = None,
+                 busy_poll: float = 0.0) -> None:
         """``command_source``: None takes commands from any address, "HOST:PORT" only from there,
-        "learn" only from the address of the first valid command (docs/security.md)."""
+        "learn" only from the address of the first valid command (docs/security.md). ``busy_poll``:
+        lockstep waits for a command polling the socket up to this long (s) first (common.udp.BusyPoll)."""
         self.core, self.ep = core, endpoint
         self.learn_source = command_source == LEARN
         if command_source and not self.learn_source:
@@ -40,6 +42,7 @@ class SimulatorServer:
         self.mavlink_commands_ignored = 0
         self.lockstep, self.duration, self.speedup = lockstep, duration, speedup
         self.lockstep_resend = lockstep_resend
+        self.busy = BusyPoll(busy_poll) if lockstep and busy_poll > 0 else None
         self.progress, self.progress_every_s = progress, progress_every_s
         self.end_frame = int(round(duration / core.frame_dt)) if duration > 0 else None
         self.lockstep_resends = 0
@@ -98,7 +101,7 @@ class SimulatorServer:
         last_send = time.monotonic()
         while not self._done():
             wait = min(POLL_S, max(0.0, last_send + self.lockstep_resend - time.monotonic()))
-            data = self.ep.recv(timeout=wait)
+            data = self.ep.recv(timeout=wait, poll=self.busy)
             if data is None:
                 if time.monotonic() - last_send >= self.lockstep_resend:
                     self._publish(frame)  # the latest frame, unchanged: a lost datagram cannot deadlock
@@ -222,6 +225,7 @@ class SimulatorServer:
             "stale_command_events": c.stale_command_events,
             "stale_command_times_s": [round(t, 3) for t in c.stale_command_times],
             "lockstep_resends": self.lockstep_resends,
+            "busy_poll": None if self.busy is None else self.busy.summary(),
             "command_port": {"source": None if self.ep.peer is None else f"{self.ep.peer[0]}:{self.ep.peer[1]}",
                              "wrong_source_address": self.ep.wrong_source,
                              "wrong_source_id": c.rejects.get("wrong_source_id", 0),

@@ -63,7 +63,7 @@ UNIT_MODULES = frozenset("""
     run_plot scenarios sim_sensors sim_vessel sim_waves summaries tiers tracking_stats traffic_planning vehicle
 """.split())
 INTEGRATION_MODULES = frozenset("""
-    autopilot_link bench_frame bench_planner cli connection cpu_load executors gcs_esc_telemetry gcs_fuzz gcs_security
+    autopilot_link bench_frame bench_planner busy_poll cli connection cpu_load executors gcs_esc_telemetry gcs_fuzz gcs_security
     gcs_link gcs_mission montecarlo output plan_cli planner_warmup planning_worker range_sensing
     readme security_gates sim_link sim_udp startup_errors traffic_ais
 """.split())

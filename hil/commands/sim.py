@@ -153,7 +153,8 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(str(exc)) from None
     server = SimulatorServer(core, endpoint, lockstep=cfg.sim.lockstep, duration=cfg.sim.duration,
                              speedup=cfg.sim.speedup, lockstep_resend=cfg.sim.lockstep_resend, progress=progress,
-                             esc=esc, can_lockstep_wait=cfg.can.lockstep_wait, command_source=source)
+                             esc=esc, can_lockstep_wait=cfg.can.lockstep_wait, command_source=source,
+                             busy_poll=cfg.sim.lockstep_busy_poll)
     previous = {sig: signal.signal(sig, lambda *_: server.stop()) for sig in (signal.SIGINT, signal.SIGTERM)}
     host, port = endpoint.address
     mode = "lockstep" if cfg.sim.lockstep else f"real time x{cfg.sim.speedup:g}"

@@ -1,0 +1,81 @@
+"""common.udp.BusyPoll: lockstep waits poll their socket first, and stop polling while it catches nothing."""
+
+import socket
+import threading
+
+import pytest
+
+from common.udp import BusyPoll, UdpEndpoint
+
+
+def test_three_empty_polls_in_a_row_pause_polling_for_a_doubling_number_of_waits():
+    p = BusyPoll(0.001)
+    assert p.window() == 0.001
+    p.missed()
+    p.missed()
+    assert p.window() == 0.001          # two misses: still polling
+    p.missed()                          # the third in a row: a pause of FIRST_PAUSE waits
+    assert [p.window() for _ in range(BusyPoll.FIRST_PAUSE)] == [0.0] * BusyPoll.FIRST_PAUSE
+    assert p.window() == 0.001
+    for _ in range(3):
+        p.missed()
+    assert sum(p.window() == 0.0 for _ in range(4 * BusyPoll.FIRST_PAUSE)) == 2 * BusyPoll.FIRST_PAUSE
+    assert p.summary() == {"max_us": 1000.0, "caught": 0, "missed": 6, "pauses": 2}
+
+
+def test_a_catch_resets_the_run_of_misses_and_the_pause_length():
+    p = BusyPoll(0.002)
+    for _ in range(3):
+        p.missed()                      # pause 1: FIRST_PAUSE waits, the next one twice as long
+    for _ in range(BusyPoll.FIRST_PAUSE):
+        p.window()
+    p.missed()
+    p.missed()
+    p.caught()                          # breaks the run: two more misses do not pause
+    p.missed()
+    p.missed()
+    assert p.window() == 0.002
+    p.missed()                          # a new run of three: the pause is FIRST_PAUSE again, not doubled
+    assert sum(p.window() == 0.0 for _ in range(4 * BusyPoll.FIRST_PAUSE)) == BusyPoll.FIRST_PAUSE
+
+
+def test_pauses_are_capped():
+    p = BusyPoll(0.001)
+    for _ in range(20):
+        for _ in range(3):
+            p.missed()
+        while p.window() == 0.0:
+            pass
+    assert p._pause == BusyPoll.MAX_PAUSE
+
+
+def test_negative_window_is_refused():
+    with pytest.raises(ValueError):
+        BusyPoll(-1e-3)
+
+
+def test_recv_with_a_poll_returns_the_datagram_whichever_path_caught_it():
+    ep = UdpEndpoint("127.0.0.1:0")
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        poll = BusyPoll(2.0)
+        sender = threading.Thread(target=tx.sendto, args=(b"frame", ep.address))
+        sender.start()
+        assert ep.recv(timeout=10.0, poll=poll) == b"frame"
+        sender.join()
+        assert poll.hits + poll.misses == 1   # one wait: caught by polling, or by select after it
+    finally:
+        tx.close()
+        ep.close()
+
+
+def test_recv_with_a_poll_keeps_its_timeout_and_counts_the_miss():
+    ep = UdpEndpoint("127.0.0.1:0")
+    try:
+        poll = BusyPoll(0.5)
+        assert ep.recv(timeout=0.01, poll=poll) is None   # the poll is cut to the timeout
+        assert (poll.hits, poll.misses) == (0, 1)
+        assert ep.recv(timeout=0.0, poll=poll) is None    # no wait, no poll
+        assert (poll.hits, poll.misses) == (0, 1)
+    finally:
+        ep.close()
