@@ -31,6 +31,14 @@ def parse_hostport(text: str, role: Role = RECEIVE_UDP) -> tuple[str, int]:
     return parse(text, role).address
 
 
+def usable_cpus() -> int:
+    """The CPUs this process may run on (its affinity mask where the OS has one)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
 class BusyPoll:
     """How long to poll a socket in a busy loop before sleeping on it, adapted to what it catches.
 
@@ -44,8 +52,9 @@ class BusyPoll:
     A poll that ends empty is CPU taken from whatever else needs the cores (the tap, the planner
     worker, a second run); so after ``MISSES_BEFORE_PAUSE`` empty polls in a row the endpoint
     sleeps without polling for a pause that doubles each time (up to ``MAX_PAUSE`` waits) and is
-    reset by the first poll that catches something. Which path delivered a datagram changes nothing
-    in what is delivered: lockstep runs stay byte-identical.
+    reset by the first poll that catches something. A process that may use one CPU only never polls.
+    Which path delivered a datagram changes nothing in what is delivered: lockstep runs stay
+    byte-identical.
     """
 
     MISSES_BEFORE_PAUSE = 3
@@ -55,7 +64,8 @@ class BusyPoll:
     def __init__(self, max_s: float) -> None:
         if not max_s >= 0.0:
             raise ValueError(f"busy-poll window {max_s} s must be >= 0")
-        self.max_s = max_s
+        # On one core a poll only keeps the peer it waits for from running.
+        self.max_s = max_s if usable_cpus() >= 2 else 0.0
         self.hits = self.misses = self.pauses = 0
         self._misses_in_row = 0
         self._pause = self.FIRST_PAUSE

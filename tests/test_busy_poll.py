@@ -8,6 +8,13 @@ import pytest
 from common.udp import BusyPoll, UdpEndpoint
 
 
+@pytest.fixture(autouse=True)
+def _two_cpus(request, monkeypatch):
+    """Polling needs two CPUs (a process on one never polls): the policy tests assume them."""
+    if request.node.name != "test_a_process_on_one_cpu_never_polls":
+        monkeypatch.setattr("common.udp.usable_cpus", lambda: 2)
+
+
 def test_three_empty_polls_in_a_row_pause_polling_for_a_doubling_number_of_waits():
     p = BusyPoll(0.001)
     assert p.window() == 0.001
@@ -79,3 +86,13 @@ def test_recv_with_a_poll_keeps_its_timeout_and_counts_the_miss():
         assert (poll.hits, poll.misses) == (0, 1)
     finally:
         ep.close()
+
+
+def test_a_process_on_one_cpu_never_polls(monkeypatch):
+    import common.udp as udp
+
+    monkeypatch.setattr(udp, "usable_cpus", lambda: 1)
+    p = BusyPoll(0.001)
+    assert p.window() == 0.0 and p.summary()["max_us"] == 0.0
+    monkeypatch.setattr(udp, "usable_cpus", lambda: 2)
+    assert BusyPoll(0.001).window() == 0.001
