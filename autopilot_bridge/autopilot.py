@@ -672,6 +672,7 @@ class Autopilot:
                                               max=max(lat.max, 0.0), frames=lat.count),
             lockstep_planner_waits=self.stats.planner_waits,
             lockstep_planner_wait_ms_max=max(self.stats.planner_wait_ms, default=0.0),
+            lockstep_planner_wait_ms_total=round(sum(self.stats.planner_wait_ms), 3),
             events=tuple(f"{t:.2f}s {e}" for t, e in self.stats.events),
             can=self.actuators.summary() if self.actuators is not self.link else None,
             traffic=None if self.traffic is None else self.traffic.summary(),

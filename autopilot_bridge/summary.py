@@ -74,6 +74,7 @@ class AutopilotSummary:
     control_latency_ms: ControlLatency
     lockstep_planner_waits: int
     lockstep_planner_wait_ms_max: float
+    lockstep_planner_wait_ms_total: float   # wall time the loop stood still for the planner
     events: tuple[str, ...]              # "12.34s what happened"
     can: dict[str, Any] | None = absent_when_none()       # CAN actuators only (can_actuators.py)
     traffic: dict[str, Any] | None = None                 # traffic_awareness.py; None without traffic

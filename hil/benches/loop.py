@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -98,6 +99,12 @@ def run(args: argparse.Namespace) -> int:
                                    config=args.config, overrides=list(args.overrides), out=Path(tmp) / "lockstep",
                                    plot=False, on_progress=progress), cfg)
         result["lockstep"] = _leg(lock)
+        # The wall time the loop stood still for the planner (lockstep takes its answer at a fixed
+        # simulated time, so a slow cycle stops both processes): what it costs the speed above.
+        ap_file = Path(tmp) / "lockstep" / "autopilot.json"
+        if ap_file.exists():
+            waits_s = json.loads(ap_file.read_text()).get("lockstep_planner_wait_ms_total", 0.0) / 1e3
+            result["lockstep"]["planner_wait_s"] = round(waits_s, 3)
         if sim_alone:
             sps = result["lockstep"]["steps_per_wall_s"] or 0.0
             result["lockstep"]["ratio_to_simulator"] = round(sps / sim_alone, 3)
