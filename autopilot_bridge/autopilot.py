@@ -615,9 +615,7 @@ class Autopilot:
     def run(self, should_stop: Callable[[], bool], poll_s: float = 0.05) -> None:
         """Serve sensor frames until ``should_stop()``; the planner is watched between frames too."""
         while not should_stop():
-            # While the planner works, this process's core is the one it may use: no busy poll then
-            # (in lockstep both processes stand still while a late planner is waited for).
-            frames = self.link.receive(timeout=poll_s, poll=self.planning.pending_since is None)
+            frames = self.link.receive(timeout=poll_s)
             received_at = time.perf_counter()
             for f in frames:
                 try:

@@ -247,10 +247,9 @@ class HilLink:
             ranges.append(d * 0.01)
         return RangeScan(tuple(bearings), tuple(ranges), m.max_distance * 0.01, math.radians(inc))
 
-    def receive(self, timeout: float, poll: bool = True) -> list[SensorFrame]:
-        """Every sensor frame queued now (waiting up to ``timeout`` s for the first), oldest first;
-        ``poll``: the wait may busy-poll (when the link has a BusyPoll)."""
-        first = self.ep.recv(timeout=timeout, poll=self.busy if poll else None)
+    def receive(self, timeout: float) -> list[SensorFrame]:
+        """Every sensor frame queued now (waiting up to ``timeout`` s for the first), oldest first."""
+        first = self.ep.recv(timeout=timeout, poll=self.busy)
         if first is None:
             return []
         out = []
