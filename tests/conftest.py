@@ -56,15 +56,15 @@ def hil_main(capsys):
 # A new test module must be listed here: collection fails otherwise, so no test falls through.
 UNIT_MODULES = frozenset("""
     can_codec can_esc collision_cone colregs colregs_oracle config config_layers control current_field geodesy
-    global_route mavlink_crc mission_executor modes navigation navigation_fast online percentiles plan_commitment plan_start_course
-    readiness
+    global_route mavlink_crc mission_executor modes navigation navigation_fast online percentiles plan_commitment
+    plan_start_course readiness
     planner_algorithms planner_config planner_cost planner_dynamic_domain planner_gridmap
     planner_guidance planner_kgrowth planner_metrics planner_postprocess process_logging reactive route_planning
     run_plot scenarios sim_sensors sim_vessel sim_waves summaries tiers tracking_stats traffic_planning vehicle
 """.split())
 INTEGRATION_MODULES = frozenset("""
-    autopilot_link bench_frame bench_planner busy_poll cli connection cpu_load executors gcs_esc_telemetry gcs_fuzz gcs_security
-    gcs_link gcs_mission montecarlo output plan_cli planner_warmup planning_worker range_sensing
+    autopilot_link bench_frame bench_planner busy_poll cli connection cpu_load executors gcs_esc_telemetry gcs_fuzz
+    gcs_security gcs_link gcs_mission montecarlo output plan_cli planner_warmup planning_worker range_sensing
     readme security_gates sim_link sim_udp startup_errors traffic_ais
 """.split())
 E2E_MODULES = frozenset("""
