@@ -1,7 +1,6 @@
 """common.udp.BusyPoll: lockstep waits poll their socket first, and stop polling while it catches nothing."""
 
 import socket
-import threading
 
 import pytest
 
@@ -61,16 +60,23 @@ def test_negative_window_is_refused():
         BusyPoll(-1e-3)
 
 
-def test_recv_with_a_poll_returns_the_datagram_whichever_path_caught_it():
+def test_recv_polls_and_catches_a_datagram_that_arrives_after_its_first_read():
     ep = UdpEndpoint("127.0.0.1:0")
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+
+    class SendsWhenAsked(BusyPoll):
+        def window(self) -> float:
+            # recv asks for the window after its first read found nothing; a loopback datagram is
+            # queued when sendto returns, so the poll that follows is the path that reads it
+            tx.sendto(b"frame", ep.address)
+            return super().window()
+
     try:
-        poll = BusyPoll(2.0)
-        sender = threading.Thread(target=tx.sendto, args=(b"frame", ep.address))
-        sender.start()
+        poll = SendsWhenAsked(2.0)
         assert ep.recv(timeout=10.0, poll=poll) == b"frame"
-        sender.join()
-        assert poll.hits + poll.misses == 1   # one wait: caught by polling, or by select after it
+        assert (poll.hits, poll.misses) == (1, 0)
+        tx.sendto(b"queued", ep.address)
+        assert ep.recv(timeout=10.0, poll=BusyPoll(2.0)) == b"queued"   # already there: no poll at all
     finally:
         tx.close()
         ep.close()
