@@ -280,7 +280,6 @@ class HilLink:
         timeline switches (simulator restarts or long gaps accepted); with fault injection on, the
         datagrams it dropped on purpose each way."""
         out = {"rejects": dict(sorted(self.rejects.items())), "frames": self.frames,
-               "busy_poll": None if self.busy is None else self.busy.summary(),
                "truth_ignored": self.truth_ignored, "timeline_switches": self.timeline_switches,
                "sensors_from": None if self.ep.peer is None else f"{self.ep.peer[0]}:{self.ep.peer[1]}",
                **self.ep.counters()}

@@ -79,6 +79,7 @@ class AutopilotSummary:
     can: dict[str, Any] | None = absent_when_none()       # CAN actuators only (can_actuators.py)
     traffic: dict[str, Any] | None = None                 # traffic_awareness.py; None without traffic
     link: dict[str, Any] | None = absent_when_none()      # the HIL link's refusals (hil_link.py)
+    busy_poll: dict[str, Any] | None = absent_when_none()  # lockstep waits for frames (common.udp.BusyPoll)
     gcs: dict[str, Any] | None = absent_when_none()       # the ground-station link's counters
     local_paths: tuple[dict[str, Any], ...] | None = absent_when_none()
     estimated_track: tuple[tuple[float, ...], ...] | None = absent_when_none()   # (t s, north m, east m, psi rad)

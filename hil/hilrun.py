@@ -70,11 +70,12 @@ def startup_error(log: Path) -> str:
     return lines[-1].strip() if lines else ""
 
 
+LOCKSTEP_TAP_PERIOD_S = 0.01  # wall seconds between the tap's reads in lockstep
+
 # Summary keys whose values depend on the wall clock or on the host, not on the seed: what two
 # lockstep runs of the same seed may differ in. Counters read when the processes are stopped
 # (after the deciding sample, until the SIGTERM arrives), latencies, paths, and warnings about
 # other runs on this host (a system id in use).
-LOCKSTEP_TAP_PERIOD_S = 0.01  # wall seconds between the tap's reads in lockstep
 WALL_CLOCK_KEYS = frozenset({"wall_time_s", "control_latency_ms", "run_folder", "tlog", "plot", "simulator",
                              "tlog_messages", "navigation", "gcs", "sensed_obstacles", "security", "warnings"})
 
@@ -458,14 +459,14 @@ class HilRun:
         return self._summary(outcome, collision_at, min_clearance, wall, ap_summary, sim_summary, decided)
 
     @staticmethod
-    def _simulator_part(sim: dict, end_s: float, ap_link: dict | None = None) -> dict[str, Any]:
+    def _simulator_part(sim: dict, end_s: float, ap_busy_poll: dict | None = None) -> dict[str, Any]:
         """The simulator's counters for the run summary. Stale-command failsafes are those up to the
         run's judged end (s of simulated time); those after it, while the processes were being
         stopped, are counted apart (the simulator runs on in real time while the autopilot exits).
         ``busy_poll``: how each end's lockstep waits went (common.udp.BusyPoll; None where off)."""
         out = {k: sim.get(k) for k in ("steps", "commands_received", "malformed_dropped", "stale_command_events",
                                        "lockstep_resends", "jitter_ms", "stepping")}
-        out["busy_poll"] = {"simulator": sim.get("busy_poll"), "autopilot": (ap_link or {}).get("busy_poll")}
+        out["busy_poll"] = {"simulator": sim.get("busy_poll"), "autopilot": ap_busy_poll}
         times = sim.get("stale_command_times_s")
         if times is not None:
             after = sum(1 for t in times if t > end_s + 1e-9)
@@ -526,10 +527,10 @@ class HilRun:
             navigation=None if ap is None else ap.navigation,
             sensed_obstacles=None if ap is None else ap.sensed_obstacles,
             simulator=None if sim is None else self._simulator_part(sim, times[-1] * 1e-6 if times else 0.0,
-                                                                    None if ap is None else ap.link),
+                                                                    None if ap is None else ap.busy_poll),
             security=RunSecurity(
                 simulator=None if sim is None else {"rejects": sim.get("rejects"), **(sim.get("command_port") or {})},
-                autopilot=None if ap is None else {k: v for k, v in (ap.link or {}).items() if k != "busy_poll"},
+                autopilot=None if ap is None else ap.link,
                 autopilot_navigation_numeric={} if ap is None else
                 {k: v for k, v in ap.navigation.rejected.items() if k.startswith("numeric_")},
                 tap=self.tap.counters_at_close,

@@ -163,6 +163,7 @@ def run(args: argparse.Namespace) -> int:
     summary = replace(
         autopilot.summary(),
         link=link_summary,  # refusals by reason, source address, kernel drops (docs/security.md)
+        busy_poll=None if autopilot.link.busy is None else autopilot.link.busy.summary(),
         gcs=None if autopilot.telemetry is None else autopilot.telemetry.summary(),
         local_paths=tuple(autopilot.local_paths),
         estimated_track=tuple(map(tuple, np.frombuffer(autopilot.track, dtype=float).reshape(-1, 4).round(3).tolist())),
