@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from autopilot_bridge import guidance
 from autopilot_bridge.behaviour import STATION, Behaviour, BehaviourMachine
 from autopilot_bridge.computer_setup import AutopilotStats, ComputerConfig, Devices, RunOptions
 from autopilot_bridge.control import (
@@ -93,6 +94,7 @@ class Autopilot:
         self.lockstep, self.seed = options.lockstep, options.seed
         wait_for_arm, pace_speedup = options.wait_for_arm, options.pace_speedup
         self.log = log or _logger.info
+        guidance.warm_up()   # compiled before the first frame, not in it
         self.goal_ned = (world.goal[1], world.goal[0])
         self.reference_ned = map_to_ned_path(world.reference_path)
         from planner.gridmap import OccupancyGrid
