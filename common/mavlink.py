@@ -5,10 +5,16 @@ from 0, so a run is reproducible byte for byte) and decodes one UDP datagram at 
 messages it wants, reporting why anything else was rejected so that callers can count it.
 Each datagram is parsed on its own: a frame cut at the datagram's end is "truncated", never
 joined with the next datagram.
+
+The HIL loop's datagrams are clean (whole, unsigned MAVLink 2 frames with good checksums) and few
+kinds: :func:`parse_clean` and :meth:`Codec.encode` handle those without pymavlink's byte-stream
+parser and message objects, with the same bytes and messages; everything else goes to pymavlink.
 """
 
 from __future__ import annotations
 
+import inspect
+import struct
 from collections.abc import Callable, Iterable
 from typing import Any
 
@@ -127,6 +133,52 @@ def bad_data_reason(bad: mavlink2.MAVLink_bad_data) -> str:
     return MALFORMED
 
 
+class _Encoder:
+    """What pymavlink's ``<name>_encode`` and ``pack`` do for one message without text fields,
+    worked out once: the encode() arguments in wire order, arrays spread out, into the payload."""
+
+    __slots__ = ("msg_id", "crc_extra", "pack", "names", "defaults", "wire")
+
+    def __init__(self, cls: Any) -> None:
+        encode = getattr(mavlink2.MAVLink, f"{cls.msgname.lower()}_encode")
+        params = list(inspect.signature(encode).parameters.values())[1:]   # after self
+        self.msg_id, self.crc_extra, self.pack = cls.id, bytes((cls.crc_extra,)), cls.unpacker.pack
+        self.names = tuple(p.name for p in params)          # the declared order, encode()'s
+        self.defaults = tuple(p.default for p in params)    # extension fields default to 0
+        count = dict(zip(cls.ordered_fieldnames, cls.array_lengths, strict=True))
+        self.wire = tuple((self.names.index(n), count[n]) for n in cls.ordered_fieldnames)
+
+    def payload(self, args: tuple[Any, ...], kwargs: dict[str, Any]) -> bytes | None:
+        """The full (untrimmed) payload, or None where encode() would complain (pymavlink then says how)."""
+        if len(args) > len(self.names):
+            return None
+        values, taken = list(args), 0
+        for name, default in zip(self.names[len(args):], self.defaults[len(args):], strict=True):
+            if name in kwargs:
+                values.append(kwargs[name])
+                taken += 1
+            elif default is inspect.Parameter.empty:
+                return None
+            else:
+                values.append(default)
+        if taken != len(kwargs):
+            return None
+        flat: list[Any] = []
+        for i, n in self.wire:
+            v = values[i]
+            if n:
+                flat.extend([v[j] for j in range(n)])
+            else:
+                flat.append(v)
+        return self.pack(*flat)
+
+
+_ENCODERS = {cls.msgname.lower(): _Encoder(cls) for cls in mavlink2.mavlink_map.values()
+             if "s" not in cls.unpacker.format}
+_HEADER = struct.Struct("<BBBBBBBHB")
+_CRC = struct.Struct("<H")
+
+
 class Codec:
     """Encoder/decoder for one MAVLink endpoint (system id, component id, accepted message types)."""
 
@@ -143,8 +195,32 @@ class Codec:
         return bytes(buf)
 
     def encode(self, name: str, *args, **kwargs) -> bytes:
-        """Frame of message ``name`` (e.g. ``"hil_sensor"``) built from its encode() arguments."""
+        """Frame of message ``name`` (e.g. ``"hil_sensor"``) built from its encode() arguments.
+
+        Unsigned messages without text fields are framed here, byte for byte as pymavlink frames
+        them (tests/test_mavlink_fast_path.py), without building a message object: a third of the
+        cost. Anything else, or arguments encode() would refuse, goes through pymavlink."""
+        enc = _ENCODERS.get(name)
+        if enc is not None and _mcrf4xx is not None and not self.mav.signing.sign_outgoing:
+            try:
+                payload = enc.payload(args, kwargs)
+            except (IndexError, TypeError, KeyError, struct.error):
+                payload = None
+            if payload is not None:
+                return self._frame(enc, payload)
         return self.pack(getattr(self.mav, f"{name}_encode")(*args, **kwargs))
+
+    def _frame(self, enc: _Encoder, payload: bytes) -> bytes:
+        """pymavlink's MAVLink_message._pack for an unsigned MAVLink 2 frame; advances the sequence number."""
+        payload = payload.rstrip(b"\x00") or payload[:1]    # MAVLink 2 trims trailing zeros, keeps one byte
+        mav = self.mav
+        header = _HEADER.pack(_V2_STX, len(payload), 0, 0, mav.seq, mav.srcSystem, mav.srcComponent,
+                              enc.msg_id & 0xFFFF, enc.msg_id >> 16)
+        body = header + payload
+        assert _mcrf4xx is not None
+        frame = body + _CRC.pack(_mcrf4xx(body[1:] + enc.crc_extra))
+        mav.seq = (mav.seq + 1) % 256
+        return frame
 
     # -- decoding --------------------------------------------------------------------------
     def _reset_parser(self) -> None:

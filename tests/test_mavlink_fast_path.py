@@ -1,6 +1,8 @@
-"""common.mavlink.parse_clean: the one-pass parser of clean datagrams gives what pymavlink's parser
-gives, message for message, on every message of the dialect with random fields, and any datagram
-it does not take (corrupt, signed, MAVLink 1, unknown ids) is left to pymavlink, which names the fault."""
+"""common.mavlink's short cuts past pymavlink. parse_clean, the one-pass parser of clean datagrams,
+gives what pymavlink's parser gives, message for message, on every message of the dialect with
+random fields, and any datagram it does not take (corrupt, signed, MAVLink 1, unknown ids) is left
+to pymavlink, which names the fault. Codec.encode frames every message without text fields byte
+for byte as pymavlink does, and refuses what pymavlink refuses."""
 
 from __future__ import annotations
 
@@ -159,3 +161,45 @@ def test_a_codec_that_checks_signatures_never_takes_the_shortcut(key: bytes) -> 
     assert parse_clean(data) is not None            # a clean frame, but unsigned
     msgs, rejects = rx.decode(data)
     assert msgs == [] and rejects == ["malformed"]  # "Invalid signature": refused as pymavlink refuses it
+
+
+def encode_args(rng: random.Random, cls: type) -> tuple[list, dict]:
+    """encode() arguments of a random ``cls``: positional, the last few as keywords, or extension
+    fields left to their defaults."""
+    m = random_message(rng, cls)
+    values = [getattr(m, n) for n in cls.fieldnames]
+    cut = rng.randrange(len(values) + 1)
+    args, kwargs = values[:cut], dict(zip(cls.fieldnames[cut:], values[cut:], strict=True))
+    if kwargs and rng.random() < 0.3:
+        kwargs.popitem()        # an extension field (or a required one: encode() must then refuse)
+    return args, kwargs
+
+
+def test_encode_frames_byte_for_byte_as_pymavlink_does() -> None:
+    rng = random.Random(13)
+    fast, slow = Codec(17, 42), Codec(17, 42)
+    framed = refused = 0
+    for _ in range(12):
+        for cls in mavlink2.mavlink_map.values():
+            args, kwargs = encode_args(rng, cls)
+            name = cls.msgname.lower()
+            try:
+                want = slow.pack(getattr(slow.mav, f"{name}_encode")(*args, **kwargs))
+            except Exception as exc:      # pymavlink refuses: so must encode(), the same way
+                with pytest.raises(type(exc)):
+                    fast.encode(name, *args, **kwargs)
+                fast.mav.seq = slow.mav.seq
+                refused += 1
+                continue
+            assert fast.encode(name, *args, **kwargs) == want, name
+            framed += 1
+    assert framed > 2000 and refused > 0 and fast.mav.seq == slow.mav.seq
+
+
+def test_signed_links_are_framed_by_pymavlink() -> None:
+    a, b = Codec(1, 1), Codec(1, 1)
+    for c in (a, b):
+        c.mav.signing.secret_key, c.mav.signing.sign_outgoing, c.mav.signing.timestamp = bytes(32), True, 5
+    frame = a.encode("hil_actuator_controls", 10, [0.5] * 16, 1, 0)
+    assert frame[2] == 0x01 and len(frame) == 12 + frame[1] + 13
+    assert frame == b.pack(b.mav.hil_actuator_controls_encode(10, [0.5] * 16, 1, 0))
