@@ -2,10 +2,19 @@
 
 from __future__ import annotations
 
+import gc
 import signal
 import subprocess
 import sys
 from typing import Any
+
+
+def freeze_heap() -> None:
+    """Before a process's loop: move the objects alive now (modules, configuration, maps, compiled
+    kernels) out of the garbage collector's generations, so that a full collection during the loop
+    scans only what the loop made. Unfrozen, one took 87-115 ms in the middle of a 150 s lockstep
+    run (docs/performance.md); it changes nothing that is computed."""
+    gc.freeze()
 
 
 def _die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec

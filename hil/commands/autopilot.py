@@ -14,6 +14,7 @@ from hil.commands.arg_types import receiving, sending
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.console import emit, load_settings, progress
 from hil.files import write_json_atomic
+from hil.processes import freeze_heap
 from planner.params import ALGORITHM_NAMES
 
 
@@ -146,6 +147,7 @@ def run(args: argparse.Namespace) -> int:
              f"scenario {args.scenario}, {'lockstep' if args.lockstep else 'real time'}"
              f"{', waiting for a GCS to arm' if cfg.gcs.wait_for_arm else ''}")
     announce(args.ready_fd, Ready("autopilot", f"{host}:{port}", os.getpid()))
+    freeze_heap()
     try:
         autopilot.run(lambda: stop["flag"])
     finally:

@@ -13,6 +13,7 @@ from hil.commands.arg_types import receiving, sending
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, UsageError
+from hil.processes import freeze_heap
 
 
 def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
@@ -164,6 +165,7 @@ def run(args: argparse.Namespace) -> int:
         if not wait_for_start(start_fd, lambda: server.stopped):
             progress("sim: not started (the parent closed --start-fd or a signal came first)")
             return 0
+        freeze_heap()
         summary = server.run()
     finally:
         for sig, handler in previous.items():
