@@ -83,6 +83,13 @@ def parse_clean(datagram: bytes) -> list[mavlink2.MAVLink_message] | None:
     """
     if _mcrf4xx is None:
         return None
+    try:
+        return _parse_clean(datagram, _mcrf4xx)
+    except Exception:   # whatever the bytes (or a buffer type it does not expect): pymavlink decides
+        return None
+
+
+def _parse_clean(datagram: bytes, crc16: Callable[[bytes], int]) -> list[mavlink2.MAVLink_message] | None:
     n, i, out = len(datagram), 0, []
     while i < n:
         # incompat_flags 0: unsigned (and no flag this parser does not know)
@@ -96,15 +103,12 @@ def parse_clean(datagram: bytes) -> list[mavlink2.MAVLink_message] | None:
         if layout is None:
             return None
         crc = datagram[end - 2] | datagram[end - 1] << 8
-        if _mcrf4xx(datagram[i + 1:end - 2] + layout.crc_extra) != crc:
+        if crc16(datagram[i + 1:end - 2] + layout.crc_extra) != crc:
             return None
         payload = datagram[i + _V2_HEADER:end - 2]
         if length < layout.size:   # MAVLink 2 drops the payload's trailing zeros
             payload += bytes(layout.size - length)
-        try:
-            m = layout.cls(*layout.fields(payload[:layout.size]))
-        except Exception:   # pymavlink reports what it cannot build; let it
-            return None
+        m = layout.cls(*layout.fields(payload[:layout.size]))   # an error: pymavlink reports it
         frame = bytearray(datagram[i:end])
         m._msgbuf, m._payload, m._crc = frame, frame[6:-2], crc   # pymavlink's own slices
         m._header = mavlink2.MAVLink_header(layout.cls.id, 0, datagram[i + 3], length, datagram[i + 4],

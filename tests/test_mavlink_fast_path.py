@@ -203,3 +203,15 @@ def test_signed_links_are_framed_by_pymavlink() -> None:
     frame = a.encode("hil_actuator_controls", 10, [0.5] * 16, 1, 0)
     assert frame[2] == 0x01 and len(frame) == 12 + frame[1] + 13
     assert frame == b.pack(b.mav.hil_actuator_controls_encode(10, [0.5] * 16, 1, 0))
+
+
+def test_other_buffer_types_get_the_same_answer() -> None:
+    rng = random.Random(17)
+    rx = Codec(255, 190, accept=EVERY)
+    for _ in range(50):
+        data, _ = encoded(rng, rng.randrange(1, 4))
+        want = rx.decode(data)
+        for buf in (bytearray(data), memoryview(data)):
+            got = rx.decode(buf)
+            assert got[1] == want[1]
+            same_messages(got[0], want[0])
