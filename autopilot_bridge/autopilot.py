@@ -645,8 +645,7 @@ class Autopilot:
     def _numeric_fault(self, f: SensorFrame, received_at: float, exc: BaseException) -> None:
         """A numeric error escaped a frame (docs/security.md): stop the thrusters for this frame,
         count it, and restart navigation, which re-initialises on the next GPS fix."""
-        if self._plan_after_send is not None:   # the fault came after navigate() decided to plan
-            self._submit_deferred_plan()
+        self._submit_deferred_plan()   # if the fault came after navigate() decided to plan
         self.link.rejects["control_numeric_fault"] += 1
         self._event(f.t if math.isfinite(f.t) else 0.0, f"numeric fault ({type(exc).__name__}): stopped, "
                     "navigation restarts")

@@ -73,15 +73,15 @@ def _max_between(values: np.ndarray, cum: np.ndarray, index: int, limit: float) 
     return out
 
 
-_closest_warm = False
+_warm = False
 
 
 def warm_up() -> None:
     """Compile (or load from numba's cache) the kernels once per process, before the first frame."""
-    global _closest_warm
-    if not _closest_warm:
+    global _warm
+    if not _warm:
         LineOfSight(np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 1.0]]), 1.0, 0.5).update(0.5, 0.1, 1.0)
-        _closest_warm = True
+        _warm = True
 
 
 @dataclass(frozen=True)

@@ -177,8 +177,16 @@ class _Encoder:
         return self.pack(*flat)
 
 
-_ENCODERS = {cls.msgname.lower(): _Encoder(cls) for cls in mavlink2.mavlink_map.values()
-             if "s" not in cls.unpacker.format}
+_BY_NAME = {cls.msgname.lower(): cls for cls in mavlink2.mavlink_map.values()}
+_ENCODERS: dict[str, _Encoder | None] = {}   # built on first use: all of them cost ~9 ms at import
+
+
+def _encoder(name: str) -> _Encoder | None:
+    """The :class:`_Encoder` of message ``name`` (None: unknown, or it has text fields)."""
+    if name not in _ENCODERS:
+        cls = _BY_NAME.get(name)
+        _ENCODERS[name] = _Encoder(cls) if cls is not None and "s" not in cls.unpacker.format else None
+    return _ENCODERS[name]
 _HEADER = struct.Struct("<BBBBBBBHB")
 _CRC = struct.Struct("<H")
 
@@ -204,7 +212,7 @@ class Codec:
         Unsigned messages without text fields are framed here, byte for byte as pymavlink frames
         them (tests/test_mavlink_fast_path.py), without building a message object: a third of the
         cost. Anything else, or arguments encode() would refuse, goes through pymavlink."""
-        enc = _ENCODERS.get(name)
+        enc = _encoder(name)
         if enc is not None and _mcrf4xx is not None and not self.mav.signing.sign_outgoing:
             try:
                 payload = enc.payload(args, kwargs)
