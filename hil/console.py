@@ -59,7 +59,8 @@ def progress(message: str) -> None:
 
 
 class ProgressBar:
-    """Throttled progress for long work: ``done/total``, rate and ETA on stderr."""
+    """Throttled progress for long work: ``done/total``, rate and ETA on stderr. The first item done
+    and the last are always reported: the first gives the first ETA, and says the work has begun."""
 
     def __init__(self, total: int, label: str, every_s: float = 1.0) -> None:
         self.total, self.label, self.every_s = total, label, every_s
@@ -67,7 +68,7 @@ class ProgressBar:
 
     def update(self, done: int, extra: str = "") -> None:
         now = time.monotonic()
-        if done < self.total and now - self.last < self.every_s:
+        if 1 < done < self.total and now - self.last < self.every_s:
             return
         self.last = now
         elapsed = now - self.start

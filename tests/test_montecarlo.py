@@ -5,9 +5,11 @@ from __future__ import annotations
 import csv
 import json
 import math
+import queue
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
@@ -161,19 +163,33 @@ def test_ctrl_c_keeps_finished_route_runs(repo, tmp_path, sig):
                              "--seed", "3", "--duration", "20", "--out", str(out), "--json"],
                             cwd=repo, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
+    lines: queue.Queue = queue.Queue()
+    reader = threading.Thread(target=lambda: [lines.put(x) for x in iter(proc.stderr.readline, "")], daemon=True)
+    reader.start()
+    seen: list[str] = []
     try:
+        # Wait (bounded) until the campaign itself has taken a finished run: its progress line says
+        # "1/8". (A run's own summary.json on disk comes a moment before the campaign has it.)
         deadline = time.monotonic() + 240
-        while time.monotonic() < deadline:   # wait (bounded) until a run has finished
-            if list(out.glob("run*/hil/summary.json")) or proc.poll() is not None:
+        while time.monotonic() < deadline and proc.poll() is None:
+            try:
+                seen.append(lines.get(timeout=1.0))
+            except queue.Empty:
+                continue
+            if seen[-1].startswith("montecarlo routes: 1/8"):
                 break
-            time.sleep(0.1)
-        assert proc.poll() is None, "finished before it could be interrupted"
+        assert proc.poll() is None and seen and seen[-1].startswith("montecarlo routes: 1/8"), seen
         os.killpg(proc.pid, sig) if sig == signal.SIGINT else proc.send_signal(sig)
-        stdout, err = proc.communicate(timeout=120)
+        proc.wait(timeout=120)
+        stdout = proc.stdout.read()   # one JSON summary: it fits the pipe
+        reader.join(timeout=10)
+        while not lines.empty():
+            seen.append(lines.get())
+        err = "".join(seen)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
-            proc.communicate()
+            proc.wait()
     assert proc.returncode == 130, err
     assert "Traceback" not in err
     summary = json.loads((out / "summary.json").read_text())

@@ -38,3 +38,12 @@ def test_records_of_the_packages_are_bare_progress_lines_once(restore_loggers, c
 def test_a_component_without_a_log_callback_logs_under_its_module():
     keeper = RouteKeeper(OccupancyGrid([[False]], 1.0), 0.0)
     assert keeper.log == logging.getLogger("autopilot_bridge.route_planning").info
+
+
+def test_a_progress_bar_reports_the_first_and_last_item_and_throttles_between(capsys):
+    bar = console.ProgressBar(5, "work", every_s=3600.0)
+    for done in range(1, 6):
+        bar.update(done, f"ok {done}")
+    lines = capsys.readouterr().err.splitlines()
+    assert [ln.split(" (")[0] for ln in lines] == ["work: 1/5", "work: 5/5"]
+    assert lines[0].endswith("ok 1") and "ETA" in lines[0]
