@@ -16,6 +16,9 @@ class AutopilotParams:
     actuators_to: tuple[str, ...] = param("HOST:PORT destinations of HIL_ACTUATOR_CONTROLS")
     telemetry_to: tuple[str, ...] = param(
         "HOST:PORT destinations of a copy of every ground-station frame in and out (hil run's tap records them)")
+    telemetry_from: str = param(
+        "HOST:PORT those copies are sent from (port 0: any free port); hil run names one, and its tap takes them "
+        "from there only")
     system_id: int = param("MAVLink system id of the vessel", ge=1, le=255)
     component_id: int = param("MAVLink component id of the autopilot", ge=1, le=255)
     cruise_speed: float = param("speed set-point along the local path", "m/s", gt=0)

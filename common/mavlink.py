@@ -89,33 +89,73 @@ def parse_clean(datagram: bytes) -> list[mavlink2.MAVLink_message] | None:
         return None
 
 
-def _parse_clean(datagram: bytes, crc16: Callable[[bytes], int]) -> list[mavlink2.MAVLink_message] | None:
+def clean_frames(datagram: bytes) -> list[tuple[int, int]] | None:
+    """The (start, end) of each frame of a datagram :func:`parse_clean` takes (every check made,
+    the checksums included), or None where it would give None: for a reader that builds message
+    objects only for some of the frames (:func:`frame_ids`, :func:`message_at`)."""
+    if _mcrf4xx is None:
+        return None
+    try:
+        spans = _walk(datagram, _mcrf4xx)
+    except Exception:   # as parse_clean: pymavlink decides
+        return None
+    return None if spans is None else [(i, end) for i, end, _ in spans]
+
+
+def frame_ids(datagram: bytes, start: int) -> tuple[int, int, int]:
+    """(message id, source system, source component) of the frame at ``start`` of a clean datagram."""
+    return (datagram[start + 7] | datagram[start + 8] << 8 | datagram[start + 9] << 16,
+            datagram[start + 5], datagram[start + 6])
+
+
+def leading_uint64(datagram: bytes, start: int, end: int) -> int:
+    """The first 8 payload bytes of the clean frame ``datagram[start:end]`` as a little-endian
+    uint64 (MAVLink 2 trims a payload's trailing zeros: missing bytes are 0): the first wire field
+    of a message whose largest field comes first, e.g. HIL_SENSOR's ``time_usec``."""
+    first = bytes(datagram[start + _V2_HEADER:min(end - _CRC_LEN, start + _V2_HEADER + 8)])
+    return int.from_bytes(first.ljust(8, b"\0"), "little")
+
+
+def message_at(datagram: bytes, start: int, end: int) -> mavlink2.MAVLink_message:
+    """The message of the frame ``datagram[start:end]`` found by :func:`clean_frames`."""
+    return _message(datagram, start, end, _LAYOUTS[frame_ids(datagram, start)[0]])
+
+
+def _walk(datagram: bytes, crc16: Callable[[bytes], int]) -> list[tuple[int, int, _Layout]] | None:
     n, i, out = len(datagram), 0, []
     while i < n:
         # incompat_flags 0: unsigned (and no flag this parser does not know)
         if n - i < _V2_HEADER + _CRC_LEN or datagram[i] != _V2_STX or datagram[i + 2] != 0:
             return None
-        length = datagram[i + 1]
-        end = i + _V2_HEADER + length + _CRC_LEN
+        end = i + _V2_HEADER + datagram[i + 1] + _CRC_LEN
         if end > n:
             return None
         layout = _LAYOUTS.get(datagram[i + 7] | datagram[i + 8] << 8 | datagram[i + 9] << 16)
         if layout is None:
             return None
-        crc = datagram[end - 2] | datagram[end - 1] << 8
-        if crc16(datagram[i + 1:end - 2] + layout.crc_extra) != crc:
+        if crc16(datagram[i + 1:end - 2] + layout.crc_extra) != datagram[end - 2] | datagram[end - 1] << 8:
             return None
-        payload = datagram[i + _V2_HEADER:end - 2]
-        if length < layout.size:   # MAVLink 2 drops the payload's trailing zeros
-            payload += bytes(layout.size - length)
-        m = layout.cls(*layout.fields(payload[:layout.size]))   # an error: pymavlink reports it
-        frame = bytearray(datagram[i:end])
-        m._msgbuf, m._payload, m._crc = frame, frame[6:-2], crc   # pymavlink's own slices
-        m._header = mavlink2.MAVLink_header(layout.cls.id, 0, datagram[i + 3], length, datagram[i + 4],
-                                            datagram[i + 5], datagram[i + 6])
-        out.append(m)
+        out.append((i, end, layout))
         i = end
     return out
+
+
+def _message(datagram: bytes, i: int, end: int, layout: _Layout) -> mavlink2.MAVLink_message:
+    length = datagram[i + 1]
+    payload = datagram[i + _V2_HEADER:end - 2]
+    if length < layout.size:   # MAVLink 2 drops the payload's trailing zeros
+        payload += bytes(layout.size - length)
+    m = layout.cls(*layout.fields(payload[:layout.size]))   # an error: pymavlink reports it
+    frame = bytearray(datagram[i:end])
+    m._msgbuf, m._payload, m._crc = frame, frame[6:-2], datagram[end - 2] | datagram[end - 1] << 8   # pymavlink's
+    m._header = mavlink2.MAVLink_header(layout.cls.id, 0, datagram[i + 3], length, datagram[i + 4],
+                                        datagram[i + 5], datagram[i + 6])
+    return m
+
+
+def _parse_clean(datagram: bytes, crc16: Callable[[bytes], int]) -> list[mavlink2.MAVLink_message] | None:
+    spans = _walk(datagram, crc16)
+    return None if spans is None else [_message(datagram, i, end, layout) for i, end, layout in spans]
 
 
 def reset_parser(mav: mavlink2.MAVLink) -> None:

@@ -60,6 +60,7 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
             raise UsageError(str(exc)) from None
     try:
         telemetry = GcsLink(cfg.gcs, ap.system_id, ap.component_id, geo, mirror_to=ap.telemetry_to,
+                            mirror_from=ap.telemetry_from,
                             chart_size=(scen.height, scen.width), log=progress)
     except ValueError as exc:
         link.close()

@@ -12,9 +12,10 @@ on Ctrl-C, and never left behind.
 
 Each end takes only its peer (docs/security.md): the simulator takes commands only from the
 autopilot's socket (``--commands-from``), the autopilot sensor frames only from the simulator's
-(``--sensors-from``), and the tap takes the truth only from the simulator's socket and commands
-only from the autopilot's; what it refuses is counted (``security.tap`` of summary.json) and not
-written to the .tlog.
+(``--sensors-from``), and the tap takes the truth only from the simulator's socket, commands
+only from the autopilot's, and nothing from any other socket than those two and the autopilot's
+telemetry copies (``--telemetry-from``); what it refuses is counted (``security.tap`` of
+summary.json) and not written to the .tlog.
 """
 
 from __future__ import annotations
@@ -168,7 +169,9 @@ class HilRun:
             self.traffic_file.write_text(json.dumps([to_table(s) for s in self.scen.traffic], indent=1))
         self.ap_port = free_udp_port()
         self.sim_port = free_udp_port()
+        self.telemetry_port = free_udp_port()   # the autopilot's copies of its ground-station traffic leave from here
         self.tap.sim_addr, self.tap.ap_addr = ("127.0.0.1", self.sim_port), ("127.0.0.1", self.ap_port)
+        self.tap.telemetry_addr = ("127.0.0.1", self.telemetry_port)
         self.tap.sim_ids = (cfg.link.system_id, cfg.link.component_id)
         self.warnings: list[str] = []
         self._sysid_lock: Any = None
@@ -215,7 +218,7 @@ class HilRun:
         args = [sys.executable, "-m", "hil", "autopilot", *self._common_args(), "--scenario", self.opts.scenario,
                 "--listen", f"127.0.0.1:{self.ap_port}", "--sensors-from", f"127.0.0.1:{self.sim_port}",
                 "--actuators-to", f"127.0.0.1:{self.sim_port}", "--actuators-to", f"127.0.0.1:{self.tap.port}",
-                "--telemetry-to", f"127.0.0.1:{self.tap.port}",
+                "--telemetry-to", f"127.0.0.1:{self.tap.port}", "--telemetry-from", f"127.0.0.1:{self.telemetry_port}",
                 "--seed", str(self.opts.seed), "--summary-out", str(self.out / "autopilot.json"), "--json",
                 *self.opts.extra_autopilot_args]
         if self.opts.lockstep:

@@ -65,7 +65,8 @@ class HilConfig:
                                   ("link.commands_on", (self.link.commands_on,), c.RECEIVE_UDP),
                                   ("autopilot.listen", (self.autopilot.listen,), c.RECEIVE_UDP),
                                   ("autopilot.actuators_to", self.autopilot.actuators_to, c.SEND_UDP),
-                                  ("autopilot.telemetry_to", self.autopilot.telemetry_to, c.SEND_UDP)):
+                                  ("autopilot.telemetry_to", self.autopilot.telemetry_to, c.SEND_UDP),
+                                  ("autopilot.telemetry_from", (self.autopilot.telemetry_from,), c.RECEIVE_UDP)):
             for v in values:
                 try:
                     c.parse(v, role)

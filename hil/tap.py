@@ -1,7 +1,8 @@
 """The tap of a HIL run (hil/hilrun.py): a third UDP endpoint that both processes copy their frames
 to. It writes every accepted MAVLink frame to the run's .tlog (0600 when a signing key is set),
-takes the truth only from the simulator's stream and the commands only from the autopilot's
-(refusals counted, not recorded), and keeps what the judge needs."""
+takes the truth only from the simulator's stream, the commands only from the autopilot's, and
+nothing from a socket other than theirs and the autopilot's telemetry copies (refusals counted, not
+recorded), and keeps what the judge needs."""
 
 from __future__ import annotations
 
@@ -14,8 +15,18 @@ from pathlib import Path
 from typing import Any
 
 from common.geodesy import LocalFrame
-from common.mavlink import Codec, mavlink2
+from common.mavlink import Codec, clean_frames, frame_ids, leading_uint64, mavlink2, message_at
 from common.udp import UdpEndpoint
+
+# The kinds the tap reads (Tap._take); every other frame of a clean datagram is written as it came.
+_READ = frozenset(getattr(mavlink2, f"MAVLINK_MSG_ID_{k}") for k in (
+    "HIL_STATE_QUATERNION", "AIS_VESSEL", "HIL_ACTUATOR_CONTROLS", "LOCAL_POSITION_NED", "STATUSTEXT",
+    "MISSION_ITEM_REACHED"))
+_HIL_SENSOR = mavlink2.MAVLINK_MSG_ID_HIL_SENSOR
+_STAMP, _STAMP_MAX = struct.Struct(">Q"), (1 << 64) - 1   # a .tlog record's time stamp
+# The lockstep clock is HIL_SENSOR's time_usec, read as the frame's leading uint64 (its first wire field).
+assert mavlink2.MAVLink_hil_sensor_message.ordered_fieldnames[0] == "time_usec"
+assert mavlink2.MAVLink_hil_sensor_message.fieldtypes[0] == "uint64_t"
 
 
 class Tap:
@@ -62,10 +73,15 @@ class Tap:
         # truth only from the simulator, commands only from the autopilot's HIL socket.
         self.sim_addr: tuple[str, int] | None = None
         self.ap_addr: tuple[str, int] | None = None
+        # The autopilot's copies of its ground-station traffic (estimate, texts, mission progress): with
+        # this set too, a datagram from any other socket is refused whole.
+        self.telemetry_addr: tuple[str, int] | None = None
         self.sim_ids: tuple[int, int] | None = None
         self.refused: dict[str, int] = {}
         self.write_error: OSError | None = None   # the .tlog could not be written (a full disk)
         self.counters_at_close: dict[str, Any] | None = None
+        # The truth sample (time, north, east, heading) of the datagram being read: its AIS_VESSEL follow it.
+        self._own: tuple[int, float, float, float] | None = None
 
     def _monotonic(self, stream: str, t: int, back_gap: int) -> int:
         if t + back_gap < self._last[stream]:
@@ -119,9 +135,38 @@ class Tap:
             self.write_error = exc
 
     def _handle(self, data: bytes, sender: tuple[str, int] | None = None) -> None:
-        msgs, _ = self.codec.decode(data)
-        stamp = struct.pack(">Q", self._stamp(msgs))
-        own = None
+        self._own = None
+        if self.telemetry_addr is not None and sender not in (self.sim_addr, self.ap_addr, self.telemetry_addr):
+            self._refuse("wrong_source_address")
+            return
+        spans = clean_frames(data) if self.codec.mav.signing.secret_key is None else None
+        if spans is None:   # not what our processes send, or signed: pymavlink parses and names the faults
+            msgs, _ = self.codec.decode(data)
+            self._take(msgs, self._stamp(msgs, sender), sender)
+            return
+        # A clean datagram: message objects only for the kinds the tap reads; the other frames (two
+        # thirds of them, HIL_SENSOR the largest) go to the .tlog as they came, byte for byte.
+        ids = [frame_ids(data, start)[0] for start, _ in spans]
+        clock = None
+        if self.lockstep and _HIL_SENSOR in ids and self._from_simulator(sender):
+            start, end = spans[ids.index(_HIL_SENSOR)]
+            clock = leading_uint64(data, start, end)
+        stamp = self._stamp_at(clock)
+        batch: list[Any] = []
+        for (start, end), msg_id in zip(spans, ids, strict=True):
+            if msg_id in _READ:
+                batch.append(message_at(data, start, end))
+                continue
+            if batch:
+                self._take(batch, stamp, sender)
+                batch = []
+            self._write(stamp + data[start:end])
+            self.frames += 1
+        if batch:
+            self._take(batch, stamp, sender)
+
+    def _take(self, msgs: list[Any], stamp: bytes, sender: tuple[str, int] | None) -> None:
+        own = self._own
         for m in msgs:
             if not self._allowed(m, sender):
                 continue
@@ -157,17 +202,27 @@ class Tap:
                 self.statustext.append(m.text if isinstance(m.text, str) else m.text.decode(errors="replace"))
             elif kind == "MISSION_ITEM_REACHED":
                 self.mission_reached = True
+        self._own = own
 
-    def _stamp(self, msgs: list) -> int:
-        """The tlog time stamp (µs since the Unix epoch) of one datagram's messages."""
+    def _from_simulator(self, sender: tuple[str, int] | None) -> bool:
+        return self.sim_addr is None or sender == self.sim_addr
+
+    def _stamp(self, msgs: list, sender: tuple[str, int] | None) -> bytes:
+        """The tlog time stamp (8 bytes, big-endian µs since the Unix epoch) of one datagram's messages."""
+        if not self.lockstep or not self._from_simulator(sender):
+            return self._stamp_at(None)
+        return self._stamp_at(next((int(m.time_usec) for m in msgs if m.get_type() == "HIL_SENSOR"), None))
+
+    def _stamp_at(self, sensor_usec: int | None) -> bytes:
+        """The tlog time stamp of a datagram whose first HIL_SENSOR (from the simulator) says
+        ``sensor_usec`` (None: none). In lockstep the simulated time: only the simulator's clock
+        moves it, and a time past the stamp's 64 bits is held at the largest stamp."""
         if not self.lockstep:
-            return int(time.time() * 1e6)
-        for m in msgs:
-            if m.get_type() == "HIL_SENSOR":
-                t = self._monotonic("clock", int(m.time_usec), 1_000_000)
-                self._sim_usec = max(self._sim_usec, t)
-                break
-        return self._t0_usec + self._sim_usec
+            return _STAMP.pack(int(time.time() * 1e6))
+        if sensor_usec is not None:
+            t = self._monotonic("clock", sensor_usec, 1_000_000)
+            self._sim_usec = max(self._sim_usec, t)
+        return _STAMP.pack(min(self._t0_usec + self._sim_usec, _STAMP_MAX))
 
     def counters(self) -> dict[str, Any]:
         """What the tap refused, by reason, and its socket's counters (kernel drops)."""

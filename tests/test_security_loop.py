@@ -70,7 +70,8 @@ def test_forged_frames_on_every_port_change_nothing_and_are_counted(baseline, tm
     forger_ap = Codec(cfg.autopilot.system_id, cfg.autopilot.component_id)  # claims to be the autopilot
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     goal = (185.0, 140.0)  # map x east, y north
-    sent = {"sensor": 0, "command": 0, "truth": 0}
+    sent = {"sensor": 0, "command": 0, "tap": 0}
+    forger_gcs = Codec(cfg.autopilot.system_id, cfg.autopilot.component_id)   # the autopilot's telemetry
 
     def attack(tap, run):
         t = max(tap.truth)
@@ -85,12 +86,16 @@ def test_forged_frames_on_every_port_change_nothing_and_are_counted(baseline, tm
             sock.sendto(forger_ap.encode("hil_actuator_controls", t + k * 10_000, [-1.0, -1.0] + [0.0] * 14, 0, 0),
                         sim_port)
             sent["command"] += 1
-        # 4. the boat "at the goal" on the tap's port
+        # 4. on the tap's port: the boat "at the goal", a clock at the end of time (it used to stop the
+        # run with a struct.error), an estimate far off the truth and the mission "reached"
         lat, lon = run.geo.sea_level_to_geodetic(goal[1], goal[0])
-        sock.sendto(forger_sim.encode("hil_state_quaternion", t + 20_000, [1, 0, 0, 0], 0, 0, 0,
-                                      int(lat * 1e7), int(lon * 1e7), 0, 0, 0, 0, 0, 0, 0, 0, 0),
-                    ("127.0.0.1", tap.port))
-        sent["truth"] += 1
+        for forged in (forger_sim.encode("hil_state_quaternion", t + 20_000, [1, 0, 0, 0], 0, 0, 0,
+                                         int(lat * 1e7), int(lon * 1e7), 0, 0, 0, 0, 0, 0, 0, 0, 0),
+                       forger_sim.encode("hil_sensor", 2**64 - 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0),
+                       forger_gcs.encode("local_position_ned", t // 1000, 500.0, 500.0, 0, 0, 0, 0),
+                       forger_gcs.encode("mission_item_reached", 0)):
+            sock.sendto(forged, ("127.0.0.1", tap.port))
+            sent["tap"] += 1
 
     try:
         attacked = _run(tmp_path / "run", [_once(3_000_000, attack)])
@@ -100,8 +105,9 @@ def test_forged_frames_on_every_port_change_nothing_and_are_counted(baseline, tm
     sec = attacked[0].security
     assert sec.autopilot["wrong_source"] == sent["sensor"]
     assert sec.simulator["wrong_source_address"] == sent["command"]
-    assert sec.tap["refused"]["truth_wrong_source_address"] == sent["truth"]
+    assert sec.tap["refused"]["wrong_source_address"] == sent["tap"]
     assert attacked[0].outcome != "goal"
+    assert attacked[0].navigation_rmse_m == baseline[0].navigation_rmse_m
 
 
 def _fuzz_datagrams(rng: np.random.Generator, codec: Codec, kind: str, n: int):

@@ -60,7 +60,8 @@ class GcsLink:
     """MAVLink 2 ground-station endpoint(s) of one vessel; the autopilot's ``telemetry`` object."""
 
     def __init__(self, params: GcsParams, system_id: int, component_id: int, geo: LocalFrame, *,
-                 mirror_to: tuple[str, ...] = (), chart_size: tuple[float, float] | None = None,
+                 mirror_to: tuple[str, ...] = (), mirror_from: str = "127.0.0.1:0",
+                 chart_size: tuple[float, float] | None = None,
                  clock: Callable[[], float] = time.monotonic, log: Callable[[str], None] | None = None) -> None:
         self.params = params
         self.sysid, self.compid = system_id, component_id
@@ -93,7 +94,7 @@ class GcsLink:
         self.service_ms = StreamingPercentiles()   # wall time of each service() call, ms
         self._backlog: list[tuple[Transport, Any]] = []   # stream peers whose parser holds frames not yet decoded
 
-        mirror = UdpEndpoint("127.0.0.1:0", list(mirror_to)) if mirror_to else None
+        mirror = UdpEndpoint(mirror_from, list(mirror_to)) if mirror_to else None
         self.out = Outbox(codec, self.transports, mirror, self.log)
         self.view = VehicleView(system_id, component_id, geo, chart_size)
         self.failsafe = GcsFailsafe(self.out, self.view, params.failsafe_timeout, params.failsafe_action,

@@ -85,6 +85,9 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--telemetry-to", metavar="HOST:PORT", type=sending, action="append", default=None,
                    help="where a copy of all ground-station traffic in and out goes (a recorder); repeatable "
                         "(default: autopilot.telemetry_to, none)")
+    p.add_argument("--telemetry-from", metavar="HOST:PORT", type=receiving, default=None,
+                   help="send those copies from this address, so that the recorder can take them from it alone "
+                        "(default: autopilot.telemetry_from, any free port on 127.0.0.1)")
     add_gcs_arguments(p)
     p.add_argument("--lockstep", action="store_true",
                    help="the simulator runs in lockstep: plan on an iteration budget "
@@ -111,6 +114,8 @@ def _overrides(args: argparse.Namespace) -> list[str]:
         out.append("autopilot.actuators_to=" + json.dumps(args.actuators_to))
     if args.telemetry_to is not None:
         out.append("autopilot.telemetry_to=" + json.dumps(args.telemetry_to))
+    if args.telemetry_from is not None:
+        out.append("autopilot.telemetry_from=" + json.dumps(args.telemetry_from))
     out += gcs_overrides(args)
     if args.seed is not None:
         out.append(f"sim.seed={int(args.seed)}")
