@@ -470,6 +470,8 @@ class HilRun:
         out = {k: sim.get(k) for k in ("steps", "commands_received", "malformed_dropped", "stale_command_events",
                                        "lockstep_resends", "jitter_ms", "stepping")}
         out["busy_poll"] = {"simulator": sim.get("busy_poll"), "autopilot": ap_busy_poll}
+        if "pipeline_skips" in sim:   # the pipelined lockstep (sim.lockstep_pipeline)
+            out["pipeline_skips"] = sim["pipeline_skips"]
         times = sim.get("stale_command_times_s")
         if times is not None:
             after = sum(1 for t in times if t > end_s + 1e-9)

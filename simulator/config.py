@@ -152,6 +152,9 @@ class SimParams:
     truth_rate_hz: float = param("HIL_STATE_QUATERNION (truth) rate", "Hz", gt=0)
     stale_command_timeout: float = param("no command for this long (simulated time) -> thrust 0", "s", gt=0)
     lockstep_resend: float = param("lockstep: re-send the latest frame when no command for this long (wall)", "s", gt=0)
+    lockstep_pipeline: bool = param(
+        "lockstep: compute the next frame while the vessel computer answers the newest, so both work at once; "
+        "a command then acts one frame later (a one-frame actuator delay, the same in every run)")
     lockstep_busy_poll: float = param(
         "lockstep: wait for the command polling the socket this long before sleeping on it (common.udp.BusyPoll; "
         "0 = sleep at once)", "s", ge=0, le=0.1)

@@ -27,10 +27,14 @@ class SimulatorServer:
                  speedup: float = 1.0, lockstep_resend: float = 1.0,
                  progress: Callable[[str], None] | None = None, progress_every_s: float = 5.0,
                  esc: Any | None = None, can_lockstep_wait: float = 1.0, command_source: str | None = None,
-                 busy_poll: float = 0.0) -> None:
+                 busy_poll: float = 0.0, pipeline: bool = False) -> None:
         """``command_source``: None takes commands from any address, "HOST:PORT" only from there,
         "learn" only from the address of the first valid command (docs/security.md). ``busy_poll``:
-        lockstep waits for a command polling the socket up to this long (s) first (common.udp.BusyPoll)."""
+        lockstep waits for a command polling the socket up to this long (s) first (common.udp.BusyPoll).
+        ``pipeline``: lockstep one frame ahead (:meth:`_run_pipelined`; MAVLink commands only)."""
+        if pipeline and esc is not None:
+            raise ValueError("sim.lockstep_pipeline: the pipelined lockstep takes its commands over MAVLink, "
+                             "not from CAN ESCs")
         self.core, self.ep = core, endpoint
         self.learn_source = command_source == LEARN
         if command_source and not self.learn_source:
@@ -46,6 +50,8 @@ class SimulatorServer:
         self.progress, self.progress_every_s = progress, progress_every_s
         self.end_frame = int(round(duration / core.frame_dt)) if duration > 0 else None
         self.lockstep_resends = 0
+        self.pipeline = lockstep and pipeline
+        self.pipeline_skips = 0   # pipelined lockstep: frames whose command never came (a later one did)
         self.budget_stops = 0
         self.datagrams_sent = 0
         self.lateness = StreamingPercentiles()  # real time: lateness of each step vs its ideal wall time (ms)
@@ -85,7 +91,9 @@ class SimulatorServer:
     def run(self) -> dict[str, Any]:
         start = time.monotonic()
         try:
-            if self.lockstep:
+            if self.pipeline:
+                self._run_pipelined(start)
+            elif self.lockstep:
                 self._run_lockstep(start)
             else:
                 self._run_realtime(start)
@@ -126,6 +134,63 @@ class SimulatorServer:
             if stepped:
                 frame = core.frame()
                 self._publish(frame)
+                last_send = time.monotonic()
+                if core.n % 1000 == 0:
+                    self._maybe_progress(start, last_progress)
+
+    def _run_pipelined(self, start: float) -> None:
+        """Lockstep one frame ahead (``sim.lockstep_pipeline``). Plain lockstep waits for the answer
+        to the frame at t_k before it integrates from t_k, so the simulator and the vessel computer
+        take turns. Here the simulator integrates from t_k with the command it has (the answer to
+        t_(k-1)) while the vessel computer answers t_k, and the two work at once: the answer to t_k
+        acts from t_(k+1) to t_(k+2), a one-frame actuator delay, the same in every run.
+
+        Frames not yet answered stay pending (two in the steady state) and are re-sent together when
+        no command came for ``lockstep_resend``. A command for the later of two pending frames means
+        the earlier one's was lost: that frame is skipped (``pipeline_skips``), the command acts from
+        the next step, and the simulator steps once more to have two frames pending again."""
+        core, last_progress = self.core, [start]
+        pending: list[tuple[int, bytes]] = []   # (time_usec, datagram) sent and not yet answered, oldest first
+
+        def step_and_publish() -> None:
+            core.step()
+            self.last_step_at = time.monotonic()
+            if self.first_step_at is None:
+                self.first_step_at = self.last_step_at
+            frame = core.frame()
+            self._publish(frame)
+            pending.append((core.time_usec, frame))
+
+        first = core.frame()
+        self._publish(first)
+        pending.append((core.time_usec, first))
+        if not self._done():
+            step_and_publish()        # the first frame's command will act from the second
+        last_send = time.monotonic()
+        while not self._done():
+            wait = min(POLL_S, max(0.0, last_send + self.lockstep_resend - time.monotonic()))
+            data = self.ep.recv(timeout=wait, poll=self.busy)
+            if data is None:
+                if time.monotonic() - last_send >= self.lockstep_resend:
+                    for _, frame in pending:   # unchanged: a lost datagram cannot deadlock
+                        self._publish(frame)
+                    self.lockstep_resends += 1
+                    last_send = time.monotonic()
+                continue
+            for cmd in core.receive(data):
+                self._learn()
+                if self._done():
+                    break
+                answered = next((i for i, (tu, _) in enumerate(pending) if tu == cmd.time_usec), None)
+                if answered is None:
+                    core.rejects[OUT_OF_STEP] += 1
+                    continue
+                self.pipeline_skips += answered
+                del pending[:answered + 1]
+                core.apply(cmd)
+                step_and_publish()
+                if len(pending) < 2 and not self._done():
+                    step_and_publish()
                 last_send = time.monotonic()
                 if core.n % 1000 == 0:
                     self._maybe_progress(start, last_progress)
@@ -225,6 +290,7 @@ class SimulatorServer:
             "stale_command_events": c.stale_command_events,
             "stale_command_times_s": [round(t, 3) for t in c.stale_command_times],
             "lockstep_resends": self.lockstep_resends,
+            **({"pipeline_skips": self.pipeline_skips} if self.pipeline else {}),
             "busy_poll": None if self.busy is None else self.busy.summary(),
             "command_port": {"source": None if self.ep.peer is None else f"{self.ep.peer[0]}:{self.ep.peer[1]}",
                              "wrong_source_address": self.ep.wrong_source,

@@ -65,6 +65,22 @@ def test_same_seed_gives_the_same_summary(hil, tmp_path):
     assert strip(a) == strip(b)
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario", ["harbour", "labyrinth"])
+def test_the_pipelined_lockstep_reaches_the_goal_and_repeats_itself(hil, tmp_path, scenario):
+    """`hil run --pipeline`: the simulator one frame ahead, each command one frame late
+    (tests/test_sim_pipeline.py); the vessel still reaches the goal, and a rerun is the same run."""
+    code, a = _run(hil, tmp_path, "--scenario", scenario, "--seed", "1", "--pipeline", name="a")
+    assert a["outcome"] == "goal" and a["collisions"] == 0 and code == 0, a["events"]
+    assert a["simulator"]["pipeline_skips"] == 0 and a["simulator"]["lockstep_resends"] == 0
+    assert a["navigation_rmse_m"] < 0.5
+    _, b = _run(hil, tmp_path, "--scenario", scenario, "--seed", "1", "--pipeline", name="b")
+
+    def strip(s):
+        return {k: v for k, v in s.items() if k not in WALL_CLOCK_KEYS}
+    assert strip(a) == strip(b)
+
+
 def test_tlog_is_readable_by_pymavlink(hil, tmp_path):
     from pymavlink import mavutil
 
@@ -106,3 +122,20 @@ def test_wall_timeout_ends_the_run_with_its_folder_written(hil, tmp_path):
     code, s = _run(hil, tmp_path, "--wall-timeout", "4", traffic=False)
     assert s["outcome"] == "wall_timeout" and code == 1
     assert 4.0 <= s["wall_time_s"] < 60.0
+
+
+@pytest.mark.slow
+def test_bench_loop_measures_plain_and_pipelined_lockstep_against_the_simulator_alone(hil):
+    r = hil("bench", "loop", "--duration", "4", "--realtime-duration", "0", "--sim-steps", "300", "--json",
+            timeout=600)
+    assert r.returncode == 0, r.stderr
+    res = json.loads(r.stdout.strip().splitlines()[-1])
+    assert res["simulator_alone_steps_per_s"] > 0 and "realtime" not in res
+    for name in ("lockstep", "pipelined"):
+        leg = res[name]
+        assert leg["simulator_steps"] >= 400 and leg["steps_per_wall_s"] > 0, leg
+        ratio = leg["steps_per_wall_s"] / res["simulator_alone_steps_per_s"]   # the reference is rounded to 0.1
+        assert leg["ratio_to_simulator"] == pytest.approx(ratio, abs=2e-3)
+    assert res["pipelined"]["pipeline_skips"] == 0 and "pipeline_skips" not in res["lockstep"]
+    assert isinstance(res["speed_goal_met"], bool) and isinstance(res["pipelined_speed_goal_met"], bool)
+    assert "bench loop: pipelined, 4 s simulated" in r.stderr

@@ -35,13 +35,16 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                     "simulator process and a trivial controller) is measured in the same run, and the loop's speed "
                     "is reported as a ratio to it (lockstep.ratio_to_simulator), which stays meaningful on a "
                     f"loaded machine. Goal: >= {GOAL_LOCKSTEP_STEPS_PER_S:g} lockstep steps/s (30x real time at "
-                    "100 Hz).",
+                    "100 Hz). A third run measures the pipelined lockstep (hil run --pipeline: the simulator one "
+                    "frame ahead, each command acting one frame later) the same way (pipelined.*).",
     )
     p.add_argument("--scenario", default="harbour", help="scenario (default: harbour)")
     p.add_argument("--duration", type=float, default=60.0, metavar="S",
                    help="simulated seconds of the lockstep run (default: 60)")
     p.add_argument("--realtime-duration", type=float, default=20.0, metavar="S",
                    help="seconds of the real-time run (x1, so also wall seconds; default: 20; 0 skips it)")
+    p.add_argument("--pipelined-duration", type=float, default=None, metavar="S",
+                   help="simulated seconds of the pipelined lockstep run (default: --duration; 0 skips it)")
     p.add_argument("--seed", type=int, default=1, help="seed (default: 1)")
     p.add_argument("--sim-steps", type=int, default=5000, metavar="N",
                    help="lockstep steps of the simulator-alone reference measured in the same run (default: 5000; "
@@ -72,14 +75,16 @@ def _leg(summary: RunSummary) -> dict:
         "planning_cycles": summary.planning_cycles,
         "deadline_overruns": summary.deadline_overruns,
         "outcome": summary.outcome,
+        **({"pipeline_skips": sim["pipeline_skips"]} if "pipeline_skips" in sim else {}),
     }
 
 
 def run(args: argparse.Namespace) -> int:
     from hil.hilrun import RunOptions, run_loop
 
-    if args.duration <= 0 or args.realtime_duration < 0 or args.sim_steps < 0:
-        raise UsageError("--duration must be > 0, --realtime-duration and --sim-steps >= 0")
+    piped_duration = args.duration if args.pipelined_duration is None else args.pipelined_duration
+    if args.duration <= 0 or args.realtime_duration < 0 or args.sim_steps < 0 or piped_duration < 0:
+        raise UsageError("--duration must be > 0, --realtime-duration, --pipelined-duration and --sim-steps >= 0")
     cfg = load_settings(args)
     from common.mavlink import CRC_BACKEND
 
@@ -94,20 +99,25 @@ def run(args: argparse.Namespace) -> int:
         sim_alone = bench_lockstep(ref, cfg, args.sim_steps)["steps_per_s"]
         result["simulator_alone_steps_per_s"] = round(sim_alone, 1)
     with tempfile.TemporaryDirectory(prefix="hil-bench-loop-") as tmp:
-        progress(f"bench loop: lockstep, {args.duration:g} s simulated on {args.scenario}")
-        lock = run_loop(RunOptions(scenario=args.scenario, lockstep=True, duration=args.duration, seed=args.seed,
-                                   config=args.config, overrides=list(args.overrides), out=Path(tmp) / "lockstep",
-                                   plot=False, on_progress=progress), cfg)
-        result["lockstep"] = _leg(lock)
-        # The wall time the loop stood still for the planner (lockstep takes its answer at a fixed
-        # simulated time, so a slow cycle stops both processes): what it costs the speed above.
-        ap_file = Path(tmp) / "lockstep" / "autopilot.json"
-        if ap_file.exists():
-            waits_s = json.loads(ap_file.read_text()).get("lockstep_planner_wait_ms_total", 0.0) / 1e3
-            result["lockstep"]["planner_wait_s"] = round(waits_s, 3)
-        if sim_alone:
-            sps = result["lockstep"]["steps_per_wall_s"] or 0.0
-            result["lockstep"]["ratio_to_simulator"] = round(sps / sim_alone, 3)
+        def lockstep_leg(name: str, duration: float, extra: list[str]) -> dict:
+            progress(f"bench loop: {name}, {duration:g} s simulated on {args.scenario}")
+            summary = run_loop(RunOptions(scenario=args.scenario, lockstep=True, duration=duration, seed=args.seed,
+                                          config=args.config, overrides=list(args.overrides) + extra,
+                                          out=Path(tmp) / name, plot=False, on_progress=progress), cfg)
+            leg = _leg(summary)
+            # The wall time the loop stood still for the planner (lockstep takes its answer at a fixed
+            # simulated time, so a slow cycle stops both processes): what it costs the speed above.
+            ap_file = Path(tmp) / name / "autopilot.json"
+            if ap_file.exists():
+                waits_s = json.loads(ap_file.read_text()).get("lockstep_planner_wait_ms_total", 0.0) / 1e3
+                leg["planner_wait_s"] = round(waits_s, 3)
+            if sim_alone:
+                leg["ratio_to_simulator"] = round((leg["steps_per_wall_s"] or 0.0) / sim_alone, 3)
+            return leg
+
+        result["lockstep"] = lockstep_leg("lockstep", args.duration, [])
+        if piped_duration > 0:
+            result["pipelined"] = lockstep_leg("pipelined", piped_duration, ["sim.lockstep_pipeline=true"])
         if args.realtime_duration > 0:
             progress(f"bench loop: real time x1, {args.realtime_duration:g} s")
             rt = run_loop(RunOptions(scenario=args.scenario, lockstep=False, speedup=1.0,
@@ -119,6 +129,9 @@ def run(args: argparse.Namespace) -> int:
     result["latency_goal_met"] = bool(p99) and max(p99) <= 2.0
     result["speed_goal_met"] = (result["lockstep"]["steps_per_wall_s"] or 0.0) >= GOAL_LOCKSTEP_STEPS_PER_S
     result["goal_met"] = result["latency_goal_met"] and result["speed_goal_met"]
+    if "pipelined" in result:   # the same goal for the pipelined lockstep (one frame of actuator delay)
+        result["pipelined_speed_goal_met"] = \
+            (result["pipelined"]["steps_per_wall_s"] or 0.0) >= GOAL_LOCKSTEP_STEPS_PER_S
     rt = result.get("realtime")
     result["planning_stalled_control"] = None if rt is None else bool(rt["stale_command_events"])
     emit(args, result)

@@ -75,6 +75,11 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                       help="real-time mode instead: N simulated seconds per wall second. With --wait-for-arm "
                            "(a ground station attached) the run stays lockstep and is paced to N x wall time "
                            "(default 1: a person can follow it; lockstep alone runs ~10x faster)")
+    p.add_argument("--pipeline", action="store_true",
+                   help="lockstep one frame ahead (sim.lockstep_pipeline): the simulator computes the next frame "
+                        "while the vessel computer answers the last, so the two work at once; each command then "
+                        "acts one frame (10 ms) later than in plain lockstep. Repeatable like plain lockstep, but "
+                        "not the same runs (docs/simulator.md)")
     p.add_argument("--algorithm", choices=ALGORITHM_NAMES, default=None,
                    help="local planner (default: planner.algorithm = ddrrt-star)")
     p.add_argument("--out", metavar="DIR", default=None,
@@ -103,6 +108,12 @@ def run(args: argparse.Namespace) -> int:
     if args.wall_timeout is not None and not 0 < args.wall_timeout < math.inf:
         raise ConfigError("--wall-timeout: must be a finite number > 0 of seconds")
     args.overrides = list(args.overrides) + can_overrides(args)
+    if args.pipeline:
+        if args.demo:
+            raise UsageError("--pipeline is for the vessel computer's loop, not --demo")
+        if args.speedup is not None and not args.wait_for_arm:
+            raise ConfigError("--pipeline is a lockstep mode; drop --speedup (or add --wait-for-arm)")
+        args.overrides.append("sim.lockstep_pipeline=true")
     cfg = load_settings(args)  # fail here, with one line, on a bad configuration
     check_can(cfg, "hil run")
     previous_term = signal.signal(signal.SIGTERM, _raise_terminated)

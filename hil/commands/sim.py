@@ -152,13 +152,21 @@ def run(args: argparse.Namespace) -> int:
         except ValueError as exc:
             endpoint.close()
             raise UsageError(str(exc)) from None
-    server = SimulatorServer(core, endpoint, lockstep=cfg.sim.lockstep, duration=cfg.sim.duration,
-                             speedup=cfg.sim.speedup, lockstep_resend=cfg.sim.lockstep_resend, progress=progress,
-                             esc=esc, can_lockstep_wait=cfg.can.lockstep_wait, command_source=source,
-                             busy_poll=cfg.sim.lockstep_busy_poll)
+    try:
+        server = SimulatorServer(core, endpoint, lockstep=cfg.sim.lockstep, duration=cfg.sim.duration,
+                                 speedup=cfg.sim.speedup, lockstep_resend=cfg.sim.lockstep_resend,
+                                 progress=progress, esc=esc, can_lockstep_wait=cfg.can.lockstep_wait,
+                                 command_source=source, busy_poll=cfg.sim.lockstep_busy_poll,
+                                 pipeline=cfg.sim.lockstep_pipeline)
+    except ValueError as exc:
+        endpoint.close()
+        if esc is not None:
+            esc.bus.shutdown()
+        raise UsageError(str(exc)) from None
     previous = {sig: signal.signal(sig, lambda *_: server.stop()) for sig in (signal.SIGINT, signal.SIGTERM)}
     host, port = endpoint.address
-    mode = "lockstep" if cfg.sim.lockstep else f"real time x{cfg.sim.speedup:g}"
+    mode = ("lockstep, pipelined" if server.pipeline else "lockstep") if cfg.sim.lockstep else \
+        f"real time x{cfg.sim.speedup:g}"
     progress(f"sim: commands on {host}:{port}, state to {', '.join(cfg.link.state_to)}, {mode}, "
              f"duration {cfg.sim.duration:g} s, seed {cfg.sim.seed}")
     try:
