@@ -8,7 +8,7 @@ when ``duration`` simulated seconds have been run (0: never), or when ``stop()``
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from common.percentiles import StreamingPercentiles
@@ -108,13 +108,8 @@ class SimulatorServer:
         self._publish(frame)
         last_send = time.monotonic()
         while not self._done():
-            wait = min(POLL_S, max(0.0, last_send + self.lockstep_resend - time.monotonic()))
-            data = self.ep.recv(timeout=wait, poll=self.busy)
+            data, last_send = self._wait_for_commands(last_send, (frame,))
             if data is None:
-                if time.monotonic() - last_send >= self.lockstep_resend:
-                    self._publish(frame)  # the latest frame, unchanged: a lost datagram cannot deadlock
-                    self.lockstep_resends += 1
-                    last_send = time.monotonic()
                 continue
             stepped = False
             for cmd in core.receive(data):
@@ -168,14 +163,8 @@ class SimulatorServer:
             step_and_publish()        # the first frame's command will act from the second
         last_send = time.monotonic()
         while not self._done():
-            wait = min(POLL_S, max(0.0, last_send + self.lockstep_resend - time.monotonic()))
-            data = self.ep.recv(timeout=wait, poll=self.busy)
+            data, last_send = self._wait_for_commands(last_send, (frame for _, frame in pending))
             if data is None:
-                if time.monotonic() - last_send >= self.lockstep_resend:
-                    for _, frame in pending:   # unchanged: a lost datagram cannot deadlock
-                        self._publish(frame)
-                    self.lockstep_resends += 1
-                    last_send = time.monotonic()
                 continue
             for cmd in core.receive(data):
                 self._learn()
@@ -194,6 +183,19 @@ class SimulatorServer:
                 last_send = time.monotonic()
                 if core.n % 1000 == 0:
                     self._maybe_progress(start, last_progress)
+
+    def _wait_for_commands(self, last_send: float, unanswered: Iterable[bytes]) -> tuple[bytes | None, float]:
+        """Lockstep: the next datagram on the command socket (None: none yet), and the wall time of the
+        last send. When no command came for ``lockstep_resend`` after ``last_send``, the frames not yet
+        answered are re-sent unchanged first: a lost datagram cannot deadlock the loop."""
+        wait = min(POLL_S, max(0.0, last_send + self.lockstep_resend - time.monotonic()))
+        data = self.ep.recv(timeout=wait, poll=self.busy)
+        if data is None and time.monotonic() - last_send >= self.lockstep_resend:
+            for frame in unanswered:
+                self._publish(frame)
+            self.lockstep_resends += 1
+            last_send = time.monotonic()
+        return data, last_send
 
     def _learn(self) -> None:
         """--commands-from learn: the first valid command's address becomes the only source."""

@@ -4,33 +4,20 @@ command one frame later - and a lost command or frame neither deadlocks nor stop
 
 from __future__ import annotations
 
-import json
 import subprocess
-import sys
 
 import numpy as np
 
 from hil.processes import stop as stop_process
 from hil.sim_client import HilClient
-from tests.conftest import REPO
+from tests.test_sim_udp import finish, start_sim
 
 WAIT_S = 20.0
 STEPS = 120
 
 
 def _sim(client: HilClient, *extra: str) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "hil", "sim", "--json", "--lockstep", "--seed", "5", "--state-to",
-           f"127.0.0.1:{client.port}", "--commands-on", "127.0.0.1:0", "--duration", repr(STEPS / 100.0), *extra]
-    return subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-
-
-def _summary(proc: subprocess.Popen) -> dict:
-    try:
-        out, err = proc.communicate(timeout=30)
-    finally:
-        stop_process(proc)
-    assert proc.returncode == 0, err
-    return json.loads(out.strip().splitlines()[-1])
+    return start_sim(client.port, "--lockstep", "--seed", "5", "--duration", repr(STEPS / 100.0), *extra)
 
 
 def _commands() -> list[tuple[float, float]]:
@@ -54,7 +41,7 @@ def test_each_command_acts_one_frame_later_than_in_plain_lockstep():
             f = client.next_frame(WAIT_S)
             assert f is not None and f.time_usec == (k + 2) * 10_000, k
             piped.append(f.raw)
-        s_piped = _summary(proc)
+        s_piped = finish(proc)
     finally:
         stop_process(proc)
         client.close()
@@ -69,7 +56,7 @@ def test_each_command_acts_one_frame_later_than_in_plain_lockstep():
             plain.append(f.raw)
             if k < STEPS:
                 client.command(k * 10_000, *((0.0, 0.0) if k == 0 else cmds[k - 1]))
-        s_plain = _summary(proc)
+        s_plain = finish(proc)
     finally:
         stop_process(proc)
         client.close()
@@ -102,7 +89,7 @@ def test_a_lost_command_or_frame_is_skipped_or_resent_and_the_loop_goes_on():
             while f is not None and f.time_usec < expect:   # a late re-send
                 f = client.next_frame(WAIT_S)
             assert f is not None and f.time_usec == expect
-        s = _summary(proc)
+        s = finish(proc)
     finally:
         stop_process(proc)
         client.close()

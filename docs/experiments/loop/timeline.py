@@ -13,6 +13,8 @@ It then prints, over the steps after the first fifth of the run:
 * the legs of a step: simulator sends -> vessel computer reads -> it sends the command -> the
   simulator reads it -> it sends the next frame (p50, mean, p90);
 * how the wall time splits between short and long steps;
+* the step's phases (its index modulo 10, 20 and 100: the 10 Hz, 5 Hz and 1 Hz work of each end)
+  whose mean step is the longest, with each end's turn in them;
 * the long garbage collections of each process.
 
 The stamps cost ~1 µs each, two a datagram. docs/performance.md has the figures of this machine.
@@ -110,6 +112,7 @@ def main(argv: list[str]) -> int:
     commands = [t for kind, t, p in ap if kind == "s" and p == port]
     legs: list[list[float]] = [[], [], [], []]
     steps = []
+    phases = []   # (step index, vessel computer's turn, simulator's turn, step)
     for k in range(len(sent) // 5, len(sent) - 10):
         r = _after(ap_reads, sent[k])
         c = _after(commands, r) if r is not None else None
@@ -120,6 +123,7 @@ def main(argv: list[str]) -> int:
         for leg, v in zip(legs, (r - sent[k], c - r, d - c, s2 - d), strict=True):
             leg.append(v)
         steps.append(sent[k + 1] - sent[k])
+        phases.append((k, c - r, s2 - d, sent[k + 1] - sent[k]))
     print(f"{len(steps)} steps; hil run: {summary['simulator']['stepping']}")
     for name, leg in zip(("simulator sends -> vessel computer reads", "vessel computer reads -> sends the command",
                           "command -> simulator reads", "simulator reads -> sends the next frame"), legs, strict=True):
@@ -130,6 +134,16 @@ def main(argv: list[str]) -> int:
         xs = [s for s in steps if lo <= s < hi]
         print(f"  steps of {1e6 * lo:5.0f}-{1e6 * hi:5.0f} us: {len(xs):6d} ({100 * len(xs) / len(steps):4.1f} %), "
               f"{100 * sum(xs) / total:4.1f} % of the wall time")
+    for mod in (10, 20, 100):
+        by: dict[int, list[tuple[float, float, float]]] = {}
+        for k, ap_turn, sim_turn, step in phases:
+            by.setdefault(k % mod, []).append((ap_turn, sim_turn, step))
+        means = sorted(((sum(x[2] for x in v) / len(v), ph, sum(x[0] for x in v) / len(v),
+                        sum(x[1] for x in v) / len(v)) for ph, v in by.items()), reverse=True)
+        median = means[len(means) // 2][0]
+        print(f"  steps by phase mod {mod:3d} (median phase {1e6 * median:6.1f} us); the longest: " + "; ".join(
+            f"{ph}: step {1e6 * st:.0f}, vessel computer {1e6 * a:.0f}, simulator {1e6 * s:.0f} us"
+            for st, ph, a, s in means[:3]))
     first = sent[len(sent) // 5]
     for name, d in sorted(runs.items()):
         long_gcs = [(g, t1 - t0) for g, t0, t1 in d["gc"] if t0 >= first]
