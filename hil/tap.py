@@ -80,7 +80,8 @@ class Tap:
         self.refused: dict[str, int] = {}
         self.write_error: OSError | None = None   # the .tlog could not be written (a full disk)
         self.counters_at_close: dict[str, Any] | None = None
-        # The truth sample (time, north, east, heading) of the datagram being read: its AIS_VESSEL follow it.
+        # The truth sample (time, north, east, heading) of the datagram being read: the ship truth
+        # (AIS_VESSEL) after it in the same datagram is of the same instant.
         self._own: tuple[int, float, float, float] | None = None
 
     def _monotonic(self, stream: str, t: int, back_gap: int) -> int:
@@ -144,8 +145,8 @@ class Tap:
             msgs, _ = self.codec.decode(data)
             self._take(msgs, self._stamp(msgs, sender), sender)
             return
-        # A clean datagram: message objects only for the kinds the tap reads; the other frames (two
-        # thirds of them, HIL_SENSOR the largest) go to the .tlog as they came, byte for byte.
+        # A clean datagram: message objects only for the kinds the tap reads; the other frames (about
+        # half of a run's, HIL_SENSOR the largest) go to the .tlog as they came, byte for byte.
         ids = [frame_ids(data, start)[0] for start, _ in spans]
         clock = None
         if self.lockstep and _HIL_SENSOR in ids and self._from_simulator(sender):

@@ -60,6 +60,7 @@ class SimulatorServer:
         # lockstep: wall clock (time.monotonic) of the first and the last step, so the loop's speed
         # can be read without the processes' start-up and shut-down (one-off costs)
         self.first_step_at: float | None = None
+        self.first_step_n = 1          # core.n after the first timed step
         self.last_step_at: float | None = None
 
     def stop(self) -> None:
@@ -123,7 +124,7 @@ class SimulatorServer:
                     stepped = True
                     self.last_step_at = time.monotonic()
                     if self.first_step_at is None:
-                        self.first_step_at = self.last_step_at
+                        self.first_step_at, self.first_step_n = self.last_step_at, core.n
                 else:
                     core.rejects[OUT_OF_STEP] += 1
             if stepped:
@@ -147,11 +148,12 @@ class SimulatorServer:
         core, last_progress = self.core, [start]
         pending: list[tuple[int, bytes]] = []   # (time_usec, datagram) sent and not yet answered, oldest first
 
-        def step_and_publish() -> None:
+        def step_and_publish(timed: bool = True) -> None:
             core.step()
-            self.last_step_at = time.monotonic()
-            if self.first_step_at is None:
-                self.first_step_at = self.last_step_at
+            if timed:   # the speed counts from the first step a command drove, as in plain lockstep
+                self.last_step_at = time.monotonic()
+                if self.first_step_at is None:
+                    self.first_step_at, self.first_step_n = self.last_step_at, core.n
             frame = core.frame()
             self._publish(frame)
             pending.append((core.time_usec, frame))
@@ -160,7 +162,7 @@ class SimulatorServer:
         self._publish(first)
         pending.append((core.time_usec, first))
         if not self._done():
-            step_and_publish()        # the first frame's command will act from the second
+            step_and_publish(timed=False)   # the first frame's command will act from the second
         last_send = time.monotonic()
         while not self._done():
             data, last_send = self._wait_for_commands(last_send, (frame for _, frame in pending))
@@ -266,10 +268,10 @@ class SimulatorServer:
     def stepping(self) -> dict[str, float] | None:
         """Lockstep: the steps from the first to the last and the wall time between them (s), i.e.
         the loop's speed without start-up and shut-down; None before two steps or in real time."""
-        if self.first_step_at is None or self.last_step_at is None or self.core.n < 2:
+        steps = self.core.n - self.first_step_n
+        if self.first_step_at is None or self.last_step_at is None or steps < 1:
             return None
         wall = self.last_step_at - self.first_step_at
-        steps = self.core.n - 1
         return {"steps": steps, "wall_s": round(wall, 6),
                 "steps_per_s": round(steps / wall, 1) if wall > 0 else None}
 

@@ -64,6 +64,8 @@ def test_each_command_acts_one_frame_later_than_in_plain_lockstep():
     assert s_piped["final_state"] == s_plain["final_state"]
     assert s_piped["pipeline_skips"] == 0 and s_piped["lockstep_resends"] == 0 and s_piped["rejects"] == {}
     assert "pipeline_skips" not in s_plain
+    # The speed is counted from the first step a command drove: the pipeline's first step has none.
+    assert s_piped["stepping"]["steps"] == STEPS - 2 and s_plain["stepping"]["steps"] == STEPS - 1
 
 
 def test_a_lost_command_or_frame_is_skipped_or_resent_and_the_loop_goes_on():
