@@ -29,7 +29,8 @@ def test_each_command_acts_one_frame_later_than_in_plain_lockstep():
     cmds = _commands()
     # Pipelined: two frames come before any command; the answer to frame k is sent when frame k+1 is in.
     client = HilClient()
-    proc = _sim(client, "--set", "sim.lockstep_pipeline=true")
+    # No re-send within the test's reach (30 s), however loaded the machine: every frame read is a new one.
+    proc = _sim(client, "--set", "sim.lockstep_pipeline=true", "--set", "sim.lockstep_resend=30")
     piped = []
     try:
         for k in range(2):
@@ -47,7 +48,7 @@ def test_each_command_acts_one_frame_later_than_in_plain_lockstep():
         client.close()
     # Plain lockstep, every command one frame later (thrust zero over the first frame, as with none).
     client = HilClient()
-    proc = _sim(client)
+    proc = _sim(client, "--set", "sim.lockstep_resend=30")
     plain = []
     try:
         for k in range(STEPS + 1):
