@@ -41,7 +41,7 @@ from common.frames import map_to_ned
 from common.geodesy import LocalFrame
 from common.readiness import GO, ReadyWait
 from common.tables import to_table
-from hil import config, processes
+from hil import config, placement, processes
 from hil import scenario as scenarios
 from hil.errors import RunFailed, UsageError
 from hil.run_summary import RunSecurity, RunSummary, read_autopilot_summary
@@ -100,6 +100,9 @@ class RunOptions:
     plot: bool = True
     hooks: list[Callable[[Tap, HilRun], None]] = field(default_factory=list)  # tests: fault injection
     traffic: tuple | None = None         # ships replacing the scenario's [[traffic]] (Monte Carlo draws)
+    # CPUs of the processes (hil.placement): "auto" places a pipelined lockstep run, "off" never;
+    # campaigns that run several loops at once say "off".
+    cpus: str | placement.Placement = "auto"
 
     def __post_init__(self) -> None:
         # The children run in the repository (cwd=REPO): files the user named relative to where
@@ -180,6 +183,9 @@ class HilRun:
         self.sim_restarts = 0
         self.can_recorder = None  # hil.can_log.CanRecorder when the thrusters are on CAN
         self.can_log: dict[str, Any] = {}
+        self.placement = placement.choose(opts.cpus, opts.lockstep, bool(cfg.sim.lockstep_pipeline))
+        self.pinned: dict[str, int] = {}          # role -> CPU, what the placement pinned
+        self._own_cpus: set[int] | None = None    # this process's CPUs before the placement
 
     # -- processes ---------------------------------------------------------------------------------
     def _common_args(self) -> list[str]:
@@ -256,6 +262,7 @@ class HilRun:
                 os.close(go_read)
             waiting = True
             self._wait_for_autopilot(read_end, ready_timeout)
+            self._place()   # the planner worker exists now; the simulator waits for GO
             try:
                 os.write(go_write, GO)
             except BrokenPipeError:
@@ -264,6 +271,22 @@ class HilRun:
             os.close(go_write)  # without GO: the simulator exits without running
             if not waiting:
                 os.close(read_end)  # a spawn failed
+
+    def _place(self) -> None:
+        if self.placement is None or self.sim is None or self.ap is None:
+            return
+        self._own_cpus = os.sched_getaffinity(0)
+        self.pinned = placement.apply(self.placement, self.sim.pid, self.ap.pid)
+
+    def _unplace(self) -> None:
+        """This process gets back the CPUs it had (a campaign's worker runs its next run unplaced)."""
+        if self._own_cpus is not None:
+            for tid in placement.threads(os.getpid()):
+                try:
+                    os.sched_setaffinity(tid, self._own_cpus)
+                except OSError:
+                    pass
+            self._own_cpus = None
 
     def _wait_for_autopilot(self, read_end: int, ready_timeout: float) -> None:
         log = self.out / "autopilot.log"
@@ -311,6 +334,8 @@ class HilRun:
         if last is not None:
             initial = (last[0], last[1], math.atan2(last[3], last[2]) if math.hypot(last[2], last[3]) > 0.2 else 0.0)
         self.sim = self._spawn(self.sim_command(initial), f"sim-restart{self.sim_restarts}")
+        if self.placement is not None:
+            placement.pin(self.sim.pid, self.placement.simulator)
 
     def claim_system_id(self) -> None:
         """Warn when another `hil run` on this machine streams to ground stations with the same
@@ -445,6 +470,7 @@ class HilRun:
         finally:
             if self._sysid_lock is not None:
                 self._sysid_lock.close()
+            self._unplace()
             # The autopilot first, so that the simulator receives every command it sent (the CAN
             # counters of both sides must agree); in real time the simulator may meanwhile count a
             # stale-command failsafe after the run's end: the summary counts those apart.
@@ -531,8 +557,9 @@ class HilRun:
             simulator_restarts=self.sim_restarts,
             navigation=None if ap is None else ap.navigation,
             sensed_obstacles=None if ap is None else ap.sensed_obstacles,
-            simulator=None if sim is None else self._simulator_part(sim, times[-1] * 1e-6 if times else 0.0,
-                                                                    None if ap is None else ap.busy_poll),
+            simulator=None if sim is None else {**self._simulator_part(sim, times[-1] * 1e-6 if times else 0.0,
+                                                                       None if ap is None else ap.busy_poll),
+                                                "cpus": self.pinned or None},
             security=RunSecurity(
                 simulator=None if sim is None else {"rejects": sim.get("rejects"), **(sim.get("command_port") or {})},
                 autopilot=None if ap is None else ap.link,

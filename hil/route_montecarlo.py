@@ -70,7 +70,8 @@ class RouteJob:
 
         i, scenario_file, folder = item
         opts = RunOptions(scenario=scenario_file, lockstep=True, duration=self.duration, seed=self.seed * 1000 + i,
-                          config=self.config, overrides=list(self.overrides), out=Path(folder) / "hil", plot=False)
+                          config=self.config, overrides=list(self.overrides), out=Path(folder) / "hil", plot=False,
+                          cpus="off")  # runs share the host: none is placed (hil.placement)
         return run_loop(opts, settings.load(self.config, list(self.overrides)))
 
 

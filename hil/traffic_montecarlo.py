@@ -99,7 +99,7 @@ class TrafficJob:
         i, ships = item
         opts = RunOptions(scenario=self.scenario, lockstep=True, duration=self.duration, seed=self.seed * 1000 + i,
                           config=self.config, overrides=list(self.overrides), out=Path(self.out) / f"run{i:04d}",
-                          plot=False, traffic=ships)
+                          plot=False, traffic=ships, cpus="off")  # runs share the host (hil.placement)
         return run_loop(opts, settings.load(self.config, list(self.overrides)))
 
 

@@ -3,10 +3,18 @@
 from __future__ import annotations
 
 import json
+import os
+from typing import Any
 
 import pytest
 
-from hil.hilrun import WALL_CLOCK_KEYS  # figures that depend on the wall clock or the host, not the seed
+from common.tables import to_table
+from hil import placement, settings
+from hil.hilrun import (
+    WALL_CLOCK_KEYS,  # figures that depend on the wall clock or the host, not the seed
+    RunOptions,
+    run_loop,
+)
 
 
 def _run(hil, tmp_path, *args: str, name: str = "run", traffic: bool = True) -> tuple[int, dict]:
@@ -79,6 +87,50 @@ def test_the_pipelined_lockstep_reaches_the_goal_and_repeats_itself(hil, tmp_pat
     def strip(s):
         return {k: v for k, v in s.items() if k not in WALL_CLOCK_KEYS}
     assert strip(a) == strip(b)
+
+
+def _cpus_of(pid: int) -> set[int]:
+    return set(os.sched_getaffinity(pid))
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(len(placement.usable()) < 2, reason="placing the loop's ends needs two usable CPUs")
+def test_a_placed_run_pins_each_end_and_gives_the_tap_its_cpus_back(tmp_path):
+    """The run's four processes read from /proc while it runs: the simulator and the tap (this
+    process) on one CPU, the vessel computer and its planner worker on the other; afterwards this
+    process has its CPUs back, and the run is the one the scheduler's placement gives."""
+    cpus = placement.usable()
+    before = _cpus_of(0)
+    seen: dict[str, set[int]] = {}
+
+    def look(tap, run):
+        if seen or not tap.truth:
+            return
+        seen["simulator"] = _cpus_of(run.sim.pid)
+        seen["computer"] = _cpus_of(run.ap.pid)
+        seen["tap"] = _cpus_of(0)
+        workers = placement.children(run.ap.pid)
+        assert workers, "the vessel computer has a planner worker"
+        seen["planner_worker"] = _cpus_of(workers[0])
+
+    def run(name: str, cpus_opt, hooks=()) -> Any:
+        opts = RunOptions(scenario="harbour", lockstep=True, duration=300.0, seed=3, out=tmp_path / name,
+                          plot=False, overrides=["sim.lockstep_pipeline=true"], cpus=cpus_opt,
+                          hooks=list(hooks), wall_timeout=300.0)
+        return run_loop(opts, settings.load(None, opts.overrides))
+
+    placed = run("placed", "auto", [look])
+    assert placed.outcome == "goal", placed.events
+    a, b = cpus[0], cpus[1]
+    assert seen == {"simulator": {a}, "computer": {b}, "tap": {a}, "planner_worker": {b}}
+    assert placed.simulator["cpus"] == {"simulator": a, "tap": a, "computer": b, "planner_worker": b}
+    assert _cpus_of(0) == before
+    free = run("free", "off")
+    assert free.simulator["cpus"] is None
+
+    def strip(s: Any) -> dict:
+        return {k: v for k, v in to_table(s).items() if k not in WALL_CLOCK_KEYS}
+    assert strip(placed) == strip(free)
 
 
 def test_tlog_is_readable_by_pymavlink(hil, tmp_path):

@@ -76,6 +76,7 @@ def _leg(summary: RunSummary) -> dict:
         "deadline_overruns": summary.deadline_overruns,
         "outcome": summary.outcome,
         **({"pipeline_skips": sim["pipeline_skips"]} if "pipeline_skips" in sim else {}),
+        "cpus": sim.get("cpus"),   # where the processes ran (hil.placement; None: the scheduler chose)
     }
 
 

@@ -80,6 +80,11 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                         "while the vessel computer answers the last, so the two work at once; each command then "
                         "acts one frame (10 ms) later than in plain lockstep. Repeatable like plain lockstep, but "
                         "not the same runs (docs/simulator.md)")
+    p.add_argument("--cpus", default="auto", metavar="auto|off|A,B",
+                   help="where the processes run: A,B puts the simulator, the tap and the planner worker on CPU A "
+                        "and the vessel computer alone on CPU B; auto (the default) does so for --pipeline on a "
+                        "machine with two CPUs or more (the first two this process may use); off leaves it to "
+                        "the scheduler. Results do not depend on it, only the speed (docs/performance.md)")
     p.add_argument("--algorithm", choices=ALGORITHM_NAMES, default=None,
                    help="local planner (default: planner.algorithm = ddrrt-star)")
     p.add_argument("--out", metavar="DIR", default=None,
@@ -114,6 +119,9 @@ def run(args: argparse.Namespace) -> int:
         if args.speedup is not None and not args.wait_for_arm:
             raise ConfigError("--pipeline is a lockstep mode; drop --speedup (or add --wait-for-arm)")
         args.overrides.append("sim.lockstep_pipeline=true")
+    from hil import placement
+
+    cpus = placement.parse(args.cpus)
     cfg = load_settings(args)  # fail here, with one line, on a bad configuration
     check_can(cfg, "hil run")
     previous_term = signal.signal(signal.SIGTERM, _raise_terminated)
@@ -123,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
         if args.demo:
             client = HilClient(system_id=cfg.autopilot.system_id, component_id=cfg.autopilot.component_id)
             return _run_loop(args, client, args.speedup is None)
-        return _run_hil(args, cfg)
+        return _run_hil(args, cfg, cpus)
     finally:
         signal.signal(signal.SIGTERM, previous_term)
 
@@ -136,7 +144,7 @@ def _default_wall_timeout(args: argparse.Namespace, paced: bool = False) -> floa
     return args.duration / args.speedup + 300.0
 
 
-def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
+def _run_hil(args: argparse.Namespace, cfg: Any, cpus: Any = "auto") -> int:
     from pathlib import Path
 
     from hil import scenario as scenarios
@@ -163,7 +171,7 @@ def _run_hil(args: argparse.Namespace, cfg: Any) -> int:
                       speedup=args.speedup or 1.0, stop_at_goal=not gcs_session,
                       duration=args.duration, seed=seed, config=args.config, overrides=overrides, out=out,
                       on_progress=progress, plot=not args.no_plot,
-                      extra_autopilot_args=_gcs_args(args), summary_on_interrupt=True,
+                      extra_autopilot_args=_gcs_args(args), summary_on_interrupt=True, cpus=cpus,
                       wall_timeout=args.wall_timeout or _default_wall_timeout(args, gcs_session))
     opts.actuators = cfg.can.actuators
     pacing = f"lockstep paced to x{opts.speedup:g} wall time" if gcs_session else \
