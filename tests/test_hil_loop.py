@@ -189,5 +189,8 @@ def test_bench_loop_measures_plain_and_pipelined_lockstep_against_the_simulator_
         ratio = leg["steps_per_wall_s"] / res["simulator_alone_steps_per_s"]   # the reference is rounded to 0.1
         assert leg["ratio_to_simulator"] == pytest.approx(ratio, abs=2e-3)
     assert res["pipelined"]["pipeline_skips"] == 0 and "pipeline_skips" not in res["lockstep"]
+    # Placed as `hil run --pipeline` places it (hil.placement); plain lockstep is left to the scheduler.
+    assert res["lockstep"]["cpus"] is None
+    assert (res["pipelined"]["cpus"] is not None) == (len(placement.usable()) >= 2)
     assert isinstance(res["speed_goal_met"], bool) and isinstance(res["pipelined_speed_goal_met"], bool)
     assert "bench loop: pipelined, 4 s simulated" in r.stderr
