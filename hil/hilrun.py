@@ -100,8 +100,8 @@ class RunOptions:
     plot: bool = True
     hooks: list[Callable[[Tap, HilRun], None]] = field(default_factory=list)  # tests: fault injection
     traffic: tuple | None = None         # ships replacing the scenario's [[traffic]] (Monte Carlo draws)
-    # CPUs of the processes (hil.placement): "auto" places a pipelined lockstep run, "off" never;
-    # campaigns that run several loops at once say "off".
+    # CPUs of the processes (hil.placement): "auto" places a lockstep run on a pair of CPUs no other
+    # run holds, "off" never; campaigns, which run several loops at once, say "off".
     cpus: str | placement.Placement = "auto"
 
     def __post_init__(self) -> None:
@@ -183,7 +183,8 @@ class HilRun:
         self.sim_restarts = 0
         self.can_recorder = None  # hil.can_log.CanRecorder when the thrusters are on CAN
         self.can_log: dict[str, Any] = {}
-        self.placement = placement.choose(opts.cpus, opts.lockstep, bool(cfg.sim.lockstep_pipeline))
+        self.placement: placement.Placement | None = None
+        self._cpu_claim: placement.Claim | None = None
         self.pinned: dict[str, int] = {}          # role -> CPU, what the placement pinned
         self._own_cpus: set[int] | None = None    # this process's CPUs before the placement
 
@@ -273,8 +274,12 @@ class HilRun:
                 os.close(read_end)  # a spawn failed
 
     def _place(self) -> None:
-        if self.placement is None or self.sim is None or self.ap is None:
+        if self.sim is None or self.ap is None:
             return
+        self._cpu_claim = placement.claim(self.opts.cpus, self.opts.lockstep)
+        if self._cpu_claim is None:
+            return
+        self.placement = self._cpu_claim.placement
         self._own_cpus = os.sched_getaffinity(0)
         self.pinned = placement.apply(self.placement, self.sim.pid, self.ap.pid)
 
@@ -287,6 +292,9 @@ class HilRun:
                 except OSError:
                     pass
             self._own_cpus = None
+        if self._cpu_claim is not None:
+            self._cpu_claim.release()
+            self._cpu_claim = None
 
     def _wait_for_autopilot(self, read_end: int, ready_timeout: float) -> None:
         log = self.out / "autopilot.log"

@@ -1,24 +1,29 @@
-"""Where a lockstep run's processes run: the vessel computer on a CPU of its own.
+"""Where a lockstep run's processes run: each end of the loop on a CPU of its own.
 
-A pipelined lockstep (``sim.lockstep_pipeline``) has the simulator and the vessel computer work at
-once, each polling its socket while it waits (``common.udp.BusyPoll``). Left to the scheduler, the
-two land on one core now and then: a datagram that wakes one of them there preempts the other,
-and the preempted end's answer waits for the woken one's whole turn (in a harbour run the vessel
-computer's ``sendto`` of its command took 12 µs at the median and 72 µs on average, 1.15 ms at
-p99; docs/performance.md). Placed, the vessel computer has one CPU to itself and the simulator,
-``hil run``'s tap and the planner worker share another: the simulator has slack in a step
-(~140 µs of work against the vessel computer's ~200 µs), the tap and the worker fill it.
+In lockstep the simulator and the vessel computer wait for each other, each polling its socket
+(``common.udp.BusyPoll``). Left to the scheduler, the two land on one core now and then: the
+datagram that wakes one of them there preempts the other, and the preempted end's answer waits for
+the woken one's turn. In a plain lockstep harbour run, the vessel computer's ``sendto`` of its
+command took 12 µs at the median but 72 µs on average and 1.15 ms at p99; placed (pipelined), 9,
+11 and 58 µs (docs/performance.md, "Placing the loop's processes").
 
-``--cpus auto`` places a pipelined lockstep run when this process may use two CPUs or more;
-``off`` never places; ``A,B`` puts the simulator, tap and worker on CPU A and the vessel computer
-on CPU B. Campaigns that run several loops at once do not place them (each would pin its ends to
-the same two CPUs). Where a run ends, ``hil run`` gets back the CPUs it had."""
+A placement puts the simulator and ``hil run``'s tap (which reads the simulator's stream) on CPU
+A, the vessel computer and its planner worker on CPU B. ``--cpus auto`` (the default) places a
+lockstep run on the first pair of usable CPUs (1st and 2nd, 3rd and 4th, ...) that no other run on
+this host holds: a ``flock`` per CPU, held for the run and dropped by the kernel if ``hil run``
+dies. With every pair held, or one usable CPU, the run is left to the scheduler; ``off`` leaves
+it there always; ``A,B`` places it on A and B whatever else runs. Real time is never placed.
+Campaigns, which run several loops at once, do not place their runs. Where a run ends, ``hil run``
+gets back the CPUs it had. What a run computes does not depend on where it runs (tested)."""
 
 from __future__ import annotations
 
+import fcntl
 import os
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import IO
 
 from hil.errors import UsageError
 
@@ -56,14 +61,59 @@ def parse(spec: str) -> str | Placement:
     return Placement(a, b)
 
 
-def choose(spec: str | Placement, lockstep: bool, pipelined: bool) -> Placement | None:
-    """The placement of a run: an explicit one as given (lockstep only), ``auto`` for a pipelined
-    lockstep run on two usable CPUs or more, otherwise none."""
+def _lock_dir() -> Path:
+    return Path(tempfile.gettempdir())
+
+
+class Claim:
+    """A placement and the host-wide locks on its CPUs, held until :meth:`release` (or until the
+    process ends: the kernel drops ``flock`` locks with their files)."""
+
+    def __init__(self, placement: Placement, handles: list[IO[str]]) -> None:
+        self.placement, self._handles = placement, handles
+
+    def release(self) -> None:
+        for fh in self._handles:
+            fh.close()
+        self._handles = []
+
+
+def _lock(cpus: tuple[int, ...]) -> list[IO[str]] | None:
+    """Exclusive locks on these CPUs' lock files, or None (and nothing held) where another run
+    holds one of them."""
+    handles: list[IO[str]] = []
+    for cpu in cpus:
+        try:
+            fh = open(_lock_dir() / f"usv-hil-cpu-{os.getuid()}-{cpu}.lock", "a")
+        except OSError:
+            break
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            fh.close()
+            break
+        handles.append(fh)
+    else:
+        return handles
+    for held in handles:
+        held.close()
+    return None
+
+
+def claim(spec: str | Placement, lockstep: bool) -> Claim | None:
+    """The placement of a lockstep run: an explicit one as given (its CPUs locked where free);
+    ``auto``: the first pair of usable CPUs (1st and 2nd, 3rd and 4th, ...) that no other run on this
+    host holds, none where every pair is held or fewer than two CPUs are usable; ``off``: none.
+    Real time is never placed."""
+    if not lockstep or spec == "off":
+        return None
     if isinstance(spec, Placement):
-        return spec if lockstep else None
+        return Claim(spec, _lock((spec.simulator, spec.computer)) or [])
     cpus = usable()
-    if spec == "auto" and lockstep and pipelined and len(cpus) >= 2:
-        return Placement(cpus[0], cpus[1])
+    for a, b in zip(cpus[0::2], cpus[1::2], strict=False):
+        handles = _lock((a, b))
+        if handles is not None:
+            return Claim(Placement(a, b), handles)
     return None
 
 

@@ -96,9 +96,10 @@ def _cpus_of(pid: int) -> set[int]:
 @pytest.mark.slow
 @pytest.mark.skipif(len(placement.usable()) < 2, reason="placing the loop's ends needs two usable CPUs")
 def test_a_placed_run_pins_each_end_and_gives_the_tap_its_cpus_back(tmp_path):
-    """The run's four processes read from /proc while it runs: the simulator and the tap (this
-    process) on one CPU, the vessel computer and its planner worker on the other; afterwards this
-    process has its CPUs back, and the run is the one the scheduler's placement gives."""
+    """`hil run --cpus A,B` (what `auto` picks on a free pair): the run's four processes read from
+    /proc while it runs, the simulator and the tap (this process) on A, the vessel computer and its
+    planner worker on B; afterwards this process has its CPUs back, and the run is the run the
+    scheduler's own placement gives (`--cpus off`)."""
     cpus = placement.usable()
     before = _cpus_of(0)
     seen: dict[str, set[int]] = {}
@@ -115,13 +116,13 @@ def test_a_placed_run_pins_each_end_and_gives_the_tap_its_cpus_back(tmp_path):
 
     def run(name: str, cpus_opt, hooks=()) -> Any:
         opts = RunOptions(scenario="harbour", lockstep=True, duration=300.0, seed=3, out=tmp_path / name,
-                          plot=False, overrides=["sim.lockstep_pipeline=true"], cpus=cpus_opt,
+                          plot=False, cpus=cpus_opt,
                           hooks=list(hooks), wall_timeout=300.0)
         return run_loop(opts, settings.load(None, opts.overrides))
 
-    placed = run("placed", "auto", [look])
+    a, b = cpus[-1], cpus[0]
+    placed = run("placed", placement.Placement(a, b), [look])
     assert placed.outcome == "goal", placed.events
-    a, b = cpus[0], cpus[1]
     assert seen == {"simulator": {a}, "computer": {b}, "tap": {a}, "planner_worker": {b}}
     assert placed.simulator["cpus"] == {"simulator": a, "tap": a, "computer": b, "planner_worker": b}
     assert _cpus_of(0) == before
@@ -189,8 +190,8 @@ def test_bench_loop_measures_plain_and_pipelined_lockstep_against_the_simulator_
         ratio = leg["steps_per_wall_s"] / res["simulator_alone_steps_per_s"]   # the reference is rounded to 0.1
         assert leg["ratio_to_simulator"] == pytest.approx(ratio, abs=2e-3)
     assert res["pipelined"]["pipeline_skips"] == 0 and "pipeline_skips" not in res["lockstep"]
-    # Placed as `hil run --pipeline` places it (hil.placement); plain lockstep is left to the scheduler.
-    assert res["lockstep"]["cpus"] is None
-    assert (res["pipelined"]["cpus"] is not None) == (len(placement.usable()) >= 2)
+    # Each leg placed as `hil run` places it (hil.placement), on a machine with two CPUs.
+    for name in ("lockstep", "pipelined"):
+        assert (res[name]["cpus"] is not None) == (len(placement.usable()) >= 2)
     assert isinstance(res["speed_goal_met"], bool) and isinstance(res["pipelined_speed_goal_met"], bool)
     assert "bench loop: pipelined, 4 s simulated" in r.stderr

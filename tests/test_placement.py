@@ -1,5 +1,6 @@
 """Where a pipelined lockstep run's processes run (hil.placement): the choice, and one line for a
-bad --cpus (a whole placed run: tests/test_hil_loop.py)."""
+bad --cpus (a whole placed run: tests/test_hil_loop.py). The CPU locks are real ``flock`` locks:
+two open files of one process conflict as two runs do."""
 
 from __future__ import annotations
 
@@ -9,17 +10,34 @@ from hil import placement
 from hil.errors import UsageError
 
 
-def test_auto_places_only_a_pipelined_lockstep_run_on_two_cpus(monkeypatch):
-    monkeypatch.setattr(placement, "usable", lambda: [2, 5, 7])
-    assert placement.choose("auto", lockstep=True, pipelined=True) == placement.Placement(2, 5)
-    assert placement.choose("auto", lockstep=True, pipelined=False) is None
-    assert placement.choose("auto", lockstep=False, pipelined=True) is None
-    assert placement.choose("off", lockstep=True, pipelined=True) is None
-    explicit = placement.Placement(7, 2)
-    assert placement.choose(explicit, lockstep=True, pipelined=False) == explicit  # asked for: placed
-    assert placement.choose(explicit, lockstep=False, pipelined=False) is None     # real time: never
+@pytest.fixture
+def four_cpus(monkeypatch, tmp_path):
+    monkeypatch.setattr(placement, "usable", lambda: [2, 5, 7, 9])
+    monkeypatch.setattr(placement, "_lock_dir", lambda: tmp_path)   # this test's own host-wide locks
+
+
+def test_auto_places_a_lockstep_run_on_a_pair_no_other_run_holds(four_cpus):
+    first = placement.claim("auto", lockstep=True)
+    second = placement.claim("auto", lockstep=True)
+    assert first is not None and first.placement == placement.Placement(2, 5)
+    assert second is not None and second.placement == placement.Placement(7, 9)
+    assert placement.claim("auto", lockstep=True) is None          # every pair held: left to the scheduler
+    first.release()
+    again = placement.claim("auto", lockstep=True)
+    assert again is not None and again.placement == placement.Placement(2, 5)
+    explicit = placement.Placement(9, 2)   # asked for: placed even where another run holds the CPUs
+    held = placement.claim(explicit, lockstep=True)
+    assert held is not None and held.placement == explicit
+    for c in (second, again, held):
+        c.release()
+
+
+def test_real_time_off_and_one_cpu_are_never_placed(four_cpus, monkeypatch):
+    assert placement.claim("auto", lockstep=False) is None
+    assert placement.claim(placement.Placement(2, 5), lockstep=False) is None
+    assert placement.claim("off", lockstep=True) is None
     monkeypatch.setattr(placement, "usable", lambda: [0])
-    assert placement.choose("auto", lockstep=True, pipelined=True) is None         # one CPU
+    assert placement.claim("auto", lockstep=True) is None
 
 
 @pytest.mark.parametrize("spec", ["0", "0,0", "1,2,3", "a,b", "0,999", "-1,0", "fast"])

@@ -81,10 +81,10 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                         "acts one frame (10 ms) later than in plain lockstep. Repeatable like plain lockstep, but "
                         "not the same runs (docs/simulator.md)")
     p.add_argument("--cpus", default="auto", metavar="auto|off|A,B",
-                   help="where the processes run: A,B puts the simulator, the tap and the planner worker on CPU A "
-                        "and the vessel computer alone on CPU B; auto (the default) does so for --pipeline on a "
-                        "machine with two CPUs or more (the first two this process may use); off leaves it to "
-                        "the scheduler. Results do not depend on it, only the speed (docs/performance.md)")
+                   help="where a lockstep run's processes run: A,B puts the simulator and the tap on CPU A, the "
+                        "vessel computer and its planner worker on CPU B; auto (the default) takes the first "
+                        "pair of CPUs no other run on this host holds, or none; off leaves it to the scheduler. "
+                        "Only the speed depends on it, not the run (docs/performance.md)")
     p.add_argument("--algorithm", choices=ALGORITHM_NAMES, default=None,
                    help="local planner (default: planner.algorithm = ddrrt-star)")
     p.add_argument("--out", metavar="DIR", default=None,
