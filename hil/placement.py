@@ -3,9 +3,9 @@
 In lockstep the simulator and the vessel computer wait for each other, each polling its socket
 (``common.udp.BusyPoll``). Left to the scheduler, the two land on one core now and then: the
 datagram that wakes one of them there preempts the other, and the preempted end's answer waits for
-the woken one's turn. In a plain lockstep harbour run, the vessel computer's ``sendto`` of its
-command took 12 µs at the median but 72 µs on average and 1.15 ms at p99; placed (pipelined), 9,
-11 and 58 µs (docs/performance.md, "Placing the loop's processes").
+the woken one's turn. The vessel computer's ``sendto`` of its command, harbour, 150 s: p50 9.9 µs,
+p99 1.14 ms, mean 57 µs left to the scheduler; placed, 6.1 µs, 53 µs and 10 µs
+(docs/performance.md, "Placing the loop's processes").
 
 A placement puts the simulator and ``hil run``'s tap (which reads the simulator's stream) on CPU
 A, the vessel computer and its planner worker on CPU B. ``--cpus auto`` (the default) places a
