@@ -284,7 +284,8 @@ class HilRun:
         self.pinned = placement.apply(self.placement, self.sim.pid, self.ap.pid)
 
     def _unplace(self) -> None:
-        """This process gets back the CPUs it had (a campaign's worker runs its next run unplaced)."""
+        """This process gets back the CPUs it had (a process that runs one run after another, a
+        test or a campaign's worker, starts the next one from where it began), and the CPUs' locks go."""
         if self._own_cpus is not None:
             for tid in placement.threads(os.getpid()):
                 try:

@@ -105,6 +105,8 @@ def claim(spec: str | Placement, lockstep: bool) -> Claim | None:
     ``auto``: the first pair of usable CPUs (1st and 2nd, 3rd and 4th, ...) that no other run on this
     host holds, none where every pair is held or fewer than two CPUs are usable; ``off``: none.
     Real time is never placed."""
+    if isinstance(spec, str) and spec not in ("auto", "off"):
+        spec = parse(spec)   # "A,B" given as text (a RunOptions built in code)
     if not lockstep or spec == "off":
         return None
     if isinstance(spec, Placement):

@@ -28,6 +28,9 @@ def test_auto_places_a_lockstep_run_on_a_pair_no_other_run_holds(four_cpus):
     explicit = placement.Placement(9, 2)   # asked for: placed even where another run holds the CPUs
     held = placement.claim(explicit, lockstep=True)
     assert held is not None and held.placement == explicit
+    as_text = placement.claim("9,2", lockstep=True)   # RunOptions(cpus="9,2") from code
+    assert as_text is not None and as_text.placement == explicit
+    as_text.release()
     for c in (second, again, held):
         c.release()
 
