@@ -287,11 +287,7 @@ class HilRun:
         """This process gets back the CPUs it had (a process that runs one run after another, a
         test or a campaign's worker, starts the next one from where it began), and the CPUs' locks go."""
         if self._own_cpus is not None:
-            for tid in placement.threads(os.getpid()):
-                try:
-                    os.sched_setaffinity(tid, self._own_cpus)
-                except OSError:
-                    pass
+            placement.pin(os.getpid(), self._own_cpus)
             self._own_cpus = None
         if self._cpu_claim is not None:
             self._cpu_claim.release()

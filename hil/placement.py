@@ -139,12 +139,14 @@ def children(pid: int) -> list[int]:
     return out
 
 
-def pin(pid: int, cpu: int) -> bool:
-    """Every thread of process ``pid`` on ``cpu``; False where the process is gone or refused."""
+def pin(pid: int, cpus: int | set[int]) -> bool:
+    """Every thread of process ``pid`` on ``cpus`` (one CPU or a set); False where the process is
+    gone or refused."""
+    mask = {cpus} if isinstance(cpus, int) else cpus
     ok = False
     for tid in threads(pid):
         try:
-            os.sched_setaffinity(tid, {cpu})
+            os.sched_setaffinity(tid, mask)
             ok = True
         except OSError:
             pass

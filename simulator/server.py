@@ -18,6 +18,8 @@ from simulator.core import OUT_OF_STEP, Command, SimulatorCore
 POLL_S = 0.05  # longest wait before the stop flag is looked at again (wall seconds)
 MAX_DATAGRAMS_PER_STEP = 64  # real time: command datagrams read per step at most (a flood waits in the socket)
 LEARN = "learn"
+# Why a pipelined lockstep refuses CAN actuators (here and in hil.commands.can_options' pre-flight).
+PIPELINE_NOT_WITH_CAN = "the pipelined lockstep takes its commands over MAVLink, not from CAN ESCs"
 
 
 class SimulatorServer:
@@ -33,8 +35,7 @@ class SimulatorServer:
         lockstep waits for a command polling the socket up to this long (s) first (common.udp.BusyPoll).
         ``pipeline``: lockstep one frame ahead (:meth:`_run_pipelined`; MAVLink commands only)."""
         if pipeline and esc is not None:
-            raise ValueError("sim.lockstep_pipeline: the pipelined lockstep takes its commands over MAVLink, "
-                             "not from CAN ESCs")
+            raise ValueError(f"sim.lockstep_pipeline: {PIPELINE_NOT_WITH_CAN}")
         self.core, self.ep = core, endpoint
         self.learn_source = command_source == LEARN
         if command_source and not self.learn_source:

@@ -81,7 +81,6 @@ def _leg(summary: RunSummary) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hil import settings
     from hil.hilrun import RunOptions, run_loop
 
     piped_duration = args.duration if args.pipelined_duration is None else args.pipelined_duration
@@ -103,11 +102,9 @@ def run(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory(prefix="hil-bench-loop-") as tmp:
         def lockstep_leg(name: str, duration: float, extra: list[str]) -> dict:
             progress(f"bench loop: {name}, {duration:g} s simulated on {args.scenario}")
-            overrides = list(args.overrides) + extra
             summary = run_loop(RunOptions(scenario=args.scenario, lockstep=True, duration=duration, seed=args.seed,
-                                          config=args.config, overrides=overrides,
-                                          out=Path(tmp) / name, plot=False, on_progress=progress),
-                               settings.load(args.config, overrides) if extra else cfg)
+                                          config=args.config, overrides=list(args.overrides) + extra,
+                                          out=Path(tmp) / name, plot=False, on_progress=progress), cfg)
             leg = _leg(summary)
             # The wall time the loop stood still for the planner (lockstep takes its answer at a fixed
             # simulated time, so a slow cycle stops both processes): what it costs the speed above.

@@ -46,8 +46,9 @@ def check_can(cfg, what: str) -> None:
     if can_cfg.actuators != "can":
         return
     if cfg.sim.lockstep_pipeline:
-        raise UsageError("sim.lockstep_pipeline (--pipeline): the pipelined lockstep takes its commands over "
-                         "MAVLink, not from CAN ESCs; drop one of the two")
+        from simulator.server import PIPELINE_NOT_WITH_CAN
+
+        raise UsageError(f"sim.lockstep_pipeline (--pipeline): {PIPELINE_NOT_WITH_CAN}; drop one of the two")
     if can_cfg.interface in IN_PROCESS_ONLY:
         raise UsageError(f"--can-interface {can_cfg.interface}: python-can's {can_cfg.interface!r} bus exists only "
                          f"inside one process, and {what} puts the ESCs and the autopilot in separate processes, "

@@ -4,40 +4,28 @@ run's processes (simulator S, autopilot A, hil run's tap T, planner worker P) on
 started, and prints the loop's speed and the control latency p50 (sensor datagram in -> command out).
 Run: python docs/experiments/loop/affinity.py [LAYOUT ...], a layout being CPUs for S,A,T,P, '-' to
 leave one to the scheduler, e.g. "0,1,0,0" (the autopilot alone on CPU 1) or "0,0,1,1".
-Add `--set sim.lockstep_busy_poll=0 --set autopilot.lockstep_busy_poll=0` after `--` to wait asleep."""
+Add `--set sim.lockstep_busy_poll=0 --set autopilot.lockstep_busy_poll=0` after `--` to wait asleep.
+The runs take `--cpus off`, so that `hil run`'s own placement (hil/placement.py) leaves the layout
+to this script."""
 import json
-import os
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[3]))
+from hil.placement import children, pin  # noqa: E402
+
 args = sys.argv[1:]
 extra = args[args.index("--") + 1:] if "--" in args else []
 layouts = (args[:args.index("--")] if "--" in args else args) or ["-,-,-,-", "0,1,0,0", "0,0,1,1"]
 
-
-def ppid(pid: int) -> int:
-    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
-
-
-def children(pid: int) -> list[int]:
-    out = []
-    for d in Path("/proc").iterdir():
-        if d.name.isdigit():
-            try:
-                if ppid(int(d.name)) == pid:
-                    out.append(int(d.name))
-            except OSError:
-                pass
-    return out
-
-
 for layout in layouts:
     with tempfile.TemporaryDirectory() as tmp:
         run = subprocess.Popen([sys.executable, "-m", "hil", "run", "--lockstep", "--duration", "150", "--no-plot",
-                                "--out", tmp, *extra], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                                "--out", tmp, "--cpus", "off", *extra],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         time.sleep(3.0)   # the processes are up and the loop is running (a 150 s run takes ~8-11 s)
         roles = {"T": run.pid}
         for c in children(run.pid):
@@ -47,8 +35,7 @@ for layout in layouts:
             roles["P"] = worker[0]
         for role, cpus in zip("SATP", layout.split(","), strict=True):
             if cpus != "-" and role in roles:
-                for task in os.listdir(f"/proc/{roles[role]}/task"):
-                    os.sched_setaffinity(int(task), {int(c) for c in cpus.split("+")})
+                pin(roles[role], {int(c) for c in cpus.split("+")})
         run.wait()
         s = json.loads((Path(tmp) / "summary.json").read_text())
         print(f"S,A,T,P on {layout:12s} {s['simulator']['stepping']['steps_per_s']:7.0f} steps/s, "
