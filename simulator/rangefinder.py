@@ -13,12 +13,10 @@ map's south-west corner is the NED origin). Outside the map there is open water:
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from simulator.config import RangefinderParams
-from simulator.raycast import first_returns
+from simulator.raycast import first_returns, skip_map
 
 NO_OBSTACLE_MARGIN_CM = 1   # MAVLink: max_distance + 1 = nothing within range
 
@@ -51,6 +49,7 @@ class Rangefinder:
         self.max_cm = int(round(params.max_range * 100))
         self.min_cm = int(round(params.min_range * 100))
 
+        self._skips = skip_map(world.occ, world.resolution, step)
         self._first = np.empty(len(self.bearings))
         self.true_ranges(0.0, 0.0, 0.0)  # compiles (or loads) the ray march now, not in the first scan
 
@@ -58,7 +57,7 @@ class Rangefinder:
         """Nearest obstacle per sector (m), ``inf`` where none within range (no noise)."""
         ang = psi + self.bearings                                   # clockwise from north
         first_returns(north, east, np.cos(ang), np.sin(ang), self.ranges, self.world.occ,
-                      self.world.resolution, self._first)
+                      self._skips, self.world.resolution, self._first)
         return self._first.reshape(self.p.sectors, self.p.rays_per_sector).min(axis=1)
 
     def true_ranges_numpy(self, north: float, east: float, psi: float) -> np.ndarray:
@@ -82,10 +81,7 @@ class Rangefinder:
         d = self.true_ranges(north, east, psi)
         noisy = d + self.p.range_std * self.rng.standard_normal(d.shape)
         missed = self.rng.random(d.shape) < self.p.miss_probability
-        out = []
-        for true, meas, miss in zip(d, noisy, missed, strict=False):
-            if miss or not math.isfinite(true):
-                out.append(self.max_cm + NO_OBSTACLE_MARGIN_CM)
-            else:
-                out.append(int(min(max(round(meas * 100.0), self.min_cm), self.max_cm)))
-        return out + [65535] * (72 - len(out))
+        # np.round halves to even, as round() does; a sector with no return is clipped, then replaced.
+        cm = np.clip(np.round(np.where(np.isfinite(noisy), noisy, 0.0) * 100.0), self.min_cm, self.max_cm)
+        out = np.where(missed | ~np.isfinite(d), self.max_cm + NO_OBSTACLE_MARGIN_CM, cm).astype(np.int64)
+        return out.tolist() + [65535] * (72 - len(out))

@@ -81,6 +81,56 @@ def test_compiled_ray_march_equals_the_numpy_evaluation_bit_for_bit(seed):
     assert returns > 200  # sectors that saw something: the comparison is not between two empty scans
 
 
+@pytest.mark.parametrize("seed", [3, 4, 5, 6])
+def test_the_skipping_march_equals_the_numpy_evaluation_on_sparse_maps(seed):
+    """The march skips the samples the map's clearance proves free and stops rays that left the grid
+    for good (simulator/raycast.py): on sparse maps of blobs, posts and walls of random sizes, an
+    empty map, and from poses outside the grid looking in, its returns are numpy's, bit for bit."""
+    rng = np.random.default_rng(seed)
+    rows, cols = int(rng.integers(40, 260)), int(rng.integers(40, 260))
+    occ = np.zeros((rows, cols), dtype=bool)
+    if seed != 6:                                            # seed 6: open water everywhere
+        for _ in range(int(rng.integers(1, 12))):
+            r, c = int(rng.integers(0, rows)), int(rng.integers(0, cols))
+            h, w = int(rng.integers(1, 30)), int(rng.integers(1, 30))
+            occ[r:r + h, c:c + w] = True
+    rf = quiet_rangefinder(occ, rays_per_sector=int(rng.integers(1, 6)),
+                           max_range=float(rng.choice([5.0, 25.0, 40.0, 80.0])))
+    returns = 0
+    for _ in range(80):
+        n = rng.uniform(-30.0, rows * RES + 30.0)
+        e = rng.uniform(-30.0, cols * RES + 30.0)
+        psi = rng.uniform(-4.0, 4.0)
+        got, want = rf.true_ranges(n, e, psi), rf.true_ranges_numpy(n, e, psi)
+        assert np.array_equal(got, want), (n, e, psi)
+        returns += int(np.isfinite(want).sum())
+    assert (returns > 20) == (seed != 6)
+
+
+def test_a_scan_is_its_true_ranges_plus_noise_rounded_clipped_and_missed_per_sector():
+    """Rangefinder.scan against the rule written out sector by sector, with the same random draws:
+    noise, half-to-even rounding to cm, clipping to [min, max] range, a miss or no return as
+    max_distance + 1, and 72 entries with the unused ones UINT16_MAX."""
+    rng = np.random.default_rng(7)
+    occ = rng.random((100, 100)) < 0.03
+    cfg = load(None, QUIET + ["sensors.rangefinder.range_std=0.8", "sensors.rangefinder.miss_probability=0.2",
+                              "sensors.rangefinder.sectors=60", "sensors.rangefinder.min_range=0.5"])
+    rf = Rangefinder(cfg.sensors.rangefinder, WorldMap(occ, RES), np.random.default_rng(11))
+    draws = np.random.default_rng(11)
+    for _ in range(40):
+        n, e, psi = rng.uniform(0, 50), rng.uniform(0, 50), rng.uniform(-4, 4)
+        true = rf.true_ranges(n, e, psi)
+        noise, miss = draws.standard_normal(true.shape), draws.random(true.shape) < 0.2
+        want = []
+        for d, z, m in zip(true, noise, miss, strict=True):
+            if m or not math.isfinite(d):
+                want.append(rf.max_cm + 1)
+            else:
+                want.append(int(min(max(round((d + 0.8 * z) * 100.0), rf.min_cm), rf.max_cm)))
+        got = rf.scan(n, e, psi)
+        assert got == want + [65535] * 12 and all(type(v) is int for v in got)
+
+
 def test_simulator_sends_obstacle_distance_at_its_rate_only_with_a_world():
     cfg = load(None, QUIET + ["sim.initial.x=10.0", "sim.initial.y=50.0"])
     dec = Codec(255, 0, accept=("HIL_SENSOR", "HIL_GPS", "HIL_STATE_QUATERNION", "OBSTACLE_DISTANCE"))
