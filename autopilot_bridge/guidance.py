@@ -73,6 +73,73 @@ def _max_between(values: np.ndarray, cum: np.ndarray, index: int, limit: float) 
     return out
 
 
+@njit(cache=True)
+def _pairwise_sum(a: np.ndarray, lo: int, n: int) -> float:
+    """numpy's sum of ``a[lo:lo + n]`` (float64, contiguous), in its order: pairwise, 8 accumulators
+    per block of <= 128, from -0.0 below 8 (tests/test_guidance_kernel.py compares it with np.sum)."""
+    if n == 0:
+        return 0.0
+    if n < 8:
+        res = -0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    if n <= 128:
+        r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+        r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+        i = 8
+        while i < n - (n % 8):
+            r0 += a[lo + i]
+            r1 += a[lo + i + 1]
+            r2 += a[lo + i + 2]
+            r3 += a[lo + i + 3]
+            r4 += a[lo + i + 4]
+            r5 += a[lo + i + 5]
+            r6 += a[lo + i + 6]
+            r7 += a[lo + i + 7]
+            i += 8
+        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+        while i < n:
+            res += a[lo + i]
+            i += 1
+        return res
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise_sum(a, lo, n2) + _pairwise_sum(a, lo + n2, n - n2)
+
+
+@njit(cache=True, error_model="numpy")
+def _curvature_at(signed: np.ndarray, cum: np.ndarray, index: int, along: float, span: float) -> float:
+    """Mean of ``signed[max(lo - 1, 0):max(hi - 1, 0)]`` with lo, hi the searchsorted positions of
+    ``cum[index] + along -/+ span`` (left, right), 0 when empty: LineOfSight.curvature_at's rule."""
+    s = cum[index] + along
+    lo = max(int(np.searchsorted(cum, s - span, side="left")) - 1, 0)
+    hi = min(max(int(np.searchsorted(cum, s + span, side="right")) - 1, 0), len(signed))
+    if hi <= lo:
+        return 0.0
+    return _pairwise_sum(signed, lo, hi - lo) / (hi - lo)
+
+
+@njit(cache=True, error_model="numpy")
+def _follow(path: np.ndarray, seg: np.ndarray, seg_len: np.ndarray, cum: np.ndarray, vertex_curvature: np.ndarray,
+            signed_curvature: np.ndarray, lo: int, hi: int, north: float, east: float, lookahead: float,
+            preview: float):
+    """One LineOfSight.update in one call: (segment, heading, cross-track, remaining, distance to the
+    end, curvature ahead, curvature), each term as the Python version computed it."""
+    i, s = _closest(path, seg, seg_len, lo, hi, north, east)
+    pi_p = math.atan2(seg[i, 1], seg[i, 0])
+    e = -(north - path[i, 0]) * math.sin(pi_p) + (east - path[i, 1]) * math.cos(pi_p)
+    along = s * seg_len[i]
+    remaining = cum[-1] - (cum[i] + along)
+    last = path.shape[0] - 1
+    end_dist = np.hypot(path[last, 0] - north, path[last, 1] - east)
+    heading = pi_p - math.atan2(e, lookahead)
+    if remaining < lookahead:
+        heading = math.atan2(path[last, 1] - east, path[last, 0] - north) if end_dist > 1e-6 else pi_p
+    ahead = _max_between(vertex_curvature, cum, i, cum[i] + along + preview)
+    return i, heading, e, remaining, end_dist, ahead, _curvature_at(signed_curvature, cum, i, along, 1.0)
+
+
 _warm = False
 
 
@@ -132,31 +199,16 @@ class LineOfSight:
     def curvature_at(self, index: int, along: float, span: float = 1.0) -> float:
         """Mean signed curvature (1/m, > 0 to starboard) of the vertices within ``span`` m either
         side of ``along`` metres into segment ``index``: the turn a yaw-rate feed-forward follows."""
-        s = self.cum[index] + along
-        lo = int(np.searchsorted(self.cum, s - span, side="left"))
-        hi = int(np.searchsorted(self.cum, s + span, side="right"))
-        k = self.signed_curvature[max(lo - 1, 0):max(hi - 1, 0)]  # vertex j sits at cum[j + 1]
-        return float(k.sum()) / len(k) if len(k) else 0.0   # k.mean(), without its Python-level overhead
+        return float(_curvature_at(self.signed_curvature, self.cum, index, along, span))
 
     def update(self, north: float, east: float, preview: float = 0.0) -> GuidanceOutput:
         """Desired heading for the vessel at (north, east); ``preview`` m of path are scanned for curvature."""
-        p = np.array([north, east])
         # Search a window ahead of the last progress only, so the vessel never skips back.
         lo, hi = self.index, min(self.index + WINDOW, len(self.seg))
-        i, s = _closest(self.path, self.seg, self.seg_len, lo, hi, float(north), float(east))
+        i, heading, e, remaining, end_dist, ahead, curvature = _follow(
+            self.path, self.seg, self.seg_len, self.cum, self.vertex_curvature, self.signed_curvature, lo, hi,
+            float(north), float(east), float(self.lookahead), float(preview))
         self.index = i
-        d = self.seg[i]
-        pi_p = math.atan2(d[1], d[0])
-        a = self.path[i]
-        # Cross-track error in the path frame: positive to starboard (right of the direction of travel).
-        e = -(p[0] - a[0]) * math.sin(pi_p) + (p[1] - a[1]) * math.cos(pi_p)
-        remaining = float(self.cum[-1] - (self.cum[i] + s * self.seg_len[i]))
-        end_dist = float(np.hypot(*(self.path[-1] - p)))
-        heading = pi_p - math.atan2(e, self.lookahead)
-        if remaining < self.lookahead:
-            # Near the end, aim at the end point itself.
-            heading = math.atan2(self.path[-1][1] - east, self.path[-1][0] - north) if end_dist > 1e-6 else pi_p
         return GuidanceOutput(heading=heading, cross_track=e, remaining=remaining,
-                              finished=end_dist <= self.acceptance_radius,
-                              curvature_ahead=self.curvature_ahead(i, s * self.seg_len[i], preview),
-                              curvature=self.curvature_at(i, s * self.seg_len[i]))
+                              finished=end_dist <= self.acceptance_radius, curvature_ahead=ahead,
+                              curvature=curvature)
