@@ -61,6 +61,21 @@ def test_a_sector_reports_its_nearest_ray_and_nothing_beyond_max_range():
     assert len(scan) == 72 and scan[0] == far.max_cm + 1     # MAVLink: max_distance + 1 = no obstacle
 
 
+def march_equals_numpy(rf, rng, poses, beyond):
+    """Compare the compiled march with the numpy evaluation at ``poses`` random poses, up to
+    ``beyond`` m outside the grid; returns how many sectors saw something."""
+    rows, cols = rf.world.occ.shape
+    returns = 0
+    for _ in range(poses):
+        n = rng.uniform(-beyond, rows * RES + beyond)
+        e = rng.uniform(-beyond, cols * RES + beyond)
+        psi = rng.uniform(-4.0, 4.0)
+        got, want = rf.true_ranges(n, e, psi), rf.true_ranges_numpy(n, e, psi)
+        assert np.array_equal(got, want), (n, e, psi)
+        returns += int(np.isfinite(want).sum())
+    return returns
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_compiled_ray_march_equals_the_numpy_evaluation_bit_for_bit(seed):
     """simulator/raycast.py (issue 17) against the numpy evaluation of every sample of every ray, on
@@ -69,15 +84,7 @@ def test_compiled_ray_march_equals_the_numpy_evaluation_bit_for_bit(seed):
     occ = rng.random((120, 160)) < 0.02 * (seed + 1)
     occ[rng.integers(0, 120, 5), :] = True                   # a few walls across the map
     rf = quiet_rangefinder(occ, rays_per_sector=int(rng.integers(1, 6)))
-    rows, cols = occ.shape
-    returns = 0
-    for _ in range(60):
-        n = rng.uniform(-10.0, rows * RES + 10.0)
-        e = rng.uniform(-10.0, cols * RES + 10.0)
-        psi = rng.uniform(-4.0, 4.0)
-        got, want = rf.true_ranges(n, e, psi), rf.true_ranges_numpy(n, e, psi)
-        assert np.array_equal(got, want), (n, e, psi)
-        returns += int(np.isfinite(want).sum())
+    returns = march_equals_numpy(rf, rng, poses=60, beyond=10.0)
     assert returns > 200  # sectors that saw something: the comparison is not between two empty scans
 
 
@@ -96,14 +103,7 @@ def test_the_skipping_march_equals_the_numpy_evaluation_on_sparse_maps(seed):
             occ[r:r + h, c:c + w] = True
     rf = quiet_rangefinder(occ, rays_per_sector=int(rng.integers(1, 6)),
                            max_range=float(rng.choice([5.0, 25.0, 40.0, 80.0])))
-    returns = 0
-    for _ in range(80):
-        n = rng.uniform(-30.0, rows * RES + 30.0)
-        e = rng.uniform(-30.0, cols * RES + 30.0)
-        psi = rng.uniform(-4.0, 4.0)
-        got, want = rf.true_ranges(n, e, psi), rf.true_ranges_numpy(n, e, psi)
-        assert np.array_equal(got, want), (n, e, psi)
-        returns += int(np.isfinite(want).sum())
+    returns = march_equals_numpy(rf, rng, poses=80, beyond=30.0)
     assert (returns > 20) == (seed != 6)
 
 
