@@ -128,13 +128,14 @@ def _follow(path: np.ndarray, seg: np.ndarray, seg_len: np.ndarray, cum: np.ndar
     end, curvature ahead, curvature), each term as the Python version computed it."""
     i, s = _closest(path, seg, seg_len, lo, hi, north, east)
     pi_p = math.atan2(seg[i, 1], seg[i, 0])
+    # Cross-track error in the path frame: positive to starboard (right of the direction of travel).
     e = -(north - path[i, 0]) * math.sin(pi_p) + (east - path[i, 1]) * math.cos(pi_p)
     along = s * seg_len[i]
     remaining = cum[-1] - (cum[i] + along)
     last = path.shape[0] - 1
     end_dist = np.hypot(path[last, 0] - north, path[last, 1] - east)
     heading = pi_p - math.atan2(e, lookahead)
-    if remaining < lookahead:
+    if remaining < lookahead:   # near the end, aim at the end point itself
         heading = math.atan2(path[last, 1] - east, path[last, 0] - north) if end_dist > 1e-6 else pi_p
     ahead = _max_between(vertex_curvature, cum, i, cum[i] + along + preview)
     return i, heading, e, remaining, end_dist, ahead, _curvature_at(signed_curvature, cum, i, along, 1.0)

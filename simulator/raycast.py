@@ -17,6 +17,8 @@ import numpy as np
 from numba import njit
 from scipy import ndimage
 
+_NO_LIMIT = 1 << 30   # samples a ray may skip on a map without an occupied cell: all of them
+
 
 def skip_map(occ: np.ndarray, resolution: float, step: float) -> np.ndarray:
     """For each cell, how many samples ``step`` m apart a ray may advance from a sample in it
@@ -31,9 +33,6 @@ def skip_map(occ: np.ndarray, resolution: float, step: float) -> np.ndarray:
         return np.full(occ.shape, _NO_LIMIT, dtype=np.int32)
     free_m = ndimage.distance_transform_edt(~occ) * float(resolution) - resolution * math.sqrt(2.0) - 1e-6
     return np.clip(np.floor(free_m / step), 1, _NO_LIMIT).astype(np.int32)
-
-
-_NO_LIMIT = 1 << 30
 
 
 @njit(cache=True)
