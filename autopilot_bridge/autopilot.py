@@ -626,7 +626,12 @@ class Autopilot:
     # -- loop ----------------------------------------------------------------------------------
     def run(self, should_stop: Callable[[], bool], poll_s: float = 0.05) -> None:
         """Serve sensor frames until ``should_stop()``; the planner is watched between frames too."""
+        busy = self.link.busy
         while not should_stop():
+            if busy is not None:
+                # While the worker plans, wait without polling: in lockstep the worker shares this CPU and
+                # gets it only while the vessel computer sleeps (hil/placement.py, docs/performance.md).
+                busy.hold(self.planning.pending_since is not None)
             frames = self.link.receive(timeout=poll_s)
             received_at = time.perf_counter()
             for f in frames:

@@ -53,6 +53,8 @@ class BusyPoll:
     worker, a second run); so after ``MISSES_BEFORE_PAUSE`` empty polls in a row the endpoint
     sleeps without polling for a pause that doubles each time (up to ``MAX_PAUSE`` waits) and is
     reset by the first poll that catches something. A process that may use one CPU only never polls.
+    A held poll (:meth:`hold`) sleeps at once, so that a process that shares its CPU on purpose (the
+    vessel computer and its planner worker) hands it over while it waits.
     Which path delivered a datagram changes nothing in what is delivered: lockstep runs stay
     byte-identical.
     """
@@ -70,9 +72,19 @@ class BusyPoll:
         self._misses_in_row = 0
         self._pause = self.FIRST_PAUSE
         self._paused_for = 0
+        self._held = False
+        self.held_waits = 0
+
+    def hold(self, held: bool) -> None:
+        """While held, every wait sleeps at once: the CPU goes to whatever else is runnable on it
+        (the vessel computer holds its polls while its planner worker has a request)."""
+        self._held = held
 
     def window(self) -> float:
         """Seconds to poll before this wait sleeps (0: sleep at once)."""
+        if self._held:
+            self.held_waits += 1
+            return 0.0
         if self._paused_for > 0:
             self._paused_for -= 1
             return 0.0
@@ -94,7 +106,7 @@ class BusyPoll:
 
     def summary(self) -> dict[str, float | int]:
         return {"max_us": round(self.max_s * 1e6, 1), "caught": self.hits, "missed": self.misses,
-                "pauses": self.pauses}
+                "pauses": self.pauses, "held": self.held_waits}
 
 
 class UdpEndpoint:

@@ -21,6 +21,7 @@ summary.json) and not written to the .tlog.
 from __future__ import annotations
 
 import errno
+import gc
 import json
 import math
 import os
@@ -412,6 +413,7 @@ class HilRun:
                     raise
                 raise _WallTimeout() from None
             checked = 0
+            processes.freeze_heap()   # unfrozen in the finally below: a campaign's runs share this process
             while True:
                 if opts.lockstep:
                     # Read in batches: a tap woken by every datagram (three a step) took the cores from
@@ -473,6 +475,7 @@ class HilRun:
                 raise
             outcome = "interrupted"
         finally:
+            gc.unfreeze()
             if self._sysid_lock is not None:
                 self._sysid_lock.close()
             self._unplace()

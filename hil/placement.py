@@ -33,8 +33,8 @@ CHOICES = "auto, off, or two CPU numbers A,B"
 @dataclass(frozen=True)
 class Placement:
     """CPU numbers (as ``os.sched_setaffinity`` counts them)."""
-    simulator: int   # the simulator, hil run's tap and the planner worker
-    computer: int    # the vessel computer alone
+    simulator: int   # the simulator and hil run's tap
+    computer: int    # the vessel computer and its planner worker (SCHED_IDLE)
 
 
 def usable() -> list[int]:
@@ -167,4 +167,17 @@ def apply(placement: Placement, simulator: int, computer: int, tap: bool = True)
     for child in children(computer):
         if pin(child, placement.computer):
             done["planner_worker"] = placement.computer
+            idle_policy(child)
     return done
+
+
+def idle_policy(pid: int) -> bool:
+    """Run ``pid`` (the planner worker) under ``SCHED_IDLE``: only while nothing else on its CPU
+    wants to run. The vessel computer then never waits for a slice of its worker; the worker gets the
+    CPU while the vessel computer sleeps (it holds its polls while a request is out) and, at a
+    lockstep deadline, while the vessel computer waits for the answer. False where refused."""
+    try:
+        os.sched_setscheduler(pid, os.SCHED_IDLE, os.sched_param(0))
+    except (AttributeError, OSError):
+        return False
+    return True

@@ -26,7 +26,7 @@ def test_three_empty_polls_in_a_row_pause_polling_for_a_doubling_number_of_waits
     for _ in range(3):
         p.missed()
     assert sum(p.window() == 0.0 for _ in range(4 * BusyPoll.FIRST_PAUSE)) == 2 * BusyPoll.FIRST_PAUSE
-    assert p.summary() == {"max_us": 1000.0, "caught": 0, "missed": 6, "pauses": 2}
+    assert p.summary() == {"max_us": 1000.0, "caught": 0, "missed": 6, "pauses": 2, "held": 0}
 
 
 def test_a_catch_resets_the_run_of_misses_and_the_pause_length():
@@ -53,6 +53,21 @@ def test_pauses_are_capped():
         while p.window() == 0.0:
             pass
     assert p._pause == BusyPoll.MAX_PAUSE
+
+
+def test_a_held_poll_sleeps_at_once_and_keeps_its_pause_schedule():
+    """The vessel computer holds its polls while its planner worker has a request: each wait
+    sleeps at once (counted), and a pause under way resumes where it was once released."""
+    p = BusyPoll(0.001)
+    for _ in range(3):
+        p.missed()                      # a pause of FIRST_PAUSE waits begins
+    p.window()
+    p.hold(True)
+    assert [p.window() for _ in range(50)] == [0.0] * 50
+    p.hold(False)
+    assert sum(p.window() == 0.0 for _ in range(BusyPoll.FIRST_PAUSE)) == BusyPoll.FIRST_PAUSE - 1
+    assert p.window() == 0.001
+    assert p.summary() == {"max_us": 1000.0, "caught": 0, "missed": 3, "pauses": 1, "held": 50}
 
 
 def test_negative_window_is_refused():

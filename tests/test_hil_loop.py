@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 from typing import Any
@@ -103,6 +104,12 @@ def test_a_placed_run_pins_each_end_and_gives_the_tap_its_cpus_back(tmp_path):
     cpus = placement.usable()
     before = _cpus_of(0)
     seen: dict[str, set[int]] = {}
+    policies: dict[str, int] = {}
+
+    def policy(tap, run):
+        workers = placement.children(run.ap.pid)
+        if "free" not in policies and tap.truth and workers:
+            policies["free"] = os.sched_getscheduler(workers[0])
 
     def look(tap, run):
         if seen or not tap.truth:
@@ -113,6 +120,7 @@ def test_a_placed_run_pins_each_end_and_gives_the_tap_its_cpus_back(tmp_path):
         workers = placement.children(run.ap.pid)
         assert workers, "the vessel computer has a planner worker"
         seen["planner_worker"] = _cpus_of(workers[0])
+        policies["placed"] = os.sched_getscheduler(workers[0])
 
     def run(name: str, cpus_opt, hooks=()) -> Any:
         opts = RunOptions(scenario="harbour", lockstep=True, duration=300.0, seed=3, out=tmp_path / name,
@@ -123,11 +131,18 @@ def test_a_placed_run_pins_each_end_and_gives_the_tap_its_cpus_back(tmp_path):
     a, b = cpus[-1], cpus[0]
     placed = run("placed", placement.Placement(a, b), [look])
     assert placed.outcome == "goal", placed.events
+    assert gc.get_freeze_count() == 0   # the tap froze its heap for the loop only: a campaign's runs share it
     assert seen == {"simulator": {a}, "computer": {b}, "tap": {a}, "planner_worker": {b}}
     assert placed.simulator["cpus"] == {"simulator": a, "tap": a, "computer": b, "planner_worker": b}
     assert _cpus_of(0) == before
-    free = run("free", "off")
+    free = run("free", "off", [policy])
     assert free.simulator["cpus"] is None
+    # Placed, the worker runs only when the vessel computer leaves its CPU idle; left to the scheduler, as any process.
+    assert policies == {"placed": os.SCHED_IDLE, "free": os.SCHED_OTHER}
+    # The vessel computer slept on its socket, not polling, while the worker had a request out (at
+    # most the frames of a planning deadline, 30, each cycle).
+    held = placed.simulator["busy_poll"]["autopilot"]["held"]
+    assert 0 < held <= 31 * placed.planning_cycles, (held, placed.planning_cycles)
 
     def strip(s: Any) -> dict:
         return {k: v for k, v in to_table(s).items() if k not in WALL_CLOCK_KEYS}
