@@ -11,6 +11,7 @@ at each piece's midpoint (tree edges are at most one step long, so they are one 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -100,6 +101,29 @@ def path_cost(path: np.ndarray, field, params) -> float:
     if not _uses_current(field, params):
         return float(np.sum(np.hypot(*np.diff(path, axis=0).T)))
     return float(sum(segment_cost(path[i], path[i + 1], field, params) for i in range(len(path) - 1)))
+
+
+def path_cost_fn(field, params) -> Callable[[np.ndarray], float]:
+    """``lambda p: path_cost(p, field, params)`` that computes each segment's cost once: pruning
+    asks for the cost of a sub-path again each time it grows by a waypoint. The same terms summed in
+    the same order, so the same floats."""
+    if not _uses_current(field, params):
+        return lambda path: path_cost(path, field, params)
+    seen: dict[tuple[float, float, float, float], float] = {}
+
+    def segment(p: np.ndarray, q: np.ndarray) -> float:
+        key = (float(p[0]), float(p[1]), float(q[0]), float(q[1]))
+        c = seen.get(key)
+        if c is None:
+            c = seen[key] = segment_cost(p, q, field, params)
+        return c
+
+    def cost(path: np.ndarray) -> float:
+        path = np.asarray(path, dtype=np.float64)
+        if len(path) < 2:
+            return 0.0
+        return float(sum(segment(path[i], path[i + 1]) for i in range(len(path) - 1)))
+    return cost
 
 
 def path_length(path: np.ndarray) -> float:

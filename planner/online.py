@@ -37,7 +37,7 @@ import numpy as np
 from scipy import ndimage
 
 from planner import make_planner
-from planner.cost import path_cost, path_length
+from planner.cost import path_cost_fn, path_length
 from planner.gridmap import OccupancyGrid
 from planner.metrics import path_metrics
 from planner.params import AlgorithmName, PlannerParams
@@ -453,9 +453,7 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
                            result.iterations, empty, empty, False, result.tree_nodes, result.tree_parents,
                            reason=result.reason or "no local path")
 
-    def cost_fn(p):
-        return path_cost(p, ctx.field, params)
-    local = prune(result.path, grid, cost_fn)
+    local = prune(result.path, grid, path_cost_fn(ctx.field, params))
     radius = params.turn_radius_factor * params.speed
     # The bypass of a short leg must be clear of the safety-inflated map (the velocity
     # inflation is a planning margin; the smoothed path is checked against the same map).

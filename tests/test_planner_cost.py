@@ -238,3 +238,32 @@ def test_gridfield_at_is_the_vectorised_call():
         vx, vy = f(xs, ys)
         for i in range(len(xs)):
             assert f.at(float(xs[i]), float(ys[i])) == (vx[i], vy[i])
+
+
+def test_path_cost_fn_gives_path_cost_bit_for_bit_on_the_sub_paths_prune_asks_for():
+    """The memoised cost (each segment computed once) sums the same terms in the same order as
+    path_cost: the same floats, with a current field and without, on growing sub-paths and their
+    shortcuts as prune asks for them, and on repeated points."""
+    from planner.cost import path_cost_fn
+
+    rng = np.random.default_rng(11)
+    params = PlannerParams(objective="current")
+    fields = [GridField(rng.normal(size=(31, 41)), rng.normal(size=(31, 41)), 1.0),
+              GridField.uniform(0.3, -0.2), None]
+    for field in fields:
+        for _ in range(40):
+            n = int(rng.integers(2, 14))
+            path = np.cumsum(rng.normal(scale=4.0, size=(n, 2)), axis=0) + 15.0
+            if n > 3:
+                path[2] = path[1]   # a zero-length segment
+            cost = path_cost_fn(field, params)
+            for j in range(n - 1):
+                for i in range(j + 1, n):
+                    sub = path[j:i + 1]
+                    assert cost(sub) == path_cost(sub, field, params)
+                    shortcut = np.stack([path[j], path[i]])
+                    assert cost(shortcut) == path_cost(shortcut, field, params)
+            assert cost(path[:1]) == path_cost(path[:1], field, params) == 0.0
+    plain = PlannerParams(objective="length")
+    path = rng.normal(size=(9, 2))
+    assert path_cost_fn(fields[0], plain)(path) == path_cost(path, fields[0], plain)
