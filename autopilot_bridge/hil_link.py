@@ -132,30 +132,29 @@ class HilLink:
 
     def decode(self, datagram: bytes) -> SensorFrame | None:
         """The sensor frame in one datagram, or None (rejects counted by reason)."""
-        msgs, rejects = self.codec.decode(datagram)
+        # Fields are read only from the frames used: the truth is counted, never decoded.
+        frames, rejects = self.codec.frames(datagram)
         for r in rejects:
             self.rejects[r] += 1
         sensor = gps = odo = obstacles = None
         ais = []
-        for m in msgs:
-            kind = m.get_type()
-            if kind != "AIS_VESSEL" and self.sim_ids is not None and \
-                    (m.get_srcSystem(), m.get_srcComponent()) != self.sim_ids:
+        for kind, system, component, fields in frames:
+            if kind != "AIS_VESSEL" and self.sim_ids is not None and (system, component) != self.sim_ids:
                 self.rejects[WRONG_SOURCE_ID] += 1
                 continue
             if kind == "AIS_VESSEL":
-                if m.get_srcComponent() == self.truth_component_id:
+                if component == self.truth_component_id:
                     self.truth_ignored += 1
                 else:
-                    ais.append(m)
+                    ais.append(fields())
             elif kind == "HIL_SENSOR":
-                sensor = m
+                sensor = fields()
             elif kind == "HIL_GPS":
-                gps = m
+                gps = fields()
             elif kind == "ODOMETRY":
-                odo = m
+                odo = fields()
             elif kind == "OBSTACLE_DISTANCE":
-                obstacles = m
+                obstacles = fields()
             else:  # HIL_STATE_QUATERNION: the truth is for evaluation only
                 self.truth_ignored += 1
         if sensor is not None and not self._on_timeline(int(sensor.time_usec)):

@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import inspect
 import struct
+from collections import namedtuple
 from collections.abc import Callable, Iterable
+from functools import partial
 from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
@@ -43,7 +45,7 @@ class _Layout:
     """What pymavlink's ``MAVLink.decode`` needs of one message class, worked out once: the payload
     unpacker, and how its wire-ordered (largest type first) values become the declared fields."""
 
-    __slots__ = ("cls", "crc_extra", "size", "unpack", "order", "spans", "strings")
+    __slots__ = ("cls", "crc_extra", "size", "unpack", "order", "spans", "strings", "texts", "_view")
 
     def __init__(self, cls: Any) -> None:
         self.cls, self.crc_extra = cls, bytes((cls.crc_extra,))
@@ -56,6 +58,15 @@ class _Layout:
             self.order = None
             self.spans = tuple((sum(lengths[:o]), lengths[o]) for o in cls.orders)
         self.strings = "s" in cls.unpacker.format
+        # char arrays, which the message's constructor turns into text (to the first NUL, ASCII)
+        self.texts = tuple(i for i, t in enumerate(cls.fieldtypes) if t == "char")
+        self._view: Any = None
+
+    def view(self) -> Any:
+        """A named tuple type of the message's fields (pymavlink's names, declared order), made once."""
+        if self._view is None:
+            self._view = namedtuple(self.cls.msgname, self.cls.fieldnames, rename=True)  # type: ignore[misc]
+        return self._view
 
     def fields(self, payload: bytes) -> list[Any]:
         t = self.unpack(payload)
@@ -121,6 +132,16 @@ def message_at(datagram: bytes, start: int, end: int) -> mavlink2.MAVLink_messag
     return _message(datagram, start, end, _LAYOUTS[frame_ids(datagram, start)[0]])
 
 
+def fields_at(datagram: bytes, start: int, end: int) -> Any:
+    """The fields of the frame ``datagram[start:end]`` found by :func:`clean_frames`, by name: a
+    named tuple of the values :func:`message_at`'s message holds, without building the message."""
+    layout = _LAYOUTS[frame_ids(datagram, start)[0]]
+    values = layout.fields(_payload(datagram, start, end, layout))
+    for i in layout.texts:
+        values[i] = values[i].split(b"\x00", 1)[0].decode("ascii", errors="replace")
+    return layout.view()._make(values)
+
+
 def _walk(datagram: bytes, crc16: Callable[[bytes], int]) -> list[tuple[int, int, _Layout]] | None:
     n, i, out = len(datagram), 0, []
     while i < n:
@@ -140,12 +161,17 @@ def _walk(datagram: bytes, crc16: Callable[[bytes], int]) -> list[tuple[int, int
     return out
 
 
-def _message(datagram: bytes, i: int, end: int, layout: _Layout) -> mavlink2.MAVLink_message:
+def _payload(datagram: bytes, i: int, end: int, layout: _Layout) -> bytes:
     length = datagram[i + 1]
     payload = datagram[i + _V2_HEADER:end - 2]
     if length < layout.size:   # MAVLink 2 drops the payload's trailing zeros
         payload += bytes(layout.size - length)
-    m = layout.cls(*layout.fields(payload[:layout.size]))   # an error: pymavlink reports it
+    return payload[:layout.size]
+
+
+def _message(datagram: bytes, i: int, end: int, layout: _Layout) -> mavlink2.MAVLink_message:
+    length = datagram[i + 1]
+    m = layout.cls(*layout.fields(_payload(datagram, i, end, layout)))   # an error: pymavlink reports it
     frame = bytearray(datagram[i:end])
     m._msgbuf, m._payload, m._crc = frame, frame[6:-2], datagram[end - 2] | datagram[end - 1] << 8   # pymavlink's
     m._header = mavlink2.MAVLink_header(layout.cls.id, 0, datagram[i + 3], length, datagram[i + 4],
@@ -156,6 +182,10 @@ def _message(datagram: bytes, i: int, end: int, layout: _Layout) -> mavlink2.MAV
 def _parse_clean(datagram: bytes, crc16: Callable[[bytes], int]) -> list[mavlink2.MAVLink_message] | None:
     spans = _walk(datagram, crc16)
     return None if spans is None else [_message(datagram, i, end, layout) for i, end, layout in spans]
+
+
+def _itself(m: Any) -> Any:
+    return m
 
 
 def reset_parser(mav: mavlink2.MAVLink) -> None:
@@ -287,6 +317,26 @@ class Codec:
             accepted = [m for m in clean if m.get_type() in self.accept]
             return accepted, [UNWANTED_MESSAGE] * (len(clean) - len(accepted))
         return self.decode_stream(datagram)
+
+    def frames(self, datagram: bytes) -> tuple[list[tuple[str, int, int, Callable[[], Any]]], list[str]]:
+        """:meth:`decode` for a reader that needs the fields of some messages only: each accepted
+        message as (type, source system, source component, fields), where ``fields()`` gives its
+        fields by name. On a clean datagram they are read from the frame when asked for
+        (:func:`fields_at`), and no message object is built; anything else is the message
+        pymavlink parsed. The same messages, values and rejections as :meth:`decode`."""
+        spans = clean_frames(datagram) if self.mav.signing.secret_key is None else None
+        if spans is None:
+            msgs, rejects = self.decode(datagram)
+            return [(m.get_type(), m.get_srcSystem(), m.get_srcComponent(), partial(_itself, m)) for m in msgs], rejects
+        self.mav.total_bytes_received += len(datagram)
+        self.mav.total_packets_received += len(spans)
+        out: list[tuple[str, int, int, Callable[[], Any]]] = []
+        for start, end in spans:
+            msg_id, system, component = frame_ids(datagram, start)
+            kind = _LAYOUTS[msg_id].cls.msgname
+            if kind in self.accept:
+                out.append((kind, system, component, partial(fields_at, datagram, start, end)))
+        return out, [UNWANTED_MESSAGE] * (len(spans) - len(out))
 
     def decode_stream(self, datagram: bytes) -> tuple[list[mavlink2.MAVLink_message], list[str]]:
         """:meth:`decode` through pymavlink's parser alone (any datagram; signed frames)."""
