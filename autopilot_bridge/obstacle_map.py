@@ -18,6 +18,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy import ndimage
 
 
@@ -43,6 +44,9 @@ class SensedObstacles:
         self._cells: list[tuple[int, int]] = []
         self.version = 0
         self.stats = SensingStats()
+        # compile (or load from numba's cache) before the first scan: no frame pays for it
+        _place(np.zeros((0, 1), np.int64), np.zeros((0, 1), np.int64), self.explained, self.hits, self.confirmed,
+               self.confirm_hits)
 
     def add_scan(self, bearings, ranges, north: float, east: float, psi: float,
                  sector_width: float = 0.0) -> np.ndarray:
@@ -56,7 +60,6 @@ class SensedObstacles:
         conservative obstacle, at most ``range x width`` wide).
         """
         self.stats.scans += 1
-        rows, cols = self.chart.shape
         res = self.resolution
         d = np.asarray(ranges, dtype=float)
         if len(d) == 0:
@@ -68,23 +71,11 @@ class SensedObstacles:
         a = psi + np.asarray(bearings, dtype=float)[:, None] + spread[None, :]      # (R, n_arc)
         r = np.floor((north + d[:, None] * np.cos(a)) / res).astype(np.int64)
         c = np.floor((east + d[:, None] * np.sin(a)) / res).astype(np.int64)
-        inside = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
-        rc_r, rc_c = np.where(inside, r, 0), np.where(inside, c, 0)
-        explained = (self.explained[rc_r, rc_c] & inside).any(axis=1)
-        outside = ~inside.any(axis=1)
-        self.stats.outside_map += int(outside.sum())
-        self.stats.explained_by_chart += int((explained & ~outside).sum())
-        keep = (~explained & ~outside)[:, None] & inside
-        # A cell counts once per scan (neighbouring sectors' arcs share their edge cells).
-        lin = np.unique(r[keep] * cols + c[keep])
-        hr, hc = lin // cols, lin % cols
-        fresh = ~self.confirmed[hr, hc]
-        hr, hc = hr[fresh], hc[fresh]
-        self.hits[hr, hc] += 1
-        done = self.hits[hr, hc] >= self.confirm_hits
-        new = np.column_stack([hr[done], hc[done]]).astype(np.int32).reshape(-1, 2)
+        # The cells in integers, compiled: a dozen numpy calls on a few hundred cells cost more than the work.
+        new, outside, explained = _place(r, c, self.explained, self.hits, self.confirmed, self.confirm_hits)
+        self.stats.outside_map += outside
+        self.stats.explained_by_chart += explained
         if len(new):
-            self.confirmed[new[:, 0], new[:, 1]] = True
             self._cells.extend((int(r), int(c)) for r, c in new.tolist())
             self.version += 1
         return new
@@ -102,6 +93,51 @@ class SensedObstacles:
         s = self.stats
         return {"scans": s.scans, "returns": s.returns, "explained_by_chart": s.explained_by_chart,
                 "outside_map": s.outside_map, "cells": len(self._cells), "versions": self.version}
+
+
+@njit(cache=True)
+def _place(r: np.ndarray, c: np.ndarray, explained_map: np.ndarray, hits: np.ndarray, confirmed: np.ndarray,
+           confirm_hits: int) -> tuple[np.ndarray, int, int]:
+    """The arcs' cells ``r, c`` (R, n_arc) of one scan on the grid: a return whose arc leaves the
+    grid entirely is outside the map; one with a cell the chart explains is explained; every cell of
+    the other arcs is hit once per scan (neighbouring arcs share edge cells) unless already confirmed,
+    and confirmed at ``confirm_hits``. Updates ``hits`` and ``confirmed``; returns the newly confirmed
+    cells (K, 2) [row, col] in row-major order, and the counts of returns outside and explained."""
+    rows, cols = explained_map.shape
+    n_ret, n_arc = r.shape
+    cells = np.empty(n_ret * n_arc, np.int64)
+    k = outside = explained = 0
+    for i in range(n_ret):
+        any_inside = by_chart = False
+        for j in range(n_arc):
+            ri, ci = r[i, j], c[i, j]
+            if 0 <= ri < rows and 0 <= ci < cols:
+                any_inside = True
+                if explained_map[ri, ci]:
+                    by_chart = True
+        if not any_inside:
+            outside += 1
+        elif by_chart:
+            explained += 1
+        else:
+            for j in range(n_arc):
+                ri, ci = r[i, j], c[i, j]
+                if 0 <= ri < rows and 0 <= ci < cols:
+                    cells[k] = ri * cols + ci
+                    k += 1
+    cells = np.unique(cells[:k])
+    new = np.empty((len(cells), 2), np.int32)
+    m = 0
+    for lin in cells:
+        ri, ci = lin // cols, lin % cols
+        if confirmed[ri, ci]:
+            continue
+        hits[ri, ci] += 1
+        if hits[ri, ci] >= confirm_hits:
+            confirmed[ri, ci] = True
+            new[m, 0], new[m, 1] = ri, ci
+            m += 1
+    return new[:m], outside, explained
 
 
 def path_blocked(path_ned: np.ndarray, cells: np.ndarray, resolution: float, clearance: float) -> bool:

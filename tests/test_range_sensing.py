@@ -236,3 +236,67 @@ def test_planner_worker_plans_around_sensed_obstacles():
     assert with_.status != "none" and safe.path_free(with_.path)
     again = plan(None, 0)                                # a restarted autopilot: back to the chart
     assert not safe.path_free(again.path)
+
+
+def _add_scan_reference(s: SensedObstacles, bearings, ranges, north, east, psi, sector_width) -> np.ndarray:
+    """SensedObstacles.add_scan as it was written in numpy before its cell work was compiled: the
+    reference for the compiled version (the same cells, order, hits and counters)."""
+    s.stats.scans += 1
+    rows, cols = s.chart.shape
+    res = s.resolution
+    d = np.asarray(ranges, dtype=float)
+    if len(d) == 0:
+        return np.zeros((0, 2), dtype=np.int32)
+    s.stats.returns += len(d)
+    n_arc = int(math.ceil(d.max() * sector_width / (0.5 * res))) + 1 if sector_width > 0 else 1
+    spread = np.linspace(-0.5, 0.5, n_arc) * sector_width if n_arc > 1 else np.zeros(1)
+    a = psi + np.asarray(bearings, dtype=float)[:, None] + spread[None, :]
+    r = np.floor((north + d[:, None] * np.cos(a)) / res).astype(np.int64)
+    c = np.floor((east + d[:, None] * np.sin(a)) / res).astype(np.int64)
+    inside = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
+    rc_r, rc_c = np.where(inside, r, 0), np.where(inside, c, 0)
+    explained = (s.explained[rc_r, rc_c] & inside).any(axis=1)
+    outside = ~inside.any(axis=1)
+    s.stats.outside_map += int(outside.sum())
+    s.stats.explained_by_chart += int((explained & ~outside).sum())
+    keep = (~explained & ~outside)[:, None] & inside
+    lin = np.unique(r[keep] * cols + c[keep])
+    hr, hc = lin // cols, lin % cols
+    fresh = ~s.confirmed[hr, hc]
+    hr, hc = hr[fresh], hc[fresh]
+    s.hits[hr, hc] += 1
+    done = s.hits[hr, hc] >= s.confirm_hits
+    new = np.column_stack([hr[done], hc[done]]).astype(np.int32).reshape(-1, 2)
+    if len(new):
+        s.confirmed[new[:, 0], new[:, 1]] = True
+        s._cells.extend((int(r), int(c)) for r, c in new.tolist())
+        s.version += 1
+    return new
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_compiled_add_scan_places_what_the_numpy_version_placed(seed):
+    """Random charts (blobs, walls, none) and random scans from inside and outside the grid, arcs
+    from points to wide sectors, one to three hits to confirm: the same new cells in the same order,
+    hits, confirmed cells, cell list and counters after every scan."""
+    rng = np.random.default_rng(seed)
+    for _ in range(6):
+        rows, cols = int(rng.integers(20, 160)), int(rng.integers(20, 160))
+        chart = rng.random((rows, cols)) < rng.choice([0.0, 0.002, 0.02])
+        if rng.random() < 0.5:
+            chart[int(rng.integers(rows)), :] = True
+        res = float(rng.choice([0.25, 0.5, 1.0]))
+        args = (chart, res, int(rng.integers(1, 4)), float(rng.uniform(0.0, 2.0)))
+        fast, ref = SensedObstacles(*args), SensedObstacles(*args)
+        for _ in range(60):
+            n = int(rng.integers(0, 73))
+            bearings = np.sort(rng.uniform(0, 2 * np.pi, n))
+            ranges = rng.uniform(0.1, 40.0, n)
+            north, east = rng.uniform(-10, rows * res + 10), rng.uniform(-10, cols * res + 10)
+            psi, width = float(rng.uniform(-np.pi, np.pi)), float(rng.choice([0.0, 0.01, 0.087, 0.5]))
+            got = fast.add_scan(bearings, ranges, north, east, psi, width)
+            want = _add_scan_reference(ref, bearings, ranges, north, east, psi, width)
+            assert got.dtype == want.dtype and got.shape == want.shape and np.array_equal(got, want)
+            assert np.array_equal(fast.hits, ref.hits) and np.array_equal(fast.confirmed, ref.confirmed)
+            assert fast.summary() == ref.summary() and fast._cells == ref._cells
+        assert ref.count > 0 or not (~chart).any()
