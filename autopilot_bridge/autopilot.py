@@ -201,10 +201,9 @@ class Autopilot:
         if math.hypot(ned[0, 0] - s.x, ned[0, 1] - s.y) > 3.0 * self.p.lookahead:
             self.stats.plans_rejected["starts_too_far"] += 1
             return False
-        for (x0, y0), (x1, y1) in zip(plan.path[:-1], plan.path[1:], strict=True):
-            if not self.grid.segment_free(x0, y0, x1, y1):
-                self.stats.plans_rejected["collides"] += 1
-                return False
+        if not self.grid.polyline_free(plan.path):
+            self.stats.plans_rejected["collides"] += 1
+            return False
         since = self.sensed.cells()[self.planning.sensed_at_submit:]
         if path_blocked(ned, since, self.grid.resolution, self.p.sensed_path_clearance):
             # Planned before these obstacles were seen: plan again at once.

@@ -106,6 +106,16 @@ def segment_free(occ, res, x0, y0, x1, y1):
 
 
 @njit(cache=True)
+def polyline_free(occ, res, path):
+    """True if every segment of the polyline ``path`` (N, 2), metres, is :func:`segment_free`
+    (True for fewer than two points)."""
+    for k in range(path.shape[0] - 1):
+        if not segment_free(occ, res, path[k, 0], path[k, 1], path[k + 1, 0], path[k + 1, 1]):
+            return False
+    return True
+
+
+@njit(cache=True)
 def field_at(fvx, fvy, fres, fox, foy, x, y):
     """Bilinear interpolation of a gridded field, clamped at the edges."""
     rows, cols = fvx.shape

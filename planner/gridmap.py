@@ -121,11 +121,18 @@ class OccupancyGrid:
         """Exact cell traversal of the closed segment, corner touches included (see _kernels)."""
         return bool(_kernels.segment_free(self._u8, self.resolution, float(x0), float(y0), float(x1), float(y1)))
 
+    def polyline_free(self, path: np.ndarray) -> bool:
+        """Every segment of the polyline ``path`` (N, 2) :meth:`segment_free`, in one compiled call
+        (True for fewer than two points)."""
+        path = np.ascontiguousarray(path, dtype=np.float64).reshape(-1, 2)
+        return bool(_kernels.polyline_free(self._u8, self.resolution, path))
+
     def path_free(self, path: np.ndarray) -> bool:
+        """:meth:`polyline_free`, and a single point must be free."""
         path = np.asarray(path, dtype=np.float64)
         if len(path) == 1:
             return self.is_free(*path[0])
-        return all(self.segment_free(*path[i], *path[i + 1]) for i in range(len(path) - 1))
+        return self.polyline_free(path)
 
     def _bordered(self) -> np.ndarray:
         """The grid with one ring of obstacle cells around it: the chart's edge is inflated like

@@ -546,11 +546,6 @@ def _termination(online: OnlineParams, clock: Callable[[], float]) -> Terminatio
     return conds[0] if len(conds) == 1 else Termination.any_of(*conds)
 
 
-def _polyline_free(grid: OccupancyGrid, path: np.ndarray) -> bool:
-    return all(grid.segment_free(float(a[0]), float(a[1]), float(b[0]), float(b[1]))
-               for a, b in zip(path[:-1], path[1:], strict=True))
-
-
 def run_online(ctx: OnlineContext, start: VesselState, seed: int,
                clock: Callable[[], float] = time.monotonic,
                on_cycle: Callable[[CycleRecord], None] | None = None) -> OnlineResult:

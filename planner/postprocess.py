@@ -223,10 +223,6 @@ def _densify(p: np.ndarray, step: float) -> np.ndarray:
     return np.vstack(out)
 
 
-def _dense_free(grid: OccupancyGrid, dense: np.ndarray) -> bool:
-    return all(grid.segment_free(*dense[k], *dense[k + 1]) for k in range(len(dense) - 1))
-
-
 @dataclass
 class SmoothResult:
     dense: np.ndarray        # (N, 2) smoothed path
@@ -241,7 +237,7 @@ def _leg_ok(grid: OccupancyGrid, piece: DubinsPath, radius: float, step: float) 
     seg_len = piece.length / max(1, len(poses) - 1)
     dth = np.abs((np.diff(poses[:, 2]) + math.pi) % TWO_PI - math.pi)
     curv_ok = bool(np.all(dth <= seg_len / radius + 1e-6))
-    return curv_ok and _dense_free(grid, poses[:, :2]), poses
+    return curv_ok and grid.polyline_free(poses[:, :2]), poses
 
 
 def _try_headings(wp, heads, i, grid, radius, step, fixed_start) -> bool:
@@ -290,7 +286,7 @@ def check_and_replan(waypoints: np.ndarray, grid: OccupancyGrid, radius: float,
             return SmoothResult(wp.copy(), wp, grid.path_free(wp), replanned, "trivial path")
         if radius <= 0:
             dense = _densify(wp, step)
-            ok = _dense_free(grid, dense)
+            ok = grid.polyline_free(dense)
             return SmoothResult(dense, wp, ok, replanned, "no turning-radius limit" if ok else "polyline collides")
         heads = waypoint_headings(wp, start_heading)
         bad = []

@@ -159,3 +159,21 @@ def test_clearance():
     assert c[0, 3] == 0.0
     assert c[4, 3] == pytest.approx(2.0)
     assert math.isinf(OccupancyGrid(np.zeros((2, 2), bool), 1.0).clearance()[0, 0])
+
+
+def test_polyline_free_is_every_segment_free():
+    """The compiled polyline check against segment_free segment by segment: random grids and
+    polylines (inside, crossing the edge, repeated points, one point, none)."""
+    rng = np.random.default_rng(9)
+    for _ in range(30):
+        occ = rng.random((int(rng.integers(5, 60)), int(rng.integers(5, 60)))) < rng.choice([0.0, 0.01, 0.1])
+        grid = OccupancyGrid(occ, float(rng.choice([0.25, 0.5, 1.0])))
+        h, w = occ.shape[0] * grid.resolution, occ.shape[1] * grid.resolution
+        for _ in range(40):
+            n = int(rng.integers(0, 12))
+            path = np.column_stack([rng.uniform(-1, w + 1, n), rng.uniform(-1, h + 1, n)])
+            if n > 2:
+                path[1] = path[0]
+            want = all(grid.segment_free(*path[i], *path[i + 1]) for i in range(n - 1))
+            assert grid.polyline_free(path) is want
+            assert grid.path_free(path) is (grid.is_free(*path[0]) if n == 1 else want)
