@@ -60,17 +60,11 @@ class SensedObstacles:
         conservative obstacle, at most ``range x width`` wide).
         """
         self.stats.scans += 1
-        res = self.resolution
         d = np.asarray(ranges, dtype=float)
         if len(d) == 0:
             return np.zeros((0, 2), dtype=np.int32)
         self.stats.returns += len(d)
-        # Every arc sampled at <= half a cell (one sample count for the scan: vectorised).
-        n_arc = int(math.ceil(d.max() * sector_width / (0.5 * res))) + 1 if sector_width > 0 else 1
-        spread = np.linspace(-0.5, 0.5, n_arc) * sector_width if n_arc > 1 else np.zeros(1)
-        a = psi + np.asarray(bearings, dtype=float)[:, None] + spread[None, :]      # (R, n_arc)
-        r = np.floor((north + d[:, None] * np.cos(a)) / res).astype(np.int64)
-        c = np.floor((east + d[:, None] * np.sin(a)) / res).astype(np.int64)
+        r, c = arc_cells(bearings, d, north, east, psi, sector_width, self.resolution)
         # The cells in integers, compiled: a dozen numpy calls on a few hundred cells cost more than the work.
         new, outside, explained = _place(r, c, self.explained, self.hits, self.confirmed, self.confirm_hits)
         self.stats.outside_map += outside
@@ -93,6 +87,18 @@ class SensedObstacles:
         s = self.stats
         return {"scans": s.scans, "returns": s.returns, "explained_by_chart": s.explained_by_chart,
                 "outside_map": s.outside_map, "cells": len(self._cells), "versions": self.version}
+
+
+def arc_cells(bearings, d: np.ndarray, north: float, east: float, psi: float, sector_width: float,
+              res: float) -> tuple[np.ndarray, np.ndarray]:
+    """Grid rows and columns ``(R, n_arc)`` int64 of the arcs of returns at ranges ``d`` (m, R > 0),
+    each arc sampled at <= half a cell across its sector (one sample count for the scan)."""
+    n_arc = int(math.ceil(d.max() * sector_width / (0.5 * res))) + 1 if sector_width > 0 else 1
+    spread = np.linspace(-0.5, 0.5, n_arc) * sector_width if n_arc > 1 else np.zeros(1)
+    a = psi + np.asarray(bearings, dtype=float)[:, None] + spread[None, :]      # (R, n_arc)
+    r = np.floor((north + d[:, None] * np.cos(a)) / res).astype(np.int64)
+    c = np.floor((east + d[:, None] * np.sin(a)) / res).astype(np.int64)
+    return r, c
 
 
 @njit(cache=True)

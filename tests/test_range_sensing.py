@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from autopilot_bridge.hil_link import HilLink
-from autopilot_bridge.obstacle_map import SensedObstacles, path_blocked
+from autopilot_bridge.obstacle_map import SensedObstacles, arc_cells, path_blocked
 from common.geodesy import LocalFrame
 from common.mavlink import Codec
 from hil.settings import load
@@ -239,20 +239,16 @@ def test_planner_worker_plans_around_sensed_obstacles():
 
 
 def _add_scan_reference(s: SensedObstacles, bearings, ranges, north, east, psi, sector_width) -> np.ndarray:
-    """SensedObstacles.add_scan as it was written in numpy before its cell work was compiled: the
-    reference for the compiled version (the same cells, order, hits and counters)."""
+    """SensedObstacles.add_scan's cell work as it was written in numpy before it was compiled: the
+    reference for the compiled version (the same cells, order, hits and counters). The arcs' float
+    geometry (arc_cells) did not change."""
     s.stats.scans += 1
     rows, cols = s.chart.shape
-    res = s.resolution
     d = np.asarray(ranges, dtype=float)
     if len(d) == 0:
         return np.zeros((0, 2), dtype=np.int32)
     s.stats.returns += len(d)
-    n_arc = int(math.ceil(d.max() * sector_width / (0.5 * res))) + 1 if sector_width > 0 else 1
-    spread = np.linspace(-0.5, 0.5, n_arc) * sector_width if n_arc > 1 else np.zeros(1)
-    a = psi + np.asarray(bearings, dtype=float)[:, None] + spread[None, :]
-    r = np.floor((north + d[:, None] * np.cos(a)) / res).astype(np.int64)
-    c = np.floor((east + d[:, None] * np.sin(a)) / res).astype(np.int64)
+    r, c = arc_cells(bearings, d, north, east, psi, sector_width, s.resolution)
     inside = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
     rc_r, rc_c = np.where(inside, r, 0), np.where(inside, c, 0)
     explained = (s.explained[rc_r, rc_c] & inside).any(axis=1)
