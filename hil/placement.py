@@ -34,7 +34,7 @@ CHOICES = "auto, off, or two CPU numbers A,B"
 class Placement:
     """CPU numbers (as ``os.sched_setaffinity`` counts them)."""
     simulator: int   # the simulator and hil run's tap
-    computer: int    # the vessel computer and its planner worker (SCHED_IDLE)
+    computer: int    # the vessel computer and its planner worker (at WORKER_NICE)
 
 
 def usable() -> list[int]:
@@ -167,17 +167,28 @@ def apply(placement: Placement, simulator: int, computer: int, tap: bool = True)
     for child in children(computer):
         if pin(child, placement.computer):
             done["planner_worker"] = placement.computer
-            idle_policy(child)
+            lower_priority(child)
     return done
 
 
-def idle_policy(pid: int) -> bool:
-    """Run ``pid`` (the planner worker) under ``SCHED_IDLE``: only while nothing else on its CPU
-    wants to run. The vessel computer then never waits for a slice of its worker; the worker gets the
-    CPU while the vessel computer sleeps (it holds its polls while a request is out) and, at a
-    lockstep deadline, while the vessel computer waits for the answer. False where refused."""
-    try:
-        os.sched_setscheduler(pid, os.SCHED_IDLE, os.sched_param(0))
-    except (AttributeError, OSError):
-        return False
-    return True
+# How much lower the planner worker's priority is in a placed run. Its CPU is the vessel
+# computer's, which sleeps while a request is out (it holds its polls) and so leaves it the CPU
+# between frames; a worker of equal weight also took slices the loop waited for (4.3 ms a planning
+# cycle at f5a0bc9), one of lower weight takes fewer. Not SCHED_IDLE nor nice 19: with another
+# process busy on that CPU (no autogroup), those starved the worker at the planning deadline, and
+# 3,000 steps took 73 s and 16 s against 1.8 s; 5 levels lower, 1.9 s (docs/performance.md). An
+# unprivileged process cannot raise a priority back, so it is chosen once.
+WORKER_NICE = 5   # added to the nice value the worker started with
+
+
+def lower_priority(pid: int, by: int = WORKER_NICE) -> bool:
+    """Every thread of ``pid`` (the planner worker) ``by`` nice levels lower (19 at most); False
+    where refused or gone."""
+    ok = False
+    for tid in threads(pid):
+        try:
+            os.setpriority(os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + by))
+            ok = True
+        except OSError:
+            pass
+    return ok
