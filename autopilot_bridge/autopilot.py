@@ -102,6 +102,7 @@ class Autopilot:
         # The chart plus the obstacles sensed on the way (kept across simulator restarts: the
         # world did not change).
         self.grid = OccupancyGrid(world.occ.copy(), world.resolution)
+        self.grid.polyline_free(np.zeros((0, 2)))   # plan acceptance's check compiled now, not in a frame
         self.sensed = SensedObstacles(world.occ, world.resolution, params.sensed_confirm_hits,
                                       params.sensed_explain_radius)
         # The global route (autopilot_bridge/route_planning.py): planned on this grid for every new

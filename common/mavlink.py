@@ -132,10 +132,10 @@ def message_at(datagram: bytes, start: int, end: int) -> mavlink2.MAVLink_messag
     return _message(datagram, start, end, _LAYOUTS[frame_ids(datagram, start)[0]])
 
 
-def fields_at(datagram: bytes, start: int, end: int) -> Any:
-    """The fields of the frame ``datagram[start:end]`` found by :func:`clean_frames`, by name: a
-    named tuple of the values :func:`message_at`'s message holds, without building the message."""
-    layout = _LAYOUTS[frame_ids(datagram, start)[0]]
+def _fields(datagram: bytes, start: int, end: int, layout: _Layout) -> Any:
+    """The fields of the clean frame ``datagram[start:end]`` by name: a named tuple of the values
+    :func:`message_at`'s message holds (char arrays made text as its constructor makes them),
+    without building the message."""
     values = layout.fields(_payload(datagram, start, end, layout))
     for i in layout.texts:
         values[i] = values[i].split(b"\x00", 1)[0].decode("ascii", errors="replace")
@@ -322,20 +322,20 @@ class Codec:
         """:meth:`decode` for a reader that needs the fields of some messages only: each accepted
         message as (type, source system, source component, fields), where ``fields()`` gives its
         fields by name. On a clean datagram they are read from the frame when asked for
-        (:func:`fields_at`), and no message object is built; anything else is the message
+        (:func:`_fields`), and no message object is built; anything else is the message
         pymavlink parsed. The same messages, values and rejections as :meth:`decode`."""
         spans = clean_frames(datagram) if self.mav.signing.secret_key is None else None
-        if spans is None:
-            msgs, rejects = self.decode(datagram)
+        if spans is None:   # not clean, or signed: what decode() would do with it
+            msgs, rejects = self.decode_stream(datagram)
             return [(m.get_type(), m.get_srcSystem(), m.get_srcComponent(), partial(_itself, m)) for m in msgs], rejects
         self.mav.total_bytes_received += len(datagram)
         self.mav.total_packets_received += len(spans)
         out: list[tuple[str, int, int, Callable[[], Any]]] = []
         for start, end in spans:
             msg_id, system, component = frame_ids(datagram, start)
-            kind = _LAYOUTS[msg_id].cls.msgname
-            if kind in self.accept:
-                out.append((kind, system, component, partial(fields_at, datagram, start, end)))
+            layout = _LAYOUTS[msg_id]
+            if layout.cls.msgname in self.accept:
+                out.append((layout.cls.msgname, system, component, partial(_fields, datagram, start, end, layout)))
         return out, [UNWANTED_MESSAGE] * (len(spans) - len(out))
 
     def decode_stream(self, datagram: bytes) -> tuple[list[mavlink2.MAVLink_message], list[str]]:

@@ -98,6 +98,7 @@ def warm_up_info() -> WarmUp:
     grid = OccupancyGrid(occ, 0.5)
     grid.segment_free(1.0, 1.0, 18.0, 18.0)
     ref = np.array([[2.0, 10.0], [18.0, 10.0]])
+    grid.polyline_free(ref)
     cases: tuple[tuple[Objective, GridField | None], ...] = (("length", None),
                                                             ("current", GridField.uniform(0.3, 0.1)))
     for objective, field in cases:

@@ -100,7 +100,12 @@ def path_cost(path: np.ndarray, field, params) -> float:
         return 0.0
     if not _uses_current(field, params):
         return float(np.sum(np.hypot(*np.diff(path, axis=0).T)))
-    return float(sum(segment_cost(path[i], path[i + 1], field, params) for i in range(len(path) - 1)))
+    return _sum_of_segments(path, lambda p, q: segment_cost(p, q, field, params))
+
+
+def _sum_of_segments(path: np.ndarray, segment: Callable[[np.ndarray, np.ndarray], float]) -> float:
+    """``segment(p, q)`` summed over consecutive waypoints, left to right (path has >= 2 points)."""
+    return float(sum(segment(path[i], path[i + 1]) for i in range(len(path) - 1)))
 
 
 def path_cost_fn(field, params) -> Callable[[np.ndarray], float]:
@@ -120,9 +125,7 @@ def path_cost_fn(field, params) -> Callable[[np.ndarray], float]:
 
     def cost(path: np.ndarray) -> float:
         path = np.asarray(path, dtype=np.float64)
-        if len(path) < 2:
-            return 0.0
-        return float(sum(segment(path[i], path[i + 1]) for i in range(len(path) - 1)))
+        return 0.0 if len(path) < 2 else _sum_of_segments(path, segment)
     return cost
 
 

@@ -1,4 +1,4 @@
-"""The vessel computer's HIL link reads fields without message objects (Codec.frames, fields_at):
+"""The vessel computer's HIL link reads fields without message objects (Codec.frames):
 what it decodes, refuses and counts must be what it did with pymavlink's message objects, on a
 simulator's real datagrams (sensors, GPS, DVL, range scans, AIS of a traffic scenario) and on random
 datagrams of every kind from the simulator and from strangers, damaged ones between."""
