@@ -17,10 +17,9 @@ from common.current_field import CurrentField
 from common.dronecan_layout import RAW_COMMAND_MAX
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE, Codec
-from simulator.integrator import rk4_step
 from simulator.rangefinder import Rangefinder, WorldMap
 from simulator.sensors import Compass, Dvl, G, Gps, Imu, sensor_rngs
-from simulator.vessel import Vessel
+from simulator.vessel import Vessel, hull_dynamics, hull_rk4_step
 from simulator.waves import WaveModel
 
 # Rejections counted by the simulator besides the codec's framing reasons.
@@ -89,7 +88,7 @@ class SimulatorCore:
         # The only peer whose commands count: the vessel computer's ids from the same configuration.
         self.peer_ids = (cfg.autopilot.system_id, cfg.autopilot.component_id)
         i = cfg.sim.initial
-        self.state: tuple[float, ...] = (i.x, i.y, i.psi, i.u, i.v, i.r)
+        self.state: tuple[float, ...] = (float(i.x), float(i.y), float(i.psi), float(i.u), float(i.v), float(i.r))
         self.n = 0
         self.controls = (0.0, 0.0)
         self.thrust = (0.0, 0.0)  # N, port and starboard thrust applied now (after the ESC lag)
@@ -106,6 +105,8 @@ class SimulatorCore:
         self.rejects: Counter = Counter()
         self.distance = 0.0
         self._env = self._environment(0.0)
+        # compile (or load from numba's cache) the hull's kernels now, not in the first timed step
+        hull_rk4_step(self.state, self.dt, (0.0, 0.0, 0.0), *self._env, self.vessel.coefficients)
         self.traffic = None
         if traffic:
             from simulator.traffic import AisParams, Traffic
@@ -129,14 +130,15 @@ class SimulatorCore:
         """Valid commands in one datagram. A datagram with any invalid part counts as one reject
         (by the first reason); valid commands in it are still returned. Only commands from the
         autopilot's system and component id (``autopilot.system_id``/``component_id``) count."""
-        msgs, rejects = self.codec.decode(datagram)
+        frames, rejects = self.codec.frames(datagram)   # fields read from the frame, no message objects
         if rejects:
             self.rejects[rejects[0]] += 1
         out = []
-        for m in msgs:
-            if (m.get_srcSystem(), m.get_srcComponent()) != self.peer_ids:
+        for _, system, component, fields in frames:
+            if (system, component) != self.peer_ids:
                 self.rejects[WRONG_SOURCE_ID] += 1
                 continue
+            m = fields()
             c = m.controls
             port, stdb = float(c[0]), float(c[1])
             if not (math.isfinite(port) and math.isfinite(stdb)):
@@ -183,7 +185,7 @@ class SimulatorCore:
     def derivative(self) -> tuple[float, ...]:
         """State derivative now (with the thrust currently applied)."""
         tau = self.vessel.propulsion(*self.thrust)
-        return self.vessel.dynamics(self.state, tau, *self._env)
+        return hull_dynamics(self.state, tau, *self._env, self.vessel.coefficients)
 
     def step(self) -> None:
         """Advance the truth by one frame: RK4 substeps with thrust held for the frame and waves and
@@ -192,11 +194,11 @@ class SimulatorCore:
         (sp, ss), (tp, ts), a = self.thrusts(), self.thrust, self._lag
         self.thrust = (sp + (tp - sp) * a, ss + (ts - ss) * a)
         tau = self.vessel.propulsion(*self.thrust)
-        dyn = self.vessel.dynamics
+        coefficients = self.vessel.coefficients
         for k in range(1, self.substeps + 1):
             tau_w, cur = self._env
             x0, y0 = self.state[0], self.state[1]
-            self.state = rk4_step(lambda s, tau_w=tau_w, cur=cur: dyn(s, tau, tau_w, cur), self.state, self.dt)
+            self.state = hull_rk4_step(self.state, self.dt, tau, tau_w, cur, coefficients)
             self.distance += math.hypot(self.state[0] - x0, self.state[1] - y0)
             self.waves.advance(self.dt)
             self._env = self._environment(self.n * self.frame_dt + k * self.dt)

@@ -13,8 +13,12 @@ Correction of a sign typo: the paper prints v_dot = +(m11/m22) u r. With u_dot =
 and r_dot = ((m11 - m22)/m33) u v as printed, the Coriolis forces do work unless the sway term is
 -(m11/m22) u r (Fossen's standard form, used here): u m22 v r - v m11 u r + r (m11 - m22) u v = 0.
 
-Plain Python floats and ``math`` are used on purpose: numpy's per-call overhead dominates on
-6-element states (see ``hil bench sim``).
+Plain floats and ``math`` on tuples, compiled by numba: numpy's per-call overhead dominates on
+6-element states (see ``hil bench sim``), and the simulator's step is on the lockstep loop's
+critical path. :func:`hull_dynamics` is the equations; :func:`hull_rk4_step` one RK4 step of them,
+the same operations in the same order as ``simulator.integrator.rk4_step`` (bit for bit,
+tests/test_sim_vessel.py). Both live in this file so that numba's cache, which follows a function's
+own file, never pairs a changed equation with a stale integrator.
 """
 
 from __future__ import annotations
@@ -22,7 +26,65 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from numba import njit
+
 State = tuple[float, float, float, float, float, float]
+Coefficients = tuple[float, float, float, float, float, float, float, float, float, float, float, float]
+
+
+@njit(cache=True)
+def hull_dynamics(s: State, tau: tuple[float, float, float], tau_w: tuple[float, float, float],
+                  current: tuple[float, float], k: Coefficients) -> State:
+    """Time derivative of the state, eqs. (2) and (4).
+
+    ``tau`` propulsion (N, N, N m, body), ``tau_w`` wave forces of eq. (6) (body), ``current``
+    (north, east) velocity of the water in m/s; ``k`` = (m11, m22, m33, d_u, d_u2, d_u3, d_v, d_v2,
+    d_v3, d_r, d_r2, d_r3) (:attr:`Vessel.coefficients`).
+    """
+    x, y, psi, u, v, r = s
+    m11, m22, m33, d_u, d_u2, d_u3, d_v, d_v2, d_v3, d_r, d_r2, d_r3 = k
+    c, sn = math.cos(psi), math.sin(psi)
+    uc = c * current[0] + sn * current[1]
+    vc = -sn * current[0] + c * current[1]
+    ur, vr = u - uc, v - vc
+    # eq. (2) / first three rows of eq. (4): kinematics over ground
+    x_dot = u * c - v * sn
+    y_dot = u * sn + v * c
+    psi_dot = r
+    # eq. (4), rows 4-6, on the water-relative velocity (sway Coriolis sign corrected)
+    ur_dot = (m22 / m11) * vr * r - (d_u / m11) * ur \
+        - (d_u2 / m11) * abs(ur) * ur - (d_u3 / m11) * ur * ur * ur \
+        + tau[0] / m11 + tau_w[0] / m11
+    vr_dot = -(m11 / m22) * ur * r - (d_v / m22) * vr \
+        - (d_v2 / m22) * abs(vr) * vr - (d_v3 / m22) * vr * vr * vr \
+        + tau[1] / m22 + tau_w[1] / m22
+    r_dot = ((m11 - m22) / m33) * ur * vr - (d_r / m33) * r \
+        - (d_r2 / m33) * abs(r) * r - (d_r3 / m33) * r * r * r \
+        + tau[2] / m33 + tau_w[2] / m33
+    # nu = nu_r + nu_c, with nu_c rotating with the hull
+    return (x_dot, y_dot, psi_dot, ur_dot + r * vc, vr_dot - r * uc, r_dot)
+
+
+@njit(cache=True)
+def _stage(s: State, h: float, d: State) -> State:
+    return (s[0] + h * d[0], s[1] + h * d[1], s[2] + h * d[2], s[3] + h * d[3], s[4] + h * d[4], s[5] + h * d[5])
+
+
+@njit(cache=True)
+def hull_rk4_step(s: State, dt: float, tau: tuple[float, float, float], tau_w: tuple[float, float, float],
+                  current: tuple[float, float], k: Coefficients) -> State:
+    """One classic RK4 step of :func:`hull_dynamics` with the inputs held over ``dt`` (s)."""
+    k1 = hull_dynamics(s, tau, tau_w, current, k)
+    k2 = hull_dynamics(_stage(s, 0.5 * dt, k1), tau, tau_w, current, k)
+    k3 = hull_dynamics(_stage(s, 0.5 * dt, k2), tau, tau_w, current, k)
+    k4 = hull_dynamics(_stage(s, dt, k3), tau, tau_w, current, k)
+    w = dt / 6.0
+    return (s[0] + w * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
+            s[1] + w * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
+            s[2] + w * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2]),
+            s[3] + w * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3]),
+            s[4] + w * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4]),
+            s[5] + w * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5]))
 
 
 class Vessel:
@@ -41,6 +103,8 @@ class Vessel:
         self.d_u2, self.d_v2, self.d_r2 = 0.2 * p.d_u, 0.2 * p.d_v, 0.2 * p.d_r
         self.d_u3, self.d_v3, self.d_r3 = 0.1 * p.d_u, 0.1 * p.d_v, 0.1 * p.d_r
         self.B_u, self.T_max, self.T_min = p.B_u, p.T_max, p.T_min
+        self.coefficients: Coefficients = _floats((self.m11, self.m22, self.m33, self.d_u, self.d_u2, self.d_u3,
+                                                   self.d_v, self.d_v2, self.d_v3, self.d_r, self.d_r2, self.d_r3))
 
     # -- actuators -------------------------------------------------------------------------
     def thrust(self, control: float) -> float:
@@ -62,33 +126,8 @@ class Vessel:
     # -- eqs. (2) and (4) ------------------------------------------------------------------
     def dynamics(self, s: State, tau: tuple[float, float, float], tau_w: tuple[float, float, float],
                  current: tuple[float, float]) -> State:
-        """Time derivative of the state.
-
-        ``tau`` propulsion (N, N, N m, body), ``tau_w`` wave forces of eq. (6) (body),
-        ``current`` (north, east) velocity of the water in m/s.
-        """
-        x, y, psi, u, v, r = s
-        c, sn = math.cos(psi), math.sin(psi)
-        uc = c * current[0] + sn * current[1]
-        vc = -sn * current[0] + c * current[1]
-        ur, vr = u - uc, v - vc
-        m11, m22, m33 = self.m11, self.m22, self.m33
-        # eq. (2) / first three rows of eq. (4): kinematics over ground
-        x_dot = u * c - v * sn
-        y_dot = u * sn + v * c
-        psi_dot = r
-        # eq. (4), rows 4-6, on the water-relative velocity (sway Coriolis sign corrected)
-        ur_dot = (m22 / m11) * vr * r - (self.d_u / m11) * ur \
-            - (self.d_u2 / m11) * abs(ur) * ur - (self.d_u3 / m11) * ur * ur * ur \
-            + tau[0] / m11 + tau_w[0] / m11
-        vr_dot = -(m11 / m22) * ur * r - (self.d_v / m22) * vr \
-            - (self.d_v2 / m22) * abs(vr) * vr - (self.d_v3 / m22) * vr * vr * vr \
-            + tau[1] / m22 + tau_w[1] / m22
-        r_dot = ((m11 - m22) / m33) * ur * vr - (self.d_r / m33) * r \
-            - (self.d_r2 / m33) * abs(r) * r - (self.d_r3 / m33) * r * r * r \
-            + tau[2] / m33 + tau_w[2] / m33
-        # nu = nu_r + nu_c, with nu_c rotating with the hull
-        return (x_dot, y_dot, psi_dot, ur_dot + r * vc, vr_dot - r * uc, r_dot)
+        """Time derivative of the state (:func:`hull_dynamics` with this hull's coefficients)."""
+        return hull_dynamics(_floats(s), _floats(tau), _floats(tau_w), _floats(current), self.coefficients)
 
     def surge_speed_for(self, tau_u: float) -> float:
         """Steady surge speed (m/s) of eq. (4) for a constant surge force (no current, v = r = 0)."""
@@ -98,3 +137,8 @@ class Vessel:
             f = self.d_u * mid + self.d_u2 * abs(mid) * mid + self.d_u3 * mid ** 3 - tau_u
             lo, hi = (mid, hi) if f < 0 else (lo, mid)
         return 0.5 * (lo + hi)
+
+
+def _floats(t: tuple) -> tuple:
+    """The tuple as floats: one compiled signature, whatever numbers a caller passed."""
+    return tuple(float(a) for a in t)

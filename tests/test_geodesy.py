@@ -88,3 +88,22 @@ def test_map_and_ned_frames_convert_both_ways():
     assert ned_to_map(*map_to_ned(3.0, -4.0, 0.3)) == pytest.approx((3.0, -4.0, 0.3))
     assert ned_to_map(1.0, 2.0) == (2.0, 1.0) and map_to_ned(2.0, 1.0) == (1.0, 2.0)
     assert map_to_ned_path([[1.0, 2.0], [3.0, 4.0]]).tolist() == [[2.0, 1.0], [4.0, 3.0]]
+
+
+def test_compiled_conversions_compute_what_their_source_does():
+    """The conversions are compiled by numba; each must give, bit for bit, what its Python source
+    gives (sqrt and pow are the same in both; CPython's hypot is not the C library's)."""
+    from common.geodesy import _ned_to_geodetic, _sea_level_to_geodetic
+
+    rng = np.random.default_rng(7)
+    points = zip(rng.uniform(-89.9, 89.9, 4000), rng.uniform(-180, 180, 4000), rng.normal(0, 2000, 4000), strict=True)
+    for lat, lon, h in points:
+        xyz = geodetic_to_ecef.py_func(lat, lon, h)
+        assert geodetic_to_ecef(lat, lon, h) == xyz
+        assert ecef_to_geodetic(*xyz) == ecef_to_geodetic.py_func(*xyz)
+    for lat0, lon0, alt0 in [(31.2, 121.5, 0.0), (-45.0, 170.0, 10.0), (89.0, -3.0, 0.0)]:
+        f = LocalFrame(lat0, lon0, alt0)
+        for n, e in rng.normal(0, 5000, (500, 2)):
+            n, e = float(n), float(e)
+            assert _ned_to_geodetic(f._o, f._r, n, e, 3.0) == _ned_to_geodetic.py_func(f._o, f._r, n, e, 3.0)
+            assert f.sea_level_to_geodetic(n, e) == _sea_level_to_geodetic.py_func(f._o, f._r, float(alt0), n, e)

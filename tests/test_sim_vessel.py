@@ -12,7 +12,7 @@ from scipy.optimize import brentq
 from hil.settings import load
 from simulator.core import Command, SimulatorCore
 from simulator.integrator import rk4_step
-from simulator.vessel import Vessel
+from simulator.vessel import Vessel, hull_dynamics, hull_rk4_step
 
 CALM = ["waves.enabled=false", "current.enabled=false"]
 
@@ -138,3 +138,33 @@ def test_vessel_at_rest_in_current_picks_up_the_current(cfg):
         s = rk4_step(f, s, 0.01)
     d = f(s)
     assert d[0] == pytest.approx(cur[0], abs=0.02) and d[1] == pytest.approx(cur[1], abs=0.02)
+
+
+def test_compiled_hull_step_is_the_generic_rk4_of_the_printed_equations(cfg):
+    """The simulator integrates with ``hull_rk4_step`` (compiled); it must compute, bit for bit, what
+    the generic Python ``rk4_step`` computes over the equations run as Python (``py_func``)."""
+    k = Vessel(cfg.vessel).coefficients
+    rng = np.random.default_rng(11)
+    for i in range(3000):
+        s = tuple(float(a) for a in rng.normal(0.0, [200.0, 200.0, 4.0, 3.0, 1.0, 0.6]))
+        tau = (float(rng.normal(0, 80)), 0.0, float(rng.normal(0, 20)))
+        tau_w = tuple(float(a) for a in rng.normal(0, 5, 3))
+        cur = tuple(float(a) for a in rng.normal(0, 0.5, 2))
+        dt = (0.01, 0.005, 0.1)[i % 3]
+        assert hull_dynamics(s, tau, tau_w, cur, k) == hull_dynamics.py_func(s, tau, tau_w, cur, k)
+        python = rk4_step(lambda x, tau=tau, tau_w=tau_w, cur=cur: hull_dynamics.py_func(x, tau, tau_w, cur, k), s, dt)
+        assert hull_rk4_step(s, dt, tau, tau_w, cur, k) == python
+
+
+def test_simulator_steps_with_the_compiled_hull(cfg):
+    """SimulatorCore.step is the hull RK4 of Vessel.dynamics, as it was written in Python."""
+    core = SimulatorCore(load(None, []))   # waves and current on
+    v = core.vessel
+    assert core.substeps == 1   # the default layout: one RK4 step a frame
+    for n in range(200):
+        core.apply(Command(core.time_usec, 0.8, 0.3 if n < 100 else -0.4))
+        s0, env = core.state, core._env
+        (sp, ss), (tp, ts), a = core.thrusts(), core.thrust, core._lag
+        tau = v.propulsion(sp + (tp - sp) * a, ss + (ts - ss) * a)
+        core.step()
+        assert core.state == rk4_step(lambda x, tau=tau, env=env: v.dynamics(x, tau, *env), s0, core.dt)

@@ -32,20 +32,19 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
 
 
 def bench_model(cfg, n: int) -> float:
-    """RK4 steps per second of Vessel.dynamics (thrust, waves and current held)."""
-    from simulator.integrator import rk4_step
-    from simulator.vessel import Vessel
+    """RK4 steps per second of the hull (``simulator.vessel.hull_rk4_step``, the simulator's
+    integration: thrust, waves and current held); compiled before the clock starts."""
+    from simulator.vessel import Vessel, hull_rk4_step
 
     vessel = Vessel(cfg.vessel)
     tau = vessel.propulsion(vessel.thrust(0.8), vessel.thrust(0.6))
     tau_w, cur = (1.0, 2.0, 0.3), (0.1, 0.2)
     s = (0.0,) * 6
-    def f(s):
-        return vessel.dynamics(s, tau, tau_w, cur)
-    dt = cfg.sim.dt
+    k, dt = vessel.coefficients, float(cfg.sim.dt)
+    hull_rk4_step(s, dt, tau, tau_w, cur, k)
     t0 = time.perf_counter()
     for _ in range(n):
-        s = rk4_step(f, s, dt)
+        s = hull_rk4_step(s, dt, tau, tau_w, cur, k)
     return n / (time.perf_counter() - t0)
 
 
