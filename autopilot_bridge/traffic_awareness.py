@@ -75,6 +75,8 @@ class TrafficAwareness:
 
     def on_frame(self, t: float, s: Any, reports: list[AisReport], telemetry: Any = None) -> tuple[list[str], bool]:
         """Fold in the frame's AIS reports and update encounters; returns (event texts, replan now)."""
+        if not reports and not self.tracker.tracks and not self.active:
+            return [], False   # no ship known (most frames of a run without traffic): nothing to assess
         for r in reports:
             if self.tracker.update(r) and telemetry is not None and hasattr(telemetry, "forward"):
                 telemetry.forward("ais_vessel", *_ais_fields(r))

@@ -19,7 +19,8 @@ class StreamingPercentiles:
 
     def __init__(self, lo: float = 1e-3, hi: float = 1e6, precision: float = 0.01) -> None:
         self.lo, self.log_g = lo, math.log1p(precision)
-        self.counts = np.zeros(int(math.ceil(math.log(hi / lo) / self.log_g)) + 2, dtype=np.int64)
+        # a list, not an array: add() runs in the control loop, and a numpy element costs ~1 us to set
+        self.counts = [0] * (int(math.ceil(math.log(hi / lo) / self.log_g)) + 2)
         self.count = 0
         self.max = -math.inf
 

@@ -26,4 +26,4 @@ def test_empty_tiny_and_huge_values():
     for v in (0.0, 1e-6, 5e5):
         sp.add(v)
     assert sp.percentile(10) == pytest.approx(1e-3) and sp.max == 5e5
-    assert sp.percentile(100) == 5e5 and sp.counts.nbytes < 20_000
+    assert sp.percentile(100) == 5e5 and len(sp.counts) < 2_500   # bins fixed by lo, hi and precision
