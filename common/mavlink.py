@@ -16,7 +16,7 @@ from __future__ import annotations
 import inspect
 import struct
 from collections import namedtuple
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from functools import partial
 from typing import Any
 
@@ -211,7 +211,7 @@ class _Encoder:
     """What pymavlink's ``<name>_encode`` and ``pack`` do for one message without text fields,
     worked out once: the encode() arguments in wire order, arrays spread out, into the payload."""
 
-    __slots__ = ("msg_id", "crc_extra", "pack", "names", "defaults", "wire")
+    __slots__ = ("msg_id", "crc_extra", "pack", "names", "defaults", "wire", "declared_order")
 
     def __init__(self, cls: Any) -> None:
         encode = getattr(mavlink2.MAVLink, f"{cls.msgname.lower()}_encode")
@@ -221,9 +221,34 @@ class _Encoder:
         self.defaults = tuple(p.default for p in params)    # extension fields default to 0
         count = dict(zip(cls.ordered_fieldnames, cls.array_lengths, strict=True))
         self.wire = tuple((self.names.index(n), count[n]) for n in cls.ordered_fieldnames)
+        # no arrays, and the wire order is encode()'s (HIL_SENSOR, HIL_GPS...): the values go as they are
+        self.declared_order = all(not n and i == k for k, (i, n) in enumerate(self.wire))
 
     def payload(self, args: tuple[Any, ...], kwargs: dict[str, Any]) -> bytes | None:
         """The full (untrimmed) payload, or None where encode() would complain (pymavlink then says how)."""
+        if not kwargs and len(args) <= len(self.names):   # the usual call: positional, defaults after
+            tail = self.defaults[len(args):]
+            if inspect.Parameter.empty in tail:
+                return None
+            if self.declared_order:
+                return self.pack(*args, *tail)
+            values: Sequence[Any] = args + tail
+        else:
+            named = self._values(args, kwargs)
+            if named is None:
+                return None
+            values = named
+        flat: list[Any] = []
+        for i, n in self.wire:
+            v = values[i]
+            if n:
+                flat.extend([v[j] for j in range(n)])
+            else:
+                flat.append(v)
+        return self.pack(*flat)
+
+    def _values(self, args: tuple[Any, ...], kwargs: dict[str, Any]) -> list[Any] | None:
+        """encode()'s arguments in declared order, defaults filled in (None where it would complain)."""
         if len(args) > len(self.names):
             return None
         values, taken = list(args), 0
@@ -237,14 +262,7 @@ class _Encoder:
                 values.append(default)
         if taken != len(kwargs):
             return None
-        flat: list[Any] = []
-        for i, n in self.wire:
-            v = values[i]
-            if n:
-                flat.extend([v[j] for j in range(n)])
-            else:
-                flat.append(v)
-        return self.pack(*flat)
+        return values
 
 
 _BY_NAME = {cls.msgname.lower(): cls for cls in mavlink2.mavlink_map.values()}

@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from simulator.sensors import Normals
+
 
 def wave_forces(rho: float, L: float, alpha: float, chi: float,
                 C_X: float, C_Y: float, C_N: float) -> tuple[float, float, float]:
@@ -24,15 +26,18 @@ def wave_forces(rho: float, L: float, alpha: float, chi: float,
 class OrnsteinUhlenbeck:
     """Scalar OU process x' = -(x - mean)/tau + noise, stationary std ``std`` (exact steps)."""
 
-    def __init__(self, mean: float, std: float, tau: float, rng: np.random.Generator) -> None:
-        self.mean, self.std, self.tau, self.rng = mean, std, tau, rng
-        self.value = mean + std * float(rng.standard_normal()) if std > 0 else mean
+    def __init__(self, mean: float, std: float, tau: float, rng: np.random.Generator | Normals) -> None:
+        """``rng``: a Generator, or a :class:`~simulator.sensors.Normals` that processes drawing from
+        one stream share (the draws are the Generator's, in the same order, fetched in blocks)."""
+        self.mean, self.std, self.tau = mean, std, tau
+        self.normal = rng if isinstance(rng, Normals) else Normals(rng)
+        self.value = mean + std * self.normal() if std > 0 else mean
 
     def step(self, dt: float) -> float:
         if self.std > 0:
             a = math.exp(-dt / self.tau)
             self.value = self.mean + (self.value - self.mean) * a \
-                + self.std * math.sqrt(1.0 - a * a) * float(self.rng.standard_normal())
+                + self.std * math.sqrt(1.0 - a * a) * self.normal()
         return self.value
 
 
@@ -42,8 +47,9 @@ class WaveModel:
     def __init__(self, waves: Any, vessel: Any, rng: np.random.Generator) -> None:
         self.p, self.rho, self.L = waves, vessel.rho, vessel.L
         self.enabled = bool(waves.enabled)
-        self.amplitude = OrnsteinUhlenbeck(waves.amplitude, waves.amplitude_std, waves.correlation_time, rng)
-        self.direction = OrnsteinUhlenbeck(waves.direction, waves.direction_std, waves.correlation_time, rng)
+        normal = Normals(rng)   # one stream, drawn in turn by both processes as before
+        self.amplitude = OrnsteinUhlenbeck(waves.amplitude, waves.amplitude_std, waves.correlation_time, normal)
+        self.direction = OrnsteinUhlenbeck(waves.direction, waves.direction_std, waves.correlation_time, normal)
 
     def advance(self, dt: float) -> None:
         if self.enabled:
