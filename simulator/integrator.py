@@ -1,4 +1,9 @@
-"""Fixed-step classic Runge-Kutta (RK4) on plain-float tuples, kept outside the model."""
+"""Fixed-step classic Runge-Kutta (RK4) on plain-float tuples, kept outside the model.
+
+The simulator integrates the hull with ``simulator.vessel.hull_rk4_step``, compiled, which computes
+the same operations in the same order; this generic step is its reference
+(tests/test_sim_vessel.py) and integrates any other right-hand side. A change here does not change
+the simulator: change both, and the test holds them together."""
 
 from __future__ import annotations
 

@@ -27,8 +27,10 @@ class OrnsteinUhlenbeck:
     """Scalar OU process x' = -(x - mean)/tau + noise, stationary std ``std`` (exact steps)."""
 
     def __init__(self, mean: float, std: float, tau: float, rng: np.random.Generator | Normals) -> None:
-        """``rng``: a Generator, or a :class:`~simulator.sensors.Normals` that processes drawing from
-        one stream share (the draws are the Generator's, in the same order, fetched in blocks)."""
+        """``rng``: a :class:`~simulator.sensors.Normals` (the Generator's draws, in order, fetched in
+        blocks), or a Generator, which gets a Normals of its own. Processes that draw from one stream
+        in turn must share one Normals: two Normals on one Generator would each fetch a block ahead,
+        and the draws would no longer alternate between them (:class:`WaveModel` shares one)."""
         self.mean, self.std, self.tau = mean, std, tau
         self.normal = rng if isinstance(rng, Normals) else Normals(rng)
         self.value = mean + std * self.normal() if std > 0 else mean
