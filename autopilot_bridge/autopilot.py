@@ -163,16 +163,19 @@ class Autopilot:
     # -- navigation ----------------------------------------------------------------------------
     def _fuse(self, f: SensorFrame) -> None:
         t = f.t
-        if f.heading is not None:
-            self.nav.update_compass(t, f.heading)
-        if f.gps is not None:
-            g = f.gps
-            lat = self.p.gps_latency
-            # The fix is ``gps_latency`` old: carry it forward with its own velocity.
-            self.nav.update_gps_position(t, g.north + g.vn * lat, g.east + g.ve * lat)
-            self.nav.update_gps_velocity(t, g.vn, g.ve)
-        if f.yaw_rate is not None:
-            self.nav.update_gyro(t, f.yaw_rate)
+        if f.gps is None and f.heading is not None and f.yaw_rate is not None:
+            self.nav.update_heading_and_rate(t, f.heading, f.yaw_rate)   # nine frames of ten
+        else:
+            if f.heading is not None:
+                self.nav.update_compass(t, f.heading)
+            if f.gps is not None:
+                g = f.gps
+                lat = self.p.gps_latency
+                # The fix is ``gps_latency`` old: carry it forward with its own velocity.
+                self.nav.update_gps_position(t, g.north + g.vn * lat, g.east + g.ve * lat)
+                self.nav.update_gps_velocity(t, g.vn, g.ve)
+            if f.yaw_rate is not None:
+                self.nav.update_gyro(t, f.yaw_rate)
         if f.dvl is not None:
             self.nav.update_dvl(t, *f.dvl)
 

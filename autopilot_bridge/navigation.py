@@ -151,6 +151,7 @@ def _warm_up() -> None:
         x, P = np.zeros((DIM, 1)), np.eye(DIM)
         nav_kernel.step(x, P, 0.01, 0.1, 0.1, 0.0, nav_kernel.GYRO, np.zeros((1, 1)), np.eye(1), 10.0)
         nav_kernel.step(x, P, 0.01, 0.1, 0.1, 0.0, nav_kernel.DVL, np.zeros((2, 1)), np.eye(2), 10.0)
+        nav_kernel.heading_and_rate(x, P, 0.01, 0.1, 0.1, 0.0, 0.0, np.eye(1), 0.0, np.eye(1), 10.0)
         _warm = True
 
 
@@ -414,6 +415,36 @@ class NavigationFilter:
         if self.t is None:
             return False
         return self._update("compass", t, np.array([[heading]]), self._heading_model, angle_rows=(0,))
+
+    def update_heading_and_rate(self, t: float, heading: float, yaw_rate: float) -> None:
+        """:meth:`update_compass` then :meth:`update_gyro` at time ``t``: the same estimates,
+        refusals and counters. The fast filter does the two in one compiled call where the calls
+        themselves would refuse nothing before their kernel (both finite, ``t`` not in the past)."""
+        dt = math.inf if self.t is None else t - self.t
+        if not (self.fast and dt >= 0.0 and math.isfinite(dt) and math.isfinite(heading)
+                and math.isfinite(yaw_rate)):
+            self.update_compass(t, heading)
+            self.update_gyro(t, yaw_rate)
+            return
+        self._heading = heading
+        q_a, q_r, q_b = self._q
+        code_c, code_g, x, P = nav_kernel.heading_and_rate(self.ekf.x, self.ekf.P, dt, q_a, q_r, q_b, heading,
+                                                           self._R["compass"], yaw_rate, self._R["gyro"],
+                                                           self._gates[1])
+        self.ekf.x, self.ekf.P = x, P
+        if code_c != nav_kernel.NUMERIC_PREDICT or code_g != nav_kernel.NUMERIC_PREDICT:
+            self.t = t
+        self._count("compass", code_c)
+        self._count("gyro", code_g)
+
+    def _count(self, kind: str, code: int) -> None:
+        """The counter :meth:`_update_fast` moves for a kernel outcome."""
+        if code == nav_kernel.OK:
+            self.stats.updates[kind] = self.stats.updates.get(kind, 0) + 1
+        elif code == nav_kernel.REJECTED:
+            self._rejected(kind)
+        else:
+            self._numeric("predict" if code == nav_kernel.NUMERIC_PREDICT else kind)
 
     def update_gyro(self, t: float, yaw_rate: float) -> bool:
         """Gyro yaw rate (rad/s), modelled as r + b_g + noise."""

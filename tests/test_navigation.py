@@ -158,3 +158,51 @@ def test_configuration_does_not_import_filterpy_or_scipy_stats():
             "print(sorted(m for m in sys.modules if m.startswith(('filterpy', 'scipy.stats'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def _stats(f: NavigationFilter) -> tuple:
+    s = f.stats
+    return f.t, dict(s.updates), dict(s.rejected), s.out_of_order, f._heading
+
+
+def test_heading_and_rate_together_equal_the_two_updates_bit_for_bit():
+    # The usual frame's compass and gyro in one compiled call (update_heading_and_rate) against
+    # update_compass then update_gyro, on random frames that reach every outcome: accepted, gated
+    # (outliers), out of order, non-finite readings, and a prediction or an update that overflows.
+    rng = np.random.default_rng(7)
+    outcomes: set[str] = set()
+    for _ in range(40):
+        pair, seq = NavigationFilter(params()), NavigationFilter(params())
+        t = 0.0
+        for f in (pair, seq):
+            f.update_compass(t, 0.3)
+            f.update_gps_position(t, 1.0, 2.0)
+        for _ in range(60):
+            t += rng.choice([0.01, 0.01, 0.01, 0.0, -0.02, 0.05])
+            heading = wrap_angle(0.3 + rng.normal(0, 0.02) + (rng.random() < 0.1) * rng.normal(0, 2.0))
+            rate = rng.normal(0.004, 0.002) + (rng.random() < 0.1) * rng.normal(0, 1.0)
+            if rng.random() < 0.05:
+                heading = rng.choice([math.nan, math.inf])
+            if rng.random() < 0.05:
+                rate = rng.choice([math.nan, -math.inf])
+            if rng.random() < 0.03:   # an estimate whose next prediction or update overflows
+                scale = rng.choice([1e306, 1e200])
+                for f in (pair, seq):
+                    with np.errstate(over="ignore"):
+                        f.ekf.P = f.ekf.P * scale
+            if rng.random() < 0.02:
+                for f in (pair, seq):
+                    f.ekf.x = f.ekf.x.copy()
+                    f.ekf.x[3, 0] = 1e305
+            pair.update_heading_and_rate(t, heading, rate)
+            seq.update_compass(t, heading)
+            seq.update_gyro(t, rate)
+            assert np.array_equal(pair.ekf.x, seq.ekf.x, equal_nan=True)
+            assert np.array_equal(pair.ekf.P, seq.ekf.P, equal_nan=True)
+            assert _stats(pair) == _stats(seq)
+        outcomes |= set(seq.stats.updates) | {f"rejected {k}" for k in seq.stats.rejected}
+        if seq.stats.out_of_order:
+            outcomes.add("out of order")
+    # every path the call can take was taken
+    assert {"compass", "gyro", "rejected compass", "rejected gyro", "rejected numeric_predict",
+            "rejected numeric_compass", "out of order"} <= outcomes, outcomes
