@@ -186,7 +186,7 @@ class OccupancyGrid:
         cells = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
         if len(cells):
             self.occ[cells[:, 0], cells[:, 1]] = True
-            self._clearance = None
+            self._clearance = self._free_labels = None   # the caches of the map before
 
     def clearance(self) -> np.ndarray:
         """Distance (m) from each cell centre to the nearest obstacle cell centre (0 inside

@@ -177,3 +177,20 @@ def test_polyline_free_is_every_segment_free():
             want = all(grid.segment_free(*path[i], *path[i + 1]) for i in range(n - 1))
             assert grid.polyline_free(path) is want
             assert grid.path_free(path) is (grid.is_free(*path[0]) if n == 1 else want)
+
+
+def test_marking_cells_drops_the_cached_free_regions():
+    # A wall marked across the map after a search (a sensed obstacle) must part start and goal
+    # for the next search: the connectivity labels cached by the first one are of the map before.
+    from planner import make_planner
+    from planner.params import PlannerParams
+    from planner.problem import PlanningProblem
+    from planner.termination import Termination
+
+    g = OccupancyGrid(np.zeros((20, 20), bool), 1.0)
+    problem = PlanningProblem(grid=g, start=(2.0, 10.0), goal=(18.0, 10.0))
+    planner = make_planner("rrt-star", PlannerParams(seed=1))
+    assert planner.solve(problem, Termination.iterations(2000)).status != "none"
+    g.mark(np.array([[r, 10] for r in range(20)]))
+    result = planner.solve(problem, Termination.iterations(2000))
+    assert result.status == "none" and "different free regions" in result.reason
