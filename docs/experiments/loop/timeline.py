@@ -15,6 +15,11 @@ It then prints, over the steps after the first fifth of the run:
 * how the wall time splits between short and long steps;
 * the step's phases (its index modulo 10, 20 and 100: the 10 Hz, 5 Hz and 1 Hz work of each end)
   whose mean step is the longest, with each end's turn in them;
+* the phases modulo 100 that hold most of the time over 300 µs a step (the planning cycle's), each
+  with its four legs and its step, mean and median;
+* the four legs and the step of each phase modulo 20 (medians), the planning cycle's phases left
+  out (0-2 and 30-31 modulo 100: the request goes out after frame 0's command, the answer is due
+  at frame 30);
 * the long garbage collections of each process.
 
 The stamps cost ~1 µs each, two a datagram. docs/performance.md has the figures of this machine.
@@ -87,6 +92,32 @@ def _q(xs: list[float]) -> str:
             f"p90 {1e6 * xs[int(0.9 * len(xs))]:7.1f} us")
 
 
+def _phase_tables(phases: list[tuple[int, float, float, float]], legs: list[list[float]]) -> None:
+    rows: dict[int, list[list[float]]] = {}
+    for i, (k, *_turns, step) in enumerate(phases):
+        rows.setdefault(k, []).append([legs[j][i] for j in range(4)] + [step])
+    by100: dict[int, list[list[float]]] = {}
+    by20: dict[int, list[list[float]]] = {}
+    for k, rs in rows.items():
+        by100.setdefault(k % 100, []).extend(rs)
+        if k % 100 not in (0, 1, 2, 30, 31):
+            by20.setdefault(k % 20, []).extend(rs)
+    excess = {ph: sum(max(0.0, r[4] - 300e-6) for r in rs) for ph, rs in by100.items()}
+    total = sum(excess.values()) or 1.0
+
+    def cells(rs: list[list[float]], stat: str) -> str:
+        cols = [sorted(r[j] for r in rs) for j in range(5)]
+        vals = [sum(c) / len(c) if stat == "mean" else c[len(c) // 2] for c in cols]
+        return " ".join(f"{1e6 * v:6.0f}" for v in vals)
+
+    print("  legs (sim sends->vc reads, vc turn, command->sim reads, sim turn) and step, us")
+    for ph in sorted(excess, key=lambda p: -excess[p])[:6]:
+        print(f"    phase {ph:2d} mod 100 ({100 * excess[ph] / total:4.1f} % of the time over 300 us): "
+              f"mean {cells(by100[ph], 'mean')}  median {cells(by100[ph], 'median')}")
+    for ph in sorted(by20):
+        print(f"    phase {ph:2d} mod 20, planning phases left out: median {cells(by20[ph], 'median')}")
+
+
 def main(argv: list[str]) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         Path(tmp, "sitecustomize.py").write_text(HOOK)
@@ -144,6 +175,7 @@ def main(argv: list[str]) -> int:
         print(f"  steps by phase mod {mod:3d} (median phase {1e6 * median:6.1f} us); the longest: " + "; ".join(
             f"{ph}: step {1e6 * st:.0f}, vessel computer {1e6 * a:.0f}, simulator {1e6 * s:.0f} us"
             for st, ph, a, s in means[:3]))
+    _phase_tables(phases, legs)
     first = sent[len(sent) // 5]
     for name, d in sorted(runs.items()):
         long_gcs = [(g, t1 - t0) for g, t0, t1 in d["gc"] if t0 >= first]
