@@ -301,19 +301,11 @@ class NavigationFilter:
         q_a, q_r, q_b = self._q
         code, xp, Pp, xn, Pn = nav_kernel.step(self.ekf.x, self.ekf.P, dt, q_a, q_r, q_b, _KIND[kind], z,
                                                self._R[kind], self._gate(z.shape[0]))
+        self._count(kind, code)
         if code == nav_kernel.NUMERIC_PREDICT:
-            self._numeric("predict")  # keep the last estimate; its time stays, so dt grows next time
-            return False
-        self.ekf.x, self.ekf.P, self.t = xp, Pp, t
-        if code == nav_kernel.NUMERIC_UPDATE:
-            self._numeric(kind)
-            return False
-        if code == nav_kernel.REJECTED:
-            self._rejected(kind)
-            return False
-        self.ekf.x, self.ekf.P = xn, Pn
-        self.stats.updates[kind] = self.stats.updates.get(kind, 0) + 1
-        return True
+            return False   # keep the last estimate; its time stays, so dt grows next time
+        self.ekf.x, self.ekf.P, self.t = (xn, Pn, t) if code == nav_kernel.OK else (xp, Pp, t)
+        return code == nav_kernel.OK
 
     def _gated_update(self, kind: str, z: np.ndarray, model: MeasurementModel, Rm: np.ndarray,
                       angle_rows: tuple[int, ...]) -> bool:
@@ -438,7 +430,8 @@ class NavigationFilter:
         self._count("gyro", code_g)
 
     def _count(self, kind: str, code: int) -> None:
-        """The counter :meth:`_update_fast` moves for a kernel outcome."""
+        """Count a kernel outcome: an update, a gated rejection, or a numeric fault of the
+        prediction or of the update."""
         if code == nav_kernel.OK:
             self.stats.updates[kind] = self.stats.updates.get(kind, 0) + 1
         elif code == nav_kernel.REJECTED:

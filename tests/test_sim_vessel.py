@@ -157,7 +157,8 @@ def test_compiled_hull_step_is_the_generic_rk4_of_the_printed_equations(cfg):
 
 
 def test_simulator_steps_with_the_compiled_hull(cfg):
-    """SimulatorCore.step is the hull RK4 of Vessel.dynamics, as it was written in Python."""
+    """SimulatorCore.step is the generic RK4 (simulator.integrator) over Vessel.dynamics, as the
+    simulator integrated before the step was compiled."""
     core = SimulatorCore(load(None, []))   # waves and current on
     v = core.vessel
     assert core.substeps == 1   # the default layout: one RK4 step a frame
