@@ -3,8 +3,9 @@
 The same equations as the filterpy path, on the 7-state model ``[x, y, psi, u, v, r, b_g]``:
 predict eq. (2) with constant body velocities to the measurement's time, the NIS gate, the gain
 ``K = P H^T S^-1`` and the Joseph-form covariance update filterpy uses. One call does the
-predict and the update of one measurement: CPython's per-operation cost on 7x7 arrays (~1 us a
-numpy call, dozens per update) was the filter's cost, not the arithmetic.
+predict and the update of one measurement, or of two at one time (the compass and the gyro of the
+usual frame): CPython's per-operation cost on 7x7 arrays (~1 us a numpy call, dozens per update),
+and then the calls themselves, were the filter's cost, not the arithmetic.
 
 Outcome codes tell the caller what happened, so that it counts and rolls back exactly as the
 filterpy path does: a non-finite prediction keeps the previous estimate; a singular or non-finite
@@ -19,6 +20,7 @@ import numpy as np
 from numba import njit
 
 OK, REJECTED, NUMERIC_PREDICT, NUMERIC_UPDATE = 0, 1, 2, 3
+NONE = -1   # no (second) measurement
 # Measurement kinds (the models of NavigationFilter).
 GPS_POS, GPS_VEL, COMPASS, GYRO, DVL = 0, 1, 2, 3, 4
 _X, _Y, _PSI, _U, _V, _R, _BG = 0, 1, 2, 3, 4, 5, 6
@@ -103,16 +105,9 @@ def _model(x: np.ndarray, kind: int):
 
 
 @njit(cache=True, error_model="numpy")
-def step(x: np.ndarray, P: np.ndarray, dt: float, q_a: float, q_r: float, q_b: float,
-         kind: int, z: np.ndarray, Rm: np.ndarray, gate: float):
-    """Predict by ``dt`` s (none when 0), then the gated update by measurement ``z`` (m x 1) of
-    ``kind`` with noise covariance ``Rm`` (m x m). Returns (code, x_pred, P_pred, x_post, P_post)."""
-    if dt > 0.0:
-        xp, Pp = predict(x, P, dt, q_a, q_r, q_b)
-        if not (_all_finite(xp) and _all_finite(Pp)):
-            return NUMERIC_PREDICT, x, P, x, P
-    else:
-        xp, Pp = x, P
+def _update(xp: np.ndarray, Pp: np.ndarray, kind: int, z: np.ndarray, Rm: np.ndarray, gate: float):
+    """The gated update of the prediction (xp, Pp) by measurement ``z`` (m x 1) of ``kind`` with
+    noise covariance ``Rm`` (m x m): (code, x, P), the prediction itself unless the code is OK."""
     H, hx, angle = _model(xp, kind)
     y = z - hx
     if angle >= 0:
@@ -128,49 +123,50 @@ def step(x: np.ndarray, P: np.ndarray, dt: float, q_a: float, q_r: float, q_b: f
         a, b, c, d = S[0, 0], S[0, 1], S[1, 0], S[1, 1]
         scale = max(abs(a), abs(b), abs(c), abs(d))
         if not (0.0 < scale < math.inf):
-            return NUMERIC_UPDATE, xp, Pp, xp, Pp
+            return NUMERIC_UPDATE, xp, Pp
         a, b, c, d = a / scale, b / scale, c / scale, d / scale
         det = (a * d - b * c) * scale
         if det == 0.0 or not math.isfinite(det):
-            return NUMERIC_UPDATE, xp, Pp, xp, Pp
+            return NUMERIC_UPDATE, xp, Pp
         Sinv[0, 0], Sinv[0, 1], Sinv[1, 0], Sinv[1, 1] = d / det, -b / det, -c / det, a / det
         nis = (y.T @ Sinv @ y)[0, 0]
     if not math.isfinite(nis):
-        return NUMERIC_UPDATE, xp, Pp, xp, Pp
+        return NUMERIC_UPDATE, xp, Pp
     if nis > gate:
-        return REJECTED, xp, Pp, xp, Pp
+        return REJECTED, xp, Pp
     K = PHT @ Sinv
     xn = xp + K @ y
     xn[_PSI, 0] = _wrap(xn[_PSI, 0])
     I_KH = np.eye(_N) - K @ H
     Pn = I_KH @ Pp @ I_KH.T + K @ Rm @ K.T
     if not (_all_finite(xn) and _all_finite(Pn)):
-        return NUMERIC_UPDATE, xp, Pp, xp, Pp
-    return OK, xp, Pp, xn, Pn
+        return NUMERIC_UPDATE, xp, Pp
+    return OK, xn, Pn
 
 
 @njit(cache=True, error_model="numpy")
-def heading_and_rate(x: np.ndarray, P: np.ndarray, dt: float, q_a: float, q_r: float, q_b: float,
-                     heading: float, r_compass: np.ndarray, yaw_rate: float, r_gyro: np.ndarray, gate: float):
-    """The compass update then the gyro update at one time, as two :func:`step` calls would do them
-    (one compiled call instead of two: the calls, not the arithmetic, were most of their cost).
-    ``dt`` s since the estimate's time, both measurements finite. The gyro's predict is none when
-    the compass's prediction was taken (the estimate is then at the measurements' time), else by
-    ``dt`` again. Returns (compass code, gyro code, x, P); the estimate's time moved to the
-    measurements' unless both codes are NUMERIC_PREDICT."""
-    z = np.empty((1, 1))
-    z[0, 0] = heading
-    code_c, xp, Pp, xn, Pn = step(x, P, dt, q_a, q_r, q_b, COMPASS, z, r_compass, gate)
-    if code_c == NUMERIC_PREDICT:
-        dt_g = dt
-    else:
-        dt_g = 0.0
-        x, P = (xn, Pn) if code_c == OK else (xp, Pp)
-    z = np.empty((1, 1))
-    z[0, 0] = yaw_rate
-    code_g, xp, Pp, xn, Pn = step(x, P, dt_g, q_a, q_r, q_b, GYRO, z, r_gyro, gate)
-    if code_g == OK:
-        return code_c, code_g, xn, Pn
-    if code_g == NUMERIC_PREDICT:
-        return code_c, code_g, x, P
-    return code_c, code_g, xp, Pp
+def step(x: np.ndarray, P: np.ndarray, dt: float, q_a: float, q_r: float, q_b: float,
+         kind: int, z: np.ndarray, Rm: np.ndarray, gate: float,
+         kind2: int, z2: np.ndarray, Rm2: np.ndarray, gate2: float):
+    """Predict by ``dt`` s (none when 0), then the gated update by measurement ``z`` (m x 1) of
+    ``kind`` with noise covariance ``Rm`` (m x m); then, unless ``kind2`` is :data:`NONE`, the same
+    for a second measurement at the same time (``z2``, ``Rm2``, ``gate2``), as a second call would:
+    no predict if the first one's was taken, by ``dt`` again if it was refused.
+
+    Returns (code, code2, x, P): the estimate after them (the one given where every prediction was
+    refused, a prediction where an update was refused), ``code2`` NONE without a second measurement.
+    One entry point on purpose: a second compiled function calling the same code would compile it
+    again, and a cold numba cache takes ~5 s for it."""
+    codes = [NONE, NONE]
+    for i in range(1 if kind2 == NONE else 2):
+        k, zi, Ri, gi = (kind, z, Rm, gate) if i == 0 else (kind2, z2, Rm2, gate2)
+        if dt > 0.0:
+            xp, Pp = predict(x, P, dt, q_a, q_r, q_b)
+            if not (_all_finite(xp) and _all_finite(Pp)):
+                codes[i] = NUMERIC_PREDICT
+                continue
+            dt = 0.0   # the estimate is at the measurements' time now
+        else:
+            xp, Pp = x, P
+        codes[i], x, P = _update(xp, Pp, k, zi, Ri, gi)
+    return codes[0], codes[1], x, P

@@ -18,9 +18,10 @@ velocity, and its position covariance grows.
 Two interchangeable implementations (``navigation.filter``): ``"filterpy"`` (the prediction below
 on numpy, filterpy's ``ExtendedKalmanFilter.update``) and ``"fast"`` (the same equations -
 prediction, NIS gate, gain, Joseph-form covariance update - compiled with numba in one call per
-measurement, autopilot_bridge/nav_kernel.py). They agree to rounding, refusals and counters
-included (tests/test_navigation_fast.py). ``"fast"`` is the default: filterpy's path alone costs
-more per frame than the loop's budget at 3,000 lockstep steps/s (docs/performance.md).
+measurement, or per pair of them at one time, autopilot_bridge/nav_kernel.py). They agree to
+rounding, refusals and counters included (tests/test_navigation_fast.py). ``"fast"`` is the
+default: filterpy's path alone costs more per frame than the loop's budget at 3,000 lockstep
+steps/s (docs/performance.md).
 
 Numeric faults never escape: a measurement that is not finite, a singular innovation covariance
 (``LinAlgError``) or an update or prediction that would leave a NaN/inf in the state or its
@@ -141,6 +142,7 @@ class FastEkf:
 _KIND = {"gps_pos": nav_kernel.GPS_POS, "gps_vel": nav_kernel.GPS_VEL, "compass": nav_kernel.COMPASS,
          "gyro": nav_kernel.GYRO, "dvl": nav_kernel.DVL}
 _warm = False
+_NO_SECOND = (nav_kernel.NONE, np.zeros((1, 1)), np.zeros((1, 1)), 0.0)   # nav_kernel.step's unused second measurement
 
 
 def _warm_up() -> None:
@@ -149,9 +151,10 @@ def _warm_up() -> None:
     global _warm
     if not _warm:
         x, P = np.zeros((DIM, 1)), np.eye(DIM)
-        nav_kernel.step(x, P, 0.01, 0.1, 0.1, 0.0, nav_kernel.GYRO, np.zeros((1, 1)), np.eye(1), 10.0)
-        nav_kernel.step(x, P, 0.01, 0.1, 0.1, 0.0, nav_kernel.DVL, np.zeros((2, 1)), np.eye(2), 10.0)
-        nav_kernel.heading_and_rate(x, P, 0.01, 0.1, 0.1, 0.0, 0.0, np.eye(1), 0.0, np.eye(1), 10.0)
+        one = np.zeros((1, 1))
+        nav_kernel.step(x, P, 0.01, 0.1, 0.1, 0.0, nav_kernel.DVL, np.zeros((2, 1)), np.eye(2), 10.0, *_NO_SECOND)
+        nav_kernel.step(x, P, 0.01, 0.1, 0.1, 0.0, nav_kernel.COMPASS, one, np.eye(1), 10.0,
+                        nav_kernel.GYRO, one, np.eye(1), 10.0)
         _warm = True
 
 
@@ -299,12 +302,12 @@ class NavigationFilter:
             self._numeric("predict")
             return False
         q_a, q_r, q_b = self._q
-        code, xp, Pp, xn, Pn = nav_kernel.step(self.ekf.x, self.ekf.P, dt, q_a, q_r, q_b, _KIND[kind], z,
-                                               self._R[kind], self._gate(z.shape[0]))
+        code, _, x, P = nav_kernel.step(self.ekf.x, self.ekf.P, dt, q_a, q_r, q_b, _KIND[kind], z,
+                                        self._R[kind], self._gate(z.shape[0]), *_NO_SECOND)
         self._count(kind, code)
         if code == nav_kernel.NUMERIC_PREDICT:
             return False   # keep the last estimate; its time stays, so dt grows next time
-        self.ekf.x, self.ekf.P, self.t = (xn, Pn, t) if code == nav_kernel.OK else (xp, Pp, t)
+        self.ekf.x, self.ekf.P, self.t = x, P, t
         return code == nav_kernel.OK
 
     def _gated_update(self, kind: str, z: np.ndarray, model: MeasurementModel, Rm: np.ndarray,
@@ -410,8 +413,9 @@ class NavigationFilter:
 
     def update_heading_and_rate(self, t: float, heading: float, yaw_rate: float) -> None:
         """:meth:`update_compass` then :meth:`update_gyro` at time ``t``: the same estimates,
-        refusals and counters. The fast filter does the two in one compiled call where the calls
-        themselves would refuse nothing before their kernel (both finite, ``t`` not in the past)."""
+        refusals and counters. The fast filter does the two in one compiled call
+        (``nav_kernel.step`` with a second measurement) where the calls themselves would refuse
+        nothing before their kernel (both finite, ``t`` not in the past)."""
         dt = math.inf if self.t is None else t - self.t
         if not (self.fast and dt >= 0.0 and math.isfinite(dt) and math.isfinite(heading)
                 and math.isfinite(yaw_rate)):
@@ -420,9 +424,10 @@ class NavigationFilter:
             return
         self._heading = heading
         q_a, q_r, q_b = self._q
-        code_c, code_g, x, P = nav_kernel.heading_and_rate(self.ekf.x, self.ekf.P, dt, q_a, q_r, q_b, heading,
-                                                           self._R["compass"], yaw_rate, self._R["gyro"],
-                                                           self._gates[1])
+        gate = self._gates[1]
+        code_c, code_g, x, P = nav_kernel.step(self.ekf.x, self.ekf.P, dt, q_a, q_r, q_b,
+                                               nav_kernel.COMPASS, np.array([[heading]]), self._R["compass"], gate,
+                                               nav_kernel.GYRO, np.array([[yaw_rate]]), self._R["gyro"], gate)
         self.ekf.x, self.ekf.P = x, P
         if code_c != nav_kernel.NUMERIC_PREDICT or code_g != nav_kernel.NUMERIC_PREDICT:
             self.t = t

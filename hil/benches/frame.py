@@ -45,9 +45,8 @@ ROWS: tuple[tuple[str, tuple[tuple[str, str], ...]], ...] = (
 )
 # Inside the navigation row: the filter's own steps.
 NAV_DETAIL: tuple[tuple[str, tuple[tuple[str, str], ...]], ...] = (
-    ("  of which filter arithmetic (nav_kernel.step, heading_and_rate | predict_to+EKF.update)",
-     (("autopilot_bridge/nav_kernel.py", "step"), ("autopilot_bridge/nav_kernel.py", "heading_and_rate"),
-      ("autopilot_bridge/navigation.py", "predict_to"),
+    ("  of which filter arithmetic (nav_kernel.step | predict_to+EKF.update)",
+     (("autopilot_bridge/nav_kernel.py", "step"), ("autopilot_bridge/navigation.py", "predict_to"),
       ("filterpy/kalman/EKF.py", "update"))),
 )
 PLANNER_WAIT = ("autopilot_bridge/planning_worker.py", "wait")
