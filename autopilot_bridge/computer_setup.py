@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING
 
 from autopilot_bridge.config import AutopilotParams
 from autopilot_bridge.control import ControlParams, SurgeModel
@@ -15,6 +15,10 @@ from autopilot_bridge.navigation import NavigationParams
 from autopilot_bridge.planning_worker import PlannerWorker
 from autopilot_bridge.telemetry import Telemetry
 from common.percentiles import StreamingPercentiles
+
+if TYPE_CHECKING:
+    from autopilot_bridge.can_actuators import CanActuators
+    from autopilot_bridge.traffic_awareness import TrafficAwareness
 
 
 @dataclass(frozen=True)
@@ -43,13 +47,15 @@ class RunOptions:
     """How this run drives the computer: lockstep (answer every frame, wait for the planner in
     simulated time) or real time, the seed of its planning cycles, int14 thruster commands
     (DroneCAN resolution), whether it waits disarmed in HOLD for a ground station, and the pace
-    (x wall time) of lockstep with a ground station attached (None: 1x while disarmed only)."""
+    (x wall time) of lockstep with a ground station attached (None: 1x while disarmed only);
+    ``home_item``: mission item 0 is home (the boat identifies as ArduPilot, whose convention it is)."""
 
     lockstep: bool
     seed: int
     int14_commands: bool = False
     wait_for_arm: bool = False
     pace_speedup: float | None = None
+    home_item: bool = False
 
 
 @dataclass(frozen=True)
@@ -61,8 +67,8 @@ class Devices:
     link: HilLink
     worker: PlannerWorker
     telemetry: Telemetry | None = None
-    traffic: Any = None
-    actuators: Any = None
+    traffic: TrafficAwareness | None = None
+    actuators: CanActuators | None = None
 
 
 @dataclass

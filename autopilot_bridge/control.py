@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass
 
 from autopilot_bridge.angles import wrap_angle
+from autopilot_bridge.parameters import Tunable
 from common.params import param
 
 
@@ -62,10 +63,17 @@ class SurgeModel:
 
 
 class HeadingPID:
-    """PID on the wrapped heading error; derivative on the measured yaw rate (no set-point kick)."""
+    """PID on the wrapped heading error; derivative on the measured yaw rate (no set-point kick).
+
+    Its gains are its own parameters (initial values from [control]; a ground station tunes them)."""
+
+    kp = Tunable("HDG_KP", 0.0, 1000.0, "N m/rad", "heading PID proportional gain")
+    ki = Tunable("HDG_KI", 0.0, 200.0, "N m/(rad s)", "heading PID integral gain")
+    kd = Tunable("HDG_KD", 0.0, 500.0, "N m s/rad", "heading PID derivative gain (on the measured yaw rate)")
 
     def __init__(self, p: ControlParams) -> None:
         self.p = p
+        self.kp, self.ki, self.kd = p.heading_kp, p.heading_ki, p.heading_kd
         self.integral = 0.0
 
     def reset(self) -> None:
@@ -79,11 +87,11 @@ class HeadingPID:
         ``r`` alone) a steady turn at r costs a heading error of (d_r + Kd) r / Kp, 0.4 rad at
         0.3 rad/s, and the vessel swings wide of every bend of the path."""
         e = wrap_angle(psi_ref - psi)
-        if self.p.heading_ki > 0.0 and dt > 0.0:
-            self.integral += self.p.heading_ki * e * dt
+        if self.ki > 0.0 and dt > 0.0:
+            self.integral += self.ki * e * dt
             lim = self.p.heading_integral_limit
             self.integral = min(max(self.integral, -lim), lim)
-        return self.p.heading_kp * e + self.integral + self.p.heading_kd * (r_ref - r) \
+        return self.kp * e + self.integral + self.kd * (r_ref - r) \
             + self.p.heading_rate_feedforward * r_ref
 
 
@@ -100,8 +108,11 @@ class SpeedController:
     aside, which the integral removes): poles at ``-zeta omega +- omega sqrt(zeta^2 - 1)``.
     """
 
+    bandwidth = Tunable("SPD_BANDWIDTH", 0.05, 5.0, "rad/s", "speed loop natural frequency (closed-loop poles)")
+
     def __init__(self, p: ControlParams, model: SurgeModel) -> None:
         self.p, self.model = p, model
+        self.bandwidth = p.speed_bandwidth
         self.integral = 0.0
         self.u_d: float | None = None
 
@@ -111,7 +122,7 @@ class SpeedController:
 
     def update(self, u_ref: float, u: float, v: float, r: float, dt: float) -> float:
         """Surge force (N) to bring surge speed ``u`` (m/s) to the set-point ``u_ref``."""
-        m, w, z = self.model, self.p.speed_bandwidth, self.p.speed_damping
+        m, w, z = self.model, self.bandwidth, self.p.speed_damping
         if self.u_d is None:
             self.u_d = u
         du_d = (u_ref - self.u_d) / self.p.speed_reference_time_constant

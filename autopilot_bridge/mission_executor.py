@@ -3,11 +3,16 @@
 Follows ArduPilot's AP_Mission order:
 
 * one NAV command is active at a time (MISSION_CURRENT shows it); the DO commands that follow it, up to
-  the next NAV command or DO_JUMP, start when it starts;
+  the next NAV command or DO_JUMP, run when it is reached (those before the first NAV command when the
+  mission starts), so every item takes effect, and is reported reached, in mission order. (ArduPilot's
+  AP_Mission starts them when the NAV command before them starts; for DO_CHANGE_SPEED after waypoint B
+  that is on the way to B, where a planner of missions expects it at B.) With ``first`` = 1, item 0 is
+  home (ArduPilot's convention) and never executed;
 * DO_JUMP is followed when the mission advances to its next NAV command: param1 is the target item,
   param2 the number of repeats (-1: for ever); once its repeats are used up it is passed over;
 * NAV_WAYPOINT completes within its acceptance radius (param2; 0: the default), or when the boat has
-  passed the line through it perpendicular to the leg into it (not for the last point of a leg sequence);
+  passed the line through it perpendicular to the leg into it (the first item's leg begins where the
+  boat was; not for the last point of a leg sequence);
   with a hold time (param1, s) the boat keeps station there that long;
 * NAV_LOITER_TIME keeps station at its position (or, at 0/0, where the boat is) for param1 s;
   NAV_LOITER_UNLIM for ever (until the mode or the mission changes);
@@ -25,6 +30,7 @@ executed or skipped is reported once (MISSION_ITEM_REACHED); ArduPilot reports N
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Protocol
 
 from autopilot_bridge import mission_commands as mc
@@ -48,20 +54,30 @@ class MissionHost(Protocol):
 class MissionExecutor:
     """Runs a tuple of :class:`MissionCommand` for a :class:`MissionHost`."""
 
-    def __init__(self, commands: tuple[MissionCommand, ...], default_radius: float) -> None:
+    def __init__(self, commands: tuple[MissionCommand, ...], default_radius: Callable[[], float],
+                 first: int = 0) -> None:
+        """``default_radius()``: WP_RADIUS now (m; the vehicle owns it); ``first``: the first item
+        executed (1 where item 0 is home, ArduPilot's convention)."""
         self.commands = tuple(commands)
-        self.default_radius = default_radius
-        self.current = 0                       # the active NAV item (MISSION_CURRENT)
+        self._default_radius = default_radius
+        self.first = first
+        self.current = first if len(commands) > first else 0   # the active NAV item (MISSION_CURRENT)
         self.complete = False
         self.jumps: dict[int, int] = {}        # DO_JUMP item -> jumps done
         self.loiter_until: float | None = None  # s of vehicle time; inf: NAV_LOITER_UNLIM
+        self.mission_speed: float | None = None  # m/s, the last DO_CHANGE_SPEED run (kept on resume)
         self._leg: list[int] = []              # NAV items of the active leg sequence, in order
         self._leg_points: list[tuple[float, float]] = []
         self._leg_index = 0                    # the leg item to reach next
         self._after_do = 0                     # first item after the active NAV's DO commands
         self._position: tuple[float, float] = (0.0, 0.0)
+        self._leg_start: tuple[float, float] = (0.0, 0.0)   # where the boat was when the leg began
 
     # -- helpers ------------------------------------------------------------------------------------
+    @property
+    def default_radius(self) -> float:
+        return self._default_radius()
+
     def radius(self, c: MissionCommand) -> float:
         r = c.p2 if c.command == mc.NAV_WAYPOINT else 0.0
         return float(r) if math.isfinite(r) and r > 0.0 else self.default_radius
@@ -86,13 +102,14 @@ class MissionExecutor:
         """Run from item ``seq`` (a mission start, MISSION_SET_CURRENT, entering AUTO)."""
         self._position = position
         self.complete, self.loiter_until = False, None
-        nxt = self._next_nav(seq, host, run_do=True)
+        nxt = self._next_nav(max(seq, self.first), host, run_do=True)
         self._begin(nxt, host, t)
 
     def adopt_leg(self, items: list[int], points: list[tuple[float, float]]) -> None:
         """A route that is already set (the scenario's own reference path) runs through ``items``."""
         self.complete, self.loiter_until = False, None
         self._leg, self._leg_points, self._leg_index = list(items), list(points), 0
+        self._leg_start = points[0] if points else (0.0, 0.0)
         self.current = items[0] if items else 0
         self._after_do = self.current + 1
 
@@ -113,7 +130,7 @@ class MissionExecutor:
                 elif repeat < 0 or done < repeat:
                     self.jumps[i] = done + 1
                     host.note(f"mission: jump to item {target} ({done + 1}/{'inf' if repeat < 0 else repeat})")
-                    i, run_do = target, True
+                    i, run_do = max(target, self.first), True
                 else:
                     i += 1
                 continue
@@ -130,6 +147,7 @@ class MissionExecutor:
         if c.command == mc.DO_CHANGE_SPEED:
             if math.isfinite(c.p2) and c.p2 > 0.0:
                 host.set_speed(float(c.p2))
+                self.mission_speed = float(c.p2)
         elif c.command == mc.DO_SET_HOME:
             here = c.p1 == 1.0 or c.position is None
             host.home = self._position if here else c.position
@@ -154,13 +172,13 @@ class MissionExecutor:
             self._leg, self._leg_points = [], []
             return
         self.current = k
-        self._run_dos_after(k, host)
+        self._leg_start = self._position
         c = self.commands[k]
         if c.command not in mc.EXECUTED:        # a stored-only NAV command (NAV_DELAY, ...)
             host.note(f"mission item {k}: {mc.command_name(c.command)} skipped (stored, not executed here)",
                       warning=True)
             host.reached_item(k)
-            self._begin(self._next_nav(self._after_do, host, run_do=False), host, t)
+            self._begin(self._next_nav(k + 1, host, run_do=True), host, t)
             return
         if c.command == mc.NAV_RETURN_TO_LAUNCH:
             home = host.home if host.home is not None else self._position
@@ -169,17 +187,17 @@ class MissionExecutor:
             self._leg_index = 0
             return
         leg, points = [k], [c.position if c.position is not None else self._position]
-        # Consecutive waypoints join one leg sequence (no DO_JUMP in between: it is decided on arrival).
-        j = self._after_do
-        while self._loiter_time(self.commands[leg[-1]]) is None and j < len(self.commands):
-            nxt = self.commands[j]
-            if not self._joins_leg(nxt):
+        # Consecutive waypoints join one leg sequence (no DO_JUMP in between: it is decided on arrival);
+        # the DO commands between them run as the boat reaches the waypoint before them.
+        n, j = len(self.commands), k + 1
+        while self._loiter_time(self.commands[leg[-1]]) is None:
+            while j < n and not self.commands[j].is_nav and self.commands[j].command != mc.DO_JUMP:
+                j += 1
+            if j >= n or not self._joins_leg(self.commands[j]):
                 break
             leg.append(j)
-            points.append(nxt.required_position())  # _joins_leg: it has one
+            points.append(self.commands[j].required_position())  # _joins_leg: it has one
             j += 1
-            while j < len(self.commands) and not self.commands[j].is_nav and self.commands[j].command != mc.DO_JUMP:
-                j += 1
         self._leg, self._leg_points, self._leg_index = leg, points, 0
         end = self.commands[leg[-1]]
         host.new_route([self._position, *points], self.radius(end), loiter=self._loiter_time(end) is not None)
@@ -200,8 +218,10 @@ class MissionExecutor:
             tn, te = self._leg_points[self._leg_index]
             last = self._leg_index == len(self._leg) - 1
             passed = False
-            if not last and self._leg_index > 0:
-                pn, pe = self._leg_points[self._leg_index - 1]
+            if not last:
+                # Passed the line through the item perpendicular to the leg into it (ArduRover's test
+                # too): the first item's leg starts where the boat was when the leg began.
+                pn, pe = self._leg_points[self._leg_index - 1] if self._leg_index > 0 else self._leg_start
                 passed = (north - tn) * (tn - pn) + (east - te) * (te - pe) > 0.0
             if math.hypot(tn - north, te - east) > self.radius(c) and not passed:
                 return
@@ -213,9 +233,9 @@ class MissionExecutor:
         k = self._leg[self._leg_index]
         host.reached_item(k)
         if self._leg_index < len(self._leg) - 1:
+            self._run_dos_after(k, host)   # the DO items between k and the next waypoint, in mission order
             self._leg_index += 1
             self.current = self._leg[self._leg_index]
-            self._run_dos_after(self.current, host)
             return
         hold = self._loiter_time(self.commands[k])
         if hold is not None and hold > 0.0:
@@ -225,7 +245,8 @@ class MissionExecutor:
         self._advance(host, t)
 
     def _advance(self, host: MissionHost, t: float) -> None:
-        self._begin(self._next_nav(self._after_do, host, run_do=False), host, t)
+        """NAV item ``current`` is done (reached, its loiter over): its DO items, then the next NAV item."""
+        self._begin(self._next_nav(self.current + 1, host, run_do=True), host, t)
 
     def finish_leg(self, host: MissionHost, t: float) -> None:
         """The boat is at the end of the leg sequence (the planner's goal): items of it not yet reported

@@ -104,11 +104,14 @@ class ModeAuto(RoverMode):
     number, flags, needs_position, drives = Mode.AUTO, _AUTO_FLAGS, True, True
 
     def enter(self, v: Vehicle, position: tuple[float, float] | None) -> tuple[bool, str]:
-        if not v.mission:
+        if len(v.mission) <= v.executor.first:   # nothing, or only home (item 0, ArduPilot's convention)
             return False, "AUTO: no mission"
         assert position is not None  # needs_position: Vehicle.set_mode checked it
         v.route = None
+        resumed_speed = v.executor.mission_speed
         v.executor.start(v.executor.current, v, position, v.t)
+        if v.speed is None and resumed_speed is not None:
+            v.speed = resumed_speed      # a resumed mission keeps its DO_CHANGE_SPEED
         return True, self.name
 
     def update(self, v: Vehicle, north: float, east: float, t: float) -> None:

@@ -13,17 +13,19 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from autopilot_bridge.config import AutopilotParams
-from autopilot_bridge.local_planning import CycleInput, LocalPlan, ned_to_map
+from autopilot_bridge.local_planning import CycleInput, LocalPlan, WorldUpdate, ned_to_map
 from autopilot_bridge.navigation import NavState
+from autopilot_bridge.parameters import Tunable
 from autopilot_bridge.planning_worker import PlannerWorker, PlanRequest
 from planner.params import SEED_MAX
 
 if TYPE_CHECKING:
     from autopilot_bridge.computer_setup import AutopilotStats
     from autopilot_bridge.obstacle_map import SensedObstacles
+    from autopilot_bridge.traffic_awareness import TrafficAwareness
 
 
 def cycle_seed(run_seed: int, cycle: int) -> int:
@@ -35,13 +37,19 @@ def cycle_seed(run_seed: int, cycle: int) -> int:
 class PlanHandoff:
     """Submits planning cycles to ``worker`` and collects their answers.
 
+    It owns the planning deadline (PLN_DEADLINE, at most 0.95 x the planning period); ``speed()`` is
+    the speed set-point now (m/s, the vehicle's), with which the traffic assessment predicts the boat.
     ``event(t, text)`` records what the computer should tell (a restarted worker); counters go to
     the computer's ``stats`` (planning cycles, planner waits in lockstep, rejected answers)."""
 
+    deadline = Tunable("PLN_DEADLINE", 0.05, lambda o: 0.95 * o.p.planning_period, "s",
+                       "hard deadline of one local planning cycle (the watchdog's)")
+
     def __init__(self, worker: PlannerWorker, params: AutopilotParams, lockstep: bool, seed: int,
-                 stats: AutopilotStats, event: Callable[[float, str], None]) -> None:
+                 stats: AutopilotStats, event: Callable[[float, str], None], speed: Callable[[], float]) -> None:
         self.worker, self.p, self.lockstep, self.seed = worker, params, lockstep, seed
-        self.stats, self._event = stats, event
+        self.deadline = params.planning_deadline
+        self.stats, self._event, self.speed = stats, event, speed
         self.sensed_at_submit = 0        # sensed obstacles known when the pending cycle was submitted
         self.reset()
 
@@ -56,11 +64,12 @@ class PlanHandoff:
         """Whatever the worker is planning now is for the old route: its answer will be dropped."""
         self.stale_cycle = self.cycle
 
-    def submit(self, s: NavState, sensed: SensedObstacles, traffic: Any, world_update: Any) -> None:
+    def submit(self, s: NavState, sensed: SensedObstacles, traffic: TrafficAwareness | None,
+               world_update: WorldUpdate | None) -> None:
         """Hand the next cycle to the worker, planned from where the vessel (estimate ``s``, NED)
         will be at the end of the planning deadline; ``traffic``: TrafficAwareness or None;
         ``world_update``: what the worker must use instead of its initial World (None: nothing)."""
-        lead = self.p.planning_deadline
+        lead = self.deadline
         north = s.x + (s.u * math.cos(s.psi) - s.v * math.sin(s.psi)) * lead
         east = s.y + (s.u * math.sin(s.psi) + s.v * math.cos(s.psi)) * lead
         # The path is a ground track that the guidance steers as a course (Autopilot._control turns
@@ -70,14 +79,14 @@ class PlanHandoff:
         x, y, heading = ned_to_map(north, east, s.course(self.p.min_turn_speed))
         self.cycle += 1
         self.sensed_at_submit = sensed.count
-        snap = None if traffic is None else traffic.snapshot(s.t + lead, x, y, heading, self.p.cruise_speed)
+        snap = None if traffic is None else traffic.snapshot(s.t + lead, x, y, heading, self.speed())
         self.traffic_planned = snap is not None   # ships move: their cycle's newest plan always wins
         request = PlanRequest(
             cycle=self.cycle,
             problem=CycleInput(x, y, heading, s.t + lead, cycle_seed(self.seed, self.cycle),
                                sensed.cells() if self.sensed_at_submit else None, sensed.version,
                                traffic=snap, world=world_update),
-            deadline_s=self.p.planning_deadline,
+            deadline_s=self.deadline,
             iterations=self.p.lockstep_iterations if self.lockstep else None,
         )
         if self.lockstep:
@@ -94,7 +103,7 @@ class PlanHandoff:
             return None, False
         waited = False
         if self.lockstep:
-            if t + 1e-9 < self.pending_since + self.p.planning_deadline:
+            if t + 1e-9 < self.pending_since + self.deadline:
                 return None, False
             # Simulated time stands still while we wait: bounded by the watchdog's wall limit.
             waited = True

@@ -15,6 +15,10 @@ import numpy as np
 from autopilot_bridge.mission_commands import MissionCommand, waypoint
 from autopilot_bridge.mission_executor import MissionExecutor
 from autopilot_bridge.modes import MODES, Mode, RoverMode
+from autopilot_bridge.parameters import Tunable
+
+SPEED_RANGE = (0.2, 3.0)   # m/s: speed set-points a GCS or a mission may give (3 m/s: the hull's top speed)
+MIS_DONE_HOLD, MIS_DONE_LOITER = 0, 1   # MIS_DONE_BEHAVE values (ArduRover's: 0 Hold, 1 Loiter)
 
 __all__ = ["Mode", "Route", "Vehicle", "Waypoint"]
 
@@ -44,14 +48,32 @@ def _command(w: Waypoint | MissionCommand) -> MissionCommand:
 
 
 class Vehicle:
-    """Armed state, the active mode, mission progress and the active route (no I/O)."""
+    """Armed state, the active mode, mission progress and the active route (no I/O).
+
+    It owns the navigation parameters a Rover user knows by ArduRover's names (read live: the
+    mission executor and the modes ask the vehicle, never keep a copy). ``home_item``: item 0 of the
+    mission is home and is never executed (ArduPilot's convention, when the boat identifies as it)."""
+
+    wp_speed = Tunable("WP_SPEED", *SPEED_RANGE, "m/s",
+                       "speed over ground set-point in AUTO, GUIDED and LOITER's way back (ArduRover: WP_SPEED)")
+    rtl_speed = Tunable("RTL_SPEED", 0.0, SPEED_RANGE[1], "m/s", "speed over ground in RTL; 0: WP_SPEED")
+    wp_radius = Tunable("WP_RADIUS", 0.5, 50.0, "m",
+                        "acceptance radius of waypoints that give none, and of RTL, GUIDED and loiter targets")
+    mission_done = Tunable("MIS_DONE_BEHAVE", 0, 1, "",
+                           "after the last mission item: 0 hold (thrusters off), 1 loiter (keep station)",
+                           integer=True)
+    arming_check = Tunable("ARMING_CHECK", 0, 1, "",
+                           "1: refuse to arm without a navigation fix; 0: no pre-arm check", integer=True)
 
     def __init__(self, mission: list[Waypoint] | list[MissionCommand] | tuple, *, armed: bool, mode: Mode,
-                 scenario_route: np.ndarray | None = None, default_radius: float = 3.0) -> None:
+                 scenario_route: np.ndarray | None = None, default_radius: float = 3.0, wp_speed: float = 1.5,
+                 mission_done: int = MIS_DONE_LOITER, home_item: bool = False) -> None:
         self.armed = armed
         self.active: RoverMode = MODES[Mode(mode)]
-        self.default_radius = default_radius
-        self.executor = MissionExecutor(tuple(_command(w) for w in mission), default_radius)
+        self.wp_radius, self.wp_speed, self.rtl_speed = default_radius, wp_speed, 0.0
+        self.mission_done, self.arming_check = mission_done, 1
+        self.home_item = home_item
+        self.executor = self._executor(tuple(_command(w) for w in mission))
         self.home: tuple[float, float] | None = None
         self.guided_target: tuple[float, float] | None = None
         self.route: Route | None = None
@@ -66,7 +88,9 @@ class Vehicle:
         if scenario_route is not None and self.active.number == Mode.AUTO:
             # The scenario's reference path as given (version 0): runs without a GCS stay as they were.
             self.route = Route(0, np.asarray(scenario_route, dtype=float), self._final_radius())
-            self.executor.adopt_leg(list(range(len(self.mission))), [c.required_position() for c in self.mission])
+            first = self.executor.first if len(self.mission) > self.executor.first else 0
+            self.executor.adopt_leg(list(range(first, len(self.mission))),
+                                    [c.required_position() for c in self.mission[first:]])
         self.changed = False                  # mode/arming changed since last looked (telemetry)
 
     # -- state ----------------------------------------------------------------------------------
@@ -88,7 +112,24 @@ class Vehicle:
         return self.executor.complete if self.mode == Mode.AUTO else self._at_route_end
 
     def _final_radius(self) -> float:
-        return self.executor.radius(self.mission[-1]) if self.mission else self.default_radius
+        return self.executor.radius(self.mission[-1]) if self.mission else self.wp_radius
+
+    @property
+    def default_radius(self) -> float:
+        """WP_RADIUS, m."""
+        return self.wp_radius
+
+    def _executor(self, commands: tuple[MissionCommand, ...]) -> MissionExecutor:
+        return MissionExecutor(commands, lambda: self.wp_radius, first=1 if self.home_item else 0)
+
+    def speed_setpoint(self) -> float:
+        """Speed over ground (m/s) to aim at: DO_CHANGE_SPEED's until the mode changes, else RTL_SPEED
+        in RTL (when set), else WP_SPEED."""
+        if self.speed is not None:
+            return min(max(self.speed, SPEED_RANGE[0]), SPEED_RANGE[1])
+        if self.mode == Mode.RTL and self.rtl_speed > 0.0:
+            return max(self.rtl_speed, SPEED_RANGE[0])
+        return self.wp_speed
 
     # -- MissionHost ----------------------------------------------------------------------------
     def new_route(self, path: list[tuple[float, float]], goal_radius: float, loiter: bool = False) -> None:
@@ -97,8 +138,10 @@ class Vehicle:
         self._at_route_end = False
 
     def set_speed(self, speed: float) -> None:
-        self.speed = float(speed)
-        self.note(f"speed {speed:g} m/s")
+        """DO_CHANGE_SPEED (m/s over ground); outside SPEED_RANGE it is clamped, with a warning."""
+        v = min(max(float(speed), SPEED_RANGE[0]), SPEED_RANGE[1])
+        self.speed = v
+        self.note(f"speed {v:g} m/s" + ("" if v == speed else f" ({speed:g} asked, limited)"), warning=v != speed)
 
     def note(self, text: str, warning: bool = False) -> None:
         self.notes.append((text, warning))
@@ -116,13 +159,13 @@ class Vehicle:
         new = MODES[Mode(mode)]
         if new.needs_position and position is None:
             return False, f"{new.name}: no position yet"
-        previous = self.active
+        previous, previous_speed = self.active, self.speed
         self.active = new
+        self.speed = None   # a new mode starts at its own speed; entering AUTO may run a DO_CHANGE_SPEED
         ok, why = new.enter(self, position)
         if not ok:
-            self.active = previous
+            self.active, self.speed = previous, previous_speed
             return False, why
-        self.speed = None
         self.changed = True
         self._at_route_end = False
         return True, why
@@ -136,7 +179,7 @@ class Vehicle:
     def replace_mission(self, mission: list[Waypoint] | list[MissionCommand] | tuple,
                         position: tuple[float, float] | None) -> None:
         """A new mission, all at once: restart at its first item (re-route now if in AUTO)."""
-        self.executor = MissionExecutor(tuple(_command(w) for w in mission), self.default_radius)
+        self.executor = self._executor(tuple(_command(w) for w in mission))
         self.reached.clear()
         self._last_reported = -1
         if self.mode == Mode.AUTO:
@@ -149,6 +192,7 @@ class Vehicle:
     def set_current(self, seq: int, position: tuple[float, float] | None) -> bool:
         if not 0 <= seq < len(self.mission):
             return False
+        seq = max(seq, self.executor.first)   # item 0 is home where home_item: go to item 1
         self.executor.current = seq
         self.executor.complete = False
         self._last_reported = -1
@@ -158,11 +202,19 @@ class Vehicle:
         return True
 
     def mission_start(self, first: int, position: tuple[float, float] | None) -> tuple[bool, str]:
+        """MAV_CMD_MISSION_START: ``first`` 0 resumes where the mission stands (ArduRover's MIS_RESTART = 0:
+        a paused mission goes on from its current item; a finished one starts again); else from ``first``."""
         if not self.mission:
             return False, "no mission"
         if not 0 <= first < len(self.mission):
             return False, f"no item {first}"
-        self.executor.current = first
+        if len(self.mission) <= self.executor.first:
+            return False, "no mission items after home"
+        if first == 0 and not self.executor.complete:
+            if self.mode == Mode.AUTO:
+                return True, "mission running"
+            return self.set_mode(Mode.AUTO, position)
+        self.executor.current = max(first, self.executor.first)
         self.executor.complete = False
         self._last_reported = -1
         return self.set_mode(Mode.AUTO, position)

@@ -9,13 +9,16 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from autopilot_bridge.behaviour import Behaviour
 from autopilot_bridge.mission_commands import MissionCommand
 from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavState
 from autopilot_bridge.parameters import Param
+
+if TYPE_CHECKING:
+    from autopilot_bridge.gcs.mission import MissionItem
 
 
 @dataclass(frozen=True)
@@ -64,7 +67,9 @@ class VehicleApi(Protocol):
 
     def goto(self, north: float, east: float) -> Result: ...   # GUIDED to a point, NED m
 
-    def set_speed(self, speed: float) -> Result: ...          # m/s, until the mode changes
+    def set_speed(self, speed: float | None) -> Result: ...   # m/s over ground until the mode changes; None: default
+
+    def set_home(self, north: float | None, east: float | None) -> Result: ...  # NED m; None: where the boat is
 
     def start_mission(self, first: int) -> Result: ...
 
@@ -74,7 +79,7 @@ class VehicleApi(Protocol):
 
     def mission(self) -> tuple[MissionCommand, ...]: ...
 
-    def check_mission(self, items: tuple[Any, ...],
+    def check_mission(self, items: tuple[MissionItem, ...],
                       to_ned: Callable[[float, float], tuple[float, float]]) -> tuple[int, int, str] | None:
         """The first upload item (``gcs.mission.MissionItem``) off the chart, in an obstacle or
         unreachable by water, as ``(seq, MAV_MISSION_RESULT, reason)``; None when the route is good.
@@ -87,6 +92,6 @@ class VehicleApi(Protocol):
 
     def parameters(self) -> list[Param]: ...
 
-    def esc_telemetry(self) -> list[dict[str, Any]]: ...
+    def esc_telemetry(self) -> list[dict[str, float] | None]: ...
 
-    def status(self) -> VehicleStatus: ...
+    def status(self) -> VehicleStatus | None: ...

@@ -100,8 +100,9 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
         RunOptions(lockstep=lockstep, seed=cfg.sim.seed,
                    int14_commands=cfg.esc.int14_resolution or cfg.can.actuators == "can",
                    wait_for_arm=cfg.gcs.wait_for_arm,
-                   pace_speedup=cfg.gcs.pace_speedup if cfg.gcs.wait_for_arm else None))
-    telemetry.attach(autopilot)
+                   pace_speedup=cfg.gcs.pace_speedup if cfg.gcs.wait_for_arm else None,
+                   home_item=cfg.gcs.identity == "ardupilot"))
+    telemetry.attach(autopilot.commands)
     return autopilot
 
 

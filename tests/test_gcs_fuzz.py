@@ -42,8 +42,8 @@ def _absurd(mav) -> list:
         mav.mission_item_encode(1, 1, 0, 0, 16, 0, 1, NAN, NAN, NAN, NAN, INF, NAN, NAN, 0),
         mav.mission_request_int_encode(1, 1, 65535, 0), mav.mission_request_encode(1, 1, 60000, 7),
         mav.mission_set_current_encode(1, 1, 65535), mav.mission_clear_all_encode(1, 1, 200),
-        mav.param_set_encode(1, 1, b"CRUISE_SPEED", NAN, 9), mav.param_set_encode(1, 1, b"\xff\xfe" * 8, INF, 9),
-        mav.param_set_encode(1, 1, b"FS_GCS_ACTION", 1.5, 9), mav.param_request_read_encode(1, 1, b"", 32767),
+        mav.param_set_encode(1, 1, b"WP_SPEED", NAN, 9), mav.param_set_encode(1, 1, b"\xff\xfe" * 8, INF, 9),
+        mav.param_set_encode(1, 1, b"FS_ACTION", 1.5, 9), mav.param_request_read_encode(1, 1, b"", 32767),
         mav.param_request_read_encode(1, 1, b"NOPE", -1), mav.set_mode_encode(1, 1, 4294967295),
         mav.request_data_stream_encode(1, 1, 255, 65535, 1), mav.request_data_stream_encode(1, 1, 0, 0, 1),
         mav.manual_control_encode(1, -32768, 32767, 0, -32768, 65535),
@@ -96,18 +96,18 @@ def test_fuzzing_the_gcs_port_keeps_the_boat_running_and_counts_rejects(tmp_path
         assert later is not None and proc.poll() is None
         assert gcs.arm(True).result == M.MAV_RESULT_ACCEPTED
         assert gcs.recv("HEARTBEAT", 10, lambda h: h.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED) is not None
-        pv = gcs.param_set("CRUISE_SPEED", 1.5)
+        pv = gcs.param_set("WP_SPEED", 1.5)
         assert pv is not None and math.isclose(pv.param_value, 1.5)
         # The three absurd writes once more, one at a time and answered: the fuzz's own copies may be
         # dropped by a full UDP receive buffer, or swallowed by a TCP parser out of step after garbage.
-        for name, value, why in ((b"CRUISE_SPEED", NAN, "CRUISE_SPEED: nan outside"),
+        for name, value, why in ((b"WP_SPEED", NAN, "WP_SPEED: nan outside"),
                                  (b"\xff\xfe" * 8, INF, "unknown parameter"),
-                                 (b"FS_GCS_ACTION", 1.5, "FS_GCS_ACTION")):
+                                 (b"FS_ACTION", 1.5, "FS_ACTION")):
             gcs.drain()
             gcs.mav.param_set_send(1, 1, name, value, M.MAV_PARAM_TYPE_REAL32)
             warn = gcs.recv("STATUSTEXT", 10, lambda t, why=why: _text(t.text).startswith(why))
             assert warn is not None and warn.severity == M.MAV_SEVERITY_WARNING, why
-        pv = gcs.param_set("CRUISE_SPEED", NAN)
+        pv = gcs.param_set("WP_SPEED", NAN)
         assert pv is not None and math.isclose(pv.param_value, 1.5)  # unchanged, and said so
         n_sent = len(datagrams)
     finally:

@@ -161,13 +161,13 @@ def test_mavsdk_session(tmp_path):
 
         # Parameters: the list, a change in range, a refused one out of range.
         names = {p.name for p in param.get_all_params().float_params}
-        assert {"CRUISE_SPEED", "PLN_DEADLINE", "PLN_PERCEPT_RAD", "FS_GCS_TIMEOUT"} <= names, names
-        assert param.set_param_float("CRUISE_SPEED", 1.2) == ParamResult.SUCCESS
-        assert param.get_param_float("CRUISE_SPEED") == pytest.approx(1.2, abs=1e-6)
+        assert {"WP_SPEED", "PLN_DEADLINE", "PLN_PERCEPT_RAD", "FS_GCS_TIMEOUT"} <= names, names
+        assert param.set_param_float("WP_SPEED", 1.2) == ParamResult.SUCCESS
+        assert param.get_param_float("WP_SPEED") == pytest.approx(1.2, abs=1e-6)
         with pytest.raises(ParamError) as refused:
-            param.set_param_float("CRUISE_SPEED", 9.0)
+            param.set_param_float("WP_SPEED", 9.0)
         assert refused.value.result == ParamResult.TIMEOUT  # the boat kept 1.2 and said so; MAVSDK waited for 9
-        assert param.get_param_float("CRUISE_SPEED") == pytest.approx(1.2, abs=1e-6)
+        assert param.get_param_float("WP_SPEED") == pytest.approx(1.2, abs=1e-6)
 
         # Arm once the navigation has a fix (the boat refuses before).
         start = positions.wait(lambda p: True, 60)

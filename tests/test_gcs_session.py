@@ -113,9 +113,9 @@ def test_gcs_session_mission_commands_params_failsafe(live_run):
     assert gcs.recv("TRAJECTORY_REPRESENTATION_WAYPOINTS", 20) is not None
 
     # A parameter: in range it changes, out of range it does not.
-    pv = gcs.param_set("CRUISE_SPEED", 1.2)
+    pv = gcs.param_set("WP_SPEED", 1.2)
     assert pv is not None and abs(pv.param_value - 1.2) < 1e-6
-    pv = gcs.param_set("CRUISE_SPEED", 99.0)
+    pv = gcs.param_set("WP_SPEED", 99.0)
     assert pv is not None and abs(pv.param_value - 1.2) < 1e-6
 
     # Disarm: zero thrust.

@@ -57,18 +57,20 @@ def test_a_stored_command_is_skipped_with_a_statustext_and_counts_as_reached():
     delay = MissionCommand(mc.M.MAV_CMD_NAV_DELAY, p1=10)
     v = start([waypoint(0.0, 5.0, 2.0), servo, delay, waypoint(0.0, 10.0, 2.0)])
     reached, _ = sail(v, 60)
-    assert reached == [1, 0, 2, 3] and v.complete     # the DO item starts with the NAV item before it
+    assert reached == [0, 1, 2, 3] and v.complete     # in mission order: the DO item runs when item 0 is reached
     notes = [t for t, w in v.take_notes() if w]
     assert notes == ["mission item 1: DO_SET_SERVO skipped (stored, not executed here)",
                      "mission item 2: NAV_DELAY skipped (stored, not executed here)"]
 
 
-def test_change_speed_starts_with_the_nav_item_before_it_and_ends_with_the_mode():
+def test_change_speed_takes_effect_when_the_nav_item_before_it_is_reached_and_ends_with_the_mode():
     v = start([waypoint(0.0, 5.0, 2.0), waypoint(0.0, 10.0, 2.0), MissionCommand(mc.DO_CHANGE_SPEED, p1=1, p2=0.7),
                waypoint(0.0, 15.0, 2.0)])
     assert v.speed is None
-    sail(v, 6)                                    # 3 m: item 0 reached, item 1 (and the DO after it) started
-    assert v.current == 1 and v.speed == 0.7
+    v.update(0.0, 4.0, 1.0)                       # item 0 reached, item 1 active: the DO waits for it
+    assert v.current == 1 and v.speed is None
+    v.update(0.0, 9.0, 2.0)                       # item 1 reached: the DO after it runs
+    assert v.current == 3 and v.speed == 0.7
     v.set_mode(Mode.HOLD, (0.0, 3.0))
     assert v.speed is None
 
@@ -119,5 +121,5 @@ def test_consecutive_waypoints_are_one_global_reference_path_and_passing_counts(
     assert v.route.path.tolist() == [[0.0, 0.0], [0.0, 10.0], [0.0, 20.0], [0.0, 30.0]]
     v.update(0.0, 9.0, 1.0)
     v.update(4.0, 21.0, 2.0)                  # 4 m off item 1 but past the line through it
-    # DO_CHANGE_SPEED (item 2) started with item 1, so it is reported before item 1 is reached.
-    assert v.take_reached() == [0, 2, 1] and v.current == 3 and v.speed == 1.0
+    # DO_CHANGE_SPEED (item 2) runs as item 1 is reached: every item in mission order.
+    assert v.take_reached() == [0, 1, 2] and v.current == 3 and v.speed == 1.0

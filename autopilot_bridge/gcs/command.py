@@ -43,6 +43,7 @@ class CommandService:
             M.MAV_CMD_DO_CHANGE_SPEED: self._change_speed,
             M.MAV_CMD_DO_REPOSITION: lambda p, x5, y6: self._goto(x5, y6, "reposition"),
             M.MAV_CMD_DO_SET_MISSION_CURRENT: self._set_current,
+            M.MAV_CMD_DO_SET_HOME: self._set_home,
         }
 
     def register(self, handlers: dict[int, CommandHandler]) -> None:
@@ -55,7 +56,8 @@ class CommandService:
     def handlers(self) -> dict[str, Callable[[Any, float], None]]:
         return {"COMMAND_LONG": self._on_command, "COMMAND_INT": self._on_command, "SET_MODE": self._on_set_mode,
                 "MANUAL_CONTROL": self._on_manual_control,
-                "SET_POSITION_TARGET_GLOBAL_INT": self._on_position_target}
+                "SET_POSITION_TARGET_GLOBAL_INT": self._on_position_target,
+                "SET_HOME_POSITION": self._on_set_home_position}
 
     def refuse(self, m: Any) -> None:
         """A command refused by the security gate: COMMAND_ACK DENIED to its sender."""
@@ -106,6 +108,13 @@ class CommandService:
         if code != M.MAV_RESULT_ACCEPTED and why:
             self.out.statustext(why, M.MAV_SEVERITY_WARNING)
 
+    def _on_set_home_position(self, m: Any, now: float) -> None:
+        """SET_HOME_POSITION (deprecated for MAV_CMD_DO_SET_HOME, still sent by some ground stations)."""
+        if m.target_system not in (0, self.view.sysid) or self.view.api is None:
+            return
+        code, why = self._set_home([0.0, 0.0, 0.0, 0.0], m.latitude * 1e-7, m.longitude * 1e-7)
+        self.out.statustext(why, M.MAV_SEVERITY_INFO if code == M.MAV_RESULT_ACCEPTED else M.MAV_SEVERITY_WARNING)
+
     # -- commands ---------------------------------------------------------------------------------
     def _api(self) -> Any:
         api = self.view.api
@@ -151,10 +160,26 @@ class CommandService:
         return self.set_mode(Mode.HOLD if (finite(p[0]) and p[0] == 0.0) else Mode.AUTO)
 
     def _change_speed(self, p: list[float], x5: float, y6: float) -> CommandResult:
+        """param2 speed m/s over ground; -1 leaves it as it is, -2 returns to the default (WP_SPEED)."""
         speed = p[1]
-        if not finite(speed) or speed == -1.0:
+        if speed == -1.0:
             return M.MAV_RESULT_ACCEPTED, "speed unchanged"
+        if speed == -2.0:
+            return ack_of(self._api().set_speed(None))
+        if not finite(speed) or speed < 0.0:
+            return M.MAV_RESULT_DENIED, f"change speed: {speed:g} m/s is not a speed"
         return ack_of(self._api().set_speed(float(speed)))
+
+    def _set_home(self, p: list[float], lat: float, lon: float) -> CommandResult:
+        """MAV_CMD_DO_SET_HOME: param1 = 1 where the boat is, else at lat/lon, checked like a GUIDED target."""
+        if finite(p[0]) and p[0] == 1.0:
+            return ack_of(self._api().set_home(None, None))
+        if not (finite(lat) and finite(lon)) or not -90 <= lat <= 90 or not -180 <= lon <= 180 or \
+                (lat == 0.0 and lon == 0.0):
+            return M.MAV_RESULT_DENIED, "set home: bad latitude/longitude"
+        if self.view.on_chart(lat, lon) is not None:
+            return M.MAV_RESULT_DENIED, "set home: off the chart"
+        return ack_of(self._api().set_home(*self.view.geo.geodetic_to_sea_level(lat, lon)))
 
     def _goto(self, lat: float, lon: float, what: str) -> CommandResult:
         if not (finite(lat) and finite(lon)) or not -90 <= lat <= 90 or not -180 <= lon <= 180 or \

@@ -16,6 +16,10 @@ class GcsParams:
         "ground-station endpoints: udpout:HOST:PORT (send there, answer whoever talks back), udpin:HOST:PORT "
         "(listen, answer every peer heard), tcpin:HOST:PORT (accept TCP connections)",
         default=("udpout:127.0.0.1:14550",))
+    identity: Literal["ardupilot", "generic"] = param(
+        "how the boat identifies itself: ardupilot (MAV_AUTOPILOT_ARDUPILOTMEGA, as ArduPilot Rover does, so that "
+        "QGroundControl, MAVSDK and MAVProxy use Rover's modes and mission conventions: item 0 is home) or generic "
+        "(MAV_AUTOPILOT_GENERIC: the mission starts at item 0; docs/gcs.md)", default="ardupilot")
     wait_for_arm: bool = param("start disarmed in HOLD and wait for a GCS to arm and start the mission",
                                default=False)
     pace_speedup: float = param(

@@ -1,9 +1,12 @@
-"""The GCS-heartbeat failsafe (wall time: it watches a real link).
+"""The GCS-heartbeat failsafe (wall time: it watches a real link), with ArduRover's parameters.
 
-In AUTO and armed, no heartbeat from a ground station (MAV_TYPE_GCS; signed when signing is on) for
-``FS_GCS_TIMEOUT`` seconds switches to HOLD, or to RTL when ``FS_GCS_ACTION`` = 2 and a home is set.
-It declares its own parameters (:meth:`GcsFailsafe.parameters`). A mode change, a mission start or a
-goto by a GCS clears the failsafe.
+Armed, in any mode but HOLD and RTL (as ArduRover's), no heartbeat from a ground station
+(MAV_TYPE_GCS; signed when signing is on) for FS_GCS_TIMEOUT seconds triggers FS_ACTION: 1 RTL
+(HOLD where no home is set), 2 HOLD, 0 nothing. FS_GCS_ENABLE 0 turns it off; 2 lets a mission in
+AUTO go on. A mode change, a mission start or a goto by a GCS clears the failsafe.
+
+ArduRover ships FS_GCS_ENABLE = 0; a boat in a current that loses its operator should not carry on
+blind or drift, so it is on here by default (``[gcs] failsafe_action``, ``failsafe_timeout``).
 """
 
 from __future__ import annotations
@@ -13,18 +16,26 @@ from typing import Any
 
 from autopilot_bridge.gcs.context import Outbox, VehicleView
 from autopilot_bridge.modes import Mode
-from autopilot_bridge.parameters import Param
+from autopilot_bridge.parameters import Tunable
 from common.mavlink import MAV_TYPE as M
 
-ACTIONS = ("none", "hold", "rtl")
+FS_NOTHING, FS_RTL, FS_HOLD = 0, 1, 2     # FS_ACTION, ArduRover's numbers
+ACTION_OF_CONFIG = {"none": FS_NOTHING, "rtl": FS_RTL, "hold": FS_HOLD}
 
 
 class GcsFailsafe:
+    enable = Tunable("FS_GCS_ENABLE", 0, 2, "", "GCS failsafe: 0 off, 1 on, 2 on but a mission in AUTO goes on",
+                     integer=True)
+    timeout = Tunable("FS_GCS_TIMEOUT", 1.0, 120.0, "s", "no GCS heartbeat for this long triggers the failsafe")
+    action = Tunable("FS_ACTION", 0, 2, "", "failsafe action: 0 nothing, 1 RTL (HOLD without home), 2 HOLD",
+                     integer=True)
+
     def __init__(self, out: Outbox, view: VehicleView, timeout: float, action: str,
                  require_signed: bool) -> None:
         self.out, self.view = out, view
         self.timeout = timeout            # s of wall time
-        self.action = action              # one of ACTIONS
+        self.action = ACTION_OF_CONFIG[action]
+        self.enable = 1
         self.require_signed = require_signed
         self.active = False
         self.events = 0
@@ -40,36 +51,21 @@ class GcsFailsafe:
     def clear(self) -> None:
         self.active = False
 
-    def parameters(self) -> list[Param]:
-        """FS_GCS_TIMEOUT and FS_GCS_ACTION (ArduPilot's names)."""
-
-        def set_action(v: float) -> None:
-            if v != int(v):
-                raise ValueError("must be 0, 1 or 2")
-            self.action = ACTIONS[int(round(v))]
-
-        def set_timeout(v: float) -> None:
-            self.timeout = v
-
-        return [
-            Param("FS_GCS_TIMEOUT", lambda: self.timeout, set_timeout,
-                  1.0, 120.0, "no GCS heartbeat for this long in AUTO triggers the failsafe", "s"),
-            Param("FS_GCS_ACTION", lambda: float(ACTIONS.index(self.action)), set_action,
-                  0.0, 2.0, "GCS failsafe action: 0 none, 1 hold, 2 return to launch"),
-        ]
-
     def check(self, now: float) -> None:
-        """Trigger once when the heartbeat has been lost in AUTO (``now``: wall s, the link's clock)."""
+        """Trigger once when the heartbeat has been lost (``now``: wall s, the link's clock)."""
         st, api = self.view.status, self.view.api
-        if api is None or st is None or self.last_heartbeat is None or self.action == "none":
+        if api is None or st is None or self.last_heartbeat is None or not self.enable \
+                or self.action == FS_NOTHING:
             return
         if now - self.last_heartbeat <= self.timeout:
             return
-        if self.active or not st.armed or st.mode != Mode.AUTO:
+        if self.active or not st.armed or st.mode in (Mode.HOLD, Mode.RTL):
+            return
+        if self.enable == 2 and st.mode == Mode.AUTO:
             return
         self.active = True
         self.events += 1
-        target = Mode.RTL if self.action == "rtl" and st.home is not None else Mode.HOLD
+        target = Mode.RTL if self.action == FS_RTL and st.home is not None else Mode.HOLD
         api.set_mode(target)
         msg = f"GCS failsafe: no heartbeat {now - self.last_heartbeat:.1f}s: {target.name}"
         self.out.log(f"gcs: {msg}")

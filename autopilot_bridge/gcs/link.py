@@ -30,11 +30,11 @@ from autopilot_bridge.gcs.config import GcsParams
 from autopilot_bridge.gcs.context import Outbox, Transport, VehicleView
 from autopilot_bridge.gcs.failsafe import GcsFailsafe
 from autopilot_bridge.gcs.framing import FrameParser
+from autopilot_bridge.gcs.identity import Identity
 from autopilot_bridge.gcs.limits import FRAME_BUDGET, ReadLimiter
 from autopilot_bridge.gcs.mission import MissionServer
 from autopilot_bridge.gcs.mission_service import MissionService
 from autopilot_bridge.gcs.parameter import ParameterService
-from autopilot_bridge.gcs.params import ParamTable, collect
 from autopilot_bridge.gcs.signing import (
     ReplayGuard,
     SecurityGate,
@@ -43,7 +43,7 @@ from autopilot_bridge.gcs.signing import (
 )
 from autopilot_bridge.gcs.telemetry import TelemetryService
 from autopilot_bridge.gcs.transport import open_endpoint
-from autopilot_bridge.parameters import Param
+from autopilot_bridge.parameters import Param, ParamTable, bind
 from autopilot_bridge.vehicle_api import VehicleApi, VehicleStatus
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE as M
@@ -97,12 +97,15 @@ class GcsLink:
         mirror = UdpEndpoint(mirror_from, list(mirror_to)) if mirror_to else None
         self.out = Outbox(codec, self.transports, mirror, self.log)
         self.view = VehicleView(system_id, component_id, geo, chart_size)
+        self.identity = Identity(params.identity, codec, self.view)
         self.failsafe = GcsFailsafe(self.out, self.view, params.failsafe_timeout, params.failsafe_action,
                                     require_signed=self.key is not None)
         self.mission_service = MissionService(self.out, self.view, self._mission_current,
                                               max_items=params.max_mission_items,
-                                              item_timeout=params.mission_timeout, retries=params.mission_retries)
-        self.telemetry = TelemetryService(self.out, self.view, clock, failsafe_active=lambda: self.failsafe.active,
+                                              item_timeout=params.mission_timeout, retries=params.mission_retries,
+                                              home_item=self.identity.home_item)
+        self.telemetry = TelemetryService(self.out, self.view, clock, self.identity,
+                                          failsafe_active=lambda: self.failsafe.active,
                                           link_errors=lambda: sum(self.rejects.values()),
                                           mission_total=self.mission_service.total)
         self.parameter = ParameterService(self.out, self.view, self.security)
@@ -121,11 +124,11 @@ class GcsLink:
         """Connect to the vessel through its command API: its mission, its parameters and ours."""
         self.view.api = api
         self.mission_service.attach(api.mission())
-        self.parameter.attach(collect(api.parameters(), self.parameters()))
+        self.parameter.attach(ParamTable([*api.parameters(), *self.parameters()]))
 
     def parameters(self) -> list[Param]:
-        """The link's own tunables: the GCS failsafe's."""
-        return self.failsafe.parameters()
+        """The link's own tunables: the GCS failsafe's and the system id."""
+        return bind(self.failsafe, self.identity)
 
     # The vessel's side, as the services see it (tests set ``api`` and ``status`` directly).
     @property

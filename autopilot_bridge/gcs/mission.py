@@ -113,6 +113,9 @@ def validate_item(item: MissionItem, position_check: PositionCheck | None = None
             return M.MAV_MISSION_INVALID_PARAM1, f"DO_JUMP target {item.param1} is not an item number"
         if not math.isfinite(item.param2) or item.param2 < -1:
             return M.MAV_MISSION_INVALID_PARAM2, f"DO_JUMP repeat count {item.param2} (-1: for ever)"
+    if cmd == mc.DO_CHANGE_SPEED and not (math.isfinite(item.param2) and (item.param2 >= 0.0
+                                                                       or item.param2 in (-1.0, -2.0))):
+        return M.MAV_MISSION_INVALID_PARAM2, f"DO_CHANGE_SPEED speed {item.param2} m/s (-1: unchanged)"
     if cmd == mc.NAV_LOITER_TIME and not (math.isfinite(item.param1) and item.param1 >= 0.0):
         return M.MAV_MISSION_INVALID_PARAM1, f"loiter time {item.param1} s must be >= 0"
     if cmd == mc.NAV_WAYPOINT and math.isfinite(item.param1) and item.param1 < 0.0:
@@ -150,8 +153,13 @@ class MissionServer:
 
     def __init__(self, items: tuple[MissionItem, ...] = (), *, system_id: int = 1, component_id: int = 1,
                  max_items: int = 200, item_timeout: float = 0.25, retries: int = 5,
-                 position_check: PositionCheck | None = None, mission_check: MissionCheck | None = None) -> None:
+                 position_check: PositionCheck | None = None, mission_check: MissionCheck | None = None,
+                 home: Callable[[], MissionItem | None] | None = None) -> None:
+        """``home``: where item 0 is home (ArduPilot's convention), the current home as an item (None
+        before there is one); an uploaded item 0 is then stored as it came and not checked, and a
+        download's item 0 is the home in force."""
         self.items: tuple[MissionItem, ...] = tuple(items)
+        self.home = home
         self.mission_check = mission_check
         self.sysid, self.compid = system_id, component_id
         self.max_items, self.item_timeout, self.retries = max_items, item_timeout, retries
@@ -245,7 +253,7 @@ class MissionServer:
             x, y = int(msg.x), int(msg.y)
         item = MissionItem(int(msg.frame), int(msg.command), int(msg.autocontinue), float(msg.param1),
                            float(msg.param2), float(msg.param3), float(msg.param4), x, y, float(msg.z))
-        bad = validate_item(item, self.position_check)
+        bad = None if (self.home is not None and msg.seq == 0) else validate_item(item, self.position_check)
         if bad is not None:
             self.upload = None
             self._count("rejected_item")
@@ -286,6 +294,8 @@ class MissionServer:
         if mtype != MISSION or not 0 <= msg.seq < len(self.items):
             return [self._ack(sender, M.MAV_MISSION_INVALID_SEQUENCE, mtype)]
         it = self.items[msg.seq]
+        if msg.seq == 0 and self.home is not None:
+            it = self.home() or it
         if legacy:
             return [Out("mission_item", (sender[0], sender[1], msg.seq, it.frame, it.command, 0, it.autocontinue,
                                          it.param1, it.param2, it.param3, it.param4, it.x * 1e-7, it.y * 1e-7,

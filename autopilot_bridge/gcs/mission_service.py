@@ -21,8 +21,9 @@ MISSION_WRITES = frozenset({"MISSION_COUNT", "MISSION_ITEM", "MISSION_ITEM_INT",
 
 class MissionService:
     def __init__(self, out: Outbox, view: VehicleView, on_changed: Callable[[], None], *, max_items: int,
-                 item_timeout: float, retries: int) -> None:
+                 item_timeout: float, retries: int, home_item: bool = False) -> None:
         self.out, self.view = out, view
+        self.home_item = home_item       # item 0 is home (ArduPilot's convention)
         self.on_changed = on_changed     # the current item or the mission changed: MISSION_CURRENT
         self.server: MissionServer | None = None
         self._limits = (max_items, item_timeout, retries)
@@ -32,7 +33,17 @@ class MissionService:
         self.server = MissionServer(tuple(self.item_of(c) for c in commands), system_id=self.view.sysid,
                                     component_id=self.view.compid, max_items=max_items, item_timeout=item_timeout,
                                     retries=retries, position_check=self.view.on_chart,
-                                    mission_check=self._check_mission)
+                                    mission_check=self._check_mission,
+                                    home=self._home_item if self.home_item else None)
+
+    def _home_item(self) -> MissionItem | None:
+        """The home in force as mission item 0 (a NAV_WAYPOINT at home, as ArduPilot sends it)."""
+        st = self.view.status
+        if st is None or st.home is None:
+            return None
+        lat, lon = self.view.geo.sea_level_to_geodetic(*st.home)
+        return MissionItem(M.MAV_FRAME_GLOBAL, M.MAV_CMD_NAV_WAYPOINT, 1, 0.0, 0.0, 0.0, 0.0,
+                           int(round(lat * 1e7)), int(round(lon * 1e7)), float(self.view.geo.alt0))
 
     def handlers(self) -> dict[str, Callable[[Any, float], None]]:
         return {name: self._on_message for name in MISSION_MESSAGES}

@@ -15,6 +15,7 @@ from typing import Any
 
 from autopilot_bridge.behaviour import Behaviour
 from autopilot_bridge.gcs.context import Outbox, VehicleView, finite
+from autopilot_bridge.gcs.identity import CAPABILITIES, Identity
 from autopilot_bridge.modes import Mode
 from common.mavlink import MAV_TYPE as M
 from common.mavlink import mavlink2
@@ -38,7 +39,6 @@ STREAM_GROUPS = {
 MSG_IDS = {name: getattr(mavlink2, f"MAVLINK_MSG_ID_{name}") for name in DEFAULT_INTERVALS}
 ID_NAMES = {v: k for k, v in MSG_IDS.items()}
 ON_REQUEST = {mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION: "AUTOPILOT_VERSION", **ID_NAMES}
-FIRMWARE_VERSION = (0 << 24) | (6 << 16) | (0 << 8) | 255  # 0.6.0 official
 MODE_FLAGS = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | M.MAV_MODE_FLAG_HIL_ENABLED
 MIN_INTERVAL = 0.01  # s: at most once per IMU frame
 
@@ -48,10 +48,10 @@ CommandResult = tuple[int, str]
 class TelemetryService:
     """Streams and on-request messages of one vessel (all ground stations share the schedule)."""
 
-    def __init__(self, out: Outbox, view: VehicleView, clock: Callable[[], float], *,
+    def __init__(self, out: Outbox, view: VehicleView, clock: Callable[[], float], identity: Identity, *,
                  failsafe_active: Callable[[], bool], link_errors: Callable[[], int],
                  mission_total: Callable[[], int]) -> None:
-        self.out, self.view, self.clock = out, view, clock
+        self.out, self.view, self.clock, self.identity = out, view, clock, identity
         self.failsafe_active = failsafe_active     # HEARTBEAT says MAV_STATE_CRITICAL while it is
         self.link_errors = link_errors             # SYS_STATUS errors_comm
         self.mission_total = mission_total         # MISSION_CURRENT's total before the first status
@@ -134,7 +134,7 @@ class TelemetryService:
                 status = M.MAV_STATE_ACTIVE
             if self.failsafe_active():
                 status = M.MAV_STATE_CRITICAL
-        self.out.send("heartbeat", M.MAV_TYPE_SURFACE_BOAT, M.MAV_AUTOPILOT_GENERIC, base, custom, status)
+        self.out.send("heartbeat", M.MAV_TYPE_SURFACE_BOAT, self.identity.autopilot, base, custom, status)
         self.last_wall_heartbeat = self.clock()
 
     def _local_position(self) -> None:
@@ -257,10 +257,9 @@ class TelemetryService:
                       float(home[0]), float(home[1]), 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, self._t_us())
 
     def _autopilot_version(self) -> None:
-        caps = (M.MAV_PROTOCOL_CAPABILITY_MISSION_INT | M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-                | M.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | M.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT)
-        self.out.send("autopilot_version", caps, FIRMWARE_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0,
-                      self.view.sysid)
+        idn = self.identity
+        self.out.send("autopilot_version", CAPABILITIES, idn.flight_sw_version(), 0, 0, 0, list(idn.custom_version),
+                      [0] * 8, [0] * 8, 0, 0, self.view.sysid)
 
     def _trajectory(self) -> None:
         st = self.view.status

@@ -134,8 +134,8 @@ def run(args: argparse.Namespace) -> int:
 
     autopilot = build(cfg, args.scenario, args.lockstep, args.planner_factory, getattr(args, "sensors_from", None))
     stop = {"flag": False}
-    if args.can_record and autopilot.actuators is not autopilot.link:
-        autopilot.actuators.sent_times.start(spill_to=args.can_record)
+    if args.can_record and autopilot.can is not None:
+        autopilot.can.sent_times.start(spill_to=args.can_record)
 
     def request_stop(*_):
         stop["flag"] = True
@@ -161,10 +161,10 @@ def run(args: argparse.Namespace) -> int:
         autopilot.worker.close()
         link_summary = autopilot.link.summary()
         autopilot.link.close()
-        if autopilot.actuators is not autopilot.link:
-            autopilot.actuators.close()
+        if autopilot.can is not None:
+            autopilot.can.close()
             if args.can_record:
-                autopilot.actuators.sent_times.save(args.can_record)
+                autopilot.can.sent_times.save(args.can_record)
         if autopilot.telemetry is not None:
             autopilot.telemetry.close()
     summary = replace(

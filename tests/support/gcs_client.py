@@ -131,9 +131,12 @@ class Gcs:
         self.conn.close()
 
 
-def start_run(out: Path, *args: str) -> subprocess.Popen:
-    """`hil run` as a real subprocess (own session, so the test can stop the whole tree)."""
-    cmd = [sys.executable, "-m", "hil", "run", "--json", "--no-plot", "--out", str(out), *args]
+def start_run(out: Path, *args: str, identity: str = "generic") -> subprocess.Popen:
+    """`hil run` as a real subprocess (own session, so the test can stop the whole tree). ``identity``:
+    the boat's ``[gcs] identity`` (these sessions' missions were written for ``generic``, where item 0 is
+    the first waypoint; tests/test_gcs_rover.py flies the default, ``ardupilot``, where item 0 is home)."""
+    cmd = [sys.executable, "-m", "hil", "run", "--json", "--no-plot", "--out", str(out), *args,
+           "--set", f'gcs.identity="{identity}"']
     return subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
 
 
@@ -212,7 +215,7 @@ def check_mission_session(tlog: Path, geo: Any, count: int = 6, speedup: float =
     assert len(paced) > 50
     sim, wall = paced[-1][1] - paced[0][1], paced[-1][0] - paced[0][0]
     assert sim <= speedup * 1.1 * wall + 1.0, (sim, wall)
-    assert reached.count(5) >= 1 and reached.index(4) < reached.index(3), reached  # DO item starts with item 3
+    assert reached.count(5) >= 1 and reached.index(3) < reached.index(4), reached  # the DO item runs as item 3 ends
     before = speeds.get(1, []) + speeds.get(2, [])
     rtl = speeds.get(5, [])
     assert before and max(before) > 1.0, before            # cruise (1.5 m/s) before the change

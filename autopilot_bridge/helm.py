@@ -1,0 +1,172 @@
+"""The helm: where a mode's thrust comes from (:class:`autopilot_bridge.modes.Driver`).
+
+Step 3 of :mod:`autopilot_bridge.autopilot`: thrusters at zero (disarmed, HOLD), the operator's sticks
+(MANUAL), or navigation along the vehicle's route - the newest accepted local path under line-of-sight
+guidance (PLANNED), the reactive avoidance behaviour when there is none (FALLBACK), station keeping at
+the route's end - then heading PID and speed pole placement, allocated to the two thrusters (step 4).
+Positions NED m, angles rad, speeds m/s over ground, times s of vehicle time.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+
+from autopilot_bridge.behaviour import STATION, Behaviour
+from autopilot_bridge.computer_setup import Propulsion
+from autopilot_bridge.config import AutopilotParams
+from autopilot_bridge.control import (
+    HeadingPID,
+    SpeedController,
+    Thrust,
+    allocate,
+    clearance_speed_cap,
+    heading_error_speed_cap,
+)
+from autopilot_bridge.course import Course
+from autopilot_bridge.guidance import GuidanceOutput
+from autopilot_bridge.modes import Mode
+from autopilot_bridge.navigation import NavState
+from autopilot_bridge.plan_acceptance import PlanAcceptance
+from autopilot_bridge.plan_handoff import PlanHandoff
+from autopilot_bridge.reactive import ReactiveAvoidance
+from autopilot_bridge.station_keeping import StationKeeper
+from autopilot_bridge.tracking_stats import TrackingStats
+from autopilot_bridge.vehicle import MIS_DONE_LOITER, Vehicle
+from planner.gridmap import OccupancyGrid
+
+
+class Helm:
+    def __init__(self, params: AutopilotParams, propulsion: Propulsion, course: Course, vehicle: Vehicle,
+                 grid: OccupancyGrid, safety_radius: float, planning: PlanHandoff, acceptance: PlanAcceptance,
+                 heading_pid: HeadingPID, speed_ctl: SpeedController, station: StationKeeper,
+                 event: Callable[[float, str], None], on_fallback: Callable[[], None]) -> None:
+        self.p, self.prop, self.course, self.vehicle = params, propulsion, course, vehicle
+        self.grid, self.safety_radius = grid, safety_radius
+        self.planning, self.acceptance = planning, acceptance
+        self.heading_pid, self.speed_ctl, self.station = heading_pid, speed_ctl, station
+        self.reactive = ReactiveAvoidance(grid, params.fallback_range, params.min_clearance, params.fallback_speed)
+        self.tracking = TrackingStats()
+        self.zero_thrust = allocate(0.0, 0.0, propulsion.B_u, propulsion.T_max, propulsion.T_min)
+        self._event, self._on_fallback = event, on_fallback
+        self.waited = False                  # this frame waited for the planner (lockstep)
+        self.plan_due: NavState | None = None   # a cycle to submit once this frame's command is out
+        self.last_t: float | None = None
+
+    # -- Driver ---------------------------------------------------------------------------------
+    def idle(self) -> Thrust:
+        """Thrusters at zero (disarmed, HOLD, a mode without a route)."""
+        self.course.behaviour.pause()
+        return self.zero_thrust
+
+    def manual(self, stick: tuple[float, float, float] | None) -> Thrust:
+        """MANUAL_CONTROL x (surge) and r (yaw), each -1..1, given at wall time stick[2]; zero when older than 1 s."""
+        self.course.behaviour.pause()
+        if stick is None or time.monotonic() - stick[2] > 1.0:
+            return self.zero_thrust
+        x, r = stick[0], stick[1]
+        prop = self.prop
+        tau_u = x * 2.0 * (prop.T_max if x >= 0 else -prop.T_min)
+        tau_r = r * 0.5 * (prop.T_max - prop.T_min) * prop.B_u
+        return allocate(tau_u, tau_r, prop.B_u, prop.T_max, prop.T_min)
+
+    def navigate(self, s: NavState, dt: float) -> Thrust:
+        """Follow the vehicle's route: plan online, follow the local path or avoid reactively, and keep
+        station at its end."""
+        c, p = self.course, self.p
+        t = s.t if self.last_t is None else self.last_t
+        b = c.behaviour
+        if b.state is Behaviour.IDLE:     # back under control: the controllers start from the present state
+            b.resume()
+            self.reset_controllers(s)
+        if b.state not in STATION and math.hypot(c.goal_ned[0] - s.x, c.goal_ned[1] - s.y) <= c.goal_radius:
+            b.to(Behaviour.COMPLETE)
+            v = self.vehicle
+            if v.mode == Mode.AUTO:
+                v.finish()
+                if v.complete:
+                    c.complete_t = t
+                    self._event(t, "mission complete: final goal reached")
+            else:
+                c.complete_t = t
+                self._event(t, f"{v.mode.name}: destination reached, holding")
+        if b.state in STATION:
+            return self._station_keep(s, dt)
+        plan, waited = self.planning.collect(t)
+        self.waited = self.waited or waited
+        if plan is not None:
+            if self.acceptance.accept(plan, s):
+                if b.to(Behaviour.PLANNED):
+                    self._event(t, f"following local path (cycle {plan.cycle}, {plan.status})")
+            elif c.los is None:
+                self.to_fallback(t, f"no valid local path ({plan.reason or plan.status})")
+        if self.planning.pending_since is None and t + 1e-9 >= c.next_plan_t:
+            c.next_plan_t = t + p.planning_period
+            self.plan_due = s   # submitted by the pipeline once the command is out
+        preview = max(p.lookahead, 3.0 * self.speed_setpoint())  # ~3 s of travel
+        following = b.state is Behaviour.PLANNED and c.los is not None
+        guidance = c.los.update(s.x, s.y, preview) if following and c.los is not None else None
+        if guidance is not None and guidance.finished and \
+                math.hypot(c.goal_ned[0] - s.x, c.goal_ned[1] - s.y) > p.goal_tolerance:
+            self.to_fallback(t, "local path finished before a new one arrived")
+            guidance = None
+        return self._control(s, dt, guidance)
+
+    # -- helpers --------------------------------------------------------------------------------
+    def speed_setpoint(self) -> float:
+        """m/s over ground along the path: the vehicle's (DO_CHANGE_SPEED, RTL_SPEED, WP_SPEED)."""
+        return self.vehicle.speed_setpoint()
+
+    def to_fallback(self, t: float, why: str) -> None:
+        if self.course.behaviour.to(Behaviour.FALLBACK):
+            self._on_fallback()
+            self._event(t, f"reactive avoidance engaged: {why}")
+        self.course.los = None
+
+    def reset_controllers(self, s: NavState) -> None:
+        self.heading_pid.reset()
+        self.speed_ctl.reset(s.u)
+
+    def _control(self, s: NavState, dt: float, g: GuidanceOutput | None) -> Thrust:
+        c, p = self.course, self.p
+        if g is not None and c.los is not None:
+            # LOS gives the course to steer; the hull must point the drift angle beta = atan2(v, u)
+            # (current, sway in turns) away from it. Uncompensated, each cycle's new path (starting
+            # where the vessel is) forgave the drift, and a cross-current set the boat onto walls.
+            psi_ref, u_ref = g.heading - s.drift_angle(p.min_turn_speed), self.speed_setpoint() * c.speed_factor
+            self.tracking.add(g.cross_track, psi_ref, s.psi)
+            r_ref = max(s.u, 0.0) * g.curvature   # the path turns at u kappa: feed it forward
+            # Slow down for sharp turns ahead so the yaw rate they need (u kappa) stays within reach.
+            if g.curvature_ahead > 1e-6:
+                u_ref = min(u_ref, max(p.min_turn_speed, p.max_turn_rate / g.curvature_ahead))
+            u_ref = min(u_ref, self._near_obstacle_speed(s))
+            u_ref = min(u_ref, heading_error_speed_cap(psi_ref - s.psi, p.turn_in_place_angle,
+                                                        p.min_turn_speed, math.inf))
+            if g.remaining < 2.0 * p.lookahead and c.los.path[-1].tolist() == list(c.goal_ned):
+                u_ref = max(0.5, self.speed_setpoint() * g.remaining / (2.0 * p.lookahead))
+        else:
+            a = self.reactive.command(s.x, s.y, s.psi, c.target)
+            psi_ref, u_ref, r_ref = a.heading, a.speed, 0.0
+        return self.drive(s, dt, psi_ref, u_ref, r_ref)
+
+    def drive(self, s: NavState, dt: float, psi_ref: float, u_ref: float, r_ref: float = 0.0) -> Thrust:
+        """Heading (rad, with yaw-rate feed-forward r_ref rad/s) and speed (m/s) set-points to thrust."""
+        tau_r = self.heading_pid.update(psi_ref, s.psi, s.r, dt, r_ref)
+        tau_u = self.speed_ctl.update(u_ref, s.u, s.v, s.r, dt)
+        return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
+
+    def _near_obstacle_speed(self, s: NavState) -> float:
+        """Speed cap (m/s) near obstacles: the set-point beyond ``slow_clearance`` of the vessel's
+        clearance (cell-centre distance on the chart plus sensed obstacles), ``min_turn_speed`` at the
+        planner's safety radius. The cross-track error of a turn grows with speed; a path at the
+        inflation's edge leaves the hull only safety radius - L/2 of it."""
+        return clearance_speed_cap(self.grid.clearance_at(s.y, s.x), self.safety_radius,
+                                   self.p.slow_clearance, self.p.min_turn_speed, self.speed_setpoint())
+
+    def _station_keep(self, s: NavState, dt: float) -> Thrust:
+        """After the route's end: loiter when the route says so or MIS_DONE_BEHAVE is loiter, else hold."""
+        route = self.vehicle.route
+        loiter = self.vehicle.mission_done == MIS_DONE_LOITER or (route is not None and route.loiter)
+        return self.station.command(s, dt, self.course.goal_ned, loiter, self.course.behaviour, self.drive,
+                                    lambda: self.reset_controllers(s))

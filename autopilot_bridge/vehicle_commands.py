@@ -1,0 +1,142 @@
+"""The vessel's command API (:class:`autopilot_bridge.vehicle_api.VehicleApi`), served to ground stations.
+
+Every command is checked here before it reaches the vehicle: a GUIDED target or a home is refused, with
+the reason, when it is off the chart, in an obstacle (with the planner's safety margin) or unreachable
+by water from the boat, exactly as a mission waypoint would be; a speed must be finite and within the
+hull's range. Positions NED m, speeds m/s over ground.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+from autopilot_bridge.mission_commands import MissionCommand
+from autopilot_bridge.modes import Mode
+from autopilot_bridge.parameters import Param, ParamTable
+from autopilot_bridge.route_planning import check_mission, check_mission_items
+from autopilot_bridge.vehicle import SPEED_RANGE, Vehicle
+from autopilot_bridge.vehicle_api import Result, VehicleStatus
+from planner.gridmap import OccupancyGrid
+
+if TYPE_CHECKING:
+    from autopilot_bridge.actuators import Actuators
+    from autopilot_bridge.gcs.mission import MissionItem
+
+
+class VehicleCommands:
+    """What a ground station may do to the vessel, checked against the chart and the parameters."""
+
+    def __init__(self, vehicle: Vehicle, grid: OccupancyGrid, safety_radius: float, params: ParamTable,
+                 actuators: Actuators, status: Callable[[], VehicleStatus | None],
+                 record: Callable[[str], None]) -> None:
+        self.vehicle, self.grid, self.safety_radius = vehicle, grid, safety_radius
+        self.param_table, self.actuators = params, actuators
+        self._status, self._record = status, record
+
+    def _position(self) -> tuple[float, float] | None:
+        st = self._status()
+        return None if st is None else st.position
+
+    def check_target(self, north: float, east: float, what: str) -> str | None:
+        """Why a boat cannot be sent to (north, east): off the chart, in an obstacle, unreachable; or None."""
+        if not (math.isfinite(north) and math.isfinite(east)):
+            return f"{what}: position not finite"
+        bad = check_mission(self.grid, [(north, east)], self.safety_radius, self._position())
+        return None if bad is None else f"{what}: {bad[2]}"
+
+    # -- VehicleApi -----------------------------------------------------------------------------
+    def status(self) -> VehicleStatus | None:
+        """The newest frame's status (None before the first navigation fix)."""
+        return self._status()
+
+    def arm(self, on: bool) -> Result:
+        if on and self.vehicle.arming_check and self._position() is None:
+            return Result(False, "arm: no navigation fix yet (ARMING_CHECK)", temporary=True)
+        return Result(*self.vehicle.arm(on))
+
+    def set_mode(self, mode: Mode) -> Result:
+        return Result(*self.vehicle.set_mode(mode, self._position()))
+
+    def set_param(self, name: str, value: float) -> Result:
+        return Result(*self.param_table.set(name, value))
+
+    def goto(self, north: float, east: float) -> Result:
+        why = self.check_target(north, east, "GUIDED target")
+        if why is not None:
+            return Result(False, why)
+        return Result(*self.vehicle.reposition((float(north), float(east)), self._position()))
+
+    def set_home(self, north: float | None, east: float | None) -> Result:
+        """Home at (north, east), or where the boat is when both are None (MAV_CMD_DO_SET_HOME param1 = 1)."""
+        if north is None or east is None:
+            here = self._position()
+            if here is None:
+                return Result(False, "set home: no position yet", temporary=True)
+            north, east = here
+        else:
+            why = self.check_target(north, east, "home")
+            if why is not None:
+                return Result(False, why)
+        self.vehicle.home = (float(north), float(east))
+        self.vehicle.changed = True
+        return Result(True, f"home set at {north:.1f} m N, {east:.1f} m E")
+
+    def set_speed(self, speed: float | None) -> Result:
+        if speed is None:
+            self.vehicle.speed = None
+            return Result(True, f"speed back to WP_SPEED {self.vehicle.wp_speed:g} m/s")
+        lo, hi = SPEED_RANGE
+        if not math.isfinite(speed) or not lo <= speed <= hi:
+            return Result(False, f"speed {speed:g} m/s outside {lo:g}..{hi:g}")
+        self.vehicle.speed = float(speed)
+        return Result(True, f"speed {speed:g} m/s")
+
+    def start_mission(self, first: int) -> Result:
+        if not self.vehicle.armed:
+            return Result(False, "mission start: not armed")
+        return Result(*self.vehicle.mission_start(first, self._position()))
+
+    def set_mission_current(self, seq: int) -> Result:
+        ok = self.vehicle.set_current(seq, self._position())
+        return Result(ok, "" if ok else f"no mission item {seq}")
+
+    def replace_mission(self, commands: tuple[MissionCommand, ...]) -> None:
+        self.vehicle.replace_mission(commands, self._position())
+
+    def mission(self) -> tuple[MissionCommand, ...]:
+        return self.vehicle.mission
+
+    def check_mission(self, items: tuple[MissionItem, ...],
+                      to_ned: Callable[[float, float], tuple[float, float]]) -> tuple[int, int, str] | None:
+        first = 1 if self.vehicle.home_item else 0   # ArduPilot's item 0 is home: not a place to sail to
+        bad = check_mission_items(items[first:], to_ned, self.grid, self.safety_radius, self._position())
+        if bad is not None:
+            return bad[0] + first, bad[1], bad[2]
+        return self._check_home_items(items, to_ned, first)
+
+    def _check_home_items(self, items: tuple[MissionItem, ...], to_ned: Callable[[float, float], tuple[float, float]],
+                          first: int) -> tuple[int, int, str] | None:
+        """DO_SET_HOME items with a position: a home a later RTL could reach."""
+        from autopilot_bridge.gcs.mission import has_position
+        from common.mavlink import MAV_TYPE as M
+
+        for seq, it in enumerate(items):
+            if seq >= first and it.command == M.MAV_CMD_DO_SET_HOME and has_position(it):
+                why = self.check_target(*to_ned(it.lat, it.lon), "DO_SET_HOME")
+                if why is not None:
+                    return seq, M.MAV_MISSION_INVALID, why
+        return None
+
+    def manual_input(self, x: float, r: float, wall_time: float) -> None:
+        self.vehicle.manual = (x, r, wall_time)
+
+    def record_event(self, text: str) -> None:
+        self._record(text)
+
+    def parameters(self) -> list[Param]:
+        return self.param_table.params
+
+    def esc_telemetry(self) -> list[dict[str, float] | None]:
+        return self.actuators.esc_telemetry()
