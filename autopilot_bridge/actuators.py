@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Any, Protocol
 
-from autopilot_bridge.hil_link import HilLink
+from autopilot_bridge.hil_link import SensorLink
 
 
 class Actuators(Protocol):
@@ -33,7 +33,7 @@ class Actuators(Protocol):
 class MavlinkActuators:
     """HIL_ACTUATOR_CONTROLS on the HIL link (its counters are the link's own)."""
 
-    def __init__(self, link: HilLink) -> None:
+    def __init__(self, link: SensorLink) -> None:
         self.link = link
 
     def send_controls(self, time_usec: int, port: float, stdb: float, armed: bool = True) -> None:

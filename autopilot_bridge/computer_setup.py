@@ -10,7 +10,8 @@ from typing import TYPE_CHECKING
 
 from autopilot_bridge.config import AutopilotParams
 from autopilot_bridge.control import ControlParams, SurgeModel
-from autopilot_bridge.hil_link import HilLink
+from autopilot_bridge.hil_link import SensorLink
+from autopilot_bridge.local_planning import CycleInput, LocalPlan
 from autopilot_bridge.navigation import NavigationParams
 from autopilot_bridge.planning_worker import PlannerWorker
 from autopilot_bridge.telemetry import Telemetry
@@ -64,8 +65,8 @@ class Devices:
     ground-station link (or None), AIS traffic awareness (or None) and the thruster back-end
     (None: HIL_ACTUATOR_CONTROLS on the HIL link; else e.g. CanActuators)."""
 
-    link: HilLink
-    worker: PlannerWorker
+    link: SensorLink
+    worker: PlannerWorker[CycleInput, LocalPlan]
     telemetry: Telemetry | None = None
     traffic: TrafficAwareness | None = None
     actuators: CanActuators | None = None

@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from dataclasses import dataclass
+from typing import Protocol
 
 from autopilot_bridge.ais_tracking import AisReport
 from common.geodesy import LocalFrame
@@ -87,6 +88,21 @@ class SensorFrame:
         return self.time_usec * 1e-6
 
 
+class SensorLink(Protocol):
+    """What the vessel computer needs of its link to the sensors and thrusters (:class:`HilLink` on UDP;
+    a test harness may script frames without sockets)."""
+
+    rejects: Counter[str]
+    truth_ignored: int
+    busy: BusyPoll | None
+
+    def receive(self, timeout: float) -> list[SensorFrame]: ...
+
+    def take_ais(self) -> list[AisReport]: ...
+
+    def send_controls(self, time_usec: int, port: float, stdb: float, armed: bool = True) -> None: ...
+
+
 class HilLink:
     """UDP endpoint + MAVLink codec of the vessel computer's HIL link."""
 
@@ -117,7 +133,7 @@ class HilLink:
         self.codec = Codec(system_id, component_id, accept=TAKEN)
         self.geo = geo
         self.declination = declination
-        self.rejects: Counter = Counter()
+        self.rejects: Counter[str] = Counter()
         self.truth_ignored = 0
         self.frames = 0
         self.commands_sent = 0

@@ -15,12 +15,19 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from common.frames import map_to_ned, map_to_ned_path, ned_to_map  # noqa: F401  (re-exported)
 from planner.cost import path_length
+
+if TYPE_CHECKING:
+    from autopilot_bridge.planning_worker import PlanRequest
+    from planner.field import GridField
+    from planner.online import OnlineContext, OnlineParams
+    from planner.params import PlannerParams
+    from planner.traffic_map import TrafficSnapshot
 
 
 @dataclass(frozen=True)
@@ -31,9 +38,9 @@ class World:
     resolution: float
     goal: tuple[float, float]
     reference_path: np.ndarray
-    field: Any                   # planner.field.GridField or None
-    params: Any                  # planner.params.PlannerParams
-    online: Any                  # planner.online.OnlineParams
+    field: GridField | None      # the current, sampled on the map (None: no current)
+    params: PlannerParams
+    online: OnlineParams
     algorithm: str
 
 
@@ -47,7 +54,7 @@ class WorldUpdate:
     version: int
     goal: tuple[float, float]
     reference_path: np.ndarray
-    planner_overrides: dict
+    planner_overrides: dict[str, float]    # PlannerParams field -> value a ground station set
 
 
 @dataclass(frozen=True)
@@ -63,7 +70,7 @@ class CycleInput:
     seed: int
     sensed: np.ndarray | None = None
     sensed_version: int = 0
-    traffic: Any = None          # planner.traffic_map.TrafficSnapshot of the ships, or None
+    traffic: TrafficSnapshot | None = None   # the ships, predicted for the cycle; None: none known
     world: WorldUpdate | None = None
 
 
@@ -90,7 +97,8 @@ WARM_UP_ITERATIONS = 200
 WARM_UP_DEADLINE_S = 0.05
 
 
-def online_cycle_handler(world: World, warm_up: CycleInput | None = None) -> Callable[[Any], LocalPlan]:
+def online_cycle_handler(world: World, warm_up: CycleInput | None = None) \
+        -> Callable[[PlanRequest[CycleInput]], LocalPlan]:
     """Worker factory: build the online context once, then plan one cycle per request.
 
     ``warm_up``: a start to plan short cycles from (both budgets) before the handler
@@ -99,7 +107,7 @@ def online_cycle_handler(world: World, warm_up: CycleInput | None = None) -> Cal
     from planner.gridmap import OccupancyGrid
     from planner.online import VesselState, make_context, plan_cycle
 
-    def context(sensed: np.ndarray | None) -> Any:
+    def context(sensed: np.ndarray | None) -> OnlineContext:
         grid = OccupancyGrid(world.occ.copy(), world.resolution)
         if sensed is not None:
             grid.mark(sensed)
@@ -111,7 +119,7 @@ def online_cycle_handler(world: World, warm_up: CycleInput | None = None) -> Cal
 
     applied = {"version": None}
 
-    def handle(request: Any) -> LocalPlan:
+    def handle(request: PlanRequest[CycleInput]) -> LocalPlan:
         nonlocal ctx, version
         start: CycleInput = request.problem
         rebuilt = False

@@ -21,11 +21,13 @@ Disarmed means zero thrust whatever the mode. All positions NED metres.
 from __future__ import annotations
 
 from enum import IntEnum
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from common.mavlink import MAV_TYPE as M
 
 if TYPE_CHECKING:
+    from autopilot_bridge.control import Thrust
+    from autopilot_bridge.navigation import NavState
     from autopilot_bridge.vehicle import Vehicle
 
 
@@ -43,11 +45,11 @@ class Mode(IntEnum):
 class Driver(Protocol):
     """What a mode drives the thrusters with (the autopilot implements it); each returns a Thrust."""
 
-    def idle(self) -> Any: ...                       # both thrusters at zero
+    def idle(self) -> Thrust: ...                    # both thrusters at zero
 
-    def manual(self, stick: tuple[float, float, float] | None) -> Any: ...  # (x, r, wall time) or None
+    def manual(self, stick: tuple[float, float, float] | None) -> Thrust: ...  # (x, r, wall time) or None
 
-    def navigate(self, s: Any, dt: float) -> Any: ...  # follow vehicle.route (planned/fallback, then station)
+    def navigate(self, s: NavState, dt: float) -> Thrust: ...  # follow vehicle.route (planned/fallback, station)
 
 
 _AUTO_FLAGS = M.MAV_MODE_FLAG_AUTO_ENABLED | M.MAV_MODE_FLAG_GUIDED_ENABLED | M.MAV_MODE_FLAG_STABILIZE_ENABLED
@@ -74,7 +76,7 @@ class RoverMode:
     def update(self, v: Vehicle, north: float, east: float, t: float) -> None:
         """Per frame, after navigation (position NED m, vehicle time s)."""
 
-    def output(self, driver: Driver, v: Vehicle, s: Any, dt: float) -> Any:
+    def output(self, driver: Driver, v: Vehicle, s: NavState, dt: float) -> Thrust:
         if self.drives and v.route is not None:
             return driver.navigate(s, dt)
         return driver.idle()
@@ -83,7 +85,7 @@ class RoverMode:
 class ModeManual(RoverMode):
     number, flags = Mode.MANUAL, M.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
 
-    def output(self, driver: Driver, v: Vehicle, s: Any, dt: float) -> Any:
+    def output(self, driver: Driver, v: Vehicle, s: NavState, dt: float) -> Thrust:
         return driver.manual(v.manual)
 
 

@@ -45,7 +45,7 @@ class PlanHandoff:
     deadline = Tunable("PLN_DEADLINE", 0.05, lambda o: 0.95 * o.p.planning_period, "s",
                        "hard deadline of one local planning cycle (the watchdog's)")
 
-    def __init__(self, worker: PlannerWorker, params: AutopilotParams, lockstep: bool, seed: int,
+    def __init__(self, worker: PlannerWorker[CycleInput, LocalPlan], params: AutopilotParams, lockstep: bool, seed: int,
                  stats: AutopilotStats, event: Callable[[float, str], None], speed: Callable[[], float]) -> None:
         self.worker, self.p, self.lockstep, self.seed = worker, params, lockstep, seed
         self.deadline = params.planning_deadline

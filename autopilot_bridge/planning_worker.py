@@ -28,19 +28,25 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
-from typing import Any
+from typing import TYPE_CHECKING, Any, Generic, TypeVar
+
+if TYPE_CHECKING:
+    from planner.termination import Termination
+
+P = TypeVar("P")   # the problem a request carries (the vessel computer's: local_planning.CycleInput)
+R = TypeVar("R")   # what the handler answers with (the vessel computer's: local_planning.LocalPlan)
 
 
 @dataclass(frozen=True)
-class PlanRequest:
+class PlanRequest(Generic[P]):
     """One local planning cycle's problem and budget."""
 
     cycle: int
-    problem: Any                     # whatever the worker's handler takes (picklable)
+    problem: P                       # whatever the worker's handler takes (picklable)
     deadline_s: float                # wall-clock budget of the planner itself
     iterations: int | None = None    # if set, an iteration budget replaces the deadline (lockstep)
 
-    def termination(self) -> Any:
+    def termination(self) -> Termination:
         """The planner's termination condition for this budget."""
         from planner.termination import Termination
 
@@ -50,9 +56,9 @@ class PlanRequest:
 
 
 @dataclass(frozen=True)
-class PlanReply:
+class PlanReply(Generic[R]):
     cycle: int
-    result: Any                      # what the handler returned, or None if it raised
+    result: R | None                 # what the handler returned, or None if it raised
     error: str = ""
     compute_time_s: float = 0.0
 
@@ -137,7 +143,7 @@ def _worker_main(conn: Connection, factory_path: str, factory_args: tuple) -> No
             return
 
 
-class PlannerWorker:
+class PlannerWorker(Generic[P, R]):
     """A planner process with a non-blocking request/answer interface and a watchdog.
 
     ``factory`` is ``"module:function"``, called once in the worker process (and again after a
@@ -156,7 +162,7 @@ class PlannerWorker:
         self.stats = WorkerStats()
         self._proc: Any = None
         self._conn: Connection | None = None
-        self._pending: PlanRequest | None = None
+        self._pending: PlanRequest[P] | None = None
         self._pending_since = 0.0
         self._ready = False
         self._started_at = 0.0
@@ -236,7 +242,7 @@ class PlannerWorker:
         return True
 
     # -- requests -----------------------------------------------------------------------------
-    def submit(self, request: PlanRequest, now: float | None = None) -> bool:
+    def submit(self, request: PlanRequest[P], now: float | None = None) -> bool:
         """Start planning ``request``; False (and counted) if the previous one is still running or
         the worker is still starting up. The deadline runs from here."""
         if self._pending is not None:
@@ -256,14 +262,14 @@ class PlannerWorker:
         self.stats.submitted += 1
         return True
 
-    def poll(self, now: float | None = None) -> PlanReply | None:
+    def poll(self, now: float | None = None) -> PlanReply[R] | None:
         """The answer to the pending request if it has arrived; never blocks."""
         if self._pending is None or self._conn is None:
             return None
         try:
             if not self._conn.poll(0):
                 return None
-            reply: PlanReply = self._conn.recv()
+            reply: PlanReply[R] = self._conn.recv()
         except (EOFError, OSError):
             self._restart("worker died")
             return None
@@ -278,7 +284,7 @@ class PlannerWorker:
         self._pending = None
         return reply
 
-    def wait(self, timeout: float) -> PlanReply | None:
+    def wait(self, timeout: float) -> PlanReply[R] | None:
         """Block up to ``timeout`` s for the pending answer (lockstep only: simulated time stands still)."""
         if self._pending is None or self._conn is None:
             return None

@@ -15,9 +15,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
+
+from planner.gridmap import OccupancyGrid
 
 
 @dataclass(frozen=True)
@@ -30,7 +31,7 @@ class AvoidanceCommand:
 class ReactiveAvoidance:
     """Heading and speed away from obstacles and towards a target (NED)."""
 
-    def __init__(self, grid: Any, max_range: float, min_clearance: float, cruise_speed: float,
+    def __init__(self, grid: OccupancyGrid, max_range: float, min_clearance: float, cruise_speed: float,
                  n_rays: int = 72, cone: float = math.radians(20.0)) -> None:
         self.grid = grid
         self.max_range = max_range

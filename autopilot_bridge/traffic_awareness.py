@@ -24,12 +24,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from autopilot_bridge.ais_tracking import AisReport, AisTracker, Target, TrackerParams
 from planner import colregs as C
 from planner.collision_cone import assess
 from planner.traffic_map import MovingObstacle, TrafficSnapshot
+
+if TYPE_CHECKING:
+    from autopilot_bridge.gcs.link import GcsLink
+    from autopilot_bridge.navigation import NavState
+    from common.geodesy import LocalFrame
 
 RULE17_PORT_TOLERANCE = 1.0  # m: path-following error allowed to port of the rule-17 course line
 SHORT_ACTION = {C.HEAD_ON: "starboard turn", C.OVERTAKING: "keep clear", C.OVERTAKEN: "stand on",
@@ -54,7 +59,7 @@ class EncounterState:
 class TrafficAwareness:
     """Tracker + encounter monitor + the planner's traffic snapshot."""
 
-    def __init__(self, tracking: TrackerParams, colregs: C.ColregsParams, geo: Any) -> None:
+    def __init__(self, tracking: TrackerParams, colregs: C.ColregsParams, geo: LocalFrame) -> None:
         self.p = colregs
         self.tracker = AisTracker(tracking, geo)
         self.geo = geo
@@ -73,7 +78,8 @@ class TrafficAwareness:
     def radius(self, tg: Target) -> float:
         return self.p.own_radius + tg.hull_radius + self.p.margin
 
-    def on_frame(self, t: float, s: Any, reports: list[AisReport], telemetry: Any = None) -> tuple[list[str], bool]:
+    def on_frame(self, t: float, s: NavState, reports: list[AisReport],
+                 telemetry: GcsLink | None = None) -> tuple[list[str], bool]:
         """Fold in the frame's AIS reports and update encounters; returns (event texts, replan now)."""
         if not reports and not self.tracker.tracks and not self.active:
             return [], False   # no ship known (most frames of a run without traffic): nothing to assess

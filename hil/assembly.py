@@ -9,33 +9,67 @@ never from the simulator's classes.
 from __future__ import annotations
 
 import multiprocessing
+from typing import TYPE_CHECKING
 
 from hil.console import progress
 from hil.errors import UsageError
 
+if TYPE_CHECKING:
+    from autopilot_bridge.autopilot import Autopilot
+    from autopilot_bridge.computer_setup import ComputerConfig, RunOptions
+    from autopilot_bridge.local_planning import World
+    from hil.scenario import Scenario
+    from hil.settings import HilConfig
 
-def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None = None,
-          sensors_from: str | None = None):
+
+def planning_world(cfg: HilConfig, scen: Scenario) -> World:
+    """What the local planner gets once: the scenario's chart, goal and route, its current, the
+    configuration's planner parameters with the scenario's own laid over them."""
+    from autopilot_bridge.local_planning import World
+    from hil import scenario as scenarios
+
+    params = scenarios.planner_params(cfg.planner, scen.planner_overrides, f"scenario {scen.name}")
+    online = scenarios.online_params(scen.online_overrides, f"scenario {scen.name}")
+    return World(occ=scen.occ, resolution=scen.resolution, goal=(float(scen.goal[0]), float(scen.goal[1])),
+                 reference_path=scen.reference_path, field=scen.planning_field(),
+                 params=params, online=online, algorithm=params.algorithm)
+
+
+def computer_config(cfg: HilConfig) -> ComputerConfig:
+    """The vessel computer's tuning, and its nominal model of the hull: eq. (5) from the configuration,
+    never the simulator's classes."""
+    from autopilot_bridge.computer_setup import ComputerConfig, Propulsion
+    from autopilot_bridge.control import SurgeModel
+
+    hull = cfg.vessel
+    propulsion = Propulsion(SurgeModel.from_hull(hull.m, hull.rho, hull.D, hull.L, hull.d_u), hull.B_u,
+                            hull.T_max, hull.T_min)
+    return ComputerConfig(cfg.autopilot, cfg.navigation, cfg.control, propulsion)
+
+
+def run_options(cfg: HilConfig, lockstep: bool) -> RunOptions:
+    from autopilot_bridge.computer_setup import RunOptions
+
+    return RunOptions(lockstep=lockstep, seed=cfg.sim.seed,
+                      int14_commands=cfg.esc.int14_resolution or cfg.can.actuators == "can",
+                      wait_for_arm=cfg.gcs.wait_for_arm,
+                      pace_speedup=cfg.gcs.pace_speedup if cfg.gcs.wait_for_arm else None,
+                      home_item=cfg.gcs.identity == "ardupilot")
+
+
+def build(cfg: HilConfig, scenario_name: str, lockstep: bool, planner_factory: str | None = None,
+          sensors_from: str | None = None) -> Autopilot:
     """The autopilot and its parts from a configuration and a scenario (used by `hil run` too)."""
     from autopilot_bridge.autopilot import Autopilot
-    from autopilot_bridge.computer_setup import ComputerConfig, Devices, Propulsion, RunOptions
-    from autopilot_bridge.control import SurgeModel
+    from autopilot_bridge.computer_setup import Devices
     from autopilot_bridge.gcs.link import GcsLink
     from autopilot_bridge.hil_link import HilLink
-    from autopilot_bridge.local_planning import World
     from autopilot_bridge.planning_worker import PlannerWorker
     from common.geodesy import LocalFrame
     from hil import scenario as scenarios
 
     scen = scenarios.load(scenario_name, cfg.current, cfg.planner.safety_radius)
-    params = scenarios.planner_params(cfg.planner, scen.planner_overrides, f"scenario {scen.name}")
-    online = scenarios.online_params(scen.online_overrides, f"scenario {scen.name}")
-    world = World(occ=scen.occ, resolution=scen.resolution, goal=tuple(scen.goal),
-                  reference_path=scen.reference_path, field=scen.planning_field(),
-                  params=params, online=online, algorithm=params.algorithm)
-    hull = cfg.vessel  # eq. (5) from the configuration: the vessel computer's nominal model of the hull
-    propulsion = Propulsion(SurgeModel.from_hull(hull.m, hull.rho, hull.D, hull.L, hull.d_u), hull.B_u,
-                            hull.T_max, hull.T_min)
+    world = planning_world(cfg, scen)
     ap = cfg.autopilot
     geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
     try:
@@ -73,7 +107,7 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     # kernels of pruning and smoothing).
     import time as _time
 
-    from autopilot_bridge.local_planning import CycleInput, online_cycle_handler
+    from autopilot_bridge.local_planning import CycleInput, LocalPlan, online_cycle_handler
 
     t0 = _time.monotonic()
     warm_up = CycleInput(scen.start[0], scen.start[1], scen.start_heading, 0.0, 0)
@@ -85,6 +119,7 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     # parent blocks writing ~100 KB into a 64 KB pipe until the new interpreter has started, which
     # stalls the control loop on every watchdog restart.
     start_method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+    worker: PlannerWorker[CycleInput, LocalPlan]
     if planner_factory:
         worker = PlannerWorker(planner_factory, (), grace_s=ap.watchdog_grace, start_method=start_method)
     else:
@@ -94,19 +129,14 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     from autopilot_bridge.traffic_awareness import TrafficAwareness
 
     traffic = TrafficAwareness(cfg.tracking, cfg.colregs, geo)  # AIS targets, COLREGs encounters
-    autopilot = Autopilot(
-        ComputerConfig(ap, cfg.navigation, cfg.control, propulsion), world,
-        Devices(link, worker, telemetry, traffic=traffic, actuators=actuators),
-        RunOptions(lockstep=lockstep, seed=cfg.sim.seed,
-                   int14_commands=cfg.esc.int14_resolution or cfg.can.actuators == "can",
-                   wait_for_arm=cfg.gcs.wait_for_arm,
-                   pace_speedup=cfg.gcs.pace_speedup if cfg.gcs.wait_for_arm else None,
-                   home_item=cfg.gcs.identity == "ardupilot"))
+    autopilot = Autopilot(computer_config(cfg), world,
+                          Devices(link, worker, telemetry, traffic=traffic, actuators=actuators),
+                          run_options(cfg, lockstep))
     telemetry.attach(autopilot.commands)
     return autopilot
 
 
-def max_time_step(cfg, lockstep: bool) -> float:
+def max_time_step(cfg: HilConfig, lockstep: bool) -> float:
     """Largest forward step (s) of sensor time the link accepts: lockstep advances exactly one IMU
     period per frame; real time skips lost datagrams (0.25 s: 25 in a row at 100 Hz)."""
     period = 1.0 / cfg.sensors.imu.rate_hz

@@ -14,7 +14,7 @@ from typing import Any
 from autopilot_bridge.gcs.context import Outbox, VehicleView, finite
 from autopilot_bridge.gcs.failsafe import GcsFailsafe
 from autopilot_bridge.modes import Mode
-from autopilot_bridge.vehicle_api import Result
+from autopilot_bridge.vehicle_api import Result, VehicleApi
 from common.mavlink import MAV_TYPE as M
 
 CommandResult = tuple[int, str]   # (MAV_RESULT, why)
@@ -116,7 +116,7 @@ class CommandService:
         self.out.statustext(why, M.MAV_SEVERITY_INFO if code == M.MAV_RESULT_ACCEPTED else M.MAV_SEVERITY_WARNING)
 
     # -- commands ---------------------------------------------------------------------------------
-    def _api(self) -> Any:
+    def _api(self) -> VehicleApi:
         api = self.view.api
         assert api is not None  # execute() answers UNSUPPORTED before attach
         return api

@@ -17,6 +17,7 @@ from autopilot_bridge.behaviour import Behaviour
 from autopilot_bridge.gcs.context import Outbox, VehicleView, finite
 from autopilot_bridge.gcs.identity import CAPABILITIES, Identity
 from autopilot_bridge.modes import Mode
+from autopilot_bridge.navigation import NavState
 from common.mavlink import MAV_TYPE as M
 from common.mavlink import mavlink2
 
@@ -115,11 +116,11 @@ class TelemetryService:
     def _t_us(self) -> int:
         return int(round(self.view.t * 1e6))
 
-    def _nav(self) -> Any:
+    def _nav(self) -> NavState | None:
         return None if self.view.status is None else self.view.status.nav
 
     @staticmethod
-    def _velocity(s: Any) -> tuple[float, float]:
+    def _velocity(s: NavState) -> tuple[float, float]:
         return (s.u * math.cos(s.psi) - s.v * math.sin(s.psi), s.u * math.sin(s.psi) + s.v * math.cos(s.psi))
 
     def heartbeat(self) -> None:
@@ -148,7 +149,7 @@ class TelemetryService:
         if s is not None:
             self.out.send("attitude", self._t_ms(), 0.0, 0.0, s.psi, 0.0, 0.0, s.r)
 
-    def _fix(self, s: Any) -> tuple[float, float, int, int, int]:
+    def _fix(self, s: NavState) -> tuple[float, float, int, int, int]:
         """Velocity north/east (m/s) and position as MAVLink integers: lat, lon (degE7), alt (mm)."""
         vn, ve = self._velocity(s)
         geo = self.view.geo
