@@ -125,11 +125,13 @@ class ModeRTL(RoverMode):
     number, flags, needs_position, drives = Mode.RTL, _AUTO_FLAGS, True, True
 
     def enter(self, v: Vehicle, position: tuple[float, float] | None) -> tuple[bool, str]:
-        if v.home is None:
-            return False, "RTL: no home position"
         assert position is not None  # needs_position: Vehicle.set_mode checked it
-        v.new_route([position, v.home], v.default_radius)
-        return True, self.name
+        rally = v.rally_target(position)
+        target = rally if rally is not None else v.home
+        if target is None:
+            return False, "RTL: no home position"
+        v.new_route([position, target], v.default_radius)
+        return True, self.name if rally is None else f"{self.name} to rally point {rally[0]:.0f} m N {rally[1]:.0f} m E"
 
 
 class ModeGuided(RoverMode):
