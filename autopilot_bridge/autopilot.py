@@ -145,6 +145,7 @@ class Autopilot:
         self.geofence = GeoFence()
         self._fence_versions = 0
         self.vehicle.rally_target = self.geofence.rally_point
+        self.helm.fence_depth = self.geofence.depth
         self.nav = NavigationFilter(self.nav_params)
         self._reset()
         # One table of every component's own declarations: the parameter service reads and writes them.

@@ -13,7 +13,7 @@ import math
 import time
 from collections.abc import Callable
 
-from autopilot_bridge.behaviour import STATION, Behaviour
+from autopilot_bridge.behaviour import STATION, Behaviour, BehaviourMachine
 from autopilot_bridge.computer_setup import Propulsion
 from autopilot_bridge.config import AutopilotParams
 from autopilot_bridge.control import (
@@ -49,6 +49,11 @@ class Helm:
         self.planning, self.acceptance = planning, acceptance
         self.heading_pid, self.speed_ctl, self.station = heading_pid, speed_ctl, station
         self.current = current
+        self.hold_clearance = 2.0 * safety_radius      # m: HOLD drifts no nearer to an obstacle or the fence
+        self.fence_depth: Callable[[float, float], float] = lambda _n, _e: math.inf
+        self.last_safe: tuple[float, float] | None = None
+        self.holding = False
+        self._hold_behaviour = BehaviourMachine()    # the station keeper's state in HOLD (not the route's)
         self.reactive = ReactiveAvoidance(grid, params.fallback_range, params.min_clearance, params.fallback_speed)
         self.tracking = TrackingStats()
         self.zero_thrust = allocate(0.0, 0.0, propulsion.B_u, propulsion.T_max, propulsion.T_min)
@@ -62,6 +67,29 @@ class Helm:
         """Thrusters at zero (disarmed, HOLD, a mode without a route)."""
         self.course.behaviour.pause()
         return self.zero_thrust
+
+    def hold(self, s: NavState, dt: float) -> Thrust:
+        """HOLD, armed: thrusters off and the boat drifts, as ArduRover's HOLD - while it is at least
+        ``hold_clearance`` (twice the planner's safety radius) from every charted or sensed obstacle and
+        as far inside the geofence. Nearer, it keeps station at the last point that was that far, so a
+        current never sets it onto the rocks or across the fence (issue 33)."""
+        self.course.behaviour.pause()
+        clearance = self.grid.clearance_at(s.y, s.x)
+        safe = clearance >= self.hold_clearance and self.fence_depth(s.x, s.y) >= self.hold_clearance
+        if safe:
+            self.last_safe = (s.x, s.y)
+            self.holding = False
+            return self.zero_thrust
+        if not self.holding:
+            self.holding = True
+            self._event(s.t, f"HOLD: {min(clearance, self.fence_depth(s.x, s.y)):.1f} m from an obstacle or the "
+                        "fence: keeping station at the last safe point")
+            self.station.reset()
+        point = self.last_safe if self.last_safe is not None else (s.x, s.y)
+        return self.station.command(s, dt, point, True, self._hold_behaviour,
+                                    lambda st, h, psi, u, uc: self._drive(st, h, psi, u, uc,
+                                                                          yaw_limit=self.turn_on_the_spot),
+                                    self.current.velocity, lambda: self.reset_controllers(s))
 
     def manual(self, stick: tuple[float, float, float] | None) -> Thrust:
         """MANUAL_CONTROL x (surge) and r (yaw), each -1..1, given at wall time stick[2]; zero when older than 1 s."""

@@ -21,6 +21,7 @@ from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavState
 from autopilot_bridge.parameters import Tunable, declarations
 from common.geodesy import LocalFrame
+from planner.fence import Circle, Fence
 
 M = mavlink2
 START = (40.0, 22.0)          # the harbour's start, NED m
@@ -72,7 +73,7 @@ def test_parameters_are_declared_by_their_owners_once_with_range_units_and_doc(s
     names = [p.name for p in table.params]
     assert len(names) == len(set(names))
     owners = (s.ap.vehicle, s.ap.planning, s.ap.planner_tuning, s.ap.helm.heading_pid, s.ap.helm.speed_ctl,
-              s.ap.station, s.link.failsafe, s.link.identity)
+              s.ap.station, s.ap.geofence, s.link.failsafe, s.link.identity)
     declared = [d.name for o in owners for d in declarations(o)]
     assert sorted(declared) == sorted(names)
     for o in owners:
@@ -214,6 +215,36 @@ def test_system_id_reaches_the_codec_and_the_link():
     assert not s.param_set("SYSID_THISMAV", 1, target=1)     # addressed to the old id: not for us any more
     assert s.param_set("SYSID_THISMAV", 1, target=7)
     tested("SYSID_THISMAV")
+
+
+def test_fence_parameters_reach_the_planning_grid_and_the_breach_action():
+    s = Session(wait_for_arm=False)
+    s.fix()
+    n, e = START
+    # An exclusion circle 10 m east of the boat: its cells become obstacles while FENCE_ENABLE is 1.
+    s.ap.commands.replace_fence(Fence(exclusion_circles=(Circle(e + 10.0, n, 3.0),)))
+    row, col = s.ap.grid.cell_of(e + 10.0, n)
+    assert s.ap.grid.occ[row, col]
+    assert s.param_set("FENCE_ENABLE", 0)
+    s.fix(0.05)
+    assert not s.ap.grid.occ[row, col]
+    assert s.param_set("FENCE_ENABLE", 1)
+    s.fix(0.05)
+    assert s.ap.grid.occ[row, col]
+    # A fence the boat is outside of: FENCE_ACTION decides what the breach does.
+    assert s.param_set("FENCE_ACTION", 2)
+    s.ap.commands.replace_fence(Fence(exclusion_circles=(Circle(e, n, 5.0),)))
+    s.fix(0.05)
+    assert s.ap.geofence.breached and s.ap.vehicle.mode == Mode.LOITER
+    s.ap.commands.set_mode(Mode.AUTO)
+    s.ap.commands.replace_fence(Fence())
+    s.fix(0.05)
+    assert not s.ap.geofence.breached
+    assert s.param_set("FENCE_ACTION", 1)
+    s.ap.commands.replace_fence(Fence(exclusion_circles=(Circle(e, n, 5.0),)))
+    s.fix(0.05)
+    assert s.ap.vehicle.mode == Mode.RTL
+    tested("FENCE_ENABLE", "FENCE_ACTION")
 
 
 def test_every_parameter_has_its_effect_tested(s):
