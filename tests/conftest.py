@@ -70,6 +70,7 @@ INTEGRATION_MODULES = frozenset("""
 """.split())
 E2E_MODULES = frozenset("""
     by_hand can_vcan colregs_loop gcs_mavproxy gcs_mavsdk gcs_rover gcs_session hil_faults hil_loop hil_vcan
+    holding_ground
     mission_done route_mission security_loop sparse_routes
 """.split())
 TIERS = ("unit", "integration", "e2e")
