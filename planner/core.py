@@ -136,14 +136,28 @@ def free_regions(grid: OccupancyGrid) -> np.ndarray:
     return labels
 
 
-def sampled_field(problem: PlanningProblem) -> GridField | None:
+def sampled_field(problem: PlanningProblem, params: PlannerParams | None = None) -> GridField | None:
+    """The disturbance alpha_y is measured against, on a grid: the current, or (``params.alpha_y``
+    = "resultant" and a wave drift given) the current plus the wave drift."""
     f = problem.field
-    if f is None:
+    drift = problem.wave_drift if params is not None and params.alpha_y == "resultant" else None
+    if f is None and drift is None:
         return None
-    if isinstance(f, GridField):
-        return f
-    res = max(FIELD_SAMPLE_RESOLUTION, problem.grid.resolution)
-    return GridField.sample(f, problem.grid.width, problem.grid.height, res)
+    if f is None:
+        return GridField.uniform(float(drift[0]), float(drift[1])) if drift is not None else None
+    g = f if isinstance(f, GridField) else GridField.sample(
+        f, problem.grid.width, problem.grid.height, max(FIELD_SAMPLE_RESOLUTION, problem.grid.resolution))
+    if drift is None:
+        return g
+    return g.shifted(float(drift[0]), float(drift[1]))
+
+
+def disturbance(problem: PlanningProblem, params: PlannerParams):
+    """The field eq. (12)'s alpha_y is measured against (see :func:`sampled_field`); problem.field
+    itself when alpha_y = "current" (the costs stay those of the caller's field)."""
+    if params.alpha_y == "resultant" and problem.wave_drift is not None:
+        return sampled_field(problem, params)
+    return problem.field
 
 
 class TreePlanner:
@@ -186,7 +200,7 @@ class TreePlanner:
             return PlannerResult("exact", path, 0.0, 0.0, 0, 0.0, time.monotonic() - t0, "start is the goal",
                                  path.copy(), np.array([-1]), 0)
 
-        field = sampled_field(problem) if p.objective == "current" else None
+        field = sampled_field(problem, p) if p.objective == "current" else None
         bx0, bx1, by0, by1 = problem.sampling_box()
         if not (bx1 > bx0 and by1 > by0):
             return _none("empty sampling domain (bounds/perceptual domain outside the map)", t0, (sx, sy))
@@ -196,6 +210,7 @@ class TreePlanner:
         nby = int(math.ceil(grid.height / bucket)) + 1
 
         png = self.png_node(problem) if self.uses_png and p.png_probability > 0 else None
+        self.last_png = png
         free_area = float((~grid.occ).mean()) * (bx1 - bx0) * (by1 - by0)
         gamma_star = 2.0 * math.sqrt(1.5) * math.sqrt(max(free_area, 1e-9) / math.pi)  # K&F 2011, d = 2
 
@@ -215,11 +230,11 @@ class TreePlanner:
         if p.dynamic_domain == "off":
             fc[_tree.C_DD0] = math.inf
         else:
-            fc[_tree.C_DD0] = p.dynamic_domain_radius
+            fc[_tree.C_DD0] = p.dynamic_domain_start
         adaptive = p.dynamic_domain == "adaptive"
         fc[_tree.C_DDGROW] = 1.0 + p.dd_alpha if adaptive else 1.0
         fc[_tree.C_DDSHRINK] = 1.0 - p.dd_alpha if adaptive else 1.0
-        fc[_tree.C_DDMIN] = min(p.dd_min_factor * p.step, p.dynamic_domain_radius)
+        fc[_tree.C_DDMIN] = min(p.dd_min_factor * p.step, p.dynamic_domain_start)
         fc[_tree.C_FMIN] = min_cost_factor(p.d_alpha, p.gamma_alpha) if field is not None else 1.0
         fc[_tree.C_BUCKET] = bucket
         fc[_tree.C_BX0], fc[_tree.C_BX1], fc[_tree.C_BY0], fc[_tree.C_BY1] = bx0, bx1, by0, by1
@@ -244,6 +259,8 @@ class TreePlanner:
         ic[_tree.I_NBY] = nby
         ic[_tree.I_CAP] = cap
         ic[_tree.I_PNG] = 1 if png is not None else 0
+        ic[_tree.I_FAILTURN] = 1 if p.failed_extension == "collision+turn" else 0
+        ic[_tree.I_PNGREPAIR] = 1 if p.png_repair else 0
 
         # node arrays are filled as nodes are added (np.empty: no page touching for unused capacity)
         X = np.empty((cap, 2))
@@ -285,6 +302,7 @@ class TreePlanner:
             bounds = dataclasses.replace(bounds, poll_python=True)
         occ = grid._u8
         _tree.seed_rng(self.seed)
+        cpu0_ns = time.thread_time_ns()
         why = "termination condition met"
         while True:
             termination.notify(int(st[_tree.S_ITER]), bool(st[_tree.S_GOAL] >= 0))
@@ -305,9 +323,10 @@ class TreePlanner:
                 why = f"tree full (max_nodes = {cap})"
                 break
         termination.notify(int(st[_tree.S_ITER]), bool(st[_tree.S_GOAL] >= 0))
-        return self._result(problem, t0, X, parent, cost, st, fs, why, dd)
+        cpu_s = (time.thread_time_ns() - cpu0_ns) * 1e-9
+        return self._result(problem, t0, X, parent, cost, st, fs, why, dd, cpu_s, cpu0_ns, png)
 
-    def _result(self, problem, t0, X, parent, cost, st, fs, why, dd) -> PlannerResult:
+    def _result(self, problem, t0, X, parent, cost, st, fs, why, dd, cpu_s=0.0, cpu0_ns=0, png=None) -> PlannerResult:
         n = int(st[_tree.S_N])
         goal = int(st[_tree.S_GOAL])
         if goal >= 0:
@@ -331,7 +350,7 @@ class TreePlanner:
         first = None
         if fs[_tree.F_FIRST_NS] >= 0:
             first = max(0.0, fs[_tree.F_FIRST_NS] * 1e-9 - t0)
-        c = path_cost(path, problem.field, self.params) if len(path) else math.inf
+        c = path_cost(path, disturbance(problem, self.params), self.params) if len(path) else math.inf
         length = path_length(path) if len(path) else math.inf
         return PlannerResult(
             status=status, path=path, cost=c, length=length, iterations=int(st[_tree.S_ITER]),
@@ -342,6 +361,15 @@ class TreePlanner:
                          "first_solution_iteration": int(st[_tree.S_FIRST_ITER]) if goal >= 0 else None,
                          "algorithm": self.name,
                          "dynamic_domains": int(np.sum(np.isfinite(dd[:n]))),  # DDRRT* nodes with a bounded DD
-                         "failed_extensions": int(st[_tree.S_FAILED]),  # DDRRT*: colliding parent attempts
+                         "failed_extensions": int(st[_tree.S_FAILED]),  # DDRRT*: failed parent attempts
+                         "failed_turns": int(st[_tree.S_FAILED_TURN]),  # of which refused by the fan
+                         # time to the first solution measured four ways (issue 34 point 4)
+                         "first_solution_checks": int(st[_tree.S_FIRST_CHECKS]) if goal >= 0 else None,
+                         "first_solution_cpu_s": max(0.0, (fs[_tree.F_FIRST_CPU_NS] - cpu0_ns) * 1e-9)
+                         if goal >= 0 else None,
+                         "thread_cpu_s": cpu_s,  # the search's thread CPU time (set-up and result excluded)
+                         "png_node": None if png is None else [float(png[0]), float(png[1])],
+                         "png_reached": bool(st[_tree.S_PNG_HIT]),
+                         "png_wasted": int(st[_tree.S_PNG_WASTED]),  # PNG samples on an existing node
                          },
         )

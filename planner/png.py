@@ -8,22 +8,28 @@ then corrected by eq. (8) until it changes by less than ``tol``. The PGNode U_k 
 u_t along the new heading, on the segment U_{k-1} C (similar triangles).
 
 All angles here are signed (counter-clockwise positive); the magnitudes are the arccos
-expressions of eqs. (7)-(8) and the signs come from the geometry.
+expressions of eqs. (7)-(8) and the signs come from the geometry. Compiled (numba): DDRRT* computes
+the PGNode inside its timed search (``pg_node.py_func`` is the same code in Python).
 """
 
 from __future__ import annotations
 
 import math
 
+from numba import njit
 
+
+@njit(cache=True)
 def _wrap(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
+@njit(cache=True)
 def _acos(x: float) -> float:
     return math.acos(max(-1.0, min(1.0, x)))
 
 
+@njit(cache=True)
 def pg_node(usv_pos, usv_heading, target_pos, target_heading, s_t, nav_ratio=3.0, tol=1e-3, max_iter=20):
     """The PGNode (x, y) of eqs. (7)-(8) (map frame, metres; headings in rad)."""
     ux, uy = float(usv_pos[0]), float(usv_pos[1])
