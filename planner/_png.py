@@ -15,16 +15,16 @@ import math
 import numpy as np
 from numba import njit
 
-from planner.png import pg_node
+from planner.png import hypot, pg_node
 
 
 @njit(cache=True)
 def _nearest_index(ref, x, y):
     """Index of the first reference point nearest (x, y)."""
     best = 0
-    bd = math.hypot(ref[0, 0] - x, ref[0, 1] - y)
+    bd = hypot(ref[0, 0] - x, ref[0, 1] - y)
     for i in range(1, ref.shape[0]):
-        d = math.hypot(ref[i, 0] - x, ref[i, 1] - y)
+        d = hypot(ref[i, 0] - x, ref[i, 1] - y)
         if d < bd:
             bd = d
             best = i
@@ -48,8 +48,8 @@ def raw_target(sx, sy, heading, gx, gy, ref, nav_ratio, tol, max_iter, box):
     if math.isnan(heading):
         dx = ref[j, 0] - sx
         dy = ref[j, 1] - sy
-        heading = math.atan2(dy, dx) if math.hypot(dx, dy) > 1e-9 else t_head
-    s_t = 0.5 * math.hypot(gx - sx, gy - sy)
+        heading = math.atan2(dy, dx) if hypot(dx, dy) > 1e-9 else t_head
+    s_t = 0.5 * hypot(gx - sx, gy - sy)
     x, y = pg_node((sx, sy), heading, (ref[j, 0], ref[j, 1]), t_head, s_t, nav_ratio, tol, max_iter)
     return min(max(x, box[0]), box[1]), min(max(y, box[2]), box[3])
 
@@ -64,7 +64,7 @@ def _usable(occ, labels, res, x, y, region, box, cx, cy, radius):
         return False
     if x < box[0] or x > box[1] or y < box[2] or y > box[3]:
         return False
-    return radius <= 0.0 or math.hypot(x - cx, y - cy) <= radius
+    return radius <= 0.0 or hypot(x - cx, y - cy) <= radius
 
 
 @njit(cache=True)
@@ -94,7 +94,7 @@ def repair(x, y, occ, labels, res, region, box, cx, cy, radius):
                 if 0 <= c < cols:
                     px = (c + 0.5) * res
                     py = (r + 0.5) * res
-                    d = math.hypot(px - x, py - y)
+                    d = hypot(px - x, py - y)
                     if d < bd and _usable(occ, labels, res, px, py, region, box, cx, cy, radius):
                         bd = d
                         bx = px
