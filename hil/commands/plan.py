@@ -159,6 +159,21 @@ def _map_field(args: argparse.Namespace, settings, sc, raw):
     return GridField.uniform(ve, vn), f"uniform {ve:g},{vn:g} m/s (east, north)"
 
 
+def _judged(grid, map_field, params, start, goal, path) -> dict[str, float]:
+    """The path's eq. (12) cost and the least one (hil.flow_optimum, independent of the planner),
+    computed after the search: the current itself (not the planner's 1 m grid of it), pieces of
+    0.25 m."""
+    from hil.flow_optimum import FlowJudge
+
+    t0 = time.monotonic()
+    judge = FlowJudge(grid.occ, grid.resolution, map_field, params.d_alpha, params.gamma_alpha)
+    best = judge.optimum(tuple(start), tuple(goal))
+    cost = judge.path_cost(path)
+    console.progress(f"hil plan: eq. (12) optimum {best.cost:.2f} (judge, {time.monotonic() - t0:.1f} s); "
+                     f"this path {cost:.2f}: {cost / best.cost:.4f} x the optimum")
+    return {"cost_judged": cost, "optimum": best.cost, "cost_over_optimum": cost / best.cost}
+
+
 def _ddrrt_hint(params, result, grid) -> str | None:
     """Why DDRRT* failed where the ESD test threw away most samples, and what to use instead."""
     if params.algorithm != "ddrrt-star" or result.status == "exact" or not result.iterations:
@@ -261,6 +276,8 @@ def run(args: argparse.Namespace) -> int:
         "samples_rejected": result.samples_rejected,
         "current": current_source if field is not None else f"none ({current_source})",
     }
+    if field is not None and result.status == "exact":
+        summary.update(_judged(grid, map_field, params, start, goal, result.path))
     hint = _ddrrt_hint(params, result, raw)
     if hint:
         summary["hint"] = hint
