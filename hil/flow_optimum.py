@@ -77,8 +77,10 @@ def _flow(vx, vy, h, x, y):
     r1 = min(r0 + 1, rows - 1)
     fx = gx - c0
     fy = gy - r0
-    a = vx[r0, c0] * (1 - fx) * (1 - fy) + vx[r0, c1] * fx * (1 - fy) + vx[r1, c0] * (1 - fx) * fy + vx[r1, c1] * fx * fy
-    b = vy[r0, c0] * (1 - fx) * (1 - fy) + vy[r0, c1] * fx * (1 - fy) + vy[r1, c0] * (1 - fx) * fy + vy[r1, c1] * fx * fy
+    a = (vx[r0, c0] * (1 - fx) * (1 - fy) + vx[r0, c1] * fx * (1 - fy)
+         + vx[r1, c0] * (1 - fx) * fy + vx[r1, c1] * fx * fy)
+    b = (vy[r0, c0] * (1 - fx) * (1 - fy) + vy[r0, c1] * fx * (1 - fy)
+         + vy[r1, c0] * (1 - fx) * fy + vy[r1, c1] * fx * fy)
     return a, b
 
 

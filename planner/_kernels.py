@@ -48,14 +48,14 @@ _clock_gettime_thread_cpu = _clock_gettime(3)  # CLOCK_THREAD_CPUTIME_ID on Linu
 @njit(cache=True)
 def monotonic_ns(buf):
     """Nanoseconds of CLOCK_MONOTONIC; ``buf`` is a scratch int64[2] (timespec)."""
-    _clock_gettime_monotonic(buf)  # type: ignore[call-arg]  # numba passes the typing context itself
+    _clock_gettime_monotonic(buf)  # numba passes the typing context itself
     return buf[0] * 1_000_000_000 + buf[1]
 
 
 @njit(cache=True)
 def thread_cpu_ns(buf):
     """Nanoseconds of the calling thread's CPU clock (time.thread_time_ns's clock on Linux)."""
-    _clock_gettime_thread_cpu(buf)  # type: ignore[call-arg]  # numba passes the typing context itself
+    _clock_gettime_thread_cpu(buf)  # numba passes the typing context itself
     return buf[0] * 1_000_000_000 + buf[1]
 
 

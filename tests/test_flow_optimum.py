@@ -29,7 +29,7 @@ def test_without_a_current_the_judge_finds_the_exact_shortest_path(name):
     assert judged.cost <= judged.lattice_cost  # refinement only lowers the lattice's cost
     assert judged.cost == pytest.approx(sum(np.hypot(*np.diff(judged.path, axis=0).T)))
     assert np.allclose(judged.path[0], sc.start) and np.allclose(judged.path[-1], sc.goal)
-    assert all(judge.clear(a, b) for a, b in zip(judged.path[:-1], judged.path[1:]))
+    assert all(judge.clear(a, b) for a, b in zip(judged.path[:-1], judged.path[1:], strict=True))
 
 
 def _uniform(vx, vy):

@@ -13,8 +13,7 @@ import numpy as np
 import pytest
 
 from hil import scenario as scenarios
-from planner import PlannerParams, make_planner
-from planner import _png
+from planner import PlannerParams, _png, make_planner
 from planner.core import free_regions
 from planner.cost import path_cost
 from planner.ddrrt_star import DDRRTStar

@@ -294,7 +294,8 @@ def run(args: argparse.Namespace) -> int:
     console.progress(f"hil bench planner: {len(args.maps)} maps x {len(args.algorithms)} planners, {seeds_n} seeds, "
                      f"budgets {', '.join(f'{b:g}' for b in budgets)} s, step {params.step:g} m; OMPL: {ompl_note}")
     seeds = list(range(1, seeds_n + 1))
-    report: dict[str, Any] = {"objective": args.objective, "seeds": seeds_n, "budgets_s": list(budgets), "step_m": params.step,
+    report: dict[str, Any] = {"objective": args.objective, "seeds": seeds_n, "budgets_s": list(budgets),
+                              "step_m": params.step,
                               "ompl": ompl_note, "targets": TARGETS, "maps": {}}
     for name in args.maps:
         sc = IslandWorld() if name == "island" else scenarios.load(name, settings.current)
