@@ -182,6 +182,7 @@ class TreePlanner:
             raise ValueError("termination has no iteration or time bound: combine it with "
                              "Termination.iterations(n) or Termination.deadline(s)")
         t0 = time.monotonic()
+        cpu0_ns = time.thread_time_ns()  # the thread's CPU clock, from the same instant as t0
         termination.reset()
         p = self.params
         grid = problem.grid
@@ -302,7 +303,6 @@ class TreePlanner:
             bounds = dataclasses.replace(bounds, poll_python=True)
         occ = grid._u8
         _tree.seed_rng(self.seed)
-        cpu0_ns = time.thread_time_ns()
         why = "termination condition met"
         while True:
             termination.notify(int(st[_tree.S_ITER]), bool(st[_tree.S_GOAL] >= 0))
@@ -367,7 +367,7 @@ class TreePlanner:
                          "first_solution_checks": int(st[_tree.S_FIRST_CHECKS]) if goal >= 0 else None,
                          "first_solution_cpu_s": max(0.0, (fs[_tree.F_FIRST_CPU_NS] - cpu0_ns) * 1e-9)
                          if goal >= 0 else None,
-                         "thread_cpu_s": cpu_s,  # the search's thread CPU time (set-up and result excluded)
+                         "thread_cpu_s": cpu_s,  # thread CPU time of the search (as planning_time_s, less the result)
                          "png_node": None if png is None else [float(png[0]), float(png[1])],
                          "png_reached": bool(st[_tree.S_PNG_HIT]),
                          "png_wasted": int(st[_tree.S_PNG_WASTED]),  # PNG samples on an existing node

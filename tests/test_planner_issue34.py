@@ -207,3 +207,17 @@ def test_first_solution_is_measured_four_ways(labyrinth):
         assert 0 <= d["first_solution_cpu_s"] <= d["thread_cpu_s"] + 1e-3
         assert 0 < d["first_solution_iteration"] <= r.iterations
         assert r.time_to_first_solution_s is not None
+
+
+def test_campaign_rows_measure_time_four_ways():
+    from hil import experiment
+
+    task = experiment.Task("labyrinth", 0, "ddrrt-star", 1,
+                           online_overrides=(("local_iterations", 300), ("max_cycles", 3)))
+    row = experiment.run_task(task)
+    assert row["cycles"] == 3
+    assert 0 < row["search_iterations"] <= row["iterations"]
+    assert row["search_checks"] > 0
+    assert 0 < row["time_cpu_s"] and 0 < row["time_s"] <= row["planning_time_s"]
+    again = experiment.run_task(task)
+    assert (again["search_iterations"], again["search_checks"]) == (row["search_iterations"], row["search_checks"])
