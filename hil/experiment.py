@@ -20,10 +20,10 @@ from typing import Any
 
 import numpy as np
 
-from planner.params import ALGORITHM_NAMES
+from planner.params import ALGORITHM_NAMES, REGISTRY
 
 ALGORITHMS = ALGORITHM_NAMES  # the planner's registry; the order fixes the per-algorithm seeds
-LABELS = {"rrt-star": "RRT*", "informed-rrt-star": "IRRT*", "ddrrt-star": "DDRRT*"}
+LABELS = {e.name: e.label for e in REGISTRY}
 
 # Per-run CSV columns; DETERMINISTIC ones must be identical for the same seed whatever --jobs is
 # (with an iteration budget); the time columns are wall-clock measurements.

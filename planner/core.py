@@ -25,7 +25,7 @@ from planner import _tree
 from planner.cost import min_cost_factor, path_cost, path_length
 from planner.field import GridField
 from planner.gridmap import OccupancyGrid
-from planner.params import Objective, PlannerParams
+from planner.params import PlannerParams
 from planner.problem import PlanningProblem
 from planner.result import PlannerResult
 from planner.termination import Termination
@@ -52,69 +52,6 @@ def compiled_clock_ok() -> bool:
         c = time.monotonic_ns()
         _CLOCK_OK = bool(a - 5_000_000 <= b <= c + 5_000_000)
     return _CLOCK_OK
-
-
-@dataclasses.dataclass(frozen=True)
-class WarmUp:
-    """What :func:`warm_up_info` did: ``seconds`` spent, and whether numba had to compile
-    (``compiled``: a cold or stale cache; otherwise the machine code came from the cache)."""
-
-    seconds: float
-    compiled: bool
-
-
-_WARM: WarmUp | None = None
-
-
-def _cache_misses() -> int:
-    from planner import _kernels
-
-    n = 0
-    for mod in (_tree, _kernels):
-        for obj in vars(mod).values():
-            stats = getattr(obj, "stats", None)
-            if stats is not None and hasattr(stats, "cache_misses"):
-                n += sum(stats.cache_misses.values())
-    return n
-
-
-def warm_up_info() -> WarmUp:
-    """Load (or, with a cold cache, compile) every compiled function by solving tiny problems
-    with each strategy, with and without a current field, as the online loop does (heading,
-    reference path, perceptual domain). Only the first call in a process does work; later calls
-    return the first call's record. The first solve in a process otherwise pays ~0.2 s of cache
-    loading (~7 s of compilation with a cold cache) inside its time budget."""
-    global _WARM
-    if _WARM is not None:
-        return _WARM
-    from planner.ddrrt_star import DDRRTStar
-    from planner.informed_rrt_star import InformedRRTStar
-    from planner.rrt_star import RRTStar
-
-    t0 = time.monotonic()
-    misses0 = _cache_misses()
-    occ = np.zeros((40, 40), dtype=bool)
-    occ[10:30, 19:21] = True
-    grid = OccupancyGrid(occ, 0.5)
-    grid.segment_free(1.0, 1.0, 18.0, 18.0)
-    ref = np.array([[2.0, 10.0], [18.0, 10.0]])
-    grid.polyline_free(ref)
-    cases: tuple[tuple[Objective, GridField | None], ...] = (("length", None),
-                                                            ("current", GridField.uniform(0.3, 0.1)))
-    for objective, field in cases:
-        params = PlannerParams(max_nodes=2000, objective=objective)
-        for cls in (RRTStar, InformedRRTStar, DDRRTStar):
-            problem = PlanningProblem(grid, (2.0, 10.0), (18.0, 10.0), start_heading=0.0, field=field,
-                                      reference_path=ref, domain_center=(10.0, 10.0), domain_radius=12.0)
-            cls(params).solve(problem, Termination.iterations(300))
-    compiled_clock_ok()
-    _WARM = WarmUp(seconds=time.monotonic() - t0, compiled=_cache_misses() > misses0)
-    return _WARM
-
-
-def warm_up() -> float:
-    """:func:`warm_up_info`, returning the seconds it took."""
-    return warm_up_info().seconds
 
 
 def _none(reason: str, t0: float, start=None) -> PlannerResult:

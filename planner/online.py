@@ -31,7 +31,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from dataclasses import field as dc_field
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 from scipy import ndimage
@@ -40,7 +40,7 @@ from planner import make_planner
 from planner.cost import path_cost_fn, path_length
 from planner.gridmap import OccupancyGrid
 from planner.metrics import path_metrics
-from planner.params import AlgorithmName, PlannerParams
+from planner.params import PlannerParams
 from planner.postprocess import check_and_replan, prune
 from planner.problem import PlanningProblem
 from planner.result import PlannerResult
@@ -638,4 +638,4 @@ def make_context(grid: OccupancyGrid, goal: tuple[float, float], reference_path:
                  params: PlannerParams, online: OnlineParams, algorithm: str, field: Any = None) -> OnlineContext:
     """An :class:`OnlineContext` for ``algorithm`` (one of ``planner.ALGORITHMS``)."""
     return OnlineContext(grid=grid, goal=(float(goal[0]), float(goal[1])), reference_path=reference_path,
-                         params=replace(params, algorithm=cast(AlgorithmName, algorithm)), online=online, field=field)
+                         params=replace(params, algorithm=algorithm), online=online, field=field)

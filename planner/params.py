@@ -10,10 +10,33 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
-ALGORITHM_NAMES = ("rrt-star", "informed-rrt-star", "ddrrt-star")
-AlgorithmName = Literal["rrt-star", "informed-rrt-star", "ddrrt-star"]
+
+@dataclass(frozen=True)
+class PlannerEntry:
+    """One planner of the registry: adding a planner is its class and one entry in ``REGISTRY``.
+    Commands (choices), experiments (labels, seeds), figures (colours), ``make_planner`` and the
+    warm-up all read the table."""
+
+    name: str      # the configuration's and the command line's name
+    label: str     # short name in tables and legends
+    colour: str    # matplotlib colour of its paths in figures
+    target: str    # "module:Class", a planner.core.TreePlanner subclass, imported on first use
+
+
+# The order fixes the per-algorithm planner seeds of the Monte Carlo experiments (hil.experiment).
+REGISTRY: tuple[PlannerEntry, ...] = (
+    PlannerEntry("rrt-star", "RRT*", "tab:blue", "planner.rrt_star:RRTStar"),
+    PlannerEntry("informed-rrt-star", "IRRT*", "tab:orange", "planner.informed_rrt_star:InformedRRTStar"),
+    PlannerEntry("ddrrt-star", "DDRRT*", "red", "planner.ddrrt_star:DDRRTStar"),
+)
+ENTRIES = {e.name: e for e in REGISTRY}
+ALGORITHM_NAMES = tuple(e.name for e in REGISTRY)
+if TYPE_CHECKING:
+    AlgorithmName = str
+else:  # the names as a Literal read from the table (hil.config offers them as choices)
+    AlgorithmName = Literal[ALGORITHM_NAMES]
 Objective = Literal["length", "current"]
 DYNAMIC_DOMAINS = ("off", "constant", "adaptive")
 FAILED_EXTENSIONS = ("collision", "collision+turn")
@@ -32,7 +55,7 @@ class PlannerParams:
     """Tuning of the sampling-based local planners (map frame: x east, y north, metres)."""
 
     algorithm: AlgorithmName = _p(
-        "planner: rrt-star | informed-rrt-star | ddrrt-star", default="ddrrt-star")
+        "planner: " + " | ".join(ALGORITHM_NAMES), default="ddrrt-star")
     objective: Objective = _p(
         "path cost: 'length' (Euclidean) or 'current' (cost distance D_C of eq. (12))", default="current")
     step: float = _p("maximum extension length of one tree edge", "m", gt=0, default=4.0)

@@ -288,7 +288,7 @@ def _figures(args, spec, camp, out: Path) -> dict[str, str]:
     from hil import scenario as scenarios
 
     files = {}
-    algs = [a for a in ("ddrrt-star", "informed-rrt-star", "rrt-star") if a in camp.details]
+    algs = [a for a in reversed(experiment.ALGORITHMS) if a in camp.details]  # every registered planner
     if algs:
         sc = experiment.scenario_instance(args.scenario, args.seed, 0, args.config, tuple(args.overrides))
         from planner.gridmap import OccupancyGrid
