@@ -126,8 +126,8 @@ def verdict_markdown(cells: dict[str, list[dict[str, Any]]]) -> str:
                     if "ddrrt" in v else ""
                 lines.append(f"| {name} | {v['claim']} | {extra} | | | {v['verdict']} |")
                 continue
-            lines.append(f"| {name} | {v['claim']} | {v['difference']:+.4g} | [{v['ci_low']:+.4g}, {v['ci_high']:+.4g}] | "
-                         f"{v['relative_pct']:+.1f} % | {v['verdict']} |")
+            lines.append(f"| {name} | {v['claim']} | {v['difference']:+.4g} | "
+                         f"[{v['ci_low']:+.4g}, {v['ci_high']:+.4g}] | {v['relative_pct']:+.1f} % | {v['verdict']} |")
     return "\n".join(lines) + "\n"
 
 
