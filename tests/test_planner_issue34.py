@@ -8,6 +8,7 @@ from __future__ import annotations
 import hashlib
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -221,3 +222,29 @@ def test_campaign_rows_measure_time_four_ways():
     assert 0 < row["time_cpu_s"] and 0 < row["time_s"] <= row["planning_time_s"]
     again = experiment.run_task(task)
     assert (again["search_iterations"], again["search_checks"]) == (row["search_iterations"], row["search_checks"])
+
+
+def test_campaign_decision_rule():
+    """The pre-registered rule: the 95 % interval of DDRRT* - RRT* excludes 0 in the paper's
+    direction (reproduced), in the other (refuted), or not (no difference)."""
+    from hil import campaign
+
+    rng = np.random.default_rng(0)
+
+    def rows(shift_cost, shift_cos):
+        out = []
+        for alg, dc, ds in (("rrt-star", 0.0, 0.0), ("ddrrt-star", shift_cost, shift_cos)):
+            for i in range(40):
+                out.append({"algorithm": alg, "reached": True, "run": i, "cost": 100 + dc + rng.normal(0, 2),
+                            "sum_cos": 40 + ds + rng.normal(0, 2), "time_s": 1.0 + rng.normal(0, 0.1)})
+        return out
+
+    v = {x["claim"]: x for x in campaign.verdicts(rows(-10.0, 0.0))}
+    assert v["cost"]["verdict"] == "reproduced" and v["cost"]["ci_high"] < 0
+    assert v["Σcos α_y"]["verdict"] == "no difference"
+    assert v["Σsin α_y"]["verdict"] == "not measured"
+    v = {x["claim"]: x for x in campaign.verdicts(rows(+10.0, -10.0))}
+    assert v["cost"]["verdict"] == "refuted" and v["Σcos α_y"]["verdict"] == "refuted"
+    assert v["cost"]["relative_pct"] == pytest.approx(10.0, abs=2.0)
+    cmd = campaign.command(campaign.CELLS[1], 20, Path("out"))
+    assert cmd[:2] == ["hil", "montecarlo"] and "planner.png_repair=true" in cmd
