@@ -51,6 +51,8 @@ CELLS: tuple[Cell, ...] = (
     Cell("kgrow", "k growing (k_growth = 2)", ("--set", "planner.k_growth=2.0")),
     Cell("it300", "300 iterations a cycle", ("--local-iterations", "300")),
     Cell("it150", "150 iterations a cycle", ("--local-iterations", "150")),
+    # added after the cells above had run (the execution model was implemented then; same rule)
+    Cell("whole", "whole-path execution (no tree reuse)", ("--execution", "whole-path")),
 )
 
 # claim: (column, the paper's direction of DDRRT* - RRT*: -1 lower, +1 higher, statistic)

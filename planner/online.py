@@ -31,7 +31,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from dataclasses import field as dc_field
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from scipy import ndimage
@@ -50,6 +50,9 @@ from planner.termination import Termination
 
 def _p(help: str, unit: str = "", **bounds: float) -> dict[str, Any]:
     return {"help": help, "unit": unit, **bounds}
+
+
+EXECUTION_MODELS = ("receding", "whole-path")
 
 
 @dataclass(frozen=True)
@@ -75,8 +78,14 @@ class OnlineParams:
         "accept a subgoal only within one perceptual radius along the reference path (see select_local_subgoal)"))
     velocity_inflation: bool = dc_field(default=True, metadata=_p(
         "extra obstacle inflation from the velocity estimated on the reference path (section 3.3)"))
+    execution: Literal["receding", "whole-path"] = dc_field(default="receding", metadata=_p(
+        "how much of each local path the vessel sails before the next cycle plans: 'receding' (speed * "
+        "cycle_time, then replan) or 'whole-path' (the whole local path, the next planned from its end, as "
+        "section 3.5 executes it; the tree is not reused)"))
 
     def __post_init__(self) -> None:
+        if self.execution not in EXECUTION_MODELS:
+            raise ValueError(f"execution: must be one of {', '.join(EXECUTION_MODELS)} (got {self.execution!r})")
         if self.local_iterations == 0 and self.local_time == 0:
             raise ValueError("local_iterations: a cycle needs a budget (local_iterations or local_time > 0)")
 
@@ -605,7 +614,8 @@ def run_online(ctx: OnlineContext, start: VesselState, seed: int,
             state = replace(state, t=state.t + online.cycle_time)
             continue
         failures = 0
-        travelled, heading = advance(rec.smooth_path, step)
+        travelled, heading = advance(rec.smooth_path, step if online.execution == "receding"
+                                     else path_length(rec.smooth_path))
         rec.travelled = travelled
         executed.append(travelled[1:])
         sailed = path_length(travelled)

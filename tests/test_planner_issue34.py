@@ -248,3 +248,27 @@ def test_campaign_decision_rule():
     assert v["cost"]["relative_pct"] == pytest.approx(10.0, abs=2.0)
     cmd = campaign.command(campaign.CELLS[1], 20, Path("out"))
     assert cmd[:2] == ["hil", "montecarlo"] and "planner.png_repair=true" in cmd
+
+
+def test_whole_path_execution_sails_each_local_path_to_its_end():
+    from hil import experiment
+    from planner.cost import path_length
+
+    def run(execution):
+        task = experiment.Task("labyrinth", 0, "ddrrt-star", 1, detail=True,
+                               online_overrides=(("execution", execution), ("local_iterations", 300),
+                                                 ("max_cycles", 4)))
+        return experiment.run_task(task)["_detail"]
+
+    whole = run("whole-path")
+    sailed = [c for c in whole.cycles if len(c.smooth_path) >= 2]
+    assert len(sailed) >= 3
+    for a, b in zip(sailed[:-1], sailed[1:], strict=False):
+        assert path_length(a.travelled) == pytest.approx(path_length(a.smooth_path))
+        assert (b.start.x, b.start.y) == pytest.approx(tuple(a.smooth_path[-1]))
+    receding = run("receding")
+    first = next(c for c in receding.cycles if len(c.smooth_path) >= 2)
+    assert path_length(first.travelled) == pytest.approx(12.0)  # speed 2 m/s x cycle 6 s
+    with pytest.raises(ValueError, match="execution"):
+        from planner.online import OnlineParams
+        OnlineParams(execution="sometimes")
