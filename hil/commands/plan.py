@@ -274,7 +274,8 @@ def run(args: argparse.Namespace) -> int:
         "compiled": warm.compiled,
         "tree_size": int(len(result.tree_nodes)),
         "samples_rejected": result.samples_rejected,
-        "current": current_source if field is not None else f"none ({current_source})",
+        "current": (current_source if field is not None else f"none ({current_source})"
+                    if params.objective == "current" else f"not used: objective length ({current_source})"),
     }
     if field is not None and result.status == "exact":
         summary.update(_judged(grid, map_field, params, start, goal, result.path))
