@@ -40,6 +40,7 @@ class Cell:
     name: str
     factor: str
     args: tuple[str, ...]
+    scenario: str = "labyrinth"
 
 
 CELLS: tuple[Cell, ...] = (
@@ -53,6 +54,9 @@ CELLS: tuple[Cell, ...] = (
     Cell("it150", "150 iterations a cycle", ("--local-iterations", "150")),
     # added after the cells above had run (the execution model was implemented then; same rule)
     Cell("whole", "whole-path execution (no tree reuse)", ("--execution", "whole-path")),
+    # random maps (Figure 11's generator, straight reference path), added with `whole`
+    Cell("random", "random maps", (), "random"),
+    Cell("random-fixes", "random maps, issue 34's fixes on", FIXES, "random"),
 )
 
 # claim: (column, the paper's direction of DDRRT* - RRT*: -1 lower, +1 higher, statistic)
@@ -73,7 +77,7 @@ CLAIMS: tuple[tuple[str, str, int, str], ...] = (
 
 def command(cell: Cell, runs: int, out: Path, jobs: int = 2, seed: int = 1) -> list[str]:
     """The `hil montecarlo` command of one cell."""
-    base = ["hil", "montecarlo", "--scenario", "labyrinth", "--runs", str(runs), "--jobs", str(jobs),
+    base = ["hil", "montecarlo", "--scenario", cell.scenario, "--runs", str(runs), "--jobs", str(jobs),
             "--seed", str(seed), "--baseline-objective", "length", "--no-plots", "--out", str(out / cell.name)]
     return base + list(PAPER) + list(cell.args)
 
