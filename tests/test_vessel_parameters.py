@@ -250,3 +250,15 @@ def test_fence_parameters_reach_the_planning_grid_and_the_breach_action():
 def test_every_parameter_has_its_effect_tested(s):
     """Runs last in this module: a parameter added without a test of its effect fails here."""
     assert TESTED == {p.name for p in s.link.params_table.params}
+
+
+def test_the_docs_table_is_the_declarations():
+    """docs/gcs.md's parameter table is what the components declare (python -m autopilot_bridge.parameters)."""
+    import re
+    from pathlib import Path
+
+    from autopilot_bridge.parameters import markdown_table
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "gcs.md").read_text()
+    table = re.search(r"<!-- parameters: generated -->\n(.*?)\n<!-- /parameters -->", doc, re.S)
+    assert table is not None and table.group(1) == markdown_table()

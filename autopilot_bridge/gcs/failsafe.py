@@ -30,8 +30,9 @@ class GcsFailsafe:
     enable = Tunable("FS_GCS_ENABLE", 0, 2, "", "GCS failsafe: 0 off, 1 on, 2 on but a mission in AUTO goes on",
                      integer=True)
     timeout = Tunable("FS_GCS_TIMEOUT", 1.0, 120.0, "s", "no GCS heartbeat for this long triggers the failsafe")
-    action = Tunable("FS_ACTION", 0, 2, "", "failsafe action: 0 nothing, 1 RTL (HOLD without home), 2 HOLD",
-                     integer=True)
+    action = Tunable("FS_ACTION", 0, 2, "",
+                     "failsafe action: 0 nothing, 1 RTL (nearest rally point inside the fence, else home), "
+                     "2 hold station (LOITER; ArduRover's Hold drifts)", integer=True)
 
     def __init__(self, out: Outbox, view: VehicleView, timeout: float, action: str,
                  require_signed: bool) -> None:
