@@ -27,7 +27,7 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
     from common.geodesy import LocalFrame
     from hil import scenario as scenarios
 
-    scen = scenarios.load(scenario_name, cfg.current, cfg.planner.safety_radius)
+    scen = scenarios.load(scenario_name, cfg.current, cfg.planner.safety_radius, cfg.geodesy)
     params = scenarios.planner_params(cfg.planner, scen.planner_overrides, f"scenario {scen.name}")
     online = scenarios.online_params(scen.online_overrides, f"scenario {scen.name}")
     world = World(occ=scen.occ, resolution=scen.resolution, goal=tuple(scen.goal),

@@ -143,7 +143,8 @@ class HilRun:
 
     def __init__(self, opts: RunOptions, cfg: Any) -> None:
         self.opts, self.cfg = opts, cfg
-        self.scen = scenarios.load(opts.scenario, cfg.current, cfg.planner.safety_radius)
+        self.scen = scenarios.load(opts.scenario, cfg.current, cfg.planner.safety_radius, cfg.geodesy)
+        self.scen.check_current_time(float(opts.duration))
         if opts.traffic is not None:
             self.scen.traffic = tuple(opts.traffic)
         self.out = opts.out
@@ -208,7 +209,8 @@ class HilRun:
                 "--duration", repr(float(self.opts.duration) + 5.0), "--json", "--world", str(self.world_file),
                 "--set", f"sim.initial.x={north!r}", "--set", f"sim.initial.y={east!r}",
                 "--set", f"sim.initial.psi={psi!r}"]
-        for k in ("enabled", "origin_x", "origin_y"):
+        for k in ("enabled", "origin_x", "origin_y", "file", "uniform", "east_variable", "north_variable",
+                  "start_time"):
             v = getattr(cur, k)
             args += ["--set", f"current.{k}={json.dumps(v)}"]
         if self.traffic_file is not None:

@@ -143,6 +143,8 @@ class Scenario:
     uncharted: tuple[tuple[float, float, float], ...] = ()   # discs (x, y, radius), m, map frame
     traffic: tuple[ShipSpec, ...] = ()                        # ships sailed by the simulator ([[traffic]])
     waypoints: np.ndarray | None = None                       # (K, 2) the route as given, m (None: = reference_path)
+    geodesy: Any = None                                       # simulator.config.GeodesyParams: the NED origin
+    _current_source: Any = field(default=None, init=False, repr=False, compare=False)
 
     def truth_occ(self) -> np.ndarray:
         """The simulated world's obstacles: the chart (``occ``) plus the uncharted discs."""
@@ -164,11 +166,25 @@ class Scenario:
         return self.occ.shape[0] * self.resolution
 
     def current_field(self):
-        """The eq. (13) current (``common.current_field.CurrentField``, NED), or None when disabled."""
+        """The current the simulator applies (``common.current_sources``: eq. (13), uniform or a
+        file's; NED), or None when disabled. Built once per scenario (a file is read once)."""
         if not self.current.enabled:
             return None
-        from common.current_field import CurrentField
-        return CurrentField(self.current)
+        if self._current_source is None:
+            from common.current_sources import make_current
+            self._current_source = make_current(self.current, geodesy_frame(self.geodesy))
+        return self._current_source
+
+    def check_current_time(self, duration: float, source: str = "") -> None:
+        """ConfigError (one line) when a current file does not cover run times 0..``duration`` s."""
+        from common.current_sources import CurrentSourceError, GriddedCurrent
+
+        f = self.current_field()
+        if isinstance(f, GriddedCurrent):
+            try:
+                f.check_covers(t=(0.0, max(float(duration), self.field_time)))
+            except CurrentSourceError as exc:
+                raise ConfigError(f"{source or 'scenario ' + self.name}: current.file: {exc}") from None
 
     def map_field(self) -> MapFrameCurrent | None:
         """The current frozen at ``field_time`` as a map-frame DisturbanceField, or None."""
@@ -238,6 +254,39 @@ def resolve_file(spec: ScenarioSpec, name: str) -> Path:
     return here if here.exists() or not legacy.exists() else legacy
 
 
+def geodesy_frame(geodesy: Any = None):
+    """The ``common.geodesy.LocalFrame`` of a ``[geodesy]`` section (default: the default configuration's)."""
+    from common.geodesy import LocalFrame
+
+    if geodesy is None:
+        from hil import settings
+        geodesy = settings.load().geodesy
+    return LocalFrame(geodesy.lat0, geodesy.lon0, geodesy.alt0)
+
+
+def _current_file(spec: ScenarioSpec, current: Any) -> Any:
+    """``current`` with its file as an absolute path: relative to the scenario file when the
+    scenario names it, else to the working directory (a configuration's or --set's)."""
+    if not current.file:
+        return current
+    path = resolve_file(spec, current.file) if "file" in spec.current else Path(current.file).expanduser()
+    return dataclasses.replace(current, file=str(path.resolve()))
+
+
+def _check_current(scen: Scenario, source: str) -> None:
+    """Build the scenario's current once (a file is read here) and refuse one that does not cover
+    the map or the planning instant: one-line ConfigError."""
+    from common.current_sources import CurrentSourceError, GriddedCurrent
+
+    try:
+        f = scen.current_field()
+        if isinstance(f, GriddedCurrent):
+            f.check_covers((0.0, scen.height), (0.0, scen.width), (scen.field_time, scen.field_time),
+                           what=f"the {scen.width:g} m x {scen.height:g} m map")
+    except CurrentSourceError as exc:
+        raise ConfigError(f"{source}: current: {exc}") from None
+
+
 def _current_params(base_current: Any, overrides: dict[str, Any], source: str) -> tuple[Any, float]:
     table = config.to_table(base_current)
     ov = dict(overrides)
@@ -277,12 +326,13 @@ def _check_point(what: str, p: tuple[float, float], occ: np.ndarray, res: float,
         raise ConfigError(f"{source}: {what}: ({p[0]:g}, {p[1]:g}) m is inside an obstacle")
 
 
-def load(name: str, base_current: Any = None, safety_radius: float | None = None) -> Scenario:
+def load(name: str, base_current: Any = None, safety_radius: float | None = None, geodesy: Any = None) -> Scenario:
     """Load a fixed scenario (for a random one, use :func:`instance` with a run's generator).
     ``safety_radius`` (m): the configuration's ``planner.safety_radius`` (default: the default
-    configuration's); the scenario's own ``[planner]`` value wins, as for the planner."""
+    configuration's); the scenario's own ``[planner]`` value wins, as for the planner.
+    ``geodesy``: the configuration's ``[geodesy]`` (default: the default configuration's)."""
     spec = load_spec(name)
-    return instance(spec, None, base_current, safety_radius)
+    return instance(spec, None, base_current, safety_radius, geodesy=geodesy)
 
 
 def _safety_radius(spec: ScenarioSpec, base: float | None, source: str) -> float:
@@ -326,12 +376,21 @@ def _default_current() -> Any:
 
 
 def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: Any = None,
-             safety_radius: float | None = None, source: str | None = None) -> Scenario:
+             safety_radius: float | None = None, source: str | None = None, geodesy: Any = None) -> Scenario:
     """A concrete :class:`Scenario`; random scenarios draw map and end points from ``rng``.
     ``source`` names the file in error messages (default: the file the spec was read from)."""
     source = source or spec.path or str(scenario_path(spec.name))
+    scen = _instance(spec, rng, base_current, safety_radius, source)
+    scen.geodesy = geodesy
+    _check_current(scen, source)
+    return scen
+
+
+def _instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: Any,
+              safety_radius: float | None, source: str) -> Scenario:
     current, field_time = _current_params(base_current if base_current is not None else _default_current(),
                                           spec.current, source)
+    current = _current_file(spec, current)
     if spec.kind == "fixed":
         map_path = resolve_file(spec, spec.map)
         if not map_path.exists():

@@ -60,6 +60,23 @@ class CurrentParams:
     speed_scale: float = param("velocity of unit stream-function gradient", "m/s", ge=0)
     origin_x: float = param("north coordinate of the jet's origin", "m")
     origin_y: float = param("east coordinate of the jet's axis", "m")
+    # The other sources (common.current_sources): a file or a uniform current replaces eq. (13).
+    file: str = param("netCDF file of the current (CF eastward/northward_sea_water_velocity on latitude, "
+                      "longitude[, time]); relative to the scenario file when a scenario names it; '' = none",
+                      default="")
+    uniform: tuple[float, ...] = param("a uniform current [east, north]; [] = none", "m/s", ge=-10.0, le=10.0,
+                                       default=())
+    east_variable: str = param("the file's eastward velocity variable ('' = found by CF standard_name)", default="")
+    north_variable: str = param("the file's northward velocity variable ('' = found by CF standard_name)",
+                                default="")
+    start_time: str = param("the file's time at the run's t = 0 (ISO 8601, UTC; '' = the file's first time)",
+                            default="")
+
+    def __post_init__(self) -> None:
+        if len(self.uniform) not in (0, 2):
+            raise ValueError(f"uniform: expected [east, north] in m/s or [], got {len(self.uniform)} items")
+        if self.file and self.uniform:
+            raise ValueError("uniform: give either a file or a uniform current, not both")
 
 
 @dataclass(frozen=True)
