@@ -45,10 +45,11 @@ from typing import Any, Literal
 import numpy as np
 
 from common.params import param
-from hil import config
+from hil import charts, config
 from hil.config import CONFIG_DIR
 from hil.errors import ConfigError, UsageError
 from hil.scenario_names import SCENARIO_DIR, available
+from simulator.config import GeodesyParams
 from simulator.traffic import ShipSpec
 
 
@@ -87,8 +88,17 @@ class ScenarioSpec:
     name: str = param("scenario name (the file's stem)")
     description: str = param("one-line description")
     kind: Literal["fixed", "random"] = param("'fixed' map and end points, or 'random' per Monte Carlo run")
-    map: str = param("map file (.npy or .png) relative to the scenario file (fixed scenarios)", default="")
+    map: str = param("map file relative to the scenario file (fixed scenarios): a grid (.npy, .png) or a vector "
+                     "chart in longitude/latitude (.geojson, .shp, .gpkg, .kml, S-57 .000; docs/worlds.md)",
+                     default="")
     resolution: float = param("map cell size", "m", gt=0, default=0.5)
+    origin: tuple[float, ...] = param(
+        "charts: [latitude, longitude] of the map's south-west corner, the run's NED origin "
+        "(default: the chart's south-west bound)", "deg", ge=-180, le=360, default=())
+    extent: tuple[float, ...] = param("charts: [width east, height north] of the map from its origin "
+                                      "(default: to the chart's north-east bound)", "m", gt=0, le=50_000, default=())
+    chart_buffer: float = param("charts: radius given to points and half-width to lines without a 'buffer' "
+                                "property", "m", ge=0, le=1000, default=2.0)
     start: tuple[float, float] = param("start position [x east, y north]", "m", default=(0.0, 0.0))
     start_heading: float = param("start heading, counter-clockwise from east", "rad", ge=-4 * math.pi,
                                  le=4 * math.pi, default=0.0)
@@ -119,6 +129,10 @@ class ScenarioSpec:
                 raise ValueError("reference_path: needs at least two points (start ... goal), or none")
         elif self.random is None:
             raise ValueError("random: a random scenario needs a [random] table")
+        if len(self.origin) not in (0, 2) or (self.origin and not -89 <= self.origin[0] <= 89):
+            raise ValueError("origin: expected [latitude, longitude] in degrees (latitude within +-89)")
+        if len(self.extent) not in (0, 2):
+            raise ValueError("extent: expected [width, height] in m")
         for x, y, r in self.uncharted:
             if r <= 0:
                 raise ValueError(f"uncharted: disc at ({x:g}, {y:g}) needs a positive radius, got {r:g}")
@@ -381,7 +395,10 @@ def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: 
     ``source`` names the file in error messages (default: the file the spec was read from)."""
     source = source or spec.path or str(scenario_path(spec.name))
     scen = _instance(spec, rng, base_current, safety_radius, source)
-    scen.geodesy = geodesy
+    if scen.geodesy is None:        # a chart sets its own origin (its map's south-west corner)
+        scen.geodesy = geodesy
+    elif geodesy is not None:
+        scen.geodesy = GeodesyParams(scen.geodesy.lat0, scen.geodesy.lon0, geodesy.alt0)
     _check_current(scen, source)
     return scen
 
@@ -395,7 +412,13 @@ def _instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current:
         map_path = resolve_file(spec, spec.map)
         if not map_path.exists():
             raise ConfigError(f"{source}: map: no such file {map_path}")
-        occ = load_occupancy(map_path, spec.resolution)
+        geodesy = None
+        if charts.is_chart(map_path):
+            grid = charts.rasterise(map_path, spec.resolution, spec.origin, spec.extent, spec.chart_buffer)
+            occ = grid.occ
+            geodesy = GeodesyParams(grid.origin[0], grid.origin[1], 0.0)
+        else:
+            occ = load_occupancy(map_path, spec.resolution)
         for what, p in (("start", spec.start), ("goal", spec.goal)):
             _check_point(what, p, occ, spec.resolution, source)
         if spec.global_route:
@@ -410,7 +433,8 @@ def _instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current:
             wps = ref = np.asarray(spec.reference_path, dtype=float)
         scen = Scenario(spec.name, spec.description, occ, spec.resolution, spec.start, spec.start_heading,
                         spec.goal, ref, current, field_time, dict(spec.planner), dict(spec.online),
-                        tuple(tuple(map(float, d)) for d in spec.uncharted), traffic=spec.traffic, waypoints=wps)
+                        tuple(tuple(map(float, d)) for d in spec.uncharted), traffic=spec.traffic, waypoints=wps,
+                        geodesy=geodesy)
         truth = scen.truth_occ()
         for what, p in (("start", spec.start), ("goal", spec.goal)):
             if truth[int(p[1] / spec.resolution), int(p[0] / spec.resolution)]:

@@ -55,7 +55,7 @@ def hil_main(capsys):
 # `pytest -m "not e2e"` is the developer's loop; the README's command and CI run every tier.
 # A new test module must be listed here: collection fails otherwise, so no test falls through.
 UNIT_MODULES = frozenset("""
-    can_codec can_esc collision_cone colregs colregs_oracle config config_layers control current_field current_sources
+    can_codec can_esc charts collision_cone colregs colregs_oracle config config_layers control current_field current_sources
     geodesy
     global_route guidance_kernel mavlink_crc mavlink_fast_path mission_executor modes navigation navigation_fast
     online percentiles plan_commitment plan_start_course readiness

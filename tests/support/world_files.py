@@ -48,3 +48,35 @@ def write_cf_current(path: Path, lat: np.ndarray, lon: np.ndarray, times: Sequen
     }, coords=coords, attrs={"Conventions": "CF-1.8", "title": "test current"})
     ds.to_netcdf(path, engine="netcdf4")
     return path
+
+
+def lonlat(frame: LocalFrame, x_east: float, y_north: float) -> list[float]:
+    """[lon, lat] (GeoJSON order) of a point ``x`` m east and ``y`` m north of ``frame``'s origin."""
+    lat, lon = frame.sea_level_to_geodetic(y_north, x_east)
+    return [lon, lat]
+
+
+def harbour_chart(frame: LocalFrame) -> dict:
+    """A small harbour chart as GeoJSON (a FeatureCollection in longitude/latitude), drawn in metres
+    from ``frame``'s origin: a quay along the south (0..20 m), a pier (60..70 m east, up to 90 m north),
+    a mole drawn as a line (buffer 3 m) and three piles as points (the default buffer), in a
+    200 m x 150 m water area whose corners are marked by two small buoys."""
+    def ring(pts):
+        return [lonlat(frame, x, y) for x, y in [*pts, pts[0]]]
+
+    feats = [
+        {"type": "Feature", "properties": {"name": "quay"},
+         "geometry": {"type": "Polygon", "coordinates": [ring([(0, 0), (200, 0), (200, 20), (0, 20)])]}},
+        {"type": "Feature", "properties": {"name": "pier"},
+         "geometry": {"type": "Polygon", "coordinates": [ring([(60, 20), (70, 20), (70, 90), (60, 90)])]}},
+        {"type": "Feature", "properties": {"name": "mole", "buffer": 3.0},
+         "geometry": {"type": "LineString", "coordinates": [lonlat(frame, 120, 140), lonlat(frame, 120, 70)]}},
+        {"type": "Feature", "properties": {"name": "piles"},
+         "geometry": {"type": "MultiPoint", "coordinates": [lonlat(frame, 150, 40), lonlat(frame, 160, 40),
+                                                             lonlat(frame, 170, 40)]}},
+        {"type": "Feature", "properties": {"name": "buoy sw", "buffer": 0.2},
+         "geometry": {"type": "Point", "coordinates": lonlat(frame, 0.2, 0.2)}},
+        {"type": "Feature", "properties": {"name": "buoy ne", "buffer": 0.2},
+         "geometry": {"type": "Point", "coordinates": lonlat(frame, 199.8, 149.8)}},
+    ]
+    return {"type": "FeatureCollection", "features": feats}

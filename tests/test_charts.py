@@ -1,0 +1,163 @@
+"""Vector charts as scenario maps (hil.charts): GeoJSON and shapefiles in longitude/latitude rasterised
+onto the planning grid, the run's origin at the map's corner, bad charts refused in one line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("shapely")
+
+from support.world_files import LAT0, LON0, harbour_chart, lonlat  # noqa: E402
+
+from common.geodesy import LocalFrame  # noqa: E402
+from hil import charts  # noqa: E402
+from hil import scenario as scenarios  # noqa: E402
+from hil.errors import ConfigError  # noqa: E402
+
+FRAME = LocalFrame(LAT0, LON0)
+
+
+def _chart(tmp_path: Path, doc: dict | None = None, name: str = "harbour.geojson") -> Path:
+    p = tmp_path / name
+    p.write_text(json.dumps(doc if doc is not None else harbour_chart(FRAME)))
+    return p
+
+
+def _cell(grid: charts.ChartGrid, x: float, y: float) -> bool:
+    return bool(grid.occ[int(y / grid.resolution), int(x / grid.resolution)])
+
+
+def test_a_geojson_chart_is_rasterised_around_its_south_west_corner(tmp_path):
+    grid = charts.rasterise(_chart(tmp_path), 0.5)
+    assert grid.origin == pytest.approx((LAT0, LON0), abs=1e-6)   # the bound of a curved parallel: mm
+    assert grid.occ.shape == (300, 400)                   # 150 m x 200 m (the chart's bounds) at 0.5 m
+    assert _cell(grid, 100.0, 10.0) and _cell(grid, 65.0, 80.0)          # quay, pier
+    assert _cell(grid, 122.4, 100.0) and not _cell(grid, 124.0, 100.0)  # the mole: a line grown by 3 m
+    assert _cell(grid, 151.5, 40.0) and not _cell(grid, 153.0, 40.0)    # a pile: a point grown by 2 m
+    assert not _cell(grid, 40.0, 60.0) and not _cell(grid, 100.0, 120.0)  # open water
+    # every cell the geometry touches: the pier's west edge (x = 60 m) marks the cell west of it too
+    assert _cell(grid, 59.8, 50.0) and not _cell(grid, 58.9, 50.0)
+
+
+def test_a_shapefile_gives_the_same_grid_as_the_geojson(tmp_path):
+    pyogrio = pytest.importorskip("pyogrio")
+    import shapely
+    from shapely.geometry import shape
+
+    doc = harbour_chart(FRAME)
+    geoms = [shape(f["geometry"]) for f in doc["features"]]
+    buffers = np.array([f["properties"].get("buffer", np.nan) for f in doc["features"]], dtype=float)
+    # a shapefile holds one geometry type: polygons in one file, the rest grown in the GeoJSON's way
+    poly = [i for i, g in enumerate(geoms) if g.geom_type == "Polygon"]
+    for name, idx in (("polygons.shp", poly),):
+        pyogrio.raw.write(tmp_path / name, shapely.to_wkb(np.array([geoms[i] for i in idx], dtype=object)),
+                          field_data=[buffers[idx]], fields=["buffer"], geometry_type="Polygon", crs="EPSG:4326",
+                          driver="ESRI Shapefile")
+    shp = charts.rasterise(tmp_path / "polygons.shp", 0.5, origin=(LAT0, LON0), extent=(200.0, 150.0))
+    only_polygons = {"type": "FeatureCollection", "features": [doc["features"][i] for i in poly]}
+    gj = charts.rasterise(_chart(tmp_path, only_polygons, "p.geojson"), 0.5, origin=(LAT0, LON0),
+                          extent=(200.0, 150.0))
+    assert shp.occ.sum() > 1000
+    np.testing.assert_array_equal(shp.occ, gj.occ)
+
+
+def test_a_projected_shapefile_is_refused(tmp_path):
+    pyogrio = pytest.importorskip("pyogrio")
+    import shapely
+    from shapely.geometry import box
+
+    pyogrio.raw.write(tmp_path / "utm.shp", shapely.to_wkb(np.array([box(500000, 4300000, 500100, 4300100)])),
+                      field_data=[], fields=[], geometry_type="Polygon", crs="EPSG:32651", driver="ESRI Shapefile")
+    with pytest.raises(ConfigError, match="coordinates in EPSG:32651; export the chart in WGS-84") as err:
+        charts.rasterise(tmp_path / "utm.shp", 1.0)
+    assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("doc, message", [
+    ("not json", "not a GeoJSON file"),
+    ({"type": "FeatureCollection", "features": []}, "the chart has no features"),
+    ({"type": "Point", "coordinates": [500000.0, 4300000.0]}, "not longitude/latitude degrees"),
+    ({"type": "Feature", "properties": {"buffer": -1}, "geometry": {"type": "Point", "coordinates": [121.65, 38.92]}},
+     "buffer must be a number of metres"),
+    ({"type": "Feature", "properties": {}, "geometry": {"type": "Polygon", "coordinates": [[[1, 2]]]}},
+     "bad geometry"),
+])
+def test_bad_charts_are_refused_in_one_line(tmp_path, doc, message):
+    p = tmp_path / "bad.geojson"
+    p.write_text(doc if isinstance(doc, str) else json.dumps(doc))
+    with pytest.raises(ConfigError, match=message) as err:
+        charts.rasterise(p, 1.0)
+    assert "\n" not in str(err.value)
+
+
+def test_a_grid_too_large_is_refused(tmp_path):
+    with pytest.raises(ConfigError, match="choose a coarser resolution"):
+        charts.rasterise(_chart(tmp_path), 0.04)
+
+
+SCENARIO = """name = "chart"
+description = "a harbour from a GeoJSON chart"
+kind = "fixed"
+map = "harbour.geojson"
+resolution = 0.5
+start = [30.0, 50.0]
+goal = [185.0, 130.0]
+uncharted = [[100.0, 60.0, 3.0]]
+"""
+
+
+def _shifted(origin: list[float]) -> str:
+    """SCENARIO with its map's corner 40 m west and 30 m south of the chart's: positions move with it."""
+    return (SCENARIO.replace("start = [30.0, 50.0]", "start = [70.0, 80.0]")
+            .replace("goal = [185.0, 130.0]", "goal = [225.0, 160.0]")
+            .replace("[[100.0, 60.0, 3.0]]", "[[140.0, 90.0, 3.0]]")
+            + f"origin = [{origin[1]!r}, {origin[0]!r}]\nextent = [260.0, 200.0]\n")
+
+
+def test_a_scenario_on_a_chart_sets_the_runs_origin(tmp_path):
+    _chart(tmp_path)
+    origin = lonlat(FRAME, -40.0, -30.0)     # a corner south-west of the chart's bounds
+    (tmp_path / "s.toml").write_text(_shifted(origin))
+    scen = scenarios.load(str(tmp_path / "s.toml"))
+    assert scen.occ.shape == (400, 520)
+    assert (scen.geodesy.lat0, scen.geodesy.lon0) == pytest.approx((origin[1], origin[0]))
+    # the quay's south-west corner, (0, 0) m of the default origin, is 40 m east and 30 m north here
+    assert scen.occ[int(30.5 / 0.5), int(40.5 / 0.5)] and not scen.occ[int(29.0 / 0.5), int(39.0 / 0.5)]
+    # the true world is the same grid plus the uncharted disc
+    truth = scen.truth_occ()
+    assert truth[int(90 / 0.5), int(140 / 0.5)] and not scen.occ[int(90 / 0.5), int(140 / 0.5)]
+    assert np.array_equal(truth & ~scen.occ, truth ^ scen.occ)
+    # every process of a run gets this origin through --set geodesy.* (hil.console.load_settings)
+    over = charts.geodesy_overrides(str(tmp_path / "s.toml"))
+    assert over == [f"geodesy.lat0={origin[1]!r}", f"geodesy.lon0={origin[0]!r}"]
+
+
+def test_the_default_extent_is_the_charts_bounds_and_points_are_checked(tmp_path):
+    _chart(tmp_path)
+    (tmp_path / "s.toml").write_text(SCENARIO)
+    scen = scenarios.load(str(tmp_path / "s.toml"))
+    assert (scen.width, scen.height) == (200.0, 150.0)
+    assert charts.geodesy_overrides("harbour") == []
+    (tmp_path / "s.toml").write_text(SCENARIO.replace("goal = [185.0, 130.0]", "goal = [65.0, 60.0]"))
+    with pytest.raises(ConfigError, match="goal: \\(65, 60\\) m is inside an obstacle"):
+        scenarios.load(str(tmp_path / "s.toml"))
+
+
+def test_the_settings_of_a_chart_scenario_carry_its_origin(tmp_path):
+    import argparse
+
+    from hil.console import load_settings
+
+    _chart(tmp_path)
+    origin = lonlat(FRAME, -40.0, -30.0)
+    (tmp_path / "s.toml").write_text(_shifted(origin))
+    args = argparse.Namespace(config=None, overrides=[], scenario=str(tmp_path / "s.toml"))
+    cfg = load_settings(args)
+    assert (cfg.geodesy.lat0, cfg.geodesy.lon0) == (origin[1], origin[0])
+    assert len(args.overrides) == 2
+    load_settings(args)
+    assert len(args.overrides) == 2      # once only
