@@ -22,7 +22,7 @@ from hil import console
 from hil.errors import HilError
 
 # Subcommand modules under hil/commands/, in the order `hil --help` lists them.
-COMMANDS = ("run", "sim", "autopilot", "plan", "montecarlo", "bench", "soak", "vcan")
+COMMANDS = ("run", "sim", "autopilot", "plan", "montecarlo", "bench", "soak", "vcan", "geo")
 
 
 class ArgumentParser(argparse.ArgumentParser):

@@ -97,6 +97,10 @@ class ScenarioSpec:
         "(default: the chart's south-west bound)", "deg", ge=-180, le=360, default=())
     extent: tuple[float, ...] = param("charts: [width east, height north] of the map from its origin "
                                       "(default: to the chart's north-east bound)", "m", gt=0, le=50_000, default=())
+    positions: Literal["metres", "latlon"] = param(
+        "how start, goal, reference_path, the uncharted discs' centres and the traffic's start and waypoints are "
+        "given: 'metres' [x east, y north] of the map, or 'latlon' [latitude, longitude] in degrees",
+        default="metres")
     chart_buffer: float = param("charts: radius given to points and half-width to lines without a 'buffer' "
                                 "property", "m", ge=0, le=1000, default=2.0)
     start: tuple[float, float] = param("start position [x east, y north]", "m", default=(0.0, 0.0))
@@ -244,7 +248,8 @@ def load_spec(name: str) -> ScenarioSpec:
     if table.get("kind") == "fixed":
         for key in ("start", "goal"):   # defaults only for random scenarios, which draw them
             if key not in table:
-                raise ConfigError(f"{path}: {key}: missing key (a fixed scenario gives [x, y] in m)")
+                raise ConfigError(f"{path}: {key}: missing key (a fixed scenario gives [x, y] in m, or "
+                                  f"[latitude, longitude] with positions = \"latlon\")")
     spec = config.from_table(ScenarioSpec, table, str(path))
     object.__setattr__(spec, "path", str(path))
     return spec
@@ -276,6 +281,45 @@ def geodesy_frame(geodesy: Any = None):
         from hil import settings
         geodesy = settings.load().geodesy
     return LocalFrame(geodesy.lat0, geodesy.lon0, geodesy.alt0)
+
+
+def map_frame(spec: ScenarioSpec, geodesy: Any = None):
+    """The ``LocalFrame`` of the scenario's map frame: a chart's own corner, else the configuration's
+    origin (``geodesy``, default: the default configuration's)."""
+    from common.geodesy import LocalFrame
+
+    if spec.kind == "fixed" and charts.is_chart(spec.map):
+        lat0, lon0 = charts.chart_origin(resolve_file(spec, spec.map), spec.origin)
+        return LocalFrame(lat0, lon0, geodesy.alt0 if geodesy is not None else 0.0)
+    return geodesy_frame(geodesy)
+
+
+MAX_LATLON_DISTANCE = 50_000.0   # m from the map's origin: a position farther is a typing mistake
+
+
+def positions_in_metres(spec: ScenarioSpec, frame: Any, source: str) -> ScenarioSpec:
+    """A ``positions = "latlon"`` spec with every position converted to map metres (x east, y north)."""
+    def xy(what: str, p: tuple[float, ...]) -> tuple[float, float]:
+        lat, lon = float(p[0]), float(p[1])
+        if not (-89.0 <= lat <= 89.0 and -180.0 <= lon <= 360.0):
+            raise ConfigError(f"{source}: {what}: [{lat:g}, {lon:g}] is not [latitude, longitude] in degrees")
+        n, e = frame.geodetic_to_sea_level(lat, lon)
+        if math.hypot(n, e) > MAX_LATLON_DISTANCE:
+            raise ConfigError(f"{source}: {what}: [{lat:g}, {lon:g}] is {math.hypot(n, e) / 1000:.0f} km from the "
+                              f"map's origin ({frame.lat0:.6f}, {frame.lon0:.6f}); [latitude, longitude] swapped?")
+        return e, n
+
+    ships = tuple(dataclasses.replace(
+        ship, start=xy(f"traffic[{i}].start", ship.start),
+        waypoints=tuple(xy(f"traffic[{i}].waypoints[{j}]", w) for j, w in enumerate(ship.waypoints)))
+        for i, ship in enumerate(spec.traffic))
+    out = dataclasses.replace(
+        spec, positions="metres", start=xy("start", spec.start), goal=xy("goal", spec.goal),
+        reference_path=tuple(xy(f"reference_path[{i}]", p) for i, p in enumerate(spec.reference_path)),
+        uncharted=tuple((*xy(f"uncharted[{i}]", d[:2]), d[2]) for i, d in enumerate(spec.uncharted)),
+        traffic=ships)
+    object.__setattr__(out, "path", spec.path)
+    return out
 
 
 def _current_file(spec: ScenarioSpec, current: Any) -> Any:
@@ -394,6 +438,8 @@ def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: 
     """A concrete :class:`Scenario`; random scenarios draw map and end points from ``rng``.
     ``source`` names the file in error messages (default: the file the spec was read from)."""
     source = source or spec.path or str(scenario_path(spec.name))
+    if spec.positions == "latlon":
+        spec = positions_in_metres(spec, map_frame(spec, geodesy), source)
     scen = _instance(spec, rng, base_current, safety_radius, source)
     if scen.geodesy is None:        # a chart sets its own origin (its map's south-west corner)
         scen.geodesy = geodesy
