@@ -55,8 +55,8 @@ def hil_main(capsys):
 # `pytest -m "not e2e"` is the developer's loop; the README's command and CI run every tier.
 # A new test module must be listed here: collection fails otherwise, so no test falls through.
 UNIT_MODULES = frozenset("""
-    can_codec can_esc charts collision_cone colregs colregs_oracle config config_layers control current_field current_sources
-    geodesy
+    can_codec can_esc charts collision_cone colregs colregs_oracle config config_layers control current_field
+    current_sources geodesy
     global_route guidance_kernel mavlink_crc mavlink_fast_path mission_executor modes navigation navigation_fast
     online percentiles plan_commitment plan_start_course readiness
     planner_algorithms planner_config planner_cost planner_dynamic_domain planner_gridmap
@@ -65,7 +65,8 @@ UNIT_MODULES = frozenset("""
 """.split())
 INTEGRATION_MODULES = frozenset("""
     autopilot_link bench_frame bench_planner busy_poll cli connection cpu_load executors gcs_esc_telemetry gcs_fuzz
-    gcs_security gcs_link gcs_mission geo_cli hil_link_fast_path montecarlo output placement plan_cli planner_warmup
+    first_run gcs_security gcs_link gcs_mission geo_cli hil_link_fast_path montecarlo output placement plan_cli
+    planner_warmup
     planning_worker range_sensing
     readme security_gates sim_link sim_pipeline sim_udp startup_errors tap_fast_path traffic_ais
 """.split())

@@ -178,6 +178,11 @@ def _run_hil(args: argparse.Namespace, cfg: Any, cpus: Any = "auto") -> int:
         ("lockstep" if opts.lockstep else f"real time x{opts.speedup:g}")
     progress(f"run: scenario {args.scenario}, {pacing}, "
              f"actuators {cfg.can.actuators}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
+    from hil.first_run import compile_notice
+
+    notice = compile_notice("run")
+    if notice:
+        progress(notice)
     summary = run_loop(opts, cfg)
     emit(args, to_table(summary), human_summary(summary))
     if summary.outcome == "interrupted":
