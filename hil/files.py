@@ -7,14 +7,20 @@ import tempfile
 from pathlib import Path
 
 
-def write_json_atomic(path: str | Path, data: dict) -> None:
-    """Write JSON to ``path`` via a temporary file and rename: never a half-written file."""
+def write_json_atomic(path: str | Path, data: dict, private: bool = False) -> None:
+    """Write JSON to ``path`` via a temporary file and rename: never a half-written file. The file is
+    owner-only (0600) when ``private`` (a run with a signing key), else readable as the other files of
+    a run folder are (0666 less the umask; mkstemp alone would leave it 0600)."""
     from hil.console import to_json
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
+        if not private:
+            umask = os.umask(0)
+            os.umask(umask)
+            os.fchmod(fd, 0o666 & ~umask)
         with os.fdopen(fd, "w") as fh:
             fh.write(to_json(data) + "\n")
         os.replace(tmp, path)

@@ -680,5 +680,5 @@ def _run_loop(opts: RunOptions, cfg: Any) -> RunSummary:
             summary = replace(summary, plot=str(opts.out / "plot.png"))
         except Exception as exc:  # a plot must never lose the run's data
             summary = replace(summary, plot_error=f"{type(exc).__name__}: {exc}")
-    write_json_atomic(opts.out / "summary.json", to_table(summary))
+    write_json_atomic(opts.out / "summary.json", to_table(summary), private=bool(cfg.gcs.signing_key_file))
     return summary

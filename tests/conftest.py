@@ -65,7 +65,7 @@ UNIT_MODULES = frozenset("""
 """.split())
 INTEGRATION_MODULES = frozenset("""
     autopilot_link bench_frame bench_planner busy_poll cli connection cpu_load executors gcs_esc_telemetry gcs_fuzz
-    first_run gcs_security gcs_link gcs_mission geo_cli hil_link_fast_path montecarlo output placement plan_cli
+    first_run friction gcs_security gcs_link gcs_mission geo_cli hil_link_fast_path montecarlo output placement plan_cli
     planner_warmup
     planning_worker range_sensing
     readme security_gates sim_link sim_pipeline sim_udp startup_errors tap_fast_path traffic_ais
