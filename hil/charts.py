@@ -5,10 +5,11 @@ A chart holds obstacles in WGS-84 longitude/latitude: polygons (land, piers, bre
 are; lines and points (a mole drawn as a line, piles and buoys) grown by a buffer in metres, the
 feature's own ``buffer`` property or the scenario's ``chart_buffer``. Every feature is an obstacle.
 
-The grid. The map's south-west corner is ``origin`` (latitude, longitude; default: the chart's
-south-west bound) and it reaches ``extent`` metres east and north (default: the chart's north-east
-bound). That corner becomes the run's NED origin (``[geodesy] lat0/lon0``: see
-:func:`geodesy_overrides`), so map metres, the simulator's and the GPS's agree. Each vertex goes to
+The grid covers the chart's bounds, or ``extent`` = [west, south, east, north] in metres from the
+origin of the scenario's positions (the configuration's ``[geodesy]`` origin, or the scenario's
+``origin``). Its south-west corner becomes the run's NED origin (``[geodesy] lat0/lon0``: see
+:func:`geodesy_overrides`), so the map's metres, the simulator's and the GPS's agree; positions the
+scenario gives in metres are moved onto it (``hil.scenario``). Each vertex goes to
 metres through the exact tangent-plane conversion (``common.geodesy``); buffers are taken in metres;
 a cell is an obstacle when the geometry comes within half a cell's diagonal of its centre (every
 cell the geometry touches, so obstacles are never thinned). The simulator's true world (its range
@@ -163,10 +164,11 @@ def chart_bounds(features: list[ChartFeature]) -> tuple[float, float, float, flo
     return float(b[:, 0].min()), float(b[:, 1].min()), float(b[:, 2].max()), float(b[:, 3].max())
 
 
-def chart_origin(path: str | Path, origin: tuple[float, ...] = ()) -> tuple[float, float]:
-    """The map's south-west corner (lat, lon): ``origin`` when given, else the chart's south-west bound."""
-    if origin:
-        return float(origin[0]), float(origin[1])
+def grid_corner(path: str | Path, positions: LocalFrame, extent: tuple[float, ...] = ()) -> tuple[float, float]:
+    """(lat, lon) of the map's south-west corner: ``extent``'s [west, south] metres from the positions'
+    origin when given, else the chart's south-west bound."""
+    if extent:
+        return positions.sea_level_to_geodetic(float(extent[1]), float(extent[0]))
     lon0, lat0, _lon1, _lat1 = chart_bounds(read_chart(path))
     return lat0, lon0
 
@@ -185,14 +187,15 @@ def to_metres(geometry: Any, frame: LocalFrame) -> Any:
     return shapely.transform(geometry, convert)
 
 
-def rasterise(path: str | Path, resolution: float, origin: tuple[float, ...] = (), extent: tuple[float, ...] = (),
-              default_buffer: float = 2.0, alt0: float = 0.0) -> ChartGrid:
-    """The chart at ``path`` on a grid of ``resolution`` m (see the module's docstring)."""
+def rasterise(path: str | Path, resolution: float, positions: LocalFrame, extent: tuple[float, ...] = (),
+              default_buffer: float = 2.0) -> ChartGrid:
+    """The chart at ``path`` on a grid of ``resolution`` m (see the module's docstring); ``extent``
+    [west, south, east, north] in metres of ``positions`` (the scenario's metres), or the chart's bounds."""
     import shapely
 
     feats = read_chart(path)
-    lat0, lon0 = chart_origin(path, origin)
-    frame = LocalFrame(lat0, lon0, alt0)
+    lat0, lon0 = grid_corner(path, positions, extent)
+    frame = LocalFrame(lat0, lon0, positions.alt0)
     shapes = []
     for f in feats:
         g = to_metres(f.geometry, frame)
@@ -206,7 +209,7 @@ def rasterise(path: str | Path, resolution: float, origin: tuple[float, ...] = (
         shapes.append(g)
     world = shapely.union_all(shapes)
     if extent:
-        width, height = float(extent[0]), float(extent[1])
+        width, height = float(extent[2] - extent[0]), float(extent[3] - extent[1])
     else:
         _x0, _y0, width, height = world.bounds
     if not (width > 0 and height > 0):
@@ -225,9 +228,11 @@ def rasterise(path: str | Path, resolution: float, origin: tuple[float, ...] = (
     return ChartGrid(occ, (lat0, lon0), float(resolution))
 
 
-def geodesy_overrides(scenario: str | None) -> list[str]:
-    """``--set`` overrides that put the NED origin at a chart scenario's map corner ([] for other
-    scenarios, and for a scenario that does not load: the command reports that itself)."""
+def geodesy_overrides(scenario: str | None, geodesy: Any) -> list[str]:
+    """``--set`` overrides that put the NED origin at a chart scenario's map corner and keep the origin
+    of its positions in metres (``geodesy.positions_origin``): [] for other scenarios, and for a
+    scenario that does not load (the command reports that itself). ``geodesy``: the configuration's
+    ``[geodesy]``; the same lines again when it already holds them (a run's processes)."""
     if not scenario:
         return []
     from hil import scenario as scenarios
@@ -237,7 +242,9 @@ def geodesy_overrides(scenario: str | None) -> list[str]:
         spec = scenarios.load_spec(scenario)
         if spec.kind != "fixed" or not is_chart(spec.map):
             return []
-        lat0, lon0 = chart_origin(scenarios.resolve_file(spec, spec.map), spec.origin)
+        positions = scenarios.positions_frame(spec, geodesy)
+        lat0, lon0 = grid_corner(scenarios.resolve_file(spec, spec.map), positions, spec.extent)
     except (ConfigError, UsageError):
         return []
-    return [f"geodesy.lat0={lat0!r}", f"geodesy.lon0={lon0!r}"]
+    return [f"geodesy.lat0={lat0!r}", f"geodesy.lon0={lon0!r}",
+            f"geodesy.positions_origin=[{positions.lat0!r}, {positions.lon0!r}]"]

@@ -21,10 +21,12 @@ def load_settings(args: argparse.Namespace) -> HilConfig:
     from hil import settings
     from hil.charts import geodesy_overrides
 
-    extra = [o for o in geodesy_overrides(getattr(args, "scenario", None)) if o not in args.overrides]
+    cfg = settings.load(args.config, args.overrides)
+    extra = [o for o in geodesy_overrides(getattr(args, "scenario", None), cfg.geodesy) if o not in args.overrides]
     if extra:
         args.overrides = [*args.overrides, *extra]
-    return settings.load(args.config, args.overrides)
+        cfg = settings.load(args.config, args.overrides)
+    return cfg
 
 
 # The processes' packages log under their own names (``logging.getLogger(__name__)``); a `hil` command

@@ -93,10 +93,10 @@ class ScenarioSpec:
                      default="")
     resolution: float = param("map cell size", "m", gt=0, default=0.5)
     origin: tuple[float, ...] = param(
-        "charts: [latitude, longitude] of the map's south-west corner, the run's NED origin "
-        "(default: the chart's south-west bound)", "deg", ge=-180, le=360, default=())
-    extent: tuple[float, ...] = param("charts: [width east, height north] of the map from its origin "
-                                      "(default: to the chart's north-east bound)", "m", gt=0, le=50_000, default=())
+        "charts: [latitude, longitude] from which the scenario's positions in metres count (default: the "
+        "configuration's [geodesy] origin)", "deg", ge=-180, le=360, default=())
+    extent: tuple[float, ...] = param("charts: the map's [west, south, east, north] in metres from the origin "
+                                      "(default: the chart's bounds)", "m", ge=-50_000, le=50_000, default=())
     positions: Literal["metres", "latlon"] = param(
         "how start, goal, reference_path, the uncharted discs' centres and the traffic's start and waypoints are "
         "given: 'metres' [x east, y north] of the map, or 'latlon' [latitude, longitude] in degrees",
@@ -135,8 +135,11 @@ class ScenarioSpec:
             raise ValueError("random: a random scenario needs a [random] table")
         if len(self.origin) not in (0, 2) or (self.origin and not -89 <= self.origin[0] <= 89):
             raise ValueError("origin: expected [latitude, longitude] in degrees (latitude within +-89)")
-        if len(self.extent) not in (0, 2):
-            raise ValueError("extent: expected [width, height] in m")
+        if len(self.extent) not in (0, 4) or (self.extent and not (self.extent[0] < self.extent[2]
+                                                                  and self.extent[1] < self.extent[3])):
+            raise ValueError("extent: expected [west, south, east, north] in m, west < east and south < north")
+        if (self.origin or self.extent) and not charts.is_chart(self.map):
+            raise ValueError("origin, extent: only for a chart map (.geojson, .shp, ...)")
         for x, y, r in self.uncharted:
             if r <= 0:
                 raise ValueError(f"uncharted: disc at ({x:g}, {y:g}) needs a positive radius, got {r:g}")
@@ -283,26 +286,44 @@ def geodesy_frame(geodesy: Any = None):
     return LocalFrame(geodesy.lat0, geodesy.lon0, geodesy.alt0)
 
 
+def positions_frame(spec: ScenarioSpec, geodesy: Any = None):
+    """The ``LocalFrame`` in which a chart scenario's positions in metres count: its ``origin``, else the
+    configuration's (``geodesy.positions_origin`` or ``lat0/lon0``; default: the default configuration's)."""
+    from common.geodesy import LocalFrame
+
+    if geodesy is None:
+        from hil import settings
+        geodesy = settings.load().geodesy
+    lat, lon = (spec.origin[0], spec.origin[1]) if spec.origin else geodesy.metres_origin()
+    return LocalFrame(lat, lon, geodesy.alt0)
+
+
 def map_frame(spec: ScenarioSpec, geodesy: Any = None):
-    """The ``LocalFrame`` of the scenario's map frame: a chart's own corner, else the configuration's
-    origin (``geodesy``, default: the default configuration's)."""
+    """The ``LocalFrame`` of the scenario's map (x = 0, y = 0 at its south-west corner): a chart's
+    grid corner, else the configuration's origin (``geodesy``, default: the default configuration's)."""
     from common.geodesy import LocalFrame
 
     if spec.kind == "fixed" and charts.is_chart(spec.map):
-        lat0, lon0 = charts.chart_origin(resolve_file(spec, spec.map), spec.origin)
-        return LocalFrame(lat0, lon0, geodesy.alt0 if geodesy is not None else 0.0)
+        positions = positions_frame(spec, geodesy)
+        lat0, lon0 = charts.grid_corner(resolve_file(spec, spec.map), positions, spec.extent)
+        return LocalFrame(lat0, lon0, positions.alt0)
     return geodesy_frame(geodesy)
 
 
 MAX_LATLON_DISTANCE = 50_000.0   # m from the map's origin: a position farther is a typing mistake
 
 
-def positions_in_metres(spec: ScenarioSpec, frame: Any, source: str) -> ScenarioSpec:
-    """A ``positions = "latlon"`` spec with every position converted to map metres (x east, y north)."""
+def positions_in_metres(spec: ScenarioSpec, frame: Any, source: str, given_in: Any = None) -> ScenarioSpec:
+    """``spec`` with every position (start, goal, route, uncharted centres, traffic) in map metres of
+    ``frame`` (x east, y north): from ``[latitude, longitude]`` (``positions = "latlon"``), or from metres
+    of another frame ``given_in`` (a chart's grid starts elsewhere than the positions' origin)."""
     def xy(what: str, p: tuple[float, ...]) -> tuple[float, float]:
-        lat, lon = float(p[0]), float(p[1])
-        if not (-89.0 <= lat <= 89.0 and -180.0 <= lon <= 360.0):
-            raise ConfigError(f"{source}: {what}: [{lat:g}, {lon:g}] is not [latitude, longitude] in degrees")
+        if given_in is not None:
+            lat, lon = given_in.sea_level_to_geodetic(float(p[1]), float(p[0]))
+        else:
+            lat, lon = float(p[0]), float(p[1])
+            if not (-89.0 <= lat <= 89.0 and -180.0 <= lon <= 360.0):
+                raise ConfigError(f"{source}: {what}: [{lat:g}, {lon:g}] is not [latitude, longitude] in degrees")
         n, e = frame.geodetic_to_sea_level(lat, lon)
         if math.hypot(n, e) > MAX_LATLON_DISTANCE:
             raise ConfigError(f"{source}: {what}: [{lat:g}, {lon:g}] is {math.hypot(n, e) / 1000:.0f} km from the "
@@ -438,19 +459,25 @@ def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: 
     """A concrete :class:`Scenario`; random scenarios draw map and end points from ``rng``.
     ``source`` names the file in error messages (default: the file the spec was read from)."""
     source = source or spec.path or str(scenario_path(spec.name))
-    if spec.positions == "latlon":
+    positions = None
+    if spec.kind == "fixed" and charts.is_chart(spec.map):
+        positions = positions_frame(spec, geodesy)
+        frame = map_frame(spec, geodesy)
+        if spec.positions == "latlon":
+            spec = positions_in_metres(spec, frame, source)
+        elif (frame.lat0, frame.lon0) != (positions.lat0, positions.lon0):
+            spec = positions_in_metres(spec, frame, source, given_in=positions)
+    elif spec.positions == "latlon":
         spec = positions_in_metres(spec, map_frame(spec, geodesy), source)
-    scen = _instance(spec, rng, base_current, safety_radius, source)
+    scen = _instance(spec, rng, base_current, safety_radius, source, positions)
     if scen.geodesy is None:        # a chart sets its own origin (its map's south-west corner)
         scen.geodesy = geodesy
-    elif geodesy is not None:
-        scen.geodesy = GeodesyParams(scen.geodesy.lat0, scen.geodesy.lon0, geodesy.alt0)
     _check_current(scen, source)
     return scen
 
 
 def _instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: Any,
-              safety_radius: float | None, source: str) -> Scenario:
+              safety_radius: float | None, source: str, positions: Any = None) -> Scenario:
     current, field_time = _current_params(base_current if base_current is not None else _default_current(),
                                           spec.current, source)
     current = _current_file(spec, current)
@@ -460,9 +487,10 @@ def _instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current:
             raise ConfigError(f"{source}: map: no such file {map_path}")
         geodesy = None
         if charts.is_chart(map_path):
-            grid = charts.rasterise(map_path, spec.resolution, spec.origin, spec.extent, spec.chart_buffer)
+            grid = charts.rasterise(map_path, spec.resolution, positions, spec.extent, spec.chart_buffer)
             occ = grid.occ
-            geodesy = GeodesyParams(grid.origin[0], grid.origin[1], 0.0)
+            geodesy = GeodesyParams(grid.origin[0], grid.origin[1], positions.alt0,
+                                    (positions.lat0, positions.lon0))
         else:
             occ = load_occupancy(map_path, spec.resolution)
         for what, p in (("start", spec.start), ("goal", spec.goal)):

@@ -212,3 +212,14 @@ class GeodesyParams:
     lat0: float = param("latitude of the NED origin", "deg", ge=-89, le=89)
     lon0: float = param("longitude of the NED origin", "deg", ge=-180, le=180)
     alt0: float = param("height of the NED origin above the ellipsoid", "m")
+    positions_origin: tuple[float, ...] = param(
+        "[lat, lon] from which a chart scenario's positions in metres count, when the NED origin was moved to its "
+        "map's corner (set by hil with lat0/lon0; [] = lat0, lon0)", "deg", ge=-180, le=360, default=())
+
+    def __post_init__(self) -> None:
+        if len(self.positions_origin) not in (0, 2):
+            raise ValueError("positions_origin: expected [latitude, longitude] or []")
+
+    def metres_origin(self) -> tuple[float, float]:
+        """(lat, lon) of the frame in which a scenario's positions in metres are given."""
+        return (self.positions_origin[0], self.positions_origin[1]) if self.positions_origin else (self.lat0, self.lon0)

@@ -11,11 +11,12 @@ import pytest
 
 pytest.importorskip("shapely")
 
-from support.world_files import LAT0, LON0, harbour_chart, lonlat  # noqa: E402
+from support.world_files import LAT0, LON0, harbour_chart  # noqa: E402
 
 from common.geodesy import LocalFrame  # noqa: E402
 from hil import charts  # noqa: E402
 from hil import scenario as scenarios  # noqa: E402
+from hil.config import CONFIG_DIR  # noqa: E402
 from hil.errors import ConfigError  # noqa: E402
 
 FRAME = LocalFrame(LAT0, LON0)
@@ -32,7 +33,7 @@ def _cell(grid: charts.ChartGrid, x: float, y: float) -> bool:
 
 
 def test_a_geojson_chart_is_rasterised_around_its_south_west_corner(tmp_path):
-    grid = charts.rasterise(_chart(tmp_path), 0.5)
+    grid = charts.rasterise(_chart(tmp_path), 0.5, FRAME)
     assert grid.origin == pytest.approx((LAT0, LON0), abs=1e-6)   # the bound of a curved parallel: mm
     assert grid.occ.shape == (300, 400)                   # 150 m x 200 m (the chart's bounds) at 0.5 m
     assert _cell(grid, 100.0, 10.0) and _cell(grid, 65.0, 80.0)          # quay, pier
@@ -57,10 +58,9 @@ def test_a_shapefile_gives_the_same_grid_as_the_geojson(tmp_path):
         pyogrio.raw.write(tmp_path / name, shapely.to_wkb(np.array([geoms[i] for i in idx], dtype=object)),
                           field_data=[buffers[idx]], fields=["buffer"], geometry_type="Polygon", crs="EPSG:4326",
                           driver="ESRI Shapefile")
-    shp = charts.rasterise(tmp_path / "polygons.shp", 0.5, origin=(LAT0, LON0), extent=(200.0, 150.0))
+    shp = charts.rasterise(tmp_path / "polygons.shp", 0.5, FRAME, extent=(0.0, 0.0, 200.0, 150.0))
     only_polygons = {"type": "FeatureCollection", "features": [doc["features"][i] for i in poly]}
-    gj = charts.rasterise(_chart(tmp_path, only_polygons, "p.geojson"), 0.5, origin=(LAT0, LON0),
-                          extent=(200.0, 150.0))
+    gj = charts.rasterise(_chart(tmp_path, only_polygons, "p.geojson"), 0.5, FRAME, extent=(0.0, 0.0, 200.0, 150.0))
     assert shp.occ.sum() > 1000
     np.testing.assert_array_equal(shp.occ, gj.occ)
 
@@ -73,7 +73,7 @@ def test_a_projected_shapefile_is_refused(tmp_path):
     pyogrio.raw.write(tmp_path / "utm.shp", shapely.to_wkb(np.array([box(500000, 4300000, 500100, 4300100)])),
                       field_data=[], fields=[], geometry_type="Polygon", crs="EPSG:32651", driver="ESRI Shapefile")
     with pytest.raises(ConfigError, match="coordinates in EPSG:32651; export the chart in WGS-84") as err:
-        charts.rasterise(tmp_path / "utm.shp", 1.0)
+        charts.rasterise(tmp_path / "utm.shp", 1.0, FRAME)
     assert "\n" not in str(err.value)
 
 
@@ -90,13 +90,13 @@ def test_bad_charts_are_refused_in_one_line(tmp_path, doc, message):
     p = tmp_path / "bad.geojson"
     p.write_text(doc if isinstance(doc, str) else json.dumps(doc))
     with pytest.raises(ConfigError, match=message) as err:
-        charts.rasterise(p, 1.0)
+        charts.rasterise(p, 1.0, FRAME)
     assert "\n" not in str(err.value)
 
 
 def test_a_grid_too_large_is_refused(tmp_path):
     with pytest.raises(ConfigError, match="choose a coarser resolution"):
-        charts.rasterise(_chart(tmp_path), 0.04)
+        charts.rasterise(_chart(tmp_path), 0.04, FRAME)
 
 
 SCENARIO = """name = "chart"
@@ -110,40 +110,65 @@ uncharted = [[100.0, 60.0, 3.0]]
 """
 
 
-def _shifted(origin: list[float]) -> str:
-    """SCENARIO with its map's corner 40 m west and 30 m south of the chart's: positions move with it."""
-    return (SCENARIO.replace("start = [30.0, 50.0]", "start = [70.0, 80.0]")
-            .replace("goal = [185.0, 130.0]", "goal = [225.0, 160.0]")
-            .replace("[[100.0, 60.0, 3.0]]", "[[140.0, 90.0, 3.0]]")
-            + f"origin = [{origin[1]!r}, {origin[0]!r}]\nextent = [260.0, 200.0]\n")
+# The chart drawn 40 m west and 30 m south of the configuration's origin: its south-west bound is there.
+SHIFTED = LocalFrame(*FRAME.sea_level_to_geodetic(-30.0, -40.0))
+# SCENARIO's positions in metres from the configuration's origin, for the shifted chart
+SHIFTED_SCENARIO = (SCENARIO.replace("start = [30.0, 50.0]", "start = [-10.0, 20.0]")
+                    .replace("goal = [185.0, 130.0]", "goal = [145.0, 100.0]")
+                    .replace("[[100.0, 60.0, 3.0]]", "[[60.0, 30.0, 3.0]]"))
 
 
-def test_a_scenario_on_a_chart_sets_the_runs_origin(tmp_path):
-    _chart(tmp_path)
-    origin = lonlat(FRAME, -40.0, -30.0)     # a corner south-west of the chart's bounds
-    (tmp_path / "s.toml").write_text(_shifted(origin))
+def test_positions_in_metres_count_from_the_configurations_origin(tmp_path):
+    """The grid starts at the chart's south-west bound; the run's NED origin moves there, and the
+    scenario's positions in metres (from the configuration's origin) move with it."""
+    _chart(tmp_path, harbour_chart(SHIFTED))
+    (tmp_path / "s.toml").write_text(SHIFTED_SCENARIO)
     scen = scenarios.load(str(tmp_path / "s.toml"))
-    assert scen.occ.shape == (400, 520)
-    assert (scen.geodesy.lat0, scen.geodesy.lon0) == pytest.approx((origin[1], origin[0]))
-    # the quay's south-west corner, (0, 0) m of the default origin, is 40 m east and 30 m north here
-    assert scen.occ[int(30.5 / 0.5), int(40.5 / 0.5)] and not scen.occ[int(29.0 / 0.5), int(39.0 / 0.5)]
-    # the true world is the same grid plus the uncharted disc
-    truth = scen.truth_occ()
-    assert truth[int(90 / 0.5), int(140 / 0.5)] and not scen.occ[int(90 / 0.5), int(140 / 0.5)]
+    assert scen.occ.shape == (300, 400)
+    assert (scen.geodesy.lat0, scen.geodesy.lon0) == pytest.approx((SHIFTED.lat0, SHIFTED.lon0), abs=1e-6)
+    assert scen.geodesy.positions_origin == (LAT0, LON0)
+    assert scen.start == pytest.approx((30.0, 50.0), abs=0.01) and scen.goal == pytest.approx((185.0, 130.0), abs=0.01)
+    assert scen.uncharted[0] == pytest.approx((100.0, 60.0, 3.0), abs=0.01)
+    truth = scen.truth_occ()      # the true world: the same grid plus the uncharted disc
+    assert truth[int(60 / 0.5), int(100 / 0.5)] and not scen.occ[int(60 / 0.5), int(100 / 0.5)]
     assert np.array_equal(truth & ~scen.occ, truth ^ scen.occ)
     # every process of a run gets this origin through --set geodesy.* (hil.console.load_settings)
-    over = charts.geodesy_overrides(str(tmp_path / "s.toml"))
-    assert over == [f"geodesy.lat0={origin[1]!r}", f"geodesy.lon0={origin[0]!r}"]
+    from hil.settings import load
+
+    over = charts.geodesy_overrides(str(tmp_path / "s.toml"), load().geodesy)
+    assert over == [f"geodesy.lat0={scen.geodesy.lat0!r}", f"geodesy.lon0={scen.geodesy.lon0!r}",
+                    f"geodesy.positions_origin=[{LAT0!r}, {LON0!r}]"]
+    moved = load(None, over).geodesy        # what the run's processes load: the same scenario, the same lines
+    assert charts.geodesy_overrides(str(tmp_path / "s.toml"), moved) == over
+    again = scenarios.load(str(tmp_path / "s.toml"), geodesy=moved)
+    assert again.start == scen.start and np.array_equal(again.occ, scen.occ)
+
+
+def test_an_extent_in_metres_from_the_origin_sets_the_grid(tmp_path):
+    _chart(tmp_path, harbour_chart(SHIFTED))
+    (tmp_path / "s.toml").write_text(SHIFTED_SCENARIO + "extent = [-50.0, -40.0, 170.0, 130.0]\n")
+    scen = scenarios.load(str(tmp_path / "s.toml"))
+    assert scen.occ.shape == (340, 440)
+    assert scen.start == pytest.approx((40.0, 60.0), abs=0.01)      # -10, 20 m from the origin; grid from -50, -40
+    # the quay's south-west corner (-40, -30 m from the origin) is 10 m east and 10 m north of the grid's
+    assert scen.occ[int(10.5 / 0.5), int(10.5 / 0.5)] and not scen.occ[int(9.0 / 0.5), int(9.0 / 0.5)]
 
 
 def test_the_default_extent_is_the_charts_bounds_and_points_are_checked(tmp_path):
+    from hil.settings import load
+
     _chart(tmp_path)
     (tmp_path / "s.toml").write_text(SCENARIO)
     scen = scenarios.load(str(tmp_path / "s.toml"))
     assert (scen.width, scen.height) == (200.0, 150.0)
-    assert charts.geodesy_overrides("harbour") == []
+    assert charts.geodesy_overrides("harbour", load().geodesy) == []
     (tmp_path / "s.toml").write_text(SCENARIO.replace("goal = [185.0, 130.0]", "goal = [65.0, 60.0]"))
-    with pytest.raises(ConfigError, match="goal: \\(65, 60\\) m is inside an obstacle"):
+    with pytest.raises(ConfigError, match="goal: \\(65, 60[.0-9]*\\) m is inside an obstacle"):
+        scenarios.load(str(tmp_path / "s.toml"))
+    grid_map = f'map = "{CONFIG_DIR}/maps/harbour.npy"'
+    (tmp_path / "s.toml").write_text(SCENARIO.replace('map = "harbour.geojson"', grid_map)
+                                     + "extent = [0.0, 0.0, 10.0, 10.0]\n")
+    with pytest.raises(ConfigError, match="only for a chart map"):
         scenarios.load(str(tmp_path / "s.toml"))
 
 
@@ -152,12 +177,12 @@ def test_the_settings_of_a_chart_scenario_carry_its_origin(tmp_path):
 
     from hil.console import load_settings
 
-    _chart(tmp_path)
-    origin = lonlat(FRAME, -40.0, -30.0)
-    (tmp_path / "s.toml").write_text(_shifted(origin))
+    _chart(tmp_path, harbour_chart(SHIFTED))
+    (tmp_path / "s.toml").write_text(SHIFTED_SCENARIO)
     args = argparse.Namespace(config=None, overrides=[], scenario=str(tmp_path / "s.toml"))
     cfg = load_settings(args)
-    assert (cfg.geodesy.lat0, cfg.geodesy.lon0) == (origin[1], origin[0])
-    assert len(args.overrides) == 2
+    assert (cfg.geodesy.lat0, cfg.geodesy.lon0) == pytest.approx((SHIFTED.lat0, SHIFTED.lon0), abs=1e-6)
+    assert cfg.geodesy.positions_origin == (LAT0, LON0)
+    assert len(args.overrides) == 3
     load_settings(args)
-    assert len(args.overrides) == 2      # once only
+    assert len(args.overrides) == 3      # once only

@@ -48,26 +48,25 @@ def test_a_run_on_the_example_world_reaches_the_goal_without_collision(hil, tmp_
 @pytest.mark.slow
 def test_a_users_chart_and_current_file_run_as_a_scenario(hil, tmp_path):
     """A GeoJSON chart and a CF netCDF current (0.4 m/s across the route, turning over an hour) that
-    a user's tools would write, named by a scenario in latitude/longitude."""
-    frame = LocalFrame(LAT0, LON0)
-    (tmp_path / "harbour.geojson").write_text(json.dumps(harbour_chart(frame)))
-    la0, lo0, la1, lo1 = metres_box(frame, -50.0, -50.0, 200.0, 250.0)
+    a user's tools would write; the chart reaches 40 m west and 30 m south of the configuration's
+    origin, from which the scenario's positions in metres count."""
     import numpy as np
 
+    origin = LocalFrame(LAT0, LON0)
+    chart_frame = LocalFrame(*origin.sea_level_to_geodetic(-30.0, -40.0))
+    (tmp_path / "harbour.geojson").write_text(json.dumps(harbour_chart(chart_frame)))
+    la0, lo0, la1, lo1 = metres_box(origin, -80.0, -90.0, 170.0, 210.0)
     write_cf_current(tmp_path / "currents.nc", np.linspace(la0, la1, 9), np.linspace(lo0, lo1, 9),
                      ["2024-05-01T00:00:00", "2024-05-01T01:00:00"],
                      lambda t, la, lo: 0.0 * la + 0.1 * t, lambda t, la, lo: 0.0 * la + 0.4 - 0.2 * t)
-    start = frame.sea_level_to_geodetic(50.0, 30.0)
-    goal = frame.sea_level_to_geodetic(130.0, 185.0)
-    (tmp_path / "users.toml").write_text(f"""name = "users-harbour"
+    (tmp_path / "users.toml").write_text("""name = "users-harbour"
 description = "a user's chart and current"
 kind = "fixed"
 map = "harbour.geojson"
 resolution = 0.5
-positions = "latlon"
-start = [{start[0]!r}, {start[1]!r}]
+start = [-10.0, 20.0]
 start_heading = 0.5
-goal = [{goal[0]!r}, {goal[1]!r}]
+goal = [145.0, 100.0]
 
 [current]
 file = "currents.nc"
