@@ -6,6 +6,12 @@ The map's origin (x = 0, y = 0, its south-west corner) is the NED origin of the 
 a map point (x, y) is NED (north = y, east = x); the HIL loop starts the simulated vessel at
 ``start``.
 
+The map may be a grid (.npy, .png) or a vector chart in longitude/latitude (``hil.charts``: the
+grid's south-west corner becomes the run's NED origin; positions in metres count from the
+configuration's origin and are moved onto the grid). With ``positions = "latlon"`` every position
+is [latitude, longitude]. The current may be eq. (13), uniform or a CF netCDF file
+(``common.current_sources``; a file that does not cover the map is refused). docs/worlds.md.
+
 A scenario file is loaded strictly (unknown or missing keys, wrong types and out-of-range values
 are one-line errors). Its optional tables override keys of other sections:
 
