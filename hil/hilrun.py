@@ -156,7 +156,8 @@ class HilRun:
         self.geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
         from hil.encounter_report import EncounterJudge
 
-        self.encounter_judge = EncounterJudge(cfg.vessel.L, cfg.vessel.W, cfg.colregs) if self.scen.traffic else None
+        self.encounter_judge = (EncounterJudge(cfg.vessel.L, cfg.vessel.W, cfg.colregs, route=self.scen.reference_path)
+                                if self.scen.traffic else None)
         self.tap = Tap(self.out / "run.tlog", self.geo, self.encounter_judge, cfg.traffic.truth_component_id,
                        cfg.link.component_id, lockstep=opts.lockstep, private=bool(cfg.gcs.signing_key_file))
         goal_ned = (self.scen.goal[1], self.scen.goal[0])
