@@ -13,7 +13,9 @@ has an own-ship sample at the same instant. From those:
   instant the ship is on a collision course (eq. 10 with R = own_radius + its hull radius +
   margin, closest approach within ``horizon``), or "no risk" if it never is;
 * **our action** between that instant and the CPA, from the true track: "starboard turn" /
-  "port turn" (course changed by at least ``TURN_DEG``), "slow down" (speed below
+  "port turn" (course at least ``TURN_DEG`` off the planned route's course where she is and farther
+  off it than at the risk instant, so closing on the route is none; without a route: changed by at
+  least ``TURN_DEG`` from the course at the risk instant), "slow down" (speed below
   ``SLOW_RATIO`` of the speed at the start), else "stand on"; with the instant it began;
 * **compliance**: no collision, CPA at least the safety radius (own_radius + the ship's hull
   radius), and the rule's manoeuvre: head-on, the ship passes on our port side (port to port);
