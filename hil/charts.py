@@ -198,15 +198,16 @@ def rasterise(path: str | Path, resolution: float, positions: LocalFrame, extent
     frame = LocalFrame(lat0, lon0, positions.alt0)
     shapes = []
     for f in feats:
-        g = to_metres(f.geometry, frame)
         b = default_buffer if f.buffer is None else f.buffer
-        if g.geom_type in ("Point", "MultiPoint", "LineString", "MultiLineString", "LinearRing"):
-            if b <= 0:
-                raise ConfigError(f"{path}: points and lines need a buffer > 0 m (chart_buffer or a 'buffer' property)")
-            g = g.buffer(b)
-        elif b > 0 and f.buffer is not None:
-            g = g.buffer(b)
-        shapes.append(g)
+        for g in shapely.get_parts(to_metres(f.geometry, frame)):   # a collection's members one by one
+            if g.geom_type in ("Point", "LineString", "LinearRing"):
+                if b <= 0:
+                    raise ConfigError(f"{path}: points and lines need a buffer > 0 m (chart_buffer or a "
+                                      "'buffer' property)")
+                g = g.buffer(b)
+            elif b > 0 and f.buffer is not None:
+                g = g.buffer(b)
+            shapes.append(g)
     world = shapely.union_all(shapes)
     if extent:
         width, height = float(extent[2] - extent[0]), float(extent[3] - extent[1])

@@ -186,3 +186,13 @@ def test_the_settings_of_a_chart_scenario_carry_its_origin(tmp_path):
     assert len(args.overrides) == 3
     load_settings(args)
     assert len(args.overrides) == 3      # once only
+
+
+def test_a_geometry_collection_grows_its_points_and_lines(tmp_path):
+    coll = {"type": "Feature", "properties": {"buffer": 2.0}, "geometry": {"type": "GeometryCollection", "geometries": [
+        {"type": "Point", "coordinates": [LON0, LAT0]},
+        {"type": "LineString", "coordinates": [list(reversed(FRAME.sea_level_to_geodetic(40.0, 0.0))),
+                                               list(reversed(FRAME.sea_level_to_geodetic(40.0, 30.0)))]}]}}
+    grid = charts.rasterise(_chart(tmp_path, coll), 0.5, FRAME)
+    assert _cell(grid, 1.0, 1.0) and not _cell(grid, 2.5, 2.5)        # the point (the corner), grown by 2 m
+    assert _cell(grid, 15.0, 41.5) and not _cell(grid, 15.0, 39.0)     # the line, 2 m each side

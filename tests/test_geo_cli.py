@@ -110,3 +110,17 @@ def test_hil_geo_writes_the_route_as_a_qgc_plan(hil_main, tmp_path):
     assert FRAME.geodetic_to_sea_level(home[0], home[1]) == pytest.approx((40.0, 22.0), abs=1e-6)
     bad = hil_main("geo", "--scenario", "harbour", "--plan", str(tmp_path / "x.txt"))
     assert bad.returncode == 2 and "unknown file type .txt" in bad.stderr
+
+
+def test_the_hil_geo_examples_of_docs_worlds_run(hil_main, tmp_path, monkeypatch):
+    """docs/worlds.md's `hil geo` lines, as written (a --plan file lands in a temporary folder)."""
+    import shlex
+
+    monkeypatch.chdir(tmp_path)
+    text = (Path(__file__).resolve().parent.parent / "docs" / "worlds.md").read_text()
+    lines = [ln.split("#")[0].strip() for ln in text.splitlines() if ln.startswith("hil geo ")]
+    assert len(lines) >= 4
+    for line in lines:
+        r = hil_main(*shlex.split(line)[1:])
+        assert r.returncode == 0, (line, r.stderr)
+    assert (tmp_path / "harbour.plan").is_file()
