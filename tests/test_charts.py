@@ -195,4 +195,4 @@ def test_a_geometry_collection_grows_its_points_and_lines(tmp_path):
                                                list(reversed(FRAME.sea_level_to_geodetic(40.0, 30.0)))]}]}}
     grid = charts.rasterise(_chart(tmp_path, coll), 0.5, FRAME)
     assert _cell(grid, 1.0, 1.0) and not _cell(grid, 2.5, 2.5)        # the point (the corner), grown by 2 m
-    assert _cell(grid, 15.0, 41.5) and not _cell(grid, 15.0, 39.0)     # the line, 2 m each side
+    assert _cell(grid, 15.0, 41.5) and _cell(grid, 15.0, 38.5) and not _cell(grid, 15.0, 37.0)  # the line, +-2 m
