@@ -74,3 +74,16 @@ def check_output_file(path: str | Path, option: str, suffixes: tuple[str, ...]) 
         raise UsageError(f"{option} {path}: is not writable")
     check_output_folder(path.parent, option)
     return path
+
+
+def tidy_failed_start(out: Path, fresh: bool) -> None:
+    """After a run that failed: drop the files it left empty (a run.tlog nothing reached), and the
+    folder itself when this run made it and nothing is left in it. Logs that say why stay."""
+    try:
+        for p in out.iterdir():
+            if p.is_file() and p.stat().st_size == 0:
+                p.unlink()
+        if fresh and not any(out.iterdir()):
+            out.rmdir()
+    except OSError:
+        pass   # tidying is a courtesy: the run's own error is what the user must see

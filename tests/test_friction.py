@@ -42,3 +42,22 @@ def test_the_demo_keeps_its_summary_in_out(hil, tmp_path):
     umask = os.umask(0)
     os.umask(umask)
     assert stat.S_IMODE((out / "summary.json").stat().st_mode) == 0o666 & ~umask
+
+
+def test_a_failed_start_leaves_no_empty_files(tmp_path):
+    from hil.files import tidy_failed_start
+
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "run.tlog").write_bytes(b"")
+    (out / "autopilot.log").write_text("autopilot: error: no such thing\n")
+    tidy_failed_start(out, fresh=True)
+    assert sorted(p.name for p in out.iterdir()) == ["autopilot.log"]     # the log that says why stays
+    (out / "autopilot.log").unlink()
+    (out / "run.tlog").write_bytes(b"")
+    tidy_failed_start(out, fresh=True)
+    assert not out.exists()
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    tidy_failed_start(kept, fresh=False)                                  # a folder the user gave stays
+    assert kept.is_dir()

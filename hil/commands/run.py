@@ -188,7 +188,15 @@ def _run_hil(args: argparse.Namespace, cfg: Any, cpus: Any = "auto") -> int:
     notice = compile_notice("run")
     if notice:
         progress(notice)
-    summary = run_loop(opts, cfg)
+    from hil.errors import RunFailed
+    from hil.files import tidy_failed_start
+
+    fresh = not out.exists()
+    try:
+        summary = run_loop(opts, cfg)
+    except RunFailed:
+        tidy_failed_start(out, fresh)
+        raise
     emit(args, to_table(summary), human_summary(summary))
     if summary.outcome == "interrupted":
         progress(f"run: interrupted; summary in {out}")
