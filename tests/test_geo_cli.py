@@ -124,3 +124,18 @@ def test_the_hil_geo_examples_of_docs_worlds_run(hil_main, tmp_path, monkeypatch
         r = hil_main(*shlex.split(line)[1:])
         assert r.returncode == 0, (line, r.stderr)
     assert (tmp_path / "harbour.plan").is_file()
+
+
+def test_hil_geo_on_a_chart_says_where_the_positions_count_from(hil_main, tmp_path):
+    from support.world_files import harbour_chart
+
+    (tmp_path / "h.geojson").write_text(json.dumps(harbour_chart(FRAME)))
+    (tmp_path / "s.toml").write_text('name = "s"\ndescription = "d"\nkind = "fixed"\nmap = "h.geojson"\n'
+                                     'start = [30.0, 50.0]\ngoal = [185.0, 130.0]\n'
+                                     "extent = [-20.0, -10.0, 200.0, 150.0]\n")
+    r = hil_main("geo", "--scenario", str(tmp_path / "s.toml"), "--json")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert out["positions_origin"] == pytest.approx([38.92, 121.65, 20.0, 10.0], abs=1e-6)
+    assert out["start"][:2] == pytest.approx([50.0, 60.0], abs=0.01)     # 30, 50 m from the origin
+    assert out["start"][2:] == pytest.approx(list(FRAME.sea_level_to_geodetic(50.0, 30.0)), abs=1e-9)

@@ -89,6 +89,13 @@ def run(args: argparse.Namespace) -> int:
 
     result: dict[str, Any] = {"origin": [frame.lat0, frame.lon0]}
     lines = [f"origin (map x = 0, y = 0): {frame.lat0:.7f}, {frame.lon0:.7f}"]
+    given = getattr(scen.geodesy, "positions_origin", ())
+    if given and tuple(given) != (frame.lat0, frame.lon0):
+        # a chart's grid starts elsewhere than the origin its positions in metres count from
+        e, n = frame.geodetic_to_sea_level(given[0], given[1])[::-1]
+        result["positions_origin"] = [given[0], given[1], e, n]
+        lines.append(f"the scenario's positions in metres count from {given[0]:.7f}, {given[1]:.7f} "
+                     f"(map {e:.2f}, {n:.2f} m); the map metres here are the run's")
     if args.to_latlon or args.to_metres:
         result["to_latlon"] = [[x, y, *latlon(x, y)] for x, y in args.to_latlon]
         result["to_metres"] = [[lat, lon, *metres(lat, lon)] for lat, lon in args.to_metres]
