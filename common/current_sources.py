@@ -17,9 +17,10 @@ scipy) with the eastward and northward velocity found by CF ``standard_name``
 (``eastward_sea_water_velocity`` / ``northward_sea_water_velocity``, or their ``surface_`` and
 ``_assuming_no_tide`` variants) or by the names given in ``east_variable`` / ``north_variable``, on
 1-D latitude and longitude coordinates (degrees north/east) and optionally time and depth (the
-level nearest the surface is used). Units ``m s-1`` (or ``m/s``) or ``cm s-1``; missing values
+level nearest the surface is used). Units ``m s-1`` (as variously spelt), ``cm s-1`` or knots; missing values
 (land in ocean-model output) read as still water. The run's t = 0 is the file's time ``start_time``
-(ISO 8601, UTC; default: the file's first time). On loading, each time slice is resampled onto a
+(ISO 8601, UTC; default: the file's first time); a file with one time slice is a steady current.
+On loading, each time slice is resampled onto a
 regular NED grid (each node's latitude and longitude from the exact tangent-plane conversion of
 ``common.geodesy``, the file bilinearly interpolated there); queries then interpolate bilinearly in
 space and linearly in time, clamped at the edges. :meth:`GriddedCurrent.check_covers` refuses, in
@@ -42,9 +43,10 @@ EAST_NAMES = ("eastward_sea_water_velocity", "surface_eastward_sea_water_velocit
               "eastward_sea_water_velocity_assuming_no_tide", "baroclinic_eastward_sea_water_velocity")
 NORTH_NAMES = ("northward_sea_water_velocity", "surface_northward_sea_water_velocity",
                "northward_sea_water_velocity_assuming_no_tide", "baroclinic_northward_sea_water_velocity")
-_UNITS = {"m s-1": 1.0, "m/s": 1.0, "m.s-1": 1.0, "m s**-1": 1.0, "meter second-1": 1.0, "meters/second": 1.0,
-          "metre second-1": 1.0, "meter/second": 1.0, "m sec-1": 1.0, "ms-1": 1.0,
-          "cm s-1": 0.01, "cm/s": 0.01, "cm.s-1": 0.01, "centimeter/second": 0.01, "cm s**-1": 0.01}
+# after lower-casing and spelling out (see _scale): "meters per second" -> "m/s", "m s^-1" -> "m s-1"
+_UNITS = {"m s-1": 1.0, "m/s": 1.0, "m.s-1": 1.0, "m s**-1": 1.0, "m/second": 1.0, "ms-1": 1.0, "mps": 1.0,
+          "cm s-1": 0.01, "cm/s": 0.01, "cm.s-1": 0.01, "cm s**-1": 0.01, "centim/second": 0.01, "centim s-1": 0.01,
+          "kn": 0.514444, "knot": 0.514444, "knots": 0.514444, "kt": 0.514444}
 MAX_SPEED = 10.0        # m/s: faster than any tidal race (Saltstraumen ~ 11 m/s is the one known exception)
 MAX_NODES = 512         # per axis of the resampled NED grid
 MAX_VALUES = 20_000_000  # time slices x nodes: a larger file must be cut down first
@@ -125,9 +127,12 @@ def _axis(ds: Any, var: Any, kind: str) -> str | None:
 
 
 def _scale(var: Any, path: str) -> float:
-    units = str(var.attrs.get("units", "m s-1")).strip()
+    units = " ".join(str(var.attrs.get("units", "m s-1")).strip().lower().replace("^", "").split())
+    units = units.replace("metres", "m").replace("meters", "m").replace("metre", "m").replace("meter", "m")
+    units = units.replace(" per second", "/s").replace("second-1", "s-1").replace("sec-1", "s-1")
     if units not in _UNITS:
-        raise CurrentSourceError(f"{path}: {var.name}: units {units!r} not understood (expected m s-1 or cm s-1)")
+        raise CurrentSourceError(f"{path}: {var.name}: units {var.attrs.get('units')!r} not understood "
+                                 "(expected m s-1, cm s-1 or knots)")
     return _UNITS[units]
 
 
@@ -176,6 +181,8 @@ def read_netcdf(path: str, east_variable: str = "", north_variable: str = "") ->
                 raise CurrentSourceError(f"{path}: time: not decodable as dates (a CF 'units' of "
                                          "'seconds since ...' and a standard calendar are needed)")
             times = tv.astype("datetime64[ns]").astype(np.int64) / 1e9
+            if times.size == 1:       # one time slice: a snapshot, taken as steady
+                times, u, v = None, u[0], v[0]
     if times is None:
         u, v = u[None], v[None]
     return _checked(RawCurrentGrid(lat, lon, times, u, v), path)

@@ -142,7 +142,7 @@ def _write_bad(path: Path, kind: str) -> Path:
 
 @pytest.mark.parametrize("kind, message", [
     ("text", "cannot be read as netCDF"),
-    ("units", "units 'knots per fortnight' not understood"),
+    ("units", "units .knots per fortnight. not understood"),
     ("fast", "42.4 m/s is not a sea current"),
     ("missing", "every velocity value is missing"),
     ("curvilinear", "curvilinear grids are not supported"),
@@ -254,3 +254,22 @@ def test_the_simulated_boat_drifts_with_the_same_current(tmp_path, kind):
     assert math.hypot(exp_n, exp_e) > 0.15
     # the drift carries the boat some metres: compare with the current where it is now
     assert (vn, ve) == pytest.approx((exp_n, exp_e), abs=0.03)
+
+
+def test_one_time_slice_is_a_steady_current_and_units_are_read_as_written(tmp_path):
+    import xarray as xr
+
+    la0, lo0, la1, lo1 = metres_box(FRAME, -150.0, -150.0, 350.0, 400.0)
+    lat, lon = np.linspace(la0, la1, 4), np.linspace(lo0, lo1, 4)
+    for units, value, expected in (("meters per second", 0.3, 0.3), ("knots", 1.0, 0.514444), ("m s^-1", 0.2, 0.2)):
+        ds = xr.Dataset({name: (("time", "lat", "lon"), np.full((1, 4, 4), value),
+                                {"standard_name": f"{d}ward_sea_water_velocity", "units": units})
+                         for name, d in (("u", "east"), ("v", "north"))},
+                        coords={"time": np.array(["2024-05-01T00:00"], dtype="datetime64[ns]"),
+                                "lat": ("lat", lat, {"units": "degrees_north"}),
+                                "lon": ("lon", lon, {"units": "degrees_east"})})
+        path = tmp_path / f"{value}.nc"
+        ds.to_netcdf(path)
+        g = load_file(str(path), FRAME)
+        assert g.time_span() == (-math.inf, math.inf)
+        assert g.velocity_at(10.0, 10.0, 1e5) == pytest.approx((expected, expected), abs=1e-9)
