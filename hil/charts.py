@@ -3,7 +3,9 @@ onto the planning grid.
 
 A chart holds obstacles in WGS-84 longitude/latitude: polygons (land, piers, breakwaters) as they
 are; lines and points (a mole drawn as a line, piles and buoys) grown by a buffer in metres, the
-feature's own ``buffer`` property or the scenario's ``chart_buffer``. Every feature is an obstacle.
+feature's own ``buffer`` property or the scenario's ``chart_buffer``. Every feature is an obstacle
+but one whose ``obstacle`` property is false; of an S-57 cell, the obstacle layers
+(:data:`S57_OBSTACLE_LAYERS`: land, shoreline constructions, obstructions, pontoons ...).
 
 The grid covers the chart's bounds, or ``extent`` = [west, south, east, north] in metres from the
 origin of the scenario's positions (the configuration's ``[geodesy]`` origin, or the scenario's
@@ -17,8 +19,8 @@ sensor and collision judge) is this same grid plus the scenario's uncharted disc
 
 Readers. GeoJSON (RFC 7946: always longitude/latitude) is read by the standard library and shapely.
 Other files go through pyogrio (GDAL): shapefiles (.shp with .dbf/.shx, and .prj when present),
-GeoPackage, KML and S-57 ENC cells (.000; every layer with geometry is read, so pick a chart
-exported with the obstacle layers you want). Files in a projected CRS are refused: export them
+GeoPackage, KML and S-57 ENC cells (.000: the obstacle layers only; no S-57 cell has been read
+here). Files in a projected CRS are refused: export them
 in WGS-84 (EPSG:4326).
 """
 
@@ -36,6 +38,10 @@ import numpy as np
 from common.geodesy import LocalFrame
 from hil.errors import ConfigError
 
+# S-57 object classes that are obstacles to a boat (IHO S-57 Appendix A): an ENC cell's other layers
+# (depth areas, fairways, lights ...) cover the water itself and are not read.
+S57_OBSTACLE_LAYERS = frozenset({"LNDARE", "SLCONS", "OBSTRN", "PONTON", "HULKES", "PILPNT", "MORFAC", "WRECKS",
+                                 "UWTROC", "DRYDOC", "FLODOC", "GATCON", "DAMCON", "CAUSWY", "PYLONS", "BRIDGE"})
 CHART_SUFFIXES = (".geojson", ".json", ".shp", ".gpkg", ".kml", ".000")
 MAX_CELLS = 16_000_000   # 4000 x 4000 cells: a planning grid the planner and the simulator hold in memory
 
@@ -98,6 +104,8 @@ def _read_geojson(path: Path) -> list[ChartFeature]:
         except Exception as exc:  # shapely raises several kinds for malformed coordinates
             raise ConfigError(f"{path}: feature {i}: bad geometry ({type(exc).__name__}: {exc})") from None
         props = f.get("properties") if isinstance(f.get("properties"), dict) else None
+        if props and props.get("obstacle") is False:
+            continue   # marked as no obstacle (a water area, a label)
         out.append(ChartFeature(geom, _buffer_of(props, f"{path}: feature {i}")))
     return out
 
@@ -111,6 +119,8 @@ def _read_ogr(path: Path) -> list[ChartFeature]:
         raise ConfigError(f"{path}: reading this chart format needs pyogrio (pip install pyogrio)") from None
     try:
         layers = [str(name) for name, gtype in pyogrio.list_layers(path) if gtype is not None]
+        if path.suffix.lower() == ".000":
+            layers = [name for name in layers if name.upper() in S57_OBSTACLE_LAYERS]
     except Exception as exc:  # pyogrio's DataSourceError and friends
         raise ConfigError(f"{path}: cannot be read as a chart ({str(exc).splitlines()[0]})") from None
     out: list[ChartFeature] = []
@@ -124,9 +134,10 @@ def _read_ogr(path: Path) -> list[ChartFeature]:
             raise ConfigError(f"{path}: layer {layer}: coordinates in {crs}; export the chart in WGS-84 "
                               "longitude/latitude (EPSG:4326)")
         names = [str(n) for n in meta.get("fields", [])]
+        keep = fields[names.index("obstacle")] if "obstacle" in names else None
         buffers = fields[names.index("buffer")] if "buffer" in names else None
         for i, g in enumerate(wkb):
-            if g is None:
+            if g is None or (keep is not None and keep[i] in (False, 0, "false", "no")):
                 continue
             b = None if buffers is None else buffers[i]
             b = None if b is None or (isinstance(b, float) and math.isnan(b)) else b

@@ -196,3 +196,15 @@ def test_a_geometry_collection_grows_its_points_and_lines(tmp_path):
     grid = charts.rasterise(_chart(tmp_path, coll), 0.5, FRAME)
     assert _cell(grid, 1.0, 1.0) and not _cell(grid, 2.5, 2.5)        # the point (the corner), grown by 2 m
     assert _cell(grid, 15.0, 41.5) and _cell(grid, 15.0, 38.5) and not _cell(grid, 15.0, 37.0)  # the line, +-2 m
+
+
+def test_a_feature_marked_as_no_obstacle_is_skipped(tmp_path):
+    doc = harbour_chart(FRAME)
+    ring = [list(reversed(FRAME.sea_level_to_geodetic(n, e))) for n, e in ((25, 5), (25, 50), (140, 50), (140, 5),
+                                                                          (25, 5))]
+    water = {"type": "Feature", "properties": {"name": "basin", "obstacle": False},
+             "geometry": {"type": "Polygon", "coordinates": [ring]}}
+    doc["features"].append(water)
+    grid = charts.rasterise(_chart(tmp_path, doc), 0.5, FRAME)
+    assert not _cell(grid, 30.0, 60.0)                # open water inside the 'basin' polygon
+    assert _cell(grid, 100.0, 10.0)                   # the quay still is land
