@@ -380,6 +380,12 @@ def _current_params(base_current: Any, overrides: dict[str, Any], source: str) -
         raise ConfigError(f"{source}: current.field_time: expected a number, got {field_time!r}")
     if not 0.0 <= field_time <= config.MAX_MAGNITUDE:
         raise ConfigError(f"{source}: current.field_time: must be a finite number of seconds >= 0 (got {field_time})")
+    # The scenario's source replaces the configuration's: its file drops a configured uniform current
+    # and the other way round (both at once is refused).
+    if "file" in ov and "uniform" in table:
+        table["uniform"] = []
+    if "uniform" in ov and "file" in table:
+        table["file"] = ""
     for k, v in ov.items():
         if k not in table:
             raise ConfigError(f"{source}: current.{k}: unknown key{config.suggest(k, list(table) + ['field_time'])}")

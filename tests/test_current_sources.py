@@ -273,3 +273,15 @@ def test_one_time_slice_is_a_steady_current_and_units_are_read_as_written(tmp_pa
         g = load_file(str(path), FRAME)
         assert g.time_span() == (-math.inf, math.inf)
         assert g.velocity_at(10.0, 10.0, 1e5) == pytest.approx((expected, expected), abs=1e-9)
+
+
+def test_the_scenarios_source_replaces_the_configurations(tmp_path):
+    """A configured uniform current gives way to a scenario's file, and a configured file to a
+    scenario's uniform current (both in one table is refused)."""
+    _harbour_file(tmp_path / "c.nc")
+    base = load(None, ["current.uniform=[0.5, 0.0]"]).current
+    scen = scenarios.load(str(_scenario(tmp_path, 'file = "c.nc"\n')), base)
+    assert isinstance(scen.current_field(), GriddedCurrent) and scen.current.uniform == ()
+    base = load(None, [f"current.file={str(tmp_path / 'c.nc')!r}"]).current
+    scen = scenarios.load(str(_scenario(tmp_path, "uniform = [0.0, 1.0]\n")), base)
+    assert isinstance(scen.current_field(), UniformCurrent) and scen.current.file == ""
