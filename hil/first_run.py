@@ -19,9 +19,11 @@ REPO = Path(__file__).resolve().parent.parent
 # the vessel computer's filter and guidance, the simulator's hull).
 KERNEL_SOURCES = ("planner/_kernels.py", "planner/_tree.py", "autopilot_bridge/nav_kernel.py",
                   "autopilot_bridge/guidance.py", "simulator/vessel.py", "common/geodesy.py")
-# CPU seconds of a cold compile, measured: `NUMBA_CACHE_DIR=$(mktemp -d) hil run --duration 1`
-# (user CPU 43 s cold against 5.4 s cached, docs/worlds.md "First run").
+# CPU seconds of a cold compile, measured (README "The first run compiles"): `NUMBA_CACHE_DIR=$(mktemp -d)
+# hil run --duration 1`, user CPU 43 s cold against 5.4 s cached; `hil plan --scenario harbour`, 26.0 s
+# against 1.3 s.
 COLD_COMPILE_S = 40
+COLD_PLAN_COMPILE_S = 25
 
 
 def _index_files(source: Path) -> list[Path]:
@@ -47,9 +49,9 @@ def kernels_cold() -> bool:
     return False
 
 
-def compile_notice(command: str) -> str | None:
+def compile_notice(command: str, seconds: int = COLD_COMPILE_S) -> str | None:
     """The line to print before a command that will compile, or None when the kernels are cached."""
     if not kernels_cold():
         return None
-    return (f"{command}: compiling numba kernels, first run only, ~{COLD_COMPILE_S} s of CPU "
+    return (f"{command}: compiling numba kernels, first run only, ~{seconds} s of CPU "
             "(longer on a busy machine; cached afterwards)")

@@ -124,6 +124,13 @@ def _ddrrt_hint(params, result, grid) -> str | None:
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
+    from hil.first_run import COLD_PLAN_COMPILE_S, compile_notice
+
+    # before the planner's import, which compiles on a cold cache
+    notice = compile_notice("hil plan", COLD_PLAN_COMPILE_S)
+    if notice:
+        console.progress(notice)
+
     import numpy as np
 
     from hil import scenario as scenarios
