@@ -75,7 +75,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     src = p.add_argument_group("problem (either --scenario or --map/--resolution/--start/--goal)")
     src.add_argument("--scenario", metavar="NAME",
                      help=f"take map, start, goal, heading and current from configs/scenarios/NAME.toml "
-                          f"({', '.join(scenario_names())})")
+                          f"({', '.join(scenario_names('fixed'))})")
     src.add_argument("--map", metavar="FILE", type=Path,
                      help="occupancy map: .npy (bool/0-1) or .png (dark = obstacle)")
     src.add_argument("--resolution", metavar="R", type=float, help="map cell size (m per cell, > 0)")
@@ -190,6 +190,13 @@ def _ddrrt_hint(params, result, grid) -> str | None:
 
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
+
+    from hil.first_run import COLD_PLAN_COMPILE_S, compile_notice
+
+    # before the planner's import, which compiles on a cold cache
+    notice = compile_notice("hil plan", COLD_PLAN_COMPILE_S)
+    if notice:
+        console.progress(notice)
 
     import numpy as np
 

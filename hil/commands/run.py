@@ -18,6 +18,7 @@ import re
 import signal
 import subprocess
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from common.tables import to_table
@@ -129,6 +130,10 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--demo drives the simulator over MAVLink; --actuators can needs the autopilot (drop --demo)")
     try:
         if args.demo:
+            if args.out:
+                from hil.files import check_output_folder
+
+                check_output_folder(Path(args.out), "--out")
             client = HilClient(system_id=cfg.autopilot.system_id, component_id=cfg.autopilot.component_id)
             return _run_loop(args, client, args.speedup is None)
         return _run_hil(args, cfg, cpus)
@@ -178,7 +183,20 @@ def _run_hil(args: argparse.Namespace, cfg: Any, cpus: Any = "auto") -> int:
         ("lockstep" if opts.lockstep else f"real time x{opts.speedup:g}")
     progress(f"run: scenario {args.scenario}, {pacing}, "
              f"actuators {cfg.can.actuators}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
-    summary = run_loop(opts, cfg)
+    from hil.first_run import compile_notice
+
+    notice = compile_notice("run")
+    if notice:
+        progress(notice)
+    from hil.errors import RunFailed
+    from hil.files import tidy_failed_start
+
+    fresh = not out.exists()
+    try:
+        summary = run_loop(opts, cfg)
+    except RunFailed:
+        tidy_failed_start(out, fresh)
+        raise
     emit(args, to_table(summary), human_summary(summary))
     if summary.outcome == "interrupted":
         progress(f"run: interrupted; summary in {out}")
@@ -291,5 +309,9 @@ def _run_loop(args: argparse.Namespace, client: HilClient, lockstep: bool) -> in
         "last_truth_time_s": (last_truth.time_usec / 1e6) if last_truth is not None else None,
         "simulator": sim,
     }
+    if args.out:   # the demo's run folder holds its summary (the loop's has its tlog, logs and plot too)
+        from hil.files import write_json_atomic
+
+        write_json_atomic(Path(args.out) / "summary.json", summary)
     emit(args, summary)
     return 0
