@@ -93,6 +93,12 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--wall-timeout", metavar="SECONDS", type=float, default=None,
                    help="end the run after this much wall time whatever happens (default: real time "
                         "--duration / speedup + 300 s; lockstep the larger of 900 s and 3 x --duration)")
+    p.add_argument("--autopilot", choices=("vessel-computer", "ardupilot"), default="vessel-computer",
+                   help="who flies the boat: the project's vessel computer (default) or ArduPilot's ArduRover SITL "
+                        "with the simulator as its JSON physics, in lockstep (docs/ardupilot.md)")
+    p.add_argument("--ardupilot-bin", metavar="PATH", default=None,
+                   help="--autopilot ardupilot: the ArduRover SITL binary, ArduPilot's rover.parm, motorboat.parm "
+                        "and rover-skid.parm beside it (default: $ARDUPILOT_SITL)")
     add_can_arguments(p)
     from hil.commands.autopilot import add_gcs_arguments
 
@@ -119,6 +125,8 @@ def run(args: argparse.Namespace) -> int:
         if args.speedup is not None and not args.wait_for_arm:
             raise ConfigError("--pipeline is a lockstep mode; drop --speedup (or add --wait-for-arm)")
         args.overrides.append("sim.lockstep_pipeline=true")
+    if args.autopilot == "ardupilot":
+        _check_ardupilot_options(args)
     from hil import placement
 
     cpus = placement.parse(args.cpus)
@@ -134,6 +142,16 @@ def run(args: argparse.Namespace) -> int:
         return _run_hil(args, cfg, cpus)
     finally:
         signal.signal(signal.SIGTERM, previous_term)
+
+
+def _check_ardupilot_options(args: argparse.Namespace) -> None:
+    """--autopilot ardupilot runs in plain lockstep over MAVLink actuators, without --demo."""
+    for given, name in ((args.demo, "--demo"), (args.speedup is not None, "--speedup"), (args.pipeline, "--pipeline"),
+                        (args.wait_for_arm, "--wait-for-arm"), (bool(args.gcs), "--gcs"),
+                        (getattr(args, "actuators", None) == "can", "--actuators can")):
+        if given:
+            raise UsageError(f"--autopilot ardupilot runs ArduRover in lockstep; drop {name} (a ground station "
+                             f"connects to ArduRover's TCP port, printed at the start)")
 
 
 def _default_wall_timeout(args: argparse.Namespace, paced: bool = False) -> float:
@@ -178,7 +196,12 @@ def _run_hil(args: argparse.Namespace, cfg: Any, cpus: Any = "auto") -> int:
         ("lockstep" if opts.lockstep else f"real time x{opts.speedup:g}")
     progress(f"run: scenario {args.scenario}, {pacing}, "
              f"actuators {cfg.can.actuators}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
-    summary = run_loop(opts, cfg)
+    if args.autopilot == "ardupilot":
+        from hil.ardupilot import run_ardupilot
+
+        summary = run_ardupilot(opts, cfg, args.ardupilot_bin)
+    else:
+        summary = run_loop(opts, cfg)
     emit(args, to_table(summary), human_summary(summary))
     if summary.outcome == "interrupted":
         progress(f"run: interrupted; summary in {out}")
