@@ -43,6 +43,9 @@ JSON_PORT, SERIAL0_PORT = 9002, 5760          # ArduPilot SITL's ports of instan
 INSTANCES = range(11, 400)                    # private instances: ports 9112.. and 5870.. upwards
 ROVER_AUTO, ROVER_HOLD = 10, 4                # Rover custom modes
 GCS_SYSID, GCS_COMPID = 255, 190
+# ArduRover's UNIX clock at boot (2025-01-01 00:00 UTC) instead of the host's: SYSTEM_TIME and its logs
+# then repeat byte for byte from run to run.
+SITL_START_TIME = 1735689600
 POLL_EVERY = 10                               # physics steps between looks at ArduRover's MAVLink
 SETUP_TIMEOUT_S = 120.0                       # simulated s for mission upload, arming and AUTO
 IDLE_TIMEOUT_S = 20.0                         # wall s without a servo packet: ArduRover is gone
@@ -114,15 +117,37 @@ def cruise_throttle(vessel: Any, speed: float) -> float:
     return round(100.0 * 0.5 * (lo + hi), 1)
 
 
+def full_turn_rate(vessel: Any) -> float:
+    """Steady yaw rate (rad/s) of ``vessel``'s hull at full differential thrust (one thruster full
+    ahead, the other full astern), from eq. (4)'s yaw balance."""
+    from simulator.vessel import Vessel, hull_dynamics
+
+    v = Vessel(vessel)
+    moment = v.propulsion(v.thrust(1.0), v.thrust(-1.0))[2]
+    lo, hi = 0.0, 20.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        d = hull_dynamics((0.0, 0.0, 0.0, 0.0, 0.0, mid), (0.0, 0.0, abs(moment)), (0.0, 0.0, 0.0), (0.0, 0.0),
+                          v.coefficients)
+        lo, hi = (mid, hi) if d[5] > 0 else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+TURN_MARGIN = 0.8   # ArduRover may ask for this share of the hull's full turn rate (the rest corrects)
+
+
 def project_params(cfg: Any) -> dict[str, float]:
-    """The parameters this project adds to ArduPilot's: the system id, and the same cruise speed as
-    the vessel computer's with the throttle that holds it on this hull."""
+    """The parameters this project lays over ArduPilot's, all from the configuration: the system id;
+    the vessel computer's cruise speed with the throttle that holds it on this hull; and the turn
+    this hull can make. ArduPilot's defaults assume a rover that turns at 0.6 g and 120 deg/s; this
+    boat makes 0.08 g at 1.5 m/s, and with those defaults ArduRover overshot the breakwater's corner of
+    the harbour route and collided at 164.4 s (docs/ardupilot.md)."""
     speed = float(cfg.autopilot.cruise_speed)
-    # WP_RADIUS: rover.parm's 3 m lets ArduRover turn for the next waypoint 3 m early, more than the
-    # route's margin from the chart (planner.safety_radius less the half hull): on the harbour it cut
-    # the breakwater's end and collided at 164.4 s (docs/ardupilot.md). The half hull length keeps it inside.
+    rate = TURN_MARGIN * full_turn_rate(cfg.vessel)
     return {"SYSID_THISMAV": float(cfg.autopilot.system_id), "CRUISE_SPEED": speed, "WP_SPEED": speed,
-            "CRUISE_THROTTLE": cruise_throttle(cfg.vessel, speed), "WP_RADIUS": round(float(cfg.vessel.L) / 2.0, 2)}
+            "CRUISE_THROTTLE": cruise_throttle(cfg.vessel, speed),
+            "ATC_STR_RAT_MAX": round(math.degrees(rate), 1),
+            "ATC_TURN_MAX_G": round(speed * rate / 9.80665, 3)}
 
 
 def write_params(path: Path, params: dict[str, float]) -> None:
@@ -171,12 +196,12 @@ class Mission:
 class ArduPilotRun:
     """One run of ArduRover on a scenario; :meth:`execute` returns the summary."""
 
-    def __init__(self, opts: Any, cfg: Any, sitl: SitlFiles) -> None:
+    def __init__(self, opts: Any, cfg: Any, sitl: SitlFiles, user_params: Path | None = None) -> None:
         from hil import scenario as scenarios
         from hil import settings
         from hil.hilrun import Judge
 
-        self.opts, self.sitl = opts, sitl
+        self.opts, self.sitl, self.user_params = opts, sitl, user_params
         self.scen = scenarios.load(opts.scenario, cfg.current, cfg.planner.safety_radius)
         # The simulator as `hil run` starts it on this scenario: the start and the scenario's current.
         over = [*opts.overrides, *scenarios.simulator_overrides(self.scen, cfg.current), f"sim.seed={opts.seed}"]
@@ -208,8 +233,10 @@ class ArduPilotRun:
     # -- ArduRover ---------------------------------------------------------------------------------
     def sitl_command(self, instance: int, mav_port: int, param_file: Path) -> list[str]:
         lat, lon = self.geo.sea_level_to_geodetic(*self.home)
-        defaults = ",".join(str(p) for p in (*self.sitl.param_files, param_file))
+        files = (*self.sitl.param_files, param_file, *((self.user_params,) if self.user_params else ()))
+        defaults = ",".join(str(p) for p in files)
         return [str(self.sitl.binary), "--model", "JSON:127.0.0.1", "--speedup", "100", "-I", str(instance), "-w",
+                "--start-time", str(SITL_START_TIME),
                 "--home", f"{lat:.9f},{lon:.9f},{self.cfg.geodesy.alt0:g},{self.home_heading_deg:.3f}",
                 "--serial0", f"udpclient:127.0.0.1:{mav_port}", "--defaults", defaults]
 
@@ -227,7 +254,8 @@ class ArduPilotRun:
         param_file = folder / "usv-hil.parm"
         write_params(param_file, params)
         try:
-            mixer = SkidMixer.from_params({**read_params(self.sitl.param_files), **params})
+            mixer = SkidMixer.from_params({**read_params(self.sitl.param_files), **params,
+                                           **(read_params((self.user_params,)) if self.user_params else {})})
         except ValueError as exc:
             raise UsageError(f"ArduRover parameters: {exc}") from None
         core = SimulatorCore(cfg, None, tuple(self.scen.traffic or ()))
@@ -311,7 +339,8 @@ class ArduPilotRun:
                 for ship in core.traffic.ships:
                     st = ship.state(t, core.traffic.params.turning_window)
                     sp = ship.spec
-                    self.encounter_judge.add(tu, (n, e, psi), sp.mmsi, sp.name, (sp.bow, sp.stern, sp.port, sp.starboard),
+                    self.encounter_judge.add(tu, (n, e, psi), sp.mmsi, sp.name,
+                                             (sp.bow, sp.stern, sp.port, sp.starboard),
                                              st.north, st.east, st.course, st.speed)
         if self.outcome is not None:
             return
@@ -344,7 +373,6 @@ class ArduPilotRun:
 
     def _mavlink(self, t: float) -> None:
         """Read what ArduRover sent since the last look and take the set-up's next step."""
-        ms = self.mission
         while True:
             try:
                 data, sender = self.mav_sock.recvfrom(4096)
@@ -459,7 +487,8 @@ def route_cross_track(track: np.ndarray, route: np.ndarray) -> dict[str, float] 
     p = track[:, None, :]
     w = np.clip(np.sum((p - a) * ab, axis=2) / den, 0.0, 1.0)
     d = np.min(np.hypot(*(p - (a + w[..., None] * ab)).transpose(2, 0, 1)), axis=1)
-    return {"cross_track_rms_m": round(float(np.sqrt(np.mean(d * d))), 3), "cross_track_max_m": round(float(d.max()), 3)}
+    return {"cross_track_rms_m": round(float(np.sqrt(np.mean(d * d))), 3),
+            "cross_track_max_m": round(float(d.max()), 3)}
 
 
 def _i16(v: float) -> int:
@@ -474,13 +503,19 @@ def _last_line(path: Path) -> str:
     return lines[-1].strip()[:200] if lines else ""
 
 
-def run_ardupilot(opts: Any, cfg: Any, binary: str | None) -> Any:
-    """`hil run --autopilot ardupilot`: the run folder (run.tlog, summary.json, plot.png, ardupilot/)."""
+def run_ardupilot(opts: Any, cfg: Any, binary: str | None, user_params: str | None = None) -> Any:
+    """`hil run --autopilot ardupilot`: the run folder (run.tlog, summary.json, plot.png, ardupilot/).
+    ``user_params``: an ArduPilot parameter file laid over all others (the user's own tuning)."""
     from common.tables import to_table
     from hil.files import write_json_atomic
 
     sitl = find_sitl(binary)
-    run = ArduPilotRun(opts, cfg, sitl)
+    extra = None
+    if user_params:
+        extra = Path(user_params).expanduser().resolve()
+        if not extra.is_file():
+            raise UsageError(f"--ardupilot-params: no such file {extra}")
+    run = ArduPilotRun(opts, cfg, sitl, extra)
     summary = run.execute()
     summary = replace(summary, run_folder=str(opts.out))
     if opts.plot:

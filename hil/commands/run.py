@@ -99,6 +99,9 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--ardupilot-bin", metavar="PATH", default=None,
                    help="--autopilot ardupilot: the ArduRover SITL binary, ArduPilot's rover.parm, motorboat.parm "
                         "and rover-skid.parm beside it (default: $ARDUPILOT_SITL)")
+    p.add_argument("--ardupilot-params", metavar="FILE", default=None,
+                   help="--autopilot ardupilot: your own ArduPilot parameter file, laid over ArduPilot's and "
+                        "the project's")
     add_can_arguments(p)
     from hil.commands.autopilot import add_gcs_arguments
 
@@ -199,7 +202,7 @@ def _run_hil(args: argparse.Namespace, cfg: Any, cpus: Any = "auto") -> int:
     if args.autopilot == "ardupilot":
         from hil.ardupilot import run_ardupilot
 
-        summary = run_ardupilot(opts, cfg, args.ardupilot_bin)
+        summary = run_ardupilot(opts, cfg, args.ardupilot_bin, args.ardupilot_params)
     else:
         summary = run_loop(opts, cfg)
     emit(args, to_table(summary), human_summary(summary))
