@@ -503,18 +503,13 @@ def _last_line(path: Path) -> str:
     return lines[-1].strip()[:200] if lines else ""
 
 
-def run_ardupilot(opts: Any, cfg: Any, binary: str | None, user_params: str | None = None) -> Any:
+def run_ardupilot(opts: Any, cfg: Any, sitl: SitlFiles, user_params: str | None = None) -> Any:
     """`hil run --autopilot ardupilot`: the run folder (run.tlog, summary.json, plot.png, ardupilot/).
     ``user_params``: an ArduPilot parameter file laid over all others (the user's own tuning)."""
     from common.tables import to_table
     from hil.files import write_json_atomic
 
-    sitl = find_sitl(binary)
-    extra = None
-    if user_params:
-        extra = Path(user_params).expanduser().resolve()
-        if not extra.is_file():
-            raise UsageError(f"--ardupilot-params: no such file {extra}")
+    extra = Path(user_params).expanduser().resolve() if user_params else None
     run = ArduPilotRun(opts, cfg, sitl, extra)
     summary = run.execute()
     summary = replace(summary, run_folder=str(opts.out))

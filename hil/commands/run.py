@@ -148,13 +148,21 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _check_ardupilot_options(args: argparse.Namespace) -> None:
-    """--autopilot ardupilot runs in plain lockstep over MAVLink actuators, without --demo."""
+    from pathlib import Path
+
+    """--autopilot ardupilot runs in plain lockstep over MAVLink actuators, without --demo, with a
+    binary that runs."""
     for given, name in ((args.demo, "--demo"), (args.speedup is not None, "--speedup"), (args.pipeline, "--pipeline"),
                         (args.wait_for_arm, "--wait-for-arm"), (bool(args.gcs), "--gcs"),
                         (getattr(args, "actuators", None) == "can", "--actuators can")):
         if given:
             raise UsageError(f"--autopilot ardupilot runs ArduRover in lockstep; drop {name} (a ground station "
                              f"connects to ArduRover's TCP port, printed at the start)")
+    from hil.ardupilot import find_sitl
+
+    args.sitl = find_sitl(args.ardupilot_bin)   # before anything runs: a missing binary is one line
+    if args.ardupilot_params is not None and not Path(args.ardupilot_params).is_file():
+        raise UsageError(f"--ardupilot-params: no such file {args.ardupilot_params}")
 
 
 def _default_wall_timeout(args: argparse.Namespace, paced: bool = False) -> float:
@@ -202,7 +210,7 @@ def _run_hil(args: argparse.Namespace, cfg: Any, cpus: Any = "auto") -> int:
     if args.autopilot == "ardupilot":
         from hil.ardupilot import run_ardupilot
 
-        summary = run_ardupilot(opts, cfg, args.ardupilot_bin, args.ardupilot_params)
+        summary = run_ardupilot(opts, cfg, args.sitl, args.ardupilot_params)
     else:
         summary = run_loop(opts, cfg)
     emit(args, to_table(summary), human_summary(summary))
