@@ -154,15 +154,6 @@ def write_params(path: Path, params: dict[str, float]) -> None:
     path.write_text("".join(f"{k} {v:g}\n" for k, v in params.items()))
 
 
-def free_instance() -> int:
-    """An instance whose JSON (UDP) and MAVLink (TCP) ports are free now."""
-    for i in INSTANCES:
-        if _free(socket.SOCK_DGRAM, JSON_PORT + 10 * i) and all(
-                _free(socket.SOCK_STREAM, SERIAL0_PORT + 10 * i + k) for k in range(4)):
-            return i
-    raise RunFailed("no free ArduPilot SITL instance (ports 9112-13002 and 5870-9763 all taken)")
-
-
 def _free(kind: int, port: int) -> bool:
     with socket.socket(socket.AF_INET, kind) as s:
         try:
@@ -244,7 +235,7 @@ class ArduPilotRun:
         from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
         from simulator.core import SimulatorCore
-        from simulator.json_backend import JsonPhysics, JsonServer, SkidMixer
+        from simulator.json_backend import JsonPhysics, SkidMixer
 
         cfg, opts = self.cfg, self.opts
         folder = self.out / "ardupilot"
@@ -261,6 +252,8 @@ class ArduPilotRun:
         core = SimulatorCore(cfg, None, tuple(self.scen.traffic or ()))
         self.core = core
         physics = JsonPhysics(core, mixer, self.home)
+        physics.moored = True       # until ArduRover is armed in AUTO: its boot takes ~40 s of simulated time
+        self.physics = physics
         self.mav_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.mav_sock.bind(("127.0.0.1", 0))
         self.mav_sock.setblocking(False)
@@ -270,9 +263,7 @@ class ArduPilotRun:
         self.ap_sysid = int(cfg.autopilot.system_id)
         self.tlog = open(self.out / "run.tlog", "wb")
         self.truth_codec = core.codec
-        instance = free_instance()
-        server = JsonServer(physics, ("127.0.0.1", JSON_PORT + 10 * instance), duration=opts.duration + 1.0,
-                            after_step=self._after_step, idle_timeout=IDLE_TIMEOUT_S)
+        instance, server = self._open_instance(physics)
         self.server = server
         cmd = self.sitl_command(instance, self.mav_sock.getsockname()[1], param_file)
         (folder / "command.txt").write_text(" ".join(cmd) + "\n")
@@ -306,6 +297,22 @@ class ArduPilotRun:
             self.outcome = "timeout"
         return self._summary(time.monotonic() - wall0, sim_summary, params, instance)
 
+    def _open_instance(self, physics: Any) -> tuple[int, Any]:
+        """The first SITL instance whose MAVLink TCP ports are free, with its JSON port bound here (a
+        run beside this one then takes the next)."""
+        from simulator.json_backend import JsonServer
+
+        for i in INSTANCES:
+            if not all(_free(socket.SOCK_STREAM, SERIAL0_PORT + 10 * i + k) for k in range(4)):
+                continue
+            try:
+                return i, JsonServer(physics, ("127.0.0.1", JSON_PORT + 10 * i),
+                                     duration=self.opts.duration + SETUP_TIMEOUT_S + 1.0,
+                                     after_step=self._after_step, idle_timeout=IDLE_TIMEOUT_S)
+            except ValueError:
+                continue
+        raise RunFailed(f"no free ArduPilot SITL instance (instances {INSTANCES.start}-{INSTANCES.stop - 1})")
+
     # -- between two physics steps ----------------------------------------------------------------
     def _after_step(self, core: Any) -> None:
         t = core.t
@@ -333,11 +340,12 @@ class ArduPilotRun:
             int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(self.cfg.geodesy.alt0 * 1000)),
             _i16(100 * vn), _i16(100 * ve), 0, 0, 0, 0, 0, 0))
         if core.traffic is not None:
-            for frame in core.traffic.truth_messages(t, core.truth_codec):
+            ts = self.traffic_time(t)
+            for frame in core.traffic.truth_messages(ts, core.truth_codec):
                 self._log(tu, frame)
             if self.encounter_judge is not None:
                 for ship in core.traffic.ships:
-                    st = ship.state(t, core.traffic.params.turning_window)
+                    st = ship.state(ts, core.traffic.params.turning_window)
                     sp = ship.spec
                     self.encounter_judge.add(tu, (n, e, psi), sp.mmsi, sp.name,
                                              (sp.bow, sp.stern, sp.port, sp.starboard),
@@ -352,12 +360,18 @@ class ArduPilotRun:
             self.outcome, self.collision_at = "collision", self.encounter_judge.collision[0]
         elif self.judge.at_goal(n, e):
             self.outcome = "goal"
-        elif t >= self.opts.duration:
-            self.outcome = "timeout"
+        elif self.mission.auto_at is not None and t - self.mission.auto_at >= self.opts.duration:
+            self.outcome = "timeout"    # --duration counts the mission, from AUTO
         if self.mission.phase not in ("flying", "failed") and t - (self.mission.auto_at or 0.0) > SETUP_TIMEOUT_S \
                 and self.outcome is None:
             self.mission.failure = f"not in AUTO after {SETUP_TIMEOUT_S:g} s (phase {self.mission.phase})"
             self.outcome = "autopilot_not_ready"
+
+    def traffic_time(self, t: float) -> float:
+        """The ships' clock (s): they wait at their starts until the boat is let go, in AUTO, so the
+        encounters happen as they do for the vessel computer, which leaves at once."""
+        auto = self.mission.auto_at
+        return 0.0 if auto is None else t - auto
 
     def _log(self, tu: int, frame: bytes) -> None:
         self.tlog.write(struct.pack(">Q", tu) + frame)
@@ -429,6 +443,7 @@ class ArduPilotRun:
         elif ms.phase in ("arm", "auto") and t - ms.sent_at > 1.0:
             if ms.armed and ms.mode == ROVER_AUTO:
                 ms.phase, ms.auto_at = "flying", t
+                self.physics.moored = False
                 self.events.append(f"{t:.1f} s: armed, AUTO")
                 return
             if ms.mode != ROVER_AUTO:
@@ -471,6 +486,8 @@ class ArduPilotRun:
                                                   "wrong_peer")},
                        "ardupilot": {"binary": str(self.sitl.binary), "instance": instance, "params": params,
                                      "auto_at_s": ms.auto_at, "mission_items": len(ms.items),
+                                     "mission_time_s": None if ms.auto_at is None or not times else
+                                     round(times[-1] * 1e-6 - ms.auto_at, 3),
                                      "setup_failure": ms.failure, "statustext": ms.statustext[-20:]}},
             security=RunSecurity(simulator=None, autopilot=None, autopilot_navigation_numeric={}, tap=None),
             tlog=str(self.out / "run.tlog"), tlog_messages=self.tlog_frames, events=tuple(self.events),

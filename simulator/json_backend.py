@@ -164,6 +164,9 @@ class JsonPhysics:
         self.repeats = 0          # packets re-sent by the firmware (answered again, no step)
         self.malformed = 0
         self.frame_rate = 0       # Hz, the firmware's last reported physics rate
+        # Moored: the boat stays where it is, at rest, while time passes (an autopilot's boot and set-up,
+        # as at a quay); waves and current act again once it is let go.
+        self.moored = False
 
     def answer(self, data: bytes) -> bytes | None:
         """The state answer to one datagram (None: not a servo packet, counted in ``malformed``)."""
@@ -179,8 +182,13 @@ class JsonPhysics:
         self.last_count = pkt.frame_count
         core = self.core
         core.apply(Command(core.time_usec, *self.mixer.controls(pkt.pwm)))
-        core.step()
-        self.last_answer = state_json(core.t, core.state, self.acceleration(), self.home)
+        if self.moored:
+            core.n += 1     # time passes; the boat, held at its mooring, neither moves nor accelerates
+            accel = (0.0, 0.0)
+        else:
+            core.step()
+            accel = self.acceleration()
+        self.last_answer = state_json(core.t, core.state, accel, self.home)
         return self.last_answer
 
     def acceleration(self) -> tuple[float, float]:

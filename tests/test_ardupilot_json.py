@@ -204,3 +204,17 @@ def test_a_busy_port_is_one_line() -> None:
         s.bind(("127.0.0.1", 0))
         with pytest.raises(ValueError, match="JSON physics port"):
             JsonServer(JsonPhysics(_core(), SkidMixer(), (0.0, 0.0)), s.getsockname())
+
+
+def test_moored_the_boat_holds_still_while_time_passes() -> None:
+    phys = JsonPhysics(_core(x=5.0, y=7.0, psi=0.3), SkidMixer(), (5.0, 7.0))
+    start = phys.core.state
+    phys.moored = True
+    for k in range(100):
+        answer = phys.answer(encode_servo_packet(100, k, _pwm(2000, 2000)))
+    s = json.loads(answer)
+    assert phys.core.state == start and s["timestamp"] == pytest.approx(1.0)
+    assert s["position"] == [0.0, 0.0, 0.0] and s["imu"]["accel_body"][:2] == [0.0, 0.0]
+    phys.moored = False
+    phys.answer(encode_servo_packet(100, 100, _pwm(2000, 2000)))
+    assert phys.core.state != start

@@ -107,6 +107,7 @@ def test_ardurover_flies_the_harbour_route_and_a_rerun_is_byte_identical(tmp_pat
     assert s["min_clearance_m"] > 1.0 and s["energy_J"] > 0 and s["actuators"] == "ardupilot"
     ap = s["simulator"]["ardupilot"]
     assert ap["auto_at_s"] is not None and ap["mission_items"] > 10
+    assert ap["mission_time_s"] == pytest.approx(s["sim_time_s"] - ap["auto_at_s"], abs=1e-3)
     assert any("Reached waypoint" in t for t in ap["statustext"])
     drop = ("wall_time_s", "run_folder", "tlog")
     assert {k: v for k, v in s.items() if k not in drop} == {k: v for k, v in summaries[1].items() if k not in drop}
