@@ -65,20 +65,21 @@ def test_lockstep_only(tmp_path: Path) -> None:
 @needs_sitl
 def test_ardurover_flies_the_harbour_route_and_a_rerun_is_byte_identical(tmp_path: Path) -> None:
     """ArduRover (motorboat-skid parameters plus the project's) flies the harbour's global route to the
-    goal without collision, in lockstep with the JSON physics; a ground station connects to its TCP
-    port meanwhile; a second run writes the same run.tlog, byte for byte."""
+    goal without collision, in lockstep with the JSON physics; two runs write the same run.tlog, byte for
+    byte. A third, with a ground station connected to ArduRover's SERIAL1 at a moment of wall time, is
+    judged the same (its run.tlog is not compared: docs/ardupilot.md, "Repeatability")."""
     from pymavlink import mavutil
 
-    outs = [tmp_path / "a", tmp_path / "b"]
+    outs = [tmp_path / "a", tmp_path / "b", tmp_path / "gcs"]
     cmd = [sys.executable, "-m", "hil", "run", "--scenario", "harbour", "--autopilot", "ardupilot",
            "--duration", "260", "--json", "--no-plot"]
     env = {**os.environ, "ARDUPILOT_SITL": str(SITL)}
     summaries = []
-    for k, out in enumerate(outs):
+    for out in outs:
         proc = subprocess.Popen([*cmd, "--out", str(out)], cwd=REPO, env=env, text=True,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         try:
-            if k == 0:   # a ground station on ArduRover's SERIAL1, as on any SITL
+            if out.name == "gcs":   # a ground station on ArduRover's SERIAL1, as on any SITL
                 port = None
                 deadline = time.monotonic() + 120
                 while port is None and time.monotonic() < deadline:
@@ -109,10 +110,11 @@ def test_ardurover_flies_the_harbour_route_and_a_rerun_is_byte_identical(tmp_pat
     assert ap["auto_at_s"] is not None and ap["mission_items"] > 10
     assert ap["mission_time_s"] == pytest.approx(s["sim_time_s"] - ap["auto_at_s"], abs=1e-3)
     assert any("Reached waypoint" in t for t in ap["statustext"])
-    drop = ("wall_time_s", "run_folder", "tlog")
-    assert {k: v for k, v in s.items() if k not in drop} == {k: v for k, v in summaries[1].items() if k not in drop}
-    tlogs = [(o / "run.tlog").read_bytes() for o in outs]
+    tlogs = [(o / "run.tlog").read_bytes() for o in outs[:2]]
     assert len(tlogs[0]) > 100_000 and tlogs[0] == tlogs[1]
+    judged = ("outcome", "reached_goal", "collisions", "min_clearance_m", "sim_time_s", "path_length_m", "energy_J")
+    for other in summaries[1:]:
+        assert {k: other[k] for k in judged} == {k: s[k] for k in judged}
     types = set()
     m = mavutil.mavlink_connection(str(outs[0] / "run.tlog"))
     while (msg := m.recv_msg()) is not None:

@@ -131,7 +131,8 @@ def run(args: argparse.Namespace) -> int:
     geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
     result: dict[str, Any] = {"commit": commit(), "seed": args.seed, "duration_s": args.duration,
                               "ardupilot": str(sitl.binary), "scenarios": {}}
-    lines = [f"ArduRover / vessel computer, seed {args.seed}, lockstep, commit {result['commit']}"]
+    lines = [f"ArduRover against the vessel computer, seed {args.seed}, lockstep, commit {result['commit']}",
+             " ".join(f"{c:<15}" if i == 0 else f"{c:>8}" for i, c in enumerate(HEAD))]
     with tempfile.TemporaryDirectory(prefix="hil-bench-ardupilot-") as tmp:
         root = Path(args.out) if args.out else Path(tmp)
         for name in args.scenarios:
@@ -154,10 +155,18 @@ def run(args: argparse.Namespace) -> int:
                 theirs["mission_time_s"] = ap.get("mission_time_s")
             ratios = {k: ratio(theirs[k], ours[k]) for k in METRICS if k != "collisions"}
             result["scenarios"][name] = {"ardurover": theirs, "vessel_computer": ours, "ratio": ratios}
-            lines.append(f"{name}: outcome ArduRover {theirs['outcome']}, vessel computer {ours['outcome']}")
-            for k in METRICS:
-                lines.append(f"  {k:<18} {_fmt(theirs[k]):>9} {_fmt(ours[k]):>9}  ratio {_fmt(ratios.get(k))}")
+            lines += [_row(name, "ArduRover", theirs), _row("", "ours", ours),
+                      _row("", "ratio", {**ratios, "outcome": "", "collisions": None})]
     emit(args, result, lines)
+
+
+HEAD = ("scenario", "who", "outcome", "time s", "way s", "xte rms", "xte max", "clear m", "energy J", "path m",
+        "coll")   # time: to the goal (ArduRover's from AUTO); way: from the start of motion; xte: from the route
+
+
+def _row(scenario: str, who: str, f: dict[str, Any]) -> str:
+    cells = (scenario, who, str(f.get("outcome", "")), *(_fmt(f.get(k)) for k in METRICS))
+    return " ".join(f"{c:<15}" if i == 0 else f"{c:>8}" for i, c in enumerate(cells))
     return 0
 
 
