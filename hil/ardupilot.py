@@ -138,7 +138,8 @@ TURN_MARGIN = 0.8   # ArduRover may ask for this share of the hull's full turn r
 
 def project_params(cfg: Any) -> dict[str, float]:
     """The parameters this project lays over ArduPilot's, all from the configuration: the system id;
-    the vessel computer's cruise speed with the throttle that holds it on this hull; and the turn
+    the vessel computer's cruise speed with the throttle that holds it on this hull; what it does after
+    the last waypoint (``autopilot.mission_done``, ``loiter_radius``); and the turn
     this hull can make. ArduPilot's defaults assume a rover that turns at 0.6 g and 120 deg/s; this
     boat makes 0.08 g at 1.5 m/s, and with those defaults ArduRover overshot the breakwater's corner of
     the harbour route and collided at 164.4 s (docs/ardupilot.md)."""
@@ -146,6 +147,9 @@ def project_params(cfg: Any) -> dict[str, float]:
     rate = TURN_MARGIN * full_turn_rate(cfg.vessel)
     return {"SYSID_THISMAV": float(cfg.autopilot.system_id), "CRUISE_SPEED": speed, "WP_SPEED": speed,
             "CRUISE_THROTTLE": cruise_throttle(cfg.vessel, speed),
+            # after the last waypoint: keep station (LOITER) or hold, as the vessel computer's mission_done
+            "MIS_DONE_BEHAVE": 1.0 if cfg.autopilot.mission_done == "loiter" else 0.0,
+            "LOIT_RADIUS": float(cfg.autopilot.loiter_radius),
             "ATC_STR_RAT_MAX": round(math.degrees(rate), 1),
             "ATC_TURN_MAX_G": round(speed * rate / 9.80665, 3)}
 
@@ -358,7 +362,7 @@ class ArduPilotRun:
             self.outcome, self.collision_at = "collision", t
         elif self.encounter_judge is not None and self.encounter_judge.collision is not None:
             self.outcome, self.collision_at = "collision", self.encounter_judge.collision[0]
-        elif self.judge.at_goal(n, e):
+        elif self.opts.stop_at_goal and self.judge.at_goal(n, e):
             self.outcome = "goal"
         elif self.mission.auto_at is not None and t - self.mission.auto_at >= self.opts.duration:
             self.outcome = "timeout"    # --duration counts the mission, from AUTO

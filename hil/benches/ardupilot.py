@@ -43,6 +43,13 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--duration", type=float, default=300.0, metavar="S",
                    help="simulated seconds at most per flight (default: 300)")
     p.add_argument("--seed", type=int, default=1, help="seed of both flights (default: 1)")
+    p.add_argument("--station-duration", type=float, default=200.0, metavar="S",
+                   help="station keeping: simulated seconds of each flight to --station-goal and holding there "
+                        "(ArduRover: LOITER after its mission, MIS_DONE_BEHAVE 1; ours: mission_done = loiter), "
+                        "the harbour's route cut at that point (default: 200; 0 skips it)")
+    p.add_argument("--station-goal", default="120,100", metavar="X,Y",
+                   help="station keeping: the point held, map x east, y north in m, on the harbour's reference "
+                        "path (default: 120,100, on the current's jet axis)")
     p.add_argument("--ardupilot-bin", metavar="PATH", default=None,
                    help="the ArduRover SITL binary (default: $ARDUPILOT_SITL)")
     p.add_argument("--out", metavar="DIR", default=None,
@@ -52,18 +59,70 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
 
 def truth_track(tlog: Path, geo: Any, until_s: float) -> np.ndarray:
     """The truth (north, east) in m from a run's .tlog, up to ``until_s`` of simulated time."""
+    return timed_track(tlog, geo, until_s)[1]
+
+
+def timed_track(tlog: Path, geo: Any, until_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(times s, (north, east) m) of the truth in a run's .tlog, up to ``until_s`` of simulated time."""
     from pymavlink import mavutil
 
-    pts = []
+    times, pts = [], []
     m = mavutil.mavlink_connection(str(tlog))
     try:
         while (msg := m.recv_match(type="HIL_STATE_QUATERNION")) is not None:
-            if msg.time_usec * 1e-6 > until_s + 1e-9:
+            t = msg.time_usec * 1e-6
+            if t > until_s + 1e-9:
                 break
+            times.append(t)
             pts.append(geo.geodetic_to_sea_level(msg.lat * 1e-7, msg.lon * 1e-7))
     finally:
         m.close()
-    return np.array(pts, dtype=float).reshape(-1, 2)
+    return np.array(times, dtype=float), np.array(pts, dtype=float).reshape(-1, 2)
+
+
+def station_figures(summary: Any, goal_ned: tuple[float, float], tolerance: float, geo: Any) -> dict[str, Any]:
+    """Station keeping from the first arrival within ``tolerance`` (m) of ``goal_ned`` to the run's end:
+    RMS and largest distance from the goal (m), share of the time within ``tolerance``."""
+    t, track = timed_track(Path(summary.tlog), geo, summary.sim_time_s)
+    d = np.hypot(track[:, 0] - goal_ned[0], track[:, 1] - goal_ned[1]) if len(t) else np.zeros(0)
+    inside = np.flatnonzero(d <= tolerance)
+    out: dict[str, Any] = {"outcome": summary.outcome, "collisions": summary.collisions,
+                           "min_clearance_m": summary.min_clearance_m}
+    if len(inside) == 0:
+        return {**out, "arrived_s": None, "held_s": 0.0, "station_rms_m": None, "station_max_m": None,
+                "within_tolerance": None}
+    k = int(inside[0])
+    held = d[k:]
+    return {**out, "arrived_s": round(float(t[k]), 2), "held_s": round(float(t[-1] - t[k]), 2),
+            "station_rms_m": round(float(np.sqrt(np.mean(held ** 2))), 3), "station_max_m": round(float(held.max()), 3),
+            "within_tolerance": round(float(np.mean(held <= tolerance)), 3)}
+
+
+def station_scenario(folder: Path, goal_xy: tuple[float, float]) -> Path:
+    """The harbour scenario with its route cut at ``goal_xy`` (map x east, y north, m), written to ``folder``."""
+    import tomllib
+
+    from hil import scenario as scenarios
+
+    src = scenarios.scenario_path("harbour")
+    spec = tomllib.loads(src.read_text())
+    path = [p for p in spec["reference_path"]]
+    cut = min(range(len(path)), key=lambda i: math.dist(path[i], goal_xy))
+    spec.update(name="harbour-station", goal=list(goal_xy), reference_path=path[:cut] + [list(goal_xy)],
+                map=str((src.parent / spec["map"]).resolve()),
+                description="the harbour's route cut at a point on the current's jet axis, held there")
+    folder.mkdir(parents=True, exist_ok=True)
+    out = folder / "harbour-station.toml"
+    out.write_text(_toml(spec))
+    return out
+
+
+def _toml(table: dict[str, Any], prefix: str = "") -> str:
+    import json
+
+    flat = [f"{k} = {json.dumps(v)}" for k, v in table.items() if not isinstance(v, dict)]
+    subs = [f"\n[{prefix}{k}]\n" + _toml(v, f"{prefix}{k}.") for k, v in table.items() if isinstance(v, dict)]
+    return "\n".join(flat) + "\n" + "".join(subs)
 
 
 def moving_from(tlog: Path, until_s: float, speed: float = 0.3) -> float | None:
@@ -157,7 +216,43 @@ def run(args: argparse.Namespace) -> int:
             result["scenarios"][name] = {"ardurover": theirs, "vessel_computer": ours, "ratio": ratios}
             lines += [_row(name, "ArduRover", theirs), _row("", "ours", ours),
                       _row("", "ratio", {**ratios, "outcome": "", "collisions": None})]
+        if args.station_duration > 0:
+            result["station_keeping"] = _station(args, cfg, sitl, geo, root, lines)
     emit(args, result, lines)
+
+
+def _station(args: argparse.Namespace, cfg: Any, sitl: Any, geo: Any, root: Path, lines: list[str]) -> dict:
+    from hil.ardupilot import run_ardupilot
+    from hil.hilrun import RunOptions, run_loop
+
+    try:
+        gx, gy = (float(v) for v in args.station_goal.split(","))
+    except ValueError:
+        raise UsageError("--station-goal: X,Y in metres") from None
+    scen_file = station_scenario(root / "station", (gx, gy))
+
+    def opts(who: str) -> RunOptions:
+        return RunOptions(scenario=str(scen_file), lockstep=True, duration=args.station_duration, seed=args.seed,
+                          config=args.config, overrides=list(args.overrides), out=root / "station" / who,
+                          plot=False, on_progress=progress, cpus="off", stop_at_goal=False)
+
+    tol = float(cfg.autopilot.loiter_radius)
+    progress(f"bench ardupilot: station keeping at ({gx:g}, {gy:g}): the vessel computer")
+    ours = station_figures(run_loop(opts("vessel-computer"), cfg), (gy, gx), tol, geo)
+    progress("bench ardupilot: station keeping: ArduRover (LOITER)")
+    ap = run_ardupilot(opts("ardurover"), cfg, sitl)
+    theirs = station_figures(ap, (gy, gx), tol, geo)
+    auto = (ap.simulator or {}).get("ardupilot", {}).get("auto_at_s")
+    if theirs["arrived_s"] is not None and auto is not None:
+        theirs["arrived_s"] = round(theirs["arrived_s"] - auto, 2)   # from AUTO, as ours from the start
+    keys = ("station_rms_m", "station_max_m", "within_tolerance", "arrived_s")
+    ratios = {k: ratio(theirs[k], ours[k]) for k in keys}
+    lines.append(f"station keeping at ({gx:g}, {gy:g}), {tol:g} m: RMS {_fmt(theirs['station_rms_m'])} / "
+                 f"{_fmt(ours['station_rms_m'])} m (ratio {_fmt(ratios['station_rms_m'])}), max "
+                 f"{_fmt(theirs['station_max_m'])} / {_fmt(ours['station_max_m'])} m, within "
+                 f"{_fmt(theirs['within_tolerance'])} / {_fmt(ours['within_tolerance'])}, over "
+                 f"{_fmt(theirs['held_s'])} / {_fmt(ours['held_s'])} s (ArduRover / ours)")
+    return {"goal_xy": [gx, gy], "tolerance_m": tol, "ardurover": theirs, "vessel_computer": ours, "ratio": ratios}
 
 
 HEAD = ("scenario", "who", "outcome", "time s", "way s", "xte rms", "xte max", "clear m", "energy J", "path m",
