@@ -218,3 +218,42 @@ def test_moored_the_boat_holds_still_while_time_passes() -> None:
     phys.moored = False
     phys.answer(encode_servo_packet(100, 100, _pwm(2000, 2000)))
     assert phys.core.state != start
+
+
+def test_route_cross_track() -> None:
+    from hil.ardupilot import route_cross_track
+
+    route = [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]]
+    import numpy as np
+
+    xte = route_cross_track(np.array([[5.0, 1.0], [10.0, 5.0], [12.0, 5.0], [-3.0, 4.0]]), np.array(route))
+    assert xte == {"cross_track_rms_m": pytest.approx(math.sqrt((1 + 0 + 4 + 25) / 4), abs=1e-3),
+                   "cross_track_max_m": 5.0}
+    assert route_cross_track(np.zeros((0, 2)), np.array(route)) is None
+
+
+def test_project_parameters_come_from_the_hull_and_the_configuration(tmp_path: Path) -> None:
+    """CRUISE_THROTTLE holds CRUISE_SPEED on this hull; the turn limits are the hull's full turn rate
+    (eq. (4) at full differential thrust) less a margin; the file reads back as ArduPilot reads it."""
+    from hil.ardupilot import TURN_MARGIN, cruise_throttle, full_turn_rate, project_params, read_params, write_params
+    from simulator.vessel import Vessel, hull_dynamics
+
+    cfg = settings.load()
+    p = project_params(cfg)
+    assert p["CRUISE_SPEED"] == p["WP_SPEED"] == cfg.autopilot.cruise_speed
+    v = Vessel(cfg.vessel)
+    t = v.thrust(p["CRUISE_THROTTLE"] / 100.0)
+    d = hull_dynamics((0.0, 0.0, 0.0, cfg.autopilot.cruise_speed, 0.0, 0.0), v.propulsion(t, t),
+                      (0.0, 0.0, 0.0), (0.0, 0.0), v.coefficients)
+    assert abs(d[3]) < 0.01                                  # m/s^2: the throttle holds the speed
+    assert cruise_throttle(cfg.vessel, 3.5) == pytest.approx(100.0, abs=0.1)   # beyond top speed: full
+    r = full_turn_rate(cfg.vessel)
+    assert 0.5 < r < 0.8                                     # rad/s (docs: 0.63 at full differential)
+    assert p["ATC_STR_RAT_MAX"] == pytest.approx(math.degrees(TURN_MARGIN * r), abs=0.1)
+    assert p["SYSID_THISMAV"] == cfg.autopilot.system_id and p["MIS_DONE_BEHAVE"] == 1.0
+    f = tmp_path / "p.parm"
+    write_params(f, p)
+    (tmp_path / "q.parm").write_text("# comment\nWP_SPEED 2.5\nBROKEN_LINE\nSIM_X nan\n")
+    merged = read_params((f, tmp_path / "q.parm"))
+    assert merged["WP_SPEED"] == 2.5 and "BROKEN_LINE" not in merged and "SIM_X" not in merged
+    assert merged["CRUISE_THROTTLE"] == p["CRUISE_THROTTLE"]
