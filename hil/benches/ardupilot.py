@@ -219,6 +219,7 @@ def run(args: argparse.Namespace) -> int:
         if args.station_duration > 0:
             result["station_keeping"] = _station(args, cfg, sitl, geo, root, lines)
     emit(args, result, lines)
+    return 0
 
 
 def _station(args: argparse.Namespace, cfg: Any, sitl: Any, geo: Any, root: Path, lines: list[str]) -> dict:
@@ -262,7 +263,6 @@ HEAD = ("scenario", "who", "outcome", "time s", "way s", "xte rms", "xte max", "
 def _row(scenario: str, who: str, f: dict[str, Any]) -> str:
     cells = (scenario, who, str(f.get("outcome", "")), *(_fmt(f.get(k)) for k in METRICS))
     return " ".join(f"{c:<15}" if i == 0 else f"{c:>8}" for i, c in enumerate(cells))
-    return 0
 
 
 def _fmt(v: Any) -> str:
