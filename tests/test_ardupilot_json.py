@@ -257,3 +257,35 @@ def test_project_parameters_come_from_the_hull_and_the_configuration(tmp_path: P
     merged = read_params((f, tmp_path / "q.parm"))
     assert merged["WP_SPEED"] == 2.5 and "BROKEN_LINE" not in merged and "SIM_X" not in merged
     assert merged["CRUISE_THROTTLE"] == p["CRUISE_THROTTLE"]
+
+
+def test_station_keeping_figures_from_a_tlog(tmp_path: Path) -> None:
+    """The bench's station-keeping figures from a .tlog's truth: arrival, RMS and largest distance from
+    the goal after it, the share of time within the tolerance."""
+    import struct
+    from types import SimpleNamespace
+
+    from common.geodesy import LocalFrame
+    from common.mavlink import Codec
+    from hil.benches.ardupilot import station_figures
+
+    geo, codec = LocalFrame(38.92, 121.65, 0.0), Codec(1, 51)
+    # north: 10 m from the goal at (50, 0), closing at 1 m/s, then 1 m off for 10 s, then 4 m off for 10 s
+    samples = [(t, 40.0 + t) for t in range(0, 10)] + [(t, 49.0) for t in range(10, 20)] + \
+        [(t, 54.0) for t in range(20, 30)]
+    with open(tmp_path / "run.tlog", "wb") as f:
+        for t, n in samples:
+            lat, lon = geo.sea_level_to_geodetic(n, 0.0)
+            frame = codec.encode("hil_state_quaternion", t * 1_000_000, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
+                                 int(round(lat * 1e7)), int(round(lon * 1e7)), 0, 0, 0, 0, 0, 0, 0, 0, 0)
+            f.write(struct.pack(">Q", t * 1_000_000) + frame)
+    summary = SimpleNamespace(tlog=str(tmp_path / "run.tlog"), sim_time_s=29.0, outcome="timeout", collisions=0,
+                              min_clearance_m=5.0)
+    fig = station_figures(summary, (50.0, 0.0), 3.0, geo)
+    assert fig["arrived_s"] == 7.0 and fig["held_s"] == 22.0
+    d = [3, 2, 1] + [1] * 10 + [4] * 10        # m, from the arrival at 7 s
+    assert fig["station_max_m"] == pytest.approx(4.0, abs=0.02)
+    assert fig["station_rms_m"] == pytest.approx(math.sqrt(sum(x * x for x in d) / len(d)), abs=0.02)
+    assert fig["within_tolerance"] == pytest.approx(13 / 23, abs=1e-3)
+    never = station_figures(summary, (500.0, 0.0), 3.0, geo)
+    assert never["arrived_s"] is None and never["station_rms_m"] is None
