@@ -281,11 +281,11 @@ def test_station_keeping_figures_from_a_tlog(tmp_path: Path) -> None:
             f.write(struct.pack(">Q", t * 1_000_000) + frame)
     summary = SimpleNamespace(tlog=str(tmp_path / "run.tlog"), sim_time_s=29.0, outcome="timeout", collisions=0,
                               min_clearance_m=5.0)
-    fig = station_figures(summary, (50.0, 0.0), 3.0, geo)
-    assert fig["arrived_s"] == 7.0 and fig["held_s"] == 22.0
-    d = [3, 2, 1] + [1] * 10 + [4] * 10        # m, from the arrival at 7 s
+    fig = station_figures(summary, (50.0, 0.0), 3.0, geo, hold_s=15.0)
+    assert fig["arrived_s"] == 7.0 and fig["held_s"] == 15.0
+    d = [1] * 6 + [4] * 10        # m, the samples at 14 ... 29 s
     assert fig["station_max_m"] == pytest.approx(4.0, abs=0.02)
     assert fig["station_rms_m"] == pytest.approx(math.sqrt(sum(x * x for x in d) / len(d)), abs=0.02)
-    assert fig["within_tolerance"] == pytest.approx(13 / 23, abs=1e-3)
+    assert fig["within_tolerance"] == pytest.approx(6 / 16, abs=1e-3)
     never = station_figures(summary, (500.0, 0.0), 3.0, geo)
-    assert never["arrived_s"] is None and never["station_rms_m"] is None
+    assert never["arrived_s"] is None and never["within_tolerance"] == 0.0

@@ -46,10 +46,12 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--station-duration", type=float, default=200.0, metavar="S",
                    help="station keeping: simulated seconds of each flight to --station-goal and holding there "
                         "(ArduRover: LOITER after its mission, MIS_DONE_BEHAVE 1; ours: mission_done = loiter), "
-                        "the harbour's route cut at that point (default: 200; 0 skips it)")
-    p.add_argument("--station-goal", default="120,100", metavar="X,Y",
-                   help="station keeping: the point held, map x east, y north in m, on the harbour's reference "
-                        "path (default: 120,100, on the current's jet axis)")
+                        "the harbour's route cut at that point; ArduRover's from AUTO (default: 200; 0 skips it)")
+    p.add_argument("--station-goal", default="106,92", metavar="X,Y",
+                   help="station keeping: the point held, map x east, y north in m, near the harbour's reference "
+                        "path (default: 106,92: open water, 15 m from the chart, in the current's 0.5 m/s peak)")
+    p.add_argument("--station-hold", type=float, default=60.0, metavar="S",
+                   help="station keeping: judged over the last S simulated seconds of each flight (default: 60)")
     p.add_argument("--ardupilot-bin", metavar="PATH", default=None,
                    help="the ArduRover SITL binary (default: $ARDUPILOT_SITL)")
     p.add_argument("--out", metavar="DIR", default=None,
@@ -80,20 +82,21 @@ def timed_track(tlog: Path, geo: Any, until_s: float) -> tuple[np.ndarray, np.nd
     return np.array(times, dtype=float), np.array(pts, dtype=float).reshape(-1, 2)
 
 
-def station_figures(summary: Any, goal_ned: tuple[float, float], tolerance: float, geo: Any) -> dict[str, Any]:
-    """Station keeping from the first arrival within ``tolerance`` (m) of ``goal_ned`` to the run's end:
-    RMS and largest distance from the goal (m), share of the time within ``tolerance``."""
+def station_figures(summary: Any, goal_ned: tuple[float, float], tolerance: float, geo: Any,
+                    hold_s: float = 60.0) -> dict[str, Any]:
+    """Station keeping over the last ``hold_s`` simulated seconds of a run: RMS and largest distance
+    (m) from ``goal_ned``, the share of that time within ``tolerance`` (m); and when the boat first came
+    within ``tolerance`` (s, None: never)."""
     t, track = timed_track(Path(summary.tlog), geo, summary.sim_time_s)
     d = np.hypot(track[:, 0] - goal_ned[0], track[:, 1] - goal_ned[1]) if len(t) else np.zeros(0)
     inside = np.flatnonzero(d <= tolerance)
     out: dict[str, Any] = {"outcome": summary.outcome, "collisions": summary.collisions,
-                           "min_clearance_m": summary.min_clearance_m}
-    if len(inside) == 0:
-        return {**out, "arrived_s": None, "held_s": 0.0, "station_rms_m": None, "station_max_m": None,
-                "within_tolerance": None}
-    k = int(inside[0])
-    held = d[k:]
-    return {**out, "arrived_s": round(float(t[k]), 2), "held_s": round(float(t[-1] - t[k]), 2),
+                           "min_clearance_m": summary.min_clearance_m,
+                           "arrived_s": round(float(t[inside[0]]), 2) if len(inside) else None}
+    held = d[t >= t[-1] - hold_s] if len(t) else d
+    if len(held) == 0:
+        return {**out, "held_s": 0.0, "station_rms_m": None, "station_max_m": None, "within_tolerance": None}
+    return {**out, "held_s": round(min(hold_s, float(t[-1] - t[0])), 2),
             "station_rms_m": round(float(np.sqrt(np.mean(held ** 2))), 3), "station_max_m": round(float(held.max()), 3),
             "within_tolerance": round(float(np.mean(held <= tolerance)), 3)}
 
@@ -239,10 +242,12 @@ def _station(args: argparse.Namespace, cfg: Any, sitl: Any, geo: Any, root: Path
 
     tol = float(cfg.autopilot.loiter_radius)
     progress(f"bench ardupilot: station keeping at ({gx:g}, {gy:g}): the vessel computer")
-    ours = station_figures(run_loop(opts("vessel-computer"), cfg), (gy, gx), tol, geo)
+    if not 0 < args.station_hold <= args.station_duration:
+        raise UsageError("--station-hold: must be > 0 and at most --station-duration")
+    ours = station_figures(run_loop(opts("vessel-computer"), cfg), (gy, gx), tol, geo, args.station_hold)
     progress("bench ardupilot: station keeping: ArduRover (LOITER)")
     ap = run_ardupilot(opts("ardurover"), cfg, sitl)
-    theirs = station_figures(ap, (gy, gx), tol, geo)
+    theirs = station_figures(ap, (gy, gx), tol, geo, args.station_hold)
     auto = (ap.simulator or {}).get("ardupilot", {}).get("auto_at_s")
     if theirs["arrived_s"] is not None and auto is not None:
         theirs["arrived_s"] = round(theirs["arrived_s"] - auto, 2)   # from AUTO, as ours from the start
@@ -252,8 +257,10 @@ def _station(args: argparse.Namespace, cfg: Any, sitl: Any, geo: Any, root: Path
                  f"{_fmt(ours['station_rms_m'])} m (ratio {_fmt(ratios['station_rms_m'])}), max "
                  f"{_fmt(theirs['station_max_m'])} / {_fmt(ours['station_max_m'])} m, within "
                  f"{_fmt(theirs['within_tolerance'])} / {_fmt(ours['within_tolerance'])}, over "
-                 f"{_fmt(theirs['held_s'])} / {_fmt(ours['held_s'])} s (ArduRover / ours)")
-    return {"goal_xy": [gx, gy], "tolerance_m": tol, "ardurover": theirs, "vessel_computer": ours, "ratio": ratios}
+                 f"{_fmt(theirs['held_s'])} s, arrived {_fmt(theirs['arrived_s'])} / {_fmt(ours['arrived_s'])} s "
+                 f"(ArduRover / ours)")
+    return {"goal_xy": [gx, gy], "tolerance_m": tol, "hold_s": args.station_hold, "ardurover": theirs,
+            "vessel_computer": ours, "ratio": ratios}
 
 
 HEAD = ("scenario", "who", "outcome", "time s", "way s", "xte rms", "xte max", "clear m", "energy J", "path m",
