@@ -205,8 +205,9 @@ def _run_hil(args: argparse.Namespace, cfg: Any, cpus: Any = "auto") -> int:
     opts.actuators = cfg.can.actuators
     pacing = f"lockstep paced to x{opts.speedup:g} wall time" if gcs_session else \
         ("lockstep" if opts.lockstep else f"real time x{opts.speedup:g}")
+    who = "ArduRover SITL" if args.autopilot == "ardupilot" else f"actuators {cfg.can.actuators}"
     progress(f"run: scenario {args.scenario}, {pacing}, "
-             f"actuators {cfg.can.actuators}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
+             f"{who}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
     if args.autopilot == "ardupilot":
         from hil.ardupilot import run_ardupilot
 
