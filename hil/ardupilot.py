@@ -142,7 +142,7 @@ def project_params(cfg: Any) -> dict[str, float]:
     the last waypoint (``autopilot.mission_done``, ``loiter_radius``); and the turn
     this hull can make. ArduPilot's defaults assume a rover that turns at 0.6 g and 120 deg/s; this
     boat makes 0.08 g at 1.5 m/s, and with those defaults ArduRover overshot the breakwater's corner of
-    the harbour route and collided at 164.4 s (docs/ardupilot.md)."""
+    the harbour route and collided 122.1 s after AUTO (docs/ardupilot.md)."""
     speed = float(cfg.autopilot.cruise_speed)
     rate = TURN_MARGIN * full_turn_rate(cfg.vessel)
     return {"SYSID_THISMAV": float(cfg.autopilot.system_id), "CRUISE_SPEED": speed, "WP_SPEED": speed,
