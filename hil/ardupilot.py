@@ -151,7 +151,10 @@ def project_params(cfg: Any) -> dict[str, float]:
             "MIS_DONE_BEHAVE": 1.0 if cfg.autopilot.mission_done == "loiter" else 0.0,
             "LOIT_RADIUS": float(cfg.autopilot.loiter_radius),
             "ATC_STR_RAT_MAX": round(math.degrees(rate), 1),
-            "ATC_TURN_MAX_G": round(speed * rate / 9.80665, 3)}
+            "ATC_TURN_MAX_G": round(speed * rate / 9.80665, 3),
+            # No on-board .BIN log: its writer thread runs on the wall clock (13 MB a harbour run), and
+            # what it drops showed in SYS_STATUS, so two runs' tlogs differed. run.tlog is the record.
+            "LOG_BACKEND_TYPE": 0.0}
 
 
 def write_params(path: Path, params: dict[str, float]) -> None:
