@@ -261,46 +261,51 @@ class ArduPilotRun:
         physics = JsonPhysics(core, mixer, self.home)
         physics.moored = True       # until ArduRover is armed in AUTO: its boot takes ~40 s of simulated time
         self.physics = physics
-        self.mav_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.mav_sock.bind(("127.0.0.1", 0))
-        self.mav_sock.setblocking(False)
-        self.mav_peer: tuple[str, int] | None = None
         self.mav = mavlink2.MAVLink(None, srcSystem=GCS_SYSID, srcComponent=GCS_COMPID)
         self.mav.robust_parsing = True
+        self.mav_peer: tuple[str, int] | None = None
         self.ap_sysid = int(cfg.autopilot.system_id)
-        self.tlog = open(self.out / "run.tlog", "wb")
-        self.truth_codec = core.codec
         instance, server = self._open_instance(physics)
         self.server = server
-        cmd = self.sitl_command(instance, self.mav_sock.getsockname()[1], param_file)
-        (folder / "command.txt").write_text(" ".join(cmd) + "\n")
-        log = open(folder / "ardurover.log", "wb")
+        self.tlog = open(self.out / "run.tlog", "wb")
+        self.mav_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        proc: subprocess.Popen | None = None
+        sim_summary: dict[str, Any] = {}
         wall0 = time.monotonic()
         self.deadline = wall0 + opts.wall_timeout
-        proc = subprocess.Popen(cmd, cwd=folder, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
-        opts.on_progress(f"run: ArduRover pid {proc.pid}, instance {instance}: JSON physics on UDP "
-                         f"{JSON_PORT + 10 * instance}, ground stations on TCP {SERIAL0_PORT + 10 * instance + 2}")
-        sim_summary: dict[str, Any] = {}
         try:
+            self.mav_sock.bind(("127.0.0.1", 0))
+            self.mav_sock.setblocking(False)
+            cmd = self.sitl_command(instance, self.mav_sock.getsockname()[1], param_file)
+            (folder / "command.txt").write_text(" ".join(cmd) + "\n")
+            with open(folder / "ardurover.log", "wb") as log:
+                try:
+                    proc = subprocess.Popen(cmd, cwd=folder, stdout=log, stderr=subprocess.STDOUT,
+                                            start_new_session=True)
+                except OSError as exc:
+                    raise UsageError(f"ArduRover SITL binary {self.sitl.binary} does not start: {exc}") from None
+            opts.on_progress(f"run: ArduRover pid {proc.pid}, instance {instance}: JSON physics on UDP "
+                             f"{JSON_PORT + 10 * instance}, ground stations on TCP {SERIAL0_PORT + 10 * instance + 2}")
             sim_summary = server.run()
         except KeyboardInterrupt:
             self.outcome = "interrupted"
         finally:
             server.close()
-            proc.terminate()
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-            log.close()
+            if proc is not None:
+                proc.terminate()
+                try:
+                    proc.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
             self.tlog.close()
             self.mav_sock.close()
         if self.outcome is None:
             if server.idle:
                 cause = _last_line(folder / "ardurover.log")
+                code = None if proc is None else proc.returncode
                 raise RunFailed(f"ArduRover sent no servo packet for {IDLE_TIMEOUT_S:g} s (exit code "
-                                f"{proc.returncode}){': ' + cause if cause else ''} (see {folder / 'ardurover.log'})")
+                                f"{code}){': ' + cause if cause else ''} (see {folder / 'ardurover.log'})")
             self.outcome = "timeout"
         return self._summary(time.monotonic() - wall0, sim_summary, params, instance)
 

@@ -56,6 +56,25 @@ def test_a_broken_binary_is_one_line(tmp_path: Path) -> None:
     _one_line_error(r, "not executable")
 
 
+def test_a_firmware_that_never_calls_the_physics_ends_the_run_with_its_reason(tmp_path: Path) -> None:
+    """A binary that passes the check but exits at once: no servo packet for IDLE_TIMEOUT_S, one line
+    that names its exit code and its last output, exit 1, and no ArduRover left behind."""
+    folder = tmp_path / "sitl"
+    folder.mkdir()
+    fake = folder / "ardurover"
+    fake.write_text('#!/bin/sh\nif [ "$1" = --help ]; then echo "--model MODEL"; exit 0; fi\n'
+                    'echo "cannot open the JSON socket"; exit 3\n')
+    fake.chmod(0o755)
+    for parm in ("rover.parm", "motorboat.parm", "rover-skid.parm"):
+        (folder / parm).write_text("SERVO1_FUNCTION 73\nSERVO3_FUNCTION 74\n")
+    r = run_hil("run", "--autopilot", "ardupilot", "--ardupilot-bin", str(fake), "--out", str(tmp_path / "r"),
+                "--no-plot", timeout=180)
+    assert r.returncode == 1, r.stderr
+    last = r.stderr.strip().splitlines()[-1]
+    assert "sent no servo packet" in last and "exit code 3" in last and "cannot open the JSON socket" in last
+    assert "Traceback" not in r.stderr
+
+
 def test_lockstep_only(tmp_path: Path) -> None:
     r = run_hil("run", "--autopilot", "ardupilot", "--speedup", "2", "--ardupilot-bin", str(SITL),
                 "--out", str(tmp_path / "r"), timeout=120)
