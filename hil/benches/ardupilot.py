@@ -16,12 +16,13 @@ import math
 import subprocess
 import tempfile
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from hil.console import emit, load_settings, progress
 from hil.errors import UsageError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 METRICS = ("mission_time_s", "time_under_way_s", "cross_track_rms_m", "cross_track_max_m", "min_clearance_m",
            "energy_J", "path_length_m", "collisions")
@@ -66,6 +67,7 @@ def truth_track(tlog: Path, geo: Any, until_s: float) -> np.ndarray:
 
 def timed_track(tlog: Path, geo: Any, until_s: float) -> tuple[np.ndarray, np.ndarray]:
     """(times s, (north, east) m) of the truth in a run's .tlog, up to ``until_s`` of simulated time."""
+    import numpy as np
     from pymavlink import mavutil
 
     times, pts = [], []
@@ -87,6 +89,8 @@ def station_figures(summary: Any, goal_ned: tuple[float, float], tolerance: floa
     """Station keeping over the last ``hold_s`` simulated seconds of a run: RMS and largest distance
     (m) from ``goal_ned``, the share of that time within ``tolerance`` (m); and when the boat first came
     within ``tolerance`` (s, None: never)."""
+    import numpy as np
+
     t, track = timed_track(Path(summary.tlog), geo, summary.sim_time_s)
     d = np.hypot(track[:, 0] - goal_ned[0], track[:, 1] - goal_ned[1]) if len(t) else np.zeros(0)
     inside = np.flatnonzero(d <= tolerance)
@@ -178,6 +182,8 @@ def commit() -> str | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from common.geodesy import LocalFrame
     from hil import scenario as scenarios
     from hil.ardupilot import find_sitl, run_ardupilot
