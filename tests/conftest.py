@@ -65,6 +65,7 @@ UNIT_MODULES = frozenset("""
     run_plot scenarios sim_sensors sim_vessel sim_waves summaries tiers tracking_stats traffic_planning vehicle
 """.split())
 INTEGRATION_MODULES = frozenset("""
+    ardupilot_json
     autopilot_link bench_frame bench_planner busy_poll cli connection cpu_load executors gcs_esc_telemetry gcs_fuzz
     first_run friction gcs_security gcs_link gcs_mission geo_cli hil_link_fast_path montecarlo output placement plan_cli
     planner_warmup
@@ -72,8 +73,8 @@ INTEGRATION_MODULES = frozenset("""
     readme security_gates sim_link sim_pipeline sim_udp startup_errors tap_fast_path traffic_ais vessel_parameters
 """.split())
 E2E_MODULES = frozenset("""
-    by_hand can_vcan colregs_loop example_world gcs_mavproxy gcs_mavsdk gcs_rover gcs_session hil_faults hil_loop
-    hil_vcan holding_ground
+    ardupilot_sitl by_hand can_vcan colregs_loop example_world gcs_mavproxy gcs_mavsdk gcs_rover gcs_session
+    hil_faults hil_loop hil_vcan holding_ground
     mission_done route_mission security_loop sparse_routes
 """.split())
 TIERS = ("unit", "integration", "e2e")
