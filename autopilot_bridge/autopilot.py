@@ -136,7 +136,7 @@ class Autopilot:
         self.planner_tuning = PlannerTuning(world.params)
         self.acceptance = PlanAcceptance(params, self.grid, self.sensed, self.planning, self.course, self.stats)
         self.station = StationKeeper(params.loiter_radius, params.loiter_speed,
-                                     Thrust(0.0, 0.0, 0.0, 0.0, False))
+                                     Thrust(0.0, 0.0, 0.0, 0.0, False), params.station_keeping)
         self.current = CurrentObserver(propulsion.surge, prior=self._field_prior(world))
         self.helm = Helm(params, propulsion, self.course, self.vehicle, self.grid, safety, self.planning,
                          self.acceptance, HeadingPID(config.control), SpeedController(config.control, propulsion.surge),

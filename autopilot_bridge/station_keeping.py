@@ -40,7 +40,8 @@ class StationKeeper:
                      "station keeping: in still water the boat rests within half this distance of the point "
                      "(ArduRover: LOIT_RADIUS, drift within it); in a current it holds the point")
 
-    def __init__(self, radius: float, max_speed: float, zero_thrust: Thrust) -> None:
+    def __init__(self, radius: float, max_speed: float, zero_thrust: Thrust, method: str = "into-current") -> None:
+        self.method = method                # "into-current" or "drift-and-return" (ArduRover's, for comparison)
         self.radius = radius
         self.max_speed = max_speed          # m/s over ground towards the point
         self.zero_thrust = zero_thrust
@@ -57,6 +58,8 @@ class StationKeeper:
         ``on_resume()`` when the thrusters take over again after resting (the controllers start afresh)."""
         en, ee = point[0] - s.x, point[1] - s.y
         d = math.hypot(en, ee)
+        if self.method == "drift-and-return":
+            return self._drift_and_return(s, dt, d, en, ee, loiter, behaviour, drive, on_resume)
         cn, ce = current
         still = math.hypot(cn, ce) < STILL_WATER
         if not loiter or (still and d <= 0.5 * self.radius):
@@ -77,3 +80,17 @@ class StationKeeper:
         bow = (math.cos(s.psi), math.sin(s.psi))
         u_ref = vn * bow[0] + ve * bow[1]
         return drive(s, dt, psi, u_ref, cn * bow[0] + ce * bow[1])
+
+    def _drift_and_return(self, s: NavState, dt: float, d: float, en: float, ee: float, loiter: bool,
+                          behaviour: BehaviourMachine, drive: Drive, on_resume: Callable[[], None]) -> Thrust:
+        """ArduRover's boat loiter: drift within LOIT_RADIUS; beyond it steer straight back, bow first, until
+        within half the radius (the way back is the water just drifted across)."""
+        if not loiter or d <= 0.5 * self.radius or (behaviour.state is Behaviour.COMPLETE and d <= self.radius):
+            behaviour.to(Behaviour.COMPLETE)
+            self.resting = True
+            return self.zero_thrust
+        behaviour.to(Behaviour.RETURNING)
+        if self.resting:
+            self.resting = False
+            on_resume()
+        return drive(s, dt, math.atan2(ee, en), min(self.max_speed, max(0.3, 0.5 * d)), 0.0)

@@ -222,5 +222,63 @@ def test_a_fence_and_a_rally_point_shape_the_mission_and_rtl_comes_back_from_out
     cx, cy, r = EXCLUSION
     assert min(math.hypot(x - cx, y - cy) for x, y in leg) > r, "the boat entered the exclusion circle"
     assert t_done - t_start < 200.0           # ~45 m of legs: no stall at a waypoint (30995)
+    # No planned target outside the fence (13016): every local path the boat announced while the first
+    # fence was in force lies inside the inclusion polygon and outside the exclusion circle.
+    from pymavlink import mavutil
+
+    log = mavutil.mavlink_connection(str(s.out / "run.tlog"), dialect="ardupilotmega")
+    planned = []
+    while (m := log.recv_match(type="TRAJECTORY_REPRESENTATION_WAYPOINTS")) is not None:
+        if t_start <= m.time_usec * 1e-6 <= t_done:
+            planned += [(e, n) for n, e in zip(m.pos_x[:m.valid_points], m.pos_y[:m.valid_points], strict=True)]
+    assert len(planned) > 20
+    xs, ys = [p[0] for p in INCLUSION], [p[1] for p in INCLUSION]
+    for x, y in planned:
+        assert min(xs) <= x <= max(xs) and min(ys) <= y <= max(ys), (x, y)
+        assert math.hypot(x - cx, y - cy) > r, (x, y)
     assert summary.get("collisions", 0) == 0
     assert t_end > t_done
+
+
+def _open_water(tmp_path: Path, current: float) -> Session:
+    s = Session.__new__(Session)
+    port = free_udp_port()
+    s.out = tmp_path / "run"
+    s.proc = start_run(s.out, "--scenario", "open-water-current", "--duration", "3000", "--wait-for-arm",
+                       "--speedup", str(SPEEDUP), "--gcs", f"udpin:127.0.0.1:{port}",
+                       "--set", f"current.uniform=[0.0,{current}]", identity="ardupilot")
+    s.gcs = Gcs(f"udpout:127.0.0.1:{port}")
+    assert s.gcs.connect() is not None
+    assert s.gcs.recv("GLOBAL_POSITION_INT", 60) is not None
+    return s
+
+
+@pytest.mark.slow
+def test_a_square_in_a_strong_cross_current_finishes_every_leg_then_loiter_holds_within_3_m(tmp_path):
+    """ArduPilot issue 19306 ("boats may drift away in Auto if current is too high"): a 40 m square in
+    a 1.2 m/s current (0.8 of the cruise speed) from the south, every leg finished; then LOITER at the
+    last corner holds 95 % of the time within 3 m (ArduRover's drift-and-return sawtooths to its radius)."""
+    s = _open_water(tmp_path, 1.2)
+    g = s.gcs
+    try:
+        corners = [(60.0, 40.0), (100.0, 40.0), (100.0, 80.0), (60.0, 80.0), (60.0, 40.0)]
+        ack = g.upload([wp(40.0, 60.0)] + [wp(x, y) for x, y in corners])
+        assert ack is not None and ack.type == M.MAV_MISSION_ACCEPTED
+        assert g.arm(True).result == M.MAV_RESULT_ACCEPTED
+        assert g.command(M.MAV_CMD_MISSION_START, 0, 0).result == M.MAV_RESULT_ACCEPTED
+        reached = []
+        end = time.monotonic() + 900
+        while time.monotonic() < end and (not reached or reached[-1] != len(corners)):
+            m = g.recv("MISSION_ITEM_REACHED", 30)
+            if m is not None:
+                reached.append(m.seq)
+        assert reached == list(range(1, len(corners) + 1)), reached
+        t0 = s.now()
+        assert g.set_mode(5).result == M.MAV_RESULT_ACCEPTED          # LOITER where the square ends
+        point = s.position()
+        s.wait_until(t0 + 150.0, wall=150.0 / SPEEDUP * 6 + 60)
+    finally:
+        s.close()
+    held = [(x, y) for t, x, y in truth_track(s.out / "run.tlog") if t >= t0 + 30.0]
+    d = sorted(math.dist(p, point) for p in held)
+    assert len(d) > 1000 and d[int(0.95 * len(d))] <= 3.0, d[int(0.95 * len(d))]
