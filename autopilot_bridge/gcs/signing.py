@@ -22,7 +22,8 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-from common.mavlink import mavlink2
+from autopilot_bridge.gcs.peers import RANK_GCS, RANK_SIGNED, RANK_STRANGER
+from common.mavlink import MAV_TYPE, mavlink2
 
 SIGNING_EPOCH = 1420070400  # 2015-01-01 00:00:00 UTC, the MAVLink 2 signing timestamp origin
 NEW_STREAM_SLACK = 6_000_000  # a new stream's first timestamp may lag our clock by 60 s (10 µs units), as the spec
@@ -129,3 +130,17 @@ class SecurityGate:
                 self.counts["bad_signature"] += 1
             return False
         return True
+
+    def peer_rank(self, m: Any, kind: str) -> int:
+        """The place a frame that passed :meth:`allows` earns its sender in the peer table (:mod:`.peers`):
+        signed with our key; without signing, a frame that talks like a ground station (a GCS HEARTBEAT
+        or a write, from an allowed system id); anything else ranks as a stranger's."""
+        if self.signed(m):
+            return RANK_SIGNED
+        if self.key is not None:
+            return RANK_STRANGER
+        if self.allowed and m.get_srcSystem() not in self.allowed:
+            return RANK_STRANGER
+        if kind in WRITES or (kind == "HEARTBEAT" and getattr(m, "type", None) == MAV_TYPE.MAV_TYPE_GCS):
+            return RANK_GCS
+        return RANK_STRANGER
