@@ -64,7 +64,7 @@ UNIT_MODULES = frozenset("""
 """.split())
 INTEGRATION_MODULES = frozenset("""
     autopilot_link bench_frame bench_planner busy_poll cli connection cpu_load executors gcs_esc_telemetry gcs_fuzz
-    gcs_security gcs_link gcs_mission hil_link_fast_path montecarlo output placement plan_cli planner_warmup
+    gcs_security gcs_lockout gcs_link gcs_mission hil_link_fast_path montecarlo output placement plan_cli planner_warmup
     planning_worker range_sensing
     readme security_gates sim_link sim_pipeline sim_udp startup_errors tap_fast_path traffic_ais
 """.split())

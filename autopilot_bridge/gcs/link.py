@@ -74,7 +74,7 @@ class GcsLink:
         self._datagrams_out_closed = 0      # per-peer sends of transports already closed
         try:
             for spec in params.endpoints:
-                self.transports.append(open_endpoint(spec, params.max_peers, self.security))
+                self.transports.append(open_endpoint(spec, params.max_peers, self.security, clock))
         except ValueError:
             self.close()
             raise

@@ -210,11 +210,15 @@ class MissionServer:
         taken: list[Out] = []
         if self.upload is not None and self.upload.partner != sender:
             if not self.claim.yields(now):
+                self.claim.denied(sender, now)
                 self._count("busy")
                 return [self._ack(sender, M.MAV_MISSION_DENIED)]
             taken = [self._ack(self.upload.partner, M.MAV_MISSION_OPERATION_CANCELLED)]   # its owner went silent
             self._count("upload_taken_over")
             self.upload = None
+        elif self.upload is None and not self.claim.admits(sender, now):
+            self._count("reserved_for_rival")
+            return [self._ack(sender, M.MAV_MISSION_DENIED)]
         if msg.count > self.max_items:
             self.upload = None
             self._count("rejected_no_space")
@@ -224,7 +228,7 @@ class MissionServer:
             return taken + self._replace((), sender, now)
         again = self.upload   # the owner re-sent MISSION_COUNT: a restart that renews neither its claim nor its retries
         if again is None:
-            self.claim.begin(now)
+            self.claim.begin(sender, now)
         self.upload = _Upload(sender, int(msg.count), legacy=False)
         request = self._request(self.upload, now)
         if again is not None:

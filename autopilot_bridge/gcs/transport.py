@@ -91,7 +91,8 @@ class UdpTransport:
         self.peers.earn(peer, rank)
 
     def send(self, data: bytes) -> None:
-        for dest in self.fixed + [p for p in self.peers if p not in self.fixed]:
+        dests: list[Any] = self.fixed + [p for p in self.peers if p not in self.fixed]
+        for dest in dests:
             try:
                 self.ep.sock.sendto(data, dest)
                 self.sent += 1
@@ -411,19 +412,21 @@ class SerialTransport:
         self.port.close()
 
 
-def open_endpoint(spec: str, max_peers: int = 8, counts: Counter[str] | None = None):
+def open_endpoint(spec: str, max_peers: int = 8, counts: Counter[str] | None = None,
+                  clock: Callable[[], float] = time.monotonic):
     """A transport from a connection string (ValueError with one line on bad input, a busy port,
     a ground station that cannot be reached, a serial port that cannot be opened). ``counts`` receives
-    the peer table's and the TCP server's refusals (``peer_table_full``, ``tcp_idle_closed`` ...)."""
+    the peer table's and the TCP server's refusals (``peer_table_full``, ``tcp_idle_closed`` ...); ``clock``
+    (s, monotonic) times the peers' silences."""
     kind, host, port = parse_endpoint(spec)
     if kind == "tcpin":
-        return TcpServerTransport(host, port, max_peers, counts=counts)
+        return TcpServerTransport(host, port, max_peers, counts=counts, clock=clock)
     if kind == "tcp":
         return TcpClientTransport(host, port)
     if kind == "serial":
         return SerialTransport(host, port)
     try:
-        return UdpTransport(kind, host, port, max_peers, counts=counts)
+        return UdpTransport(kind, host, port, max_peers, counts=counts, clock=clock)
     except socket.gaierror as exc:
         raise ValueError(f"{spec!r}: unknown host ({exc})") from None
 
