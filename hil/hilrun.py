@@ -45,6 +45,7 @@ from common.tables import to_table
 from hil import config, placement, processes
 from hil import scenario as scenarios
 from hil.errors import RunFailed, UsageError
+from hil.progress_watch import STALL_WINDOW_S, ProgressWatch
 from hil.run_summary import RunSecurity, RunSummary, read_autopilot_summary
 from hil.tap import Tap
 
@@ -413,6 +414,8 @@ class HilRun:
                     raise
                 raise _WallTimeout() from None
             checked = 0
+            watch = ProgressWatch(max(STALL_WINDOW_S, 2.0 * self.cfg.autopilot.lockstep_planner_timeout)) \
+                if opts.lockstep else None
             processes.freeze_heap()   # unfrozen in the finally below: a campaign's runs share this process
             while True:
                 if opts.lockstep:
@@ -448,6 +451,11 @@ class HilRun:
                     break
                 if time.monotonic() - wall0 > opts.wall_timeout:
                     outcome = "wall_timeout"
+                    break
+                stalled = watch.check(time.monotonic(), t_sim) if watch is not None else None
+                if stalled is not None:
+                    opts.on_progress(f"run: {stalled}")
+                    outcome = "stalled"
                     break
                 if self.tap.write_error is not None:
                     outcome = "disk_full" if self.tap.write_error.errno in (errno.ENOSPC, errno.EDQUOT) \

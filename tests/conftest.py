@@ -57,7 +57,7 @@ def hil_main(capsys):
 UNIT_MODULES = frozenset("""
     can_codec can_esc collision_cone colregs colregs_oracle config config_layers control current_field geodesy
     global_route guidance_kernel mavlink_crc mavlink_fast_path mission_executor modes navigation navigation_fast
-    online percentiles plan_commitment plan_start_course readiness
+    config_ranges online percentiles plan_commitment plan_start_course readiness
     planner_algorithms planner_config planner_cost planner_dynamic_domain planner_gridmap
     planner_guidance planner_kgrowth planner_metrics planner_postprocess process_logging reactive route_planning
     run_plot scenarios sim_sensors sim_vessel sim_waves summaries tiers tracking_stats traffic_planning vehicle
