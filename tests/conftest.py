@@ -66,7 +66,7 @@ INTEGRATION_MODULES = frozenset("""
     autopilot_link bench_frame bench_planner busy_poll cli connection cpu_load executors gcs_esc_telemetry gcs_fuzz
     gcs_security gcs_lockout gcs_link gcs_mission hil_link_fast_path montecarlo output placement plan_cli planner_warmup
     planning_worker range_sensing
-    readme security_gates sim_link sim_pipeline sim_udp startup_errors tap_fast_path traffic_ais
+    readme security_gates sim_link sim_pause sim_pipeline sim_udp startup_errors tap_fast_path traffic_ais
 """.split())
 E2E_MODULES = frozenset("""
     by_hand can_vcan colregs_loop gcs_mavproxy gcs_mavsdk gcs_session hil_faults hil_loop hil_vcan
