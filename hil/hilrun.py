@@ -82,6 +82,10 @@ LOCKSTEP_TAP_PERIOD_S = 0.01  # wall seconds between the tap's reads in lockstep
 WALL_CLOCK_KEYS = frozenset({"wall_time_s", "control_latency_ms", "run_folder", "tlog", "plot", "simulator",
                              "tlog_messages", "navigation", "gcs", "sensed_obstacles", "security", "warnings"})
 
+# Campaigns (Monte Carlo) run many loops at once and nobody watches them: they open no ground-station link.
+NO_GCS = ["gcs.endpoints=[]"]
+
+
 @dataclass
 class RunOptions:
     scenario: str = "harbour"
