@@ -96,6 +96,10 @@ def main(argv: list[str] | None = None) -> int:
     except HilError as exc:
         print(f"hil {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except OSError as exc:   # a full disk, a vanished file: one line, never a traceback (issue 31)
+        where = f" ({exc.filename})" if exc.filename else ""
+        print(f"hil {args.command}: error: {exc.strerror or exc}{where}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(f"hil {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -221,6 +221,11 @@ def test_full_disk_run_folder_one_line_exit_1_no_temporary_files(tmp_path, hil):
         left = [p.name for p in (disk / "run").iterdir()]
         assert not [n for n in left if n.endswith(".tmp")], left
         assert "summary.json" not in left
+        # No traceback anywhere: not in the children's logs either (issue 31: an OSError traceback in
+        # autopilot.log).
+        for f in (disk / "run").iterdir():
+            if f.suffix == ".log":
+                assert "Traceback" not in f.read_text(errors="replace"), f"{f.name}: {f.read_text(errors='replace')}"
     finally:
         subprocess.run(["umount", str(disk)], check=False)
 
