@@ -69,7 +69,7 @@ INTEGRATION_MODULES = frozenset("""
     readme security_gates sim_link sim_pause sim_pipeline sim_udp startup_errors tap_fast_path traffic_ais
 """.split())
 E2E_MODULES = frozenset("""
-    by_hand can_vcan colregs_loop gcs_mavproxy gcs_mavsdk gcs_session hil_faults hil_loop hil_vcan instances
+    by_hand can_vcan colregs_loop gcs_chaos gcs_mavproxy gcs_mavsdk gcs_session hil_faults hil_loop hil_vcan instances
     mission_done route_mission security_loop sparse_routes
 """.split())
 TIERS = ("unit", "integration", "e2e")
