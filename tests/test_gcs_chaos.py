@@ -93,6 +93,7 @@ def test_a_chaos_ground_station_crashes_nothing_and_every_refusal_is_counted(tmp
         if chaos is not None:
             chaos.close()
         out, err = stop_run(proc)
+        print("hil run stderr (tail):\n" + err[-3000:])
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     print(f"\nchaos {'signed' if signing else 'unsigned'} {stats.wall_s:.0f} s: actions {dict(stats.actions)}; "
           f"mission acks {dict(stats.mission_acks)}; command acks {dict(stats.command_acks)}; "
@@ -104,6 +105,7 @@ def test_a_chaos_ground_station_crashes_nothing_and_every_refusal_is_counted(tmp
     assert rss1 - rss0 <= RSS_GROWTH_MB and fd1 - fd0 <= FD_GROWTH, (rss0, rss1, fd0, fd1)
     gcs = summary["gcs"]
     assert stats.heard["HEARTBEAT"] > 0 and sum(stats.actions.values()) > 20
+    assert stats.tcp_connect_failures == 0, "the vessel's TCP server refused a connection"
     # Every refusal the client heard, the vessel counted (it counts those to every GCS, so >=).
     for result, count in stats.mission_acks.items():
         assert gcs["mission_acks"].get(result, 0) >= count, (result, gcs["mission_acks"])

