@@ -4,12 +4,13 @@ in random order, against a live vessel's ground-station port.
 Actions (weights in :data:`ACTIONS`): mission uploads (well formed, abandoned half-way, with items out
 of sequence or NaN/absurd fields), fence and rally uploads, mission downloads and clears, mode changes
 (valid and unknown custom modes, COMMAND_LONG and SET_MODE), arm/disarm, GUIDED targets (DO_REPOSITION,
-SET_POSITION_TARGET_GLOBAL_INT; anywhere within ~50 m, on land and off the chart too), parameter reads and writes (real
-names with normal, NaN, infinite and huge values; not the control gains: UNSAFE_PARAMS), disconnect and reconnect (a new socket, alternating
-UDP and TCP when both are given), floods (a burst of frames, read requests and garbage), silences
-(no heartbeat for up to 7 s: the GCS failsafe), garbage bytes. With a key it signs its frames, and
-also sends frames signed with a wrong key, replays captured ones and stamps one a day ahead.
-It never sends MANUAL_CONTROL (a person steering into a quay is not the autopilot's fault).
+SET_POSITION_TARGET_GLOBAL_INT; anywhere within ~50 m, on land and off the chart too), parameter reads
+and writes (real names with normal, NaN, infinite and huge values; not the control gains:
+:data:`UNSAFE_PARAMS`), disconnect and reconnect (a new socket, alternating UDP and TCP when both are
+given), floods (a burst of frames, read requests and garbage), silences (no heartbeat for up to 7 s:
+the GCS failsafe), garbage bytes. With a key it signs its frames, and also sends frames signed with a
+wrong key, replays captured ones and stamps one a day ahead. It never sends MANUAL_CONTROL (a person
+steering into a quay is not the autopilot's fault).
 
 Every random choice comes from ``numpy.random.default_rng(seed)``; what the vessel answers depends on
 timing, so two runs with one seed make the same requests, not necessarily in the same wall-clock
