@@ -218,6 +218,21 @@ def test_eight_idle_tcp_connections_no_longer_lock_out_the_ninth(closing):
     assert ("tcp", gcs.getsockname()) not in tr.conns and closed_by_peer(gcs)
 
 
+def test_the_issues_attack_eight_idle_connections_from_one_address_then_a_gcs(closing):
+    clock = FrozenClock()
+    port = tcp_port()
+    link = make_link(closing, clock, f"tcpin:127.0.0.1:{port}")
+    tr = link.transports[0]
+    idle = [connect(port, closing) for _ in range(8)]
+    service_until(link, lambda: tr.counts["tcp_per_address_cap"] >= 4)
+    gcs = connect(port, closing)
+    gcs.sendall(heartbeat(signer(key=None)))
+    service_until(link, lambda: ("tcp", gcs.getsockname()) in tr.peers)
+    assert ("tcp", gcs.getsockname()) in tr.peers        # before issue 31: accepted and closed at once
+    assert sum(closed_by_peer(s) for s in idle) == 5      # 4 displaced by the cap, 1 by the GCS
+    assert len(tr.conns) == tp.TCP_PER_ADDRESS
+
+
 def test_one_address_gets_at_most_tcp_per_address_connections(closing):
     clock = FrozenClock()
     port = tcp_port()
