@@ -109,6 +109,9 @@ class RunOptions:
     # CPUs of the processes (hil.placement): "auto" places a lockstep run on a pair of CPUs no other
     # run holds, "off" never; campaigns, which run several loops at once, say "off".
     cpus: str | placement.Placement = "auto"
+    # lockstep: wall seconds per progress check (hil.progress_watch); None: the larger of STALL_WINDOW_S and
+    # twice autopilot.lockstep_planner_timeout
+    stall_window_s: float | None = None
 
     def __post_init__(self) -> None:
         # The children run in the repository (cwd=REPO): files the user named relative to where
@@ -418,8 +421,8 @@ class HilRun:
                     raise
                 raise _WallTimeout() from None
             checked = 0
-            watch = ProgressWatch(max(STALL_WINDOW_S, 2.0 * self.cfg.autopilot.lockstep_planner_timeout)) \
-                if opts.lockstep else None
+            window = opts.stall_window_s or max(STALL_WINDOW_S, 2.0 * self.cfg.autopilot.lockstep_planner_timeout)
+            watch = ProgressWatch(window) if opts.lockstep else None
             processes.freeze_heap()   # unfrozen in the finally below: a campaign's runs share this process
             while True:
                 if opts.lockstep:
