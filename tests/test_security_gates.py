@@ -160,6 +160,42 @@ def test_no_spurious_timeline_switch_at_30_percent_loss_with_10_percent_reorderi
     assert switches == 0 and late > 100, (switches, late, accepted)
 
 
+@pytest.mark.parametrize("realtime", [True, False])
+def test_a_paused_vessel_computer_acts_on_fresh_frames_only_and_reports_the_stall(cfg, realtime):
+    """Issue 31, point 3 for the vessel computer: in real time, a vessel computer that comes back to its
+    socket 1 s late (it was paused) finds 1 s of frames queued; it acts on those within 0.25 s of the
+    newest, skips the rest and reports the stall with its length. In lockstep nothing is skipped (the
+    simulator waits for it)."""
+    import time as _time
+
+    geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
+    sim = Codec(cfg.link.system_id, cfg.link.component_id)
+    link = HilLink("127.0.0.1:0", (), geo, sim_ids=(cfg.link.system_id, cfg.link.component_id),
+                   max_time_step=0.25 if realtime else 0.015, realtime=realtime)
+    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        sender.sendto(_sensor(sim, 0), link.ep.address)
+        assert [f.time_usec for f in link.receive(timeout=2.0)] == [0]
+        _time.sleep(1.0)                                  # the pause: no receive() for 1 s
+        for k in range(1, 101):                           # what the simulator sent meanwhile: 1 s of frames
+            sender.sendto(_sensor(sim, k * STEP), link.ep.address)
+        got: list[int] = []
+        for _ in range(20):
+            got += [f.time_usec for f in link.receive(timeout=0.2)]
+            if got and got[-1] == 100 * STEP:
+                break
+        stalls = link.summary()["stalls"]
+        if realtime:
+            assert got == [k * STEP for k in range(75, 101)], got
+            assert stalls["count"] == 1 and stalls["stale_frames_skipped"] == 74
+            assert stalls["events"][0]["length_s"] >= 1.0 and stalls["events"][0]["t_s"] == 1.0
+        else:
+            assert got == [k * STEP for k in range(1, 101)] and stalls["count"] == 0
+    finally:
+        sender.close()
+        link.close()
+
+
 def _nav_inputs(rng: np.random.Generator, n: int):
     absurd = [float("nan"), float("inf"), -float("inf"), 1e300, -1e300, 1e-300, 0.0, 1e19]
     for _ in range(n):
