@@ -27,14 +27,17 @@ from common.params import param
 class ControlParams:
     """Gains of the heading and speed controllers (the [control] TOML section)."""
 
-    heading_kp: float = param("heading PID proportional gain", "N m/rad", ge=0)
-    heading_ki: float = param("heading PID integral gain", "N m/(rad s)", ge=0)
-    heading_kd: float = param("heading PID derivative gain (on the measured yaw rate)", "N m s/rad", ge=0)
+    heading_kp: float = param("heading PID proportional gain (HDG_KP: at least 20, else the boat cannot steer)",
+                              "N m/rad", ge=20, le=1000)
+    heading_ki: float = param("heading PID integral gain (HDG_KI)", "N m/(rad s)", ge=0, le=200)
+    heading_kd: float = param("heading PID derivative gain (on the measured yaw rate; HDG_KD)", "N m s/rad", ge=0,
+                              le=500)
     heading_integral_limit: float = param("anti-windup bound on the integral's yaw moment", "N m", ge=0)
     heading_rate_feedforward: float = param(
         "yaw moment per rad/s of the path's turn rate (u times its curvature) added to the PID: the yaw damping a "
         "steady turn must overcome (d_r); 0 = none", "N m s/rad", ge=0)
-    speed_bandwidth: float = param("speed loop natural frequency omega_n (closed-loop poles)", "rad/s", gt=0)
+    speed_bandwidth: float = param("speed loop natural frequency omega_n (closed-loop poles; SPD_BANDWIDTH)", "rad/s",
+                                   ge=0.05, le=5)
     speed_damping: float = param("speed loop damping ratio zeta", gt=0)
     speed_integral_limit: float = param("anti-windup bound on the speed integral's force", "N", ge=0)
     speed_reference_time_constant: float = param("first-order reference model of the speed set-point", "s", gt=0)
@@ -67,7 +70,8 @@ class HeadingPID:
 
     Its gains are its own parameters (initial values from [control]; a ground station tunes them)."""
 
-    kp = Tunable("HDG_KP", 0.0, 1000.0, "N m/rad", "heading PID proportional gain")
+    # At least 20 N m/rad: with none the boat cannot steer (a chaos GCS set 0 and the boat hit a quay).
+    kp = Tunable("HDG_KP", 20.0, 1000.0, "N m/rad", "heading PID proportional gain")
     ki = Tunable("HDG_KI", 0.0, 200.0, "N m/(rad s)", "heading PID integral gain")
     kd = Tunable("HDG_KD", 0.0, 500.0, "N m s/rad", "heading PID derivative gain (on the measured yaw rate)")
 

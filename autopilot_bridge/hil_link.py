@@ -25,6 +25,7 @@ stall lockstep nor reset navigation. Every refusal is counted in :attr:`HilLink.
 from __future__ import annotations
 
 import math
+import time
 from collections import Counter
 from dataclasses import dataclass
 from typing import Protocol
@@ -45,6 +46,11 @@ MAX_GPS_DISTANCE = 100e3      # m from the NED origin
 MAX_SPEED = 50.0              # m/s, GPS ground speed per axis and DVL velocity
 TIMELINE_CONFIRM = 3          # consecutive consistent frames that establish a new timeline
 MAX_DATAGRAMS_PER_RECEIVE = 256
+# Real time: a vessel computer that comes back to its socket more than this late (wall s: it was paused, by
+# SIGSTOP, a debugger, a starved VM) has stalled; of the frames that queued meanwhile only those within
+# this much simulated time of the newest are acted on (issue 31), the rest are skipped and counted.
+MAX_BEHIND_S = 0.25
+STALLS_KEPT = 100
 
 # Refusal reasons counted in HilLink.rejects besides the codec's framing reasons.
 WRONG_SOURCE_ID = "wrong_source_id"
@@ -110,11 +116,14 @@ class HilLink:
                  system_id: int = 1, component_id: int = 1, send_loss: float = 0.0, recv_loss: float = 0.0,
                  loss_seed: int = 0, extra_destinations: tuple[str, ...] = (), truth_component_id: int = 52,
                  sim_ids: tuple[int, int] | None = None, sensors_from: str | None = None,
-                 max_time_step: float = 1.0, busy_poll: float = 0.0) -> None:
+                 max_time_step: float = 1.0, busy_poll: float = 0.0, late_window: float = 1.0,
+                 realtime: bool = False) -> None:
         """``sim_ids``: (system, component) id of the simulator (None: any); ``sensors_from``:
         "HOST:PORT" of the simulator's socket (None: any address); ``max_time_step``: largest
         forward step (s) of sensor time between consecutive accepted frames; ``busy_poll``: (lockstep)
-        each wait for a frame polls the socket up to this long (s) before it sleeps."""
+        each wait for a frame polls the socket up to this long (s) before it sleeps; ``late_window``: a frame
+        at most this far (s) behind the last accepted one is late (reordered), refused without counting
+        towards a new timeline; ``realtime``: stalls of this process are detected and skipped (MAX_BEHIND_S)."""
         self.ep = UdpEndpoint(listen, list(actuators_to) + list(extra_destinations),
                               send_loss=send_loss, recv_loss=recv_loss, loss_seed=loss_seed)
         # lockstep: wait for the next frame polling the socket first (common.udp.BusyPoll)
@@ -127,6 +136,13 @@ class HilLink:
                 raise ValueError(f"sensors_from {sensors_from!r}: {exc}") from None
         self.sim_ids = sim_ids
         self.max_step_usec = int(round(max_time_step * 1e6))
+        self.late_window_usec = int(round(late_window * 1e6))
+        self.late_frames = 0
+        self.realtime = realtime
+        self._left_at: float | None = None                # wall time the last receive() returned
+        self.stalls: list[tuple[float, float]] = []       # (simulated s, wall s), the first STALLS_KEPT
+        self.stall_count = 0
+        self.stale_frames_skipped = 0
         self.last_usec: int | None = None                # time of the last accepted frame
         self._candidate: tuple[int, int] | None = None   # (last time, frames) of another timeline
         self.timeline_switches = 0
@@ -225,7 +241,13 @@ class HilLink:
             self.last_usec, self._candidate = usec, None
             return True
         c = self._candidate
-        if c is not None and 0 <= usec - c[0] <= self.max_step_usec:
+        if 0 < last - usec <= self.late_window_usec:
+            # Late: reordered on the way, unless the same frame comes again and again (a young simulator
+            # restarted in lockstep resends its frame 0). Before issue 31, three different delayed frames in
+            # a row at 30 % loss with reordering were taken for a new timeline: a spurious switch.
+            self.late_frames += 1
+            c = (usec, c[1] + 1) if c is not None and c[0] == usec else (usec, 1)
+        elif c is not None and 0 <= usec - c[0] <= self.max_step_usec:
             c = (usec, c[1] + 1)
         else:
             c = (usec, 1)
@@ -264,15 +286,31 @@ class HilLink:
 
     def receive(self, timeout: float) -> list[SensorFrame]:
         """Every sensor frame queued now (waiting up to ``timeout`` s for the first), oldest first."""
+        away = time.monotonic() - self._left_at if self._left_at is not None else 0.0
         first = self.ep.recv(timeout=timeout, poll=self.busy)
         if first is None:
+            self._left_at = time.monotonic()
             return []
         out = []
         for datagram in [first, *self.ep.drain(limit=MAX_DATAGRAMS_PER_RECEIVE)]:
             frame = self.decode(datagram)
             if frame is not None:
                 out.append(frame)
+        if self.realtime and away > MAX_BEHIND_S and out:
+            out = self._skip_ahead(out, away)
+        self._left_at = time.monotonic()
         return out
+
+    def _skip_ahead(self, frames: list[SensorFrame], away: float) -> list[SensorFrame]:
+        """After a stall of ``away`` wall seconds: the frames within MAX_BEHIND_S of the newest (the rest
+        are stale: acting on them would steer by where the boat was). Counted, and the stall recorded."""
+        newest = frames[-1].time_usec
+        fresh = [f for f in frames if newest - f.time_usec <= MAX_BEHIND_S * 1e6]
+        self.stale_frames_skipped += len(frames) - len(fresh)
+        self.stall_count += 1
+        if len(self.stalls) < STALLS_KEPT:
+            self.stalls.append((newest * 1e-6, away))
+        return fresh
 
     def take_ais(self) -> list[AisReport]:
         """The AIS reports decoded since the last call, oldest first."""
@@ -296,6 +334,9 @@ class HilLink:
         datagrams it dropped on purpose each way."""
         out = {"rejects": dict(sorted(self.rejects.items())), "frames": self.frames,
                "truth_ignored": self.truth_ignored, "timeline_switches": self.timeline_switches,
+               "late_frames": self.late_frames,
+               "stalls": {"count": self.stall_count, "stale_frames_skipped": self.stale_frames_skipped,
+                          "events": [{"t_s": round(t, 3), "length_s": round(d, 3)} for t, d in self.stalls]},
                "sensors_from": None if self.ep.peer is None else f"{self.ep.peer[0]}:{self.ep.peer[1]}",
                **self.ep.counters()}
         if self.ep.send_loss or self.ep.recv_loss:

@@ -79,7 +79,8 @@ def build(cfg: HilConfig, scenario_name: str, lockstep: bool, planner_factory: s
                        truth_component_id=cfg.traffic.truth_component_id,
                        sim_ids=(cfg.link.system_id, cfg.link.component_id), sensors_from=sensors_from,
                        max_time_step=max_time_step(cfg, lockstep),
-                       busy_poll=ap.lockstep_busy_poll if lockstep else 0.0)
+                       busy_poll=ap.lockstep_busy_poll if lockstep else 0.0, late_window=ap.sim_restart_gap,
+                       realtime=not lockstep)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     actuators = None

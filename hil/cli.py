@@ -34,6 +34,19 @@ class ArgumentParser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(r"^-\.?\d")
 
+    def _get_value(self, action: argparse.Action, arg_string: str) -> Any:
+        """argparse's conversion, then every float/int option checked against its physical range
+        (``hil.commands.arg_types.CLI_RANGES``): out of range, infinite or NaN is a one-line usage error."""
+        value = super()._get_value(action, arg_string)   # type: ignore[misc]
+        if action.type in (float, int) and isinstance(value, (float, int)):
+            from hil.commands.arg_types import check_range
+
+            name = max(action.option_strings, key=len) if action.option_strings else action.dest
+            why = check_range(name, value)
+            if why is not None:
+                raise argparse.ArgumentError(action, why)
+        return value
+
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
@@ -87,6 +100,10 @@ def main(argv: list[str] | None = None) -> int:
     except HilError as exc:
         print(f"hil {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except OSError as exc:   # a full disk, a vanished file: one line, never a traceback (issue 31)
+        where = f" ({exc.filename})" if exc.filename else ""
+        print(f"hil {args.command}: error: {exc.strerror or exc}{where}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(f"hil {args.command}: interrupted", file=sys.stderr)
         return 130

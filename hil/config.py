@@ -120,6 +120,90 @@ MAX_MAGNITUDE = 1e9
 MAX_RADIANS = 1e3
 
 
+# Physical ranges (issue 31) that close what a schema leaves open, for the keys where an extreme but
+# schema-valid value stalls or overflows a run: time steps, rates, periods and timeouts that set the
+# work per simulated or wall second, and iteration and size caps. (low, high) in the key's unit, both
+# inclusive. Every other real number keeps its schema bounds and |value| <= MAX_MAGNITUDE; every other
+# integer its schema bounds and |value| <= MAX_INTEGER. `range_of` gives a key's effective range and
+# docs/configuration-ranges.md lists them all (tests/test_config_ranges.py keeps it in step).
+PHYSICAL_RANGES: dict[str, tuple[float, float]] = {
+    # RK4 step: finer than 1 ms changes nothing for a boat (time constants >= 1 s) and only slows lockstep
+    # (sim.dt = 1e-9 advanced no simulated time in 62 s of wall time)
+    "sim.dt": (1e-3, 0.1),
+    "sim.duration": (0.0, 1e6),
+    "sim.speedup": (1e-3, 1e3),
+    "sim.truth_rate_hz": (0.1, 1000.0),
+    "sim.stale_command_timeout": (1e-3, 60.0),
+    "sim.lockstep_resend": (1e-3, 60.0),
+    # one lockstep frame per IMU period: below 1 Hz a single frame is more than a second of RK4 steps
+    "sensors.imu.rate_hz": (1.0, 1000.0),
+    "sensors.gps.rate_hz": (0.1, 50.0),
+    "sensors.gps.latency": (0.0, 10.0),
+    "sensors.gps.dropout_rate": (0.0, 100.0),
+    "sensors.dvl.rate_hz": (0.1, 50.0),
+    "sensors.rangefinder.rate_hz": (0.1, 50.0),
+    "waves.correlation_time": (0.1, 1e6),
+    "autopilot.planning_period": (0.05, 60.0),
+    "autopilot.planning_deadline": (0.01, 60.0),
+    "autopilot.watchdog_grace": (0.01, 60.0),
+    # the planner does >= 15,000 iterations/s on the slowest map measured (docs/planner.md), so 100,000
+    # iterations fit the default 20 s lockstep_planner_timeout with room; 1e12 stalled a run (issue 31)
+    "autopilot.lockstep_iterations": (1, 100_000),
+    "autopilot.lockstep_planner_timeout": (0.1, 600.0),
+    "autopilot.sim_restart_gap": (0.01, 3600.0),
+    "autopilot.sensed_confirm_hits": (1, 1000),
+    "planner.max_nodes": (2, 2_000_000),
+    "planner.png_max_iterations": (1, 1_000_000),
+    "navigation.reset_after_rejections": (1, 10_000),
+    "tracking.max_targets": (1, 1000),
+    "tracking.confirm_reports": (1, 1000),
+    "traffic.interval_slow": (0.1, 3600.0),
+    "traffic.interval_turning": (0.1, 3600.0),
+    "traffic.interval_fast": (0.1, 3600.0),
+    "traffic.interval_very_fast": (0.1, 3600.0),
+    "colregs.horizon": (1.0, 3600.0),
+    "can.lockstep_wait": (1e-3, 60.0),
+    "can.socket_rx_buffer": (0, 1 << 26),
+    "gcs.pace_speedup": (0.1, 1e3),
+    "gcs.failsafe_timeout": (0.1, 3600.0),
+    "gcs.mission_timeout": (0.01, 10.0),
+    "gcs.mission_retries": (0, 100),
+}
+MAX_INTEGER = (1 << 63) - 1   # seeds are 64-bit; counts have their own cap in PHYSICAL_RANGES
+
+
+def range_of(key: str, meta: typing.Mapping[str, Any], tp: Any = float) -> tuple[float, float]:
+    """The inclusive (low, high) a number at dotted ``key`` may take (an open schema bound ``gt``/``lt``
+    is reported as its value); array indices in ``key`` are ignored."""
+    base = key.split("[", 1)[0]
+    limit = MAX_INTEGER if tp is int else (MAX_RADIANS if meta.get("unit") == "rad" else MAX_MAGNITUDE)
+    low = next((meta[k] for k in ("ge", "gt") if meta.get(k) is not None), -limit)
+    high = next((meta[k] for k in ("le", "lt") if meta.get(k) is not None), limit)
+    if base in PHYSICAL_RANGES:
+        lo, hi = PHYSICAL_RANGES[base]
+        low, high = max(low, lo), min(high, hi)
+    return low, high
+
+
+def _check_range(value: Any, meta: typing.Mapping[str, Any], key: str) -> None:
+    """PHYSICAL_RANGES and MAX_INTEGER (the schema's bounds are :func:`_check_bounds`'s)."""
+    base = key.split("[", 1)[0]
+    values = value if isinstance(value, tuple) else (value,)
+    for v in values:
+        if isinstance(v, tuple):
+            _check_range(v, meta, key)
+            continue
+        if not isinstance(v, (int, float)) or isinstance(v, bool):
+            continue
+        unit = f" {meta['unit']}" if meta.get("unit") else ""
+        if base in PHYSICAL_RANGES:
+            lo, hi = PHYSICAL_RANGES[base]
+            if not lo <= v <= hi:
+                raise ValueError(f"{key}: {v:g}{unit} is out of range [{lo:g}, {hi:g}]{unit}")
+        elif isinstance(v, int) and abs(v) > MAX_INTEGER:
+            raise ValueError(f"{key}: {v} is out of range (|value| <= 2^63 - 1)")
+
+
 def _check_bounds(value: Any, meta: typing.Mapping[str, Any], key: str) -> None:
     values = value if isinstance(value, tuple) else (value,)
     for v in values:
@@ -171,6 +255,7 @@ def _build(cls: type[T], table: dict[str, Any], prefix: str) -> T:
             raise ValueError(f"{where}: missing key")
         value = _convert(table[name], hints[name], where)
         _check_bounds(value, f.metadata, where)
+        _check_range(value, f.metadata, where)
         kwargs[name] = value
     try:
         return cls(**kwargs)
@@ -328,6 +413,54 @@ def load(cls: type[T], path: str | Path | typing.Sequence[str | Path] | None = N
     for text in overrides or []:
         layers.add_override(text)
     return from_table(cls, layers.table, layers.source_of)
+
+
+def key_ranges(cls: type, prefix: str = "") -> list[tuple[str, str, float, float, str]]:
+    """(key, type, low, high, unit) of every number (or array of numbers) in a config dataclass, recursively."""
+    out: list[tuple[str, str, float, float, str]] = []
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        tp, key = hints[f.name], f"{prefix}{f.name}"
+        if dataclasses.is_dataclass(tp):
+            out += key_ranges(typing.cast(type, tp), key + ".")
+            continue
+        leaf = tp
+        while get_origin(leaf) is tuple:
+            leaf = get_args(leaf)[0]
+        if leaf in (int, float):
+            low, high = range_of(key, f.metadata, leaf)
+            out.append((key, leaf.__name__ if leaf is tp else f"array of {leaf.__name__}", low, high,
+                        f.metadata.get("unit", "")))
+    return out
+
+
+def _bound_text(value: float, meta: typing.Mapping[str, Any], strict: str, key: str) -> str:
+    """``> 0`` where the schema's strict bound is the effective one, else the number."""
+    base = key.split("[", 1)[0]
+    tightened = base in PHYSICAL_RANGES and value in PHYSICAL_RANGES[base]
+    return f"> {value:g}" if strict == "gt" and meta.get("gt") == value and not tightened else (
+        f"< {value:g}" if strict == "lt" and meta.get("lt") == value and not tightened else f"{value:g}")
+
+
+def range_table(cls: type) -> str:
+    """The markdown table of :func:`key_ranges` (docs/configuration-ranges.md)."""
+    metas = _metas(cls)
+    rows = ["| key | type | low | high | unit |", "| --- | --- | ---: | ---: | --- |"]
+    rows += [f"| `{k}` | {t} | {_bound_text(lo, metas[k], 'gt', k)} | {_bound_text(hi, metas[k], 'lt', k)} | {u} |"
+             for k, t, lo, hi, u in key_ranges(cls)]
+    return "\n".join(rows) + "\n"
+
+
+def _metas(cls: type, prefix: str = "") -> dict[str, typing.Mapping[str, Any]]:
+    out: dict[str, typing.Mapping[str, Any]] = {}
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        tp = hints[f.name]
+        if dataclasses.is_dataclass(tp):
+            out.update(_metas(typing.cast(type, tp), f"{prefix}{f.name}."))
+        else:
+            out[f"{prefix}{f.name}"] = f.metadata
+    return out
 
 
 def field_docs(cls: type) -> list[tuple[str, str, str]]:

@@ -45,6 +45,7 @@ from common.tables import to_table
 from hil import config, placement, processes
 from hil import scenario as scenarios
 from hil.errors import RunFailed, UsageError
+from hil.progress_watch import STALL_WINDOW_S, ProgressWatch
 from hil.run_summary import RunSecurity, RunSummary, read_autopilot_summary
 from hil.tap import Tap
 
@@ -81,6 +82,10 @@ LOCKSTEP_TAP_PERIOD_S = 0.01  # wall seconds between the tap's reads in lockstep
 WALL_CLOCK_KEYS = frozenset({"wall_time_s", "control_latency_ms", "run_folder", "tlog", "plot", "simulator",
                              "tlog_messages", "navigation", "gcs", "sensed_obstacles", "security", "warnings"})
 
+# Campaigns (Monte Carlo) run many loops at once and nobody watches them: they open no ground-station link.
+NO_GCS = ["gcs.endpoints=[]"]
+
+
 @dataclass
 class RunOptions:
     scenario: str = "harbour"
@@ -104,6 +109,9 @@ class RunOptions:
     # CPUs of the processes (hil.placement): "auto" places a lockstep run on a pair of CPUs no other
     # run holds, "off" never; campaigns, which run several loops at once, say "off".
     cpus: str | placement.Placement = "auto"
+    # lockstep: wall seconds per progress check (hil.progress_watch); None: the larger of STALL_WINDOW_S and
+    # twice autopilot.lockstep_planner_timeout
+    stall_window_s: float | None = None
 
     def __post_init__(self) -> None:
         # The children run in the repository (cwd=REPO): files the user named relative to where
@@ -416,6 +424,8 @@ class HilRun:
                     raise
                 raise _WallTimeout() from None
             checked = 0
+            window = opts.stall_window_s or max(STALL_WINDOW_S, 2.0 * self.cfg.autopilot.lockstep_planner_timeout)
+            watch = ProgressWatch(window) if opts.lockstep else None
             processes.freeze_heap()   # unfrozen in the finally below: a campaign's runs share this process
             while True:
                 if opts.lockstep:
@@ -451,6 +461,11 @@ class HilRun:
                     break
                 if time.monotonic() - wall0 > opts.wall_timeout:
                     outcome = "wall_timeout"
+                    break
+                stalled = watch.check(time.monotonic(), t_sim) if watch is not None else None
+                if stalled is not None:
+                    opts.on_progress(f"run: {stalled}")
+                    outcome = "stalled"
                     break
                 if self.tap.write_error is not None:
                     outcome = "disk_full" if self.tap.write_error.errno in (errno.ENOSPC, errno.EDQUOT) \
@@ -505,7 +520,7 @@ class HilRun:
         stopped, are counted apart (the simulator runs on in real time while the autopilot exits).
         ``busy_poll``: how each end's lockstep waits went (common.udp.BusyPoll; None where off)."""
         out = {k: sim.get(k) for k in ("steps", "commands_received", "malformed_dropped", "stale_command_events",
-                                       "lockstep_resends", "jitter_ms", "stepping")}
+                                       "lockstep_resends", "jitter_ms", "stepping", "stalls")}
         out["busy_poll"] = {"simulator": sim.get("busy_poll"), "autopilot": ap_busy_poll}
         if "pipeline_skips" in sim:   # the pipelined lockstep (sim.lockstep_pipeline)
             out["pipeline_skips"] = sim["pipeline_skips"]

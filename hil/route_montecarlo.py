@@ -66,13 +66,13 @@ class RouteJob:
 
     def __call__(self, item: tuple[int, str, str]) -> RunSummary:
         from hil import settings
-        from hil.hilrun import RunOptions, run_loop
+        from hil.hilrun import NO_GCS, RunOptions, run_loop
 
         i, scenario_file, folder = item
         opts = RunOptions(scenario=scenario_file, lockstep=True, duration=self.duration, seed=self.seed * 1000 + i,
-                          config=self.config, overrides=list(self.overrides), out=Path(folder) / "hil", plot=False,
-                          cpus="off")  # runs share the host: none is placed (hil.placement)
-        return run_loop(opts, settings.load(self.config, list(self.overrides)))
+                          config=self.config, overrides=list(self.overrides) + NO_GCS, out=Path(folder) / "hil",
+                          plot=False, cpus="off")  # runs share the host: none is placed (hil.placement)
+        return run_loop(opts, settings.load(self.config, list(self.overrides) + NO_GCS))
 
 
 def run_campaign(scenario: str, runs: int, seed: int, out: Path, executor: Any, safety_radius: float,

@@ -94,13 +94,14 @@ class TrafficJob:
 
     def __call__(self, item: tuple[int, tuple[ShipSpec, ...]]) -> RunSummary:
         from hil import settings
-        from hil.hilrun import RunOptions, run_loop
+        from hil.hilrun import NO_GCS, RunOptions, run_loop
 
         i, ships = item
         opts = RunOptions(scenario=self.scenario, lockstep=True, duration=self.duration, seed=self.seed * 1000 + i,
-                          config=self.config, overrides=list(self.overrides), out=Path(self.out) / f"run{i:04d}",
-                          plot=False, traffic=ships, cpus="off")  # runs share the host (hil.placement)
-        return run_loop(opts, settings.load(self.config, list(self.overrides)))
+                          config=self.config, overrides=list(self.overrides) + NO_GCS,
+                          out=Path(self.out) / f"run{i:04d}", plot=False, traffic=ships,
+                          cpus="off")  # runs share the host (hil.placement)
+        return run_loop(opts, settings.load(self.config, list(self.overrides) + NO_GCS))
 
 
 def run_campaign(scenario: str, runs: int, seed: int, draw: TrafficDraw, out: Path, executor: Any,

@@ -17,6 +17,10 @@ from simulator.core import OUT_OF_STEP, Command, SimulatorCore
 
 POLL_S = 0.05  # longest wait before the stop flag is looked at again (wall seconds)
 MAX_DATAGRAMS_PER_STEP = 64  # real time: command datagrams read per step at most (a flood waits in the socket)
+# Real time: a step this late (wall s) is a stall (the process was paused: SIGSTOP, a debugger, a swapped
+# VM): the missed steps are not replayed, the schedule restarts from now, and the stall is an event.
+MAX_BEHIND_S = 0.25
+STALLS_KEPT = 100   # stall events kept for the summary (count and total are exact)
 LEARN = "learn"
 # Why a pipelined lockstep refuses CAN actuators (here and in hil.commands.can_options' pre-flight).
 PIPELINE_NOT_WITH_CAN = "the pipelined lockstep takes its commands over MAVLink, not from CAN ESCs"
@@ -56,6 +60,10 @@ class SimulatorServer:
         self.budget_stops = 0
         self.datagrams_sent = 0
         self.lateness = StreamingPercentiles()  # real time: lateness of each step vs its ideal wall time (ms)
+        self.max_behind = MAX_BEHIND_S
+        self.stalls: list[tuple[float, float]] = []   # real time: (simulated s, wall s missed), the first STALLS_KEPT
+        self.stall_count = 0
+        self.stall_total_s = 0.0
         self._stop = False
         self.wall_time = 0.0
         # lockstep: wall clock (time.monotonic) of the first and the last step, so the loop's speed
@@ -234,7 +242,11 @@ class SimulatorServer:
                 if self._stop:
                     return
                 time.sleep(min(remaining, POLL_S))
-            self.lateness.add(max(0.0, (time.perf_counter() - ideal) * 1e3))
+            late = time.perf_counter() - ideal
+            if late > self.max_behind:
+                t0 = self._stalled(late, t0, period)   # skip ahead: the missed steps are not replayed
+                late = 0.0
+            self.lateness.add(max(0.0, late * 1e3))
             newest = None
             for _ in range(MAX_DATAGRAMS_PER_STEP):
                 data = self.ep.recv(0.0)
@@ -258,6 +270,19 @@ class SimulatorServer:
             core.step()
             self._publish(core.frame())
             self._maybe_progress(start, last_progress)
+
+    def _stalled(self, late: float, t0: float, period: float) -> float:
+        """A stall of ``late`` wall seconds: counted and reported; the schedule's origin moved so that this
+        step is due now. Before (issue 31) a 5 s SIGSTOP was caught up at once, about 4 s of it under the
+        thrust set before the pause, and nothing reported it."""
+        self.stall_count += 1
+        self.stall_total_s += late
+        if len(self.stalls) < STALLS_KEPT:
+            self.stalls.append((self.core.t, late))
+        if self.progress is not None:
+            self.progress(f"sim: stalled {late:.2f} s (wall) at t={self.core.t:.2f} s; skipped ahead, "
+                          f"the missed steps are not replayed")
+        return t0 + late
 
     # -- report ----------------------------------------------------------------------------
     def jitter_ms(self) -> dict[str, float] | None:
@@ -303,6 +328,8 @@ class SimulatorServer:
                              "budget_stops": self.budget_stops + self.ep.budget_stops,
                              "kernel_drops": self.ep.kernel_drops()},
             "jitter_ms": self.jitter_ms(),
+            "stalls": {"count": self.stall_count, "total_s": round(self.stall_total_s, 3),
+                       "events": [{"t_s": round(t, 3), "length_s": round(d, 3)} for t, d in self.stalls]},
             "gps": {"fixes": c.gps.fixes, "dropout_fixes": c.gps.dropout_fixes, "glitches": c.gps.glitches},
             "distance_m": c.distance,
             "ais": None if c.traffic is None else {"ships": len(c.traffic.ships), "reports": c.traffic.reports_sent,

@@ -205,6 +205,30 @@ def test_sigkill_of_a_child_ends_the_run_promptly_with_what_it_has(child, tmp_pa
 
 
 @pytest.mark.slow
+def test_a_lockstep_run_that_stops_advancing_is_stopped_with_one_line(tmp_path):
+    """Issue 31: a lockstep run whose simulated time stops (here the vessel computer's process group is
+    SIGSTOPped 2 s into the run; SIGCONT 8 s later) ends with outcome "stalled" and one line saying why,
+    not at the wall timeout. The check's window is 3 s here (60 s by default)."""
+    import threading
+
+    lines: list[str] = []
+
+    def attack(tap, run):
+        os.killpg(run.ap.pid, signal.SIGSTOP)
+        threading.Timer(8.0, lambda: os.killpg(run.ap.pid, signal.SIGCONT)).start()
+
+    opts = RunOptions(scenario="harbour", lockstep=True, duration=60.0, seed=1, out=tmp_path / "run", plot=False,
+                      wall_timeout=600.0, hooks=[_once(2_000_000, attack)], stall_window_s=3.0,
+                      on_progress=lines.append)
+    start = time.monotonic()
+    summary = HilRun(opts, settings.load(None, opts.overrides)).execute()
+    assert summary.outcome == "stalled", summary.outcome
+    why = [line for line in lines if "simulated time advanced" in line]
+    assert len(why) == 1 and "\n" not in why[0] and "lower autopilot.lockstep_iterations" in why[0], lines
+    assert time.monotonic() - start < 120.0
+
+
+@pytest.mark.slow
 def test_full_disk_run_folder_one_line_exit_1_no_temporary_files(tmp_path, hil):
     disk = tmp_path / "disk"
     disk.mkdir()
@@ -221,6 +245,11 @@ def test_full_disk_run_folder_one_line_exit_1_no_temporary_files(tmp_path, hil):
         left = [p.name for p in (disk / "run").iterdir()]
         assert not [n for n in left if n.endswith(".tmp")], left
         assert "summary.json" not in left
+        # No traceback anywhere: not in the children's logs either (issue 31: an OSError traceback in
+        # autopilot.log).
+        for f in (disk / "run").iterdir():
+            if f.suffix == ".log":
+                assert "Traceback" not in f.read_text(errors="replace"), f"{f.name}: {f.read_text(errors='replace')}"
     finally:
         subprocess.run(["umount", str(disk)], check=False)
 

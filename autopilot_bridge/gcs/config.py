@@ -39,7 +39,8 @@ class GcsParams:
                                   "hashed with SHA-256 as MAVProxy does); empty = signing off", default="")
     allowed_sysids: tuple[int, ...] = param("system ids allowed to command the boat (empty = any)", ge=1, le=255,
                                             default=())
-    max_peers: int = param("ground stations answered at once per endpoint (least recently heard dropped)", ge=1,
+    max_peers: int = param("ground stations answered at once per endpoint (places earned past the security gate, "
+                           "docs/security.md)", ge=1, le=64,
                            default=8)
 
     def __post_init__(self) -> None:

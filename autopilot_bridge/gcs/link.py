@@ -70,10 +70,11 @@ class GcsLink:
         self.log: Callable[[str], None] = log or (lambda _m: None)
         self.key = load_signing_key(params.signing_key_file) if params.signing_key_file else None
         self.transports: list[Transport] = []
+        self.security: Counter[str] = Counter()   # refusals by reason: the gate's, the limits', the peer tables'
         self._datagrams_out_closed = 0      # per-peer sends of transports already closed
         try:
             for spec in params.endpoints:
-                self.transports.append(open_endpoint(spec, params.max_peers))
+                self.transports.append(open_endpoint(spec, params.max_peers, self.security, clock))
         except ValueError:
             self.close()
             raise
@@ -85,7 +86,6 @@ class GcsLink:
             s.timestamp = signing_now()
         self.received: Counter[str] = Counter()
         self.rejects: Counter[str] = Counter()
-        self.security: Counter[str] = Counter()
         self.datagrams_in = 0               # UDP datagrams / TCP reads from ground stations
         self.guard = ReplayGuard(self.key) if self.key is not None else None
         self.gate = SecurityGate(self.key, params.allowed_sysids, self.security)
@@ -255,17 +255,15 @@ class GcsLink:
                 self.security["frame_budget"] += 1
         for r in parsed.rejects:
             self.rejects[r] += 1
-        if parsed.msgs:
-            tr.heard(peer)
         for m in parsed.msgs:
             try:
-                self._handle(m, now)
+                self._handle(m, now, tr, peer)
             except Exception as exc:  # absurd fields must never stop the boat
                 self.rejects["handler_error"] += 1
                 self.log(f"gcs: {m.get_type()} dropped: {type(exc).__name__}: {exc}")
         return budget
 
-    def _handle(self, m: Any, now: float) -> None:
+    def _handle(self, m: Any, now: float, tr: Transport | None = None, peer: Any = None) -> None:
         kind = m.get_type()
         self.received[kind] += 1
         if m.get_srcSystem() == self.sysid and m.get_srcComponent() == self.compid:
@@ -274,6 +272,8 @@ class GcsLink:
             self.command.refuse(m)
             self.mission_service.refuse(m)
             return
+        if tr is not None:
+            tr.heard(peer, self.gate.peer_rank(m, kind))   # a sender is a peer only past the gate (issue 31)
         if not self.limiter.allows(m, kind, now):
             return
         self.out.record(bytes(m.get_msgbuf()))   # only what passed the gate reaches the run's tap

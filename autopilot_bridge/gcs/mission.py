@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from autopilot_bridge import mission_commands as mc
+from autopilot_bridge.gcs.upload_claim import UploadClaim
 from common.mavlink import MAV_TYPE as M
 
 MISSION = M.MAV_MISSION_TYPE_MISSION
@@ -221,6 +222,7 @@ class MissionServer:
         self.max_items, self.item_timeout, self.retries = max_items, item_timeout, retries
         self.position_check = position_check
         self.upload: _Upload | None = None
+        self.claim = UploadClaim(item_timeout)   # the upload's owner and when it stops owning it (issue 31)
         self.events: list[MissionEvent] = []
         self.last_reject: tuple[int, str] | None = None  # (seq, why) of the last refused item
         self.stats: dict[str, int] = {}
@@ -278,18 +280,34 @@ class MissionServer:
         if mtype not in PLAN_TYPES:
             self._count("unsupported_plan_type")
             return [self._ack(sender, M.MAV_MISSION_UNSUPPORTED, mtype)]
+        taken: list[Out] = []
         if self.upload is not None and self.upload.partner != sender:
-            self._count("busy")
+            if not self.claim.yields(now):
+                self.claim.denied(sender, now)
+                self._count("busy")
+                return [self._ack(sender, M.MAV_MISSION_DENIED, mtype)]
+            # its owner went silent
+            taken = [self._ack(self.upload.partner, M.MAV_MISSION_OPERATION_CANCELLED, self.upload.mission_type)]
+            self._count("upload_taken_over")
+            self.upload = None
+        elif self.upload is None and not self.claim.admits(sender, now):
+            self._count("reserved_for_rival")
             return [self._ack(sender, M.MAV_MISSION_DENIED, mtype)]
         if msg.count > self.max_items:
             self.upload = None
             self._count("rejected_no_space")
-            return [self._ack(sender, M.MAV_MISSION_NO_SPACE, mtype)]
+            return taken + [self._ack(sender, M.MAV_MISSION_NO_SPACE, mtype)]
         if msg.count == 0:
             self.upload = None
-            return self._replace((), sender, now, mtype)
+            return taken + self._replace((), sender, now, mtype)
+        again = self.upload   # the owner re-sent MISSION_COUNT: a restart that renews neither its claim nor its retries
+        if again is None:
+            self.claim.begin(sender, now)
         self.upload = _Upload(sender, int(msg.count), legacy=False, mission_type=mtype)
-        return [self._request(self.upload, now)]
+        request = self._request(self.upload, now)
+        if again is not None:
+            self.upload.retries, self.upload.last_request = again.retries, again.last_request
+        return taken + [request]
 
     def _on_mission_item_int(self, msg: Any, sender: tuple[int, int], now: float, legacy: bool = False) -> list[Out]:
         mtype = getattr(msg, "mission_type", MISSION)
@@ -332,6 +350,7 @@ class MissionServer:
             return [self._ack(sender, bad[0], mtype)]
         up.items.append(item)
         up.retries = 0
+        self.claim.progress(now)
         if len(up.items) < up.count:
             return [self._request(up, now)]
         self.upload = None

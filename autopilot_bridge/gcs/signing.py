@@ -6,7 +6,9 @@
   same (link id, system id, component id). There is ONE guard per link and key, shared by every
   parser of every transport (UDP, each TCP connection, serial): a frame captured on one connection
   and replayed on another, or replayed over UDP, is refused. A frame is recorded only once its
-  signature is good, so a forged frame with a future timestamp cannot lock the real GCS out.
+  signature is good, so a forged frame with a future timestamp cannot lock the real GCS out; a good
+  frame stamped more than :data:`FUTURE_SLACK` ahead of our clock is refused and recorded nowhere, so
+  a GCS with a wrong clock cannot lock the others out either (issue 31).
 * :class:`SecurityGate` decides, per message, whether a frame may change the vessel: with signing on,
   every state- or rate-changing message (:data:`WRITES`) must carry a good signature; with an
   allow-list, its source system id must be listed. Refusals are counted by reason.
@@ -19,13 +21,17 @@ import hmac
 import struct
 import time
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from common.mavlink import mavlink2
+from autopilot_bridge.gcs.peers import RANK_GCS, RANK_SIGNED, RANK_STRANGER
+from common.mavlink import MAV_TYPE, mavlink2
 
 SIGNING_EPOCH = 1420070400  # 2015-01-01 00:00:00 UTC, the MAVLink 2 signing timestamp origin
 NEW_STREAM_SLACK = 6_000_000  # a new stream's first timestamp may lag our clock by 60 s (10 µs units), as the spec
+FUTURE_SLACK = 6_000_000      # a timestamp may lead our wall clock by 60 s at most (10 µs units); beyond: refused
+MAX_STREAMS = 256             # (link id, sysid, compid) streams remembered (256 links x ids would be 2^24)
 
 # Messages that change the vessel's state or what it sends (rates included): signing and the allow-list
 # apply to these. Read requests (PARAM_REQUEST_*, MISSION_REQUEST_*, PING) stay open, rate-limited
@@ -68,14 +74,27 @@ def signature_matches(key: bytes, msgbuf: bytes | bytearray) -> bool:
                                                     bytes(msgbuf[-6:]))
 
 
-class ReplayGuard:
-    """One link's signature check and replay state: newest accepted timestamp per (link id, sysid, compid)."""
+def _stamp(msgbuf: bytes | bytearray) -> int:
+    """A signed frame's timestamp (10 µs units since 2015-01-01)."""
+    low, high = struct.unpack("<IH", bytes(msgbuf[-12:-6]))
+    return int(low + (high << 32))
 
-    def __init__(self, key: bytes, now: int | None = None) -> None:
+
+class ReplayGuard:
+    """One link's signature check and replay state: newest accepted timestamp per (link id, sysid, compid).
+
+    Our clock is the wall clock (as a signing timestamp), never earlier than at the start; timestamps
+    received never move it. A timestamp more than :data:`FUTURE_SLACK` ahead of the wall clock is refused
+    (``future``) and changes nothing: before issue 31, one good frame stamped a day ahead (a GCS with a
+    wrong clock) moved our clock a day on, and every new stream was then refused as a replay for a day.
+    """
+
+    def __init__(self, key: bytes, now: int | None = None, wall: Callable[[], float] = time.time) -> None:
         self.key = key
-        self.timestamp = signing_now() if now is None else now   # our clock: max(start, newest accepted)
+        self.wall = wall
+        self.timestamp = signing_now(wall()) if now is None else now   # our clock: max(start, newest accepted)
         self.streams: dict[tuple[int, int, int], int] = {}
-        self.refused: Counter[str] = Counter()                    # "replay" / "bad_signature", every frame
+        self.refused: Counter[str] = Counter()                    # "replay" / "bad_signature" / "future"
 
     def check(self, msgbuf: bytes | bytearray, src_system: int, src_component: int) -> bool:
         """pymavlink's ``check_signature`` hook: True for a good signature with a fresh timestamp."""
@@ -83,15 +102,20 @@ class ReplayGuard:
             self.refused["bad_signature"] += 1
             return False
         link_id = msgbuf[-13]
-        low, high = struct.unpack("<IH", bytes(msgbuf[-12:-6]))
-        stamp = low + (high << 32)
+        stamp = _stamp(msgbuf)
+        clock = max(self.timestamp, signing_now(self.wall()))
+        if stamp > clock + FUTURE_SLACK:
+            self.refused["future"] += 1
+            return False
         stream = (link_id, src_system, src_component)
         last = self.streams.get(stream)
-        if (last is not None and stamp <= last) or (last is None and stamp + NEW_STREAM_SLACK < self.timestamp):
+        if (last is not None and stamp <= last) or (last is None and stamp + NEW_STREAM_SLACK < clock):
             self.refused["replay"] += 1
             return False
+        if last is None and len(self.streams) >= MAX_STREAMS:
+            self.streams.pop(next(iter(self.streams)))   # the oldest stream's state: bounded memory
         self.streams[stream] = stamp
-        self.timestamp = max(self.timestamp, stamp)
+        self.timestamp = clock   # the stamps we accept never move our clock (a wrong GCS clock stays its own)
         return True
 
     def install(self, mav: Any) -> None:
@@ -124,8 +148,23 @@ class SecurityGate:
             if not m.get_header().incompat_flags & mavlink2.MAVLINK_IFLAG_SIGNED:
                 self.counts["unsigned"] += 1
             elif signature_matches(self.key, m.get_msgbuf()):
-                self.counts["replay"] += 1      # our key, an old timestamp: a captured frame sent again
+                # our key: a timestamp too far ahead (a wrong clock), or an old one (a captured frame sent again)
+                self.counts["future" if _stamp(m.get_msgbuf()) > signing_now() + FUTURE_SLACK else "replay"] += 1
             else:
                 self.counts["bad_signature"] += 1
             return False
         return True
+
+    def peer_rank(self, m: Any, kind: str) -> int:
+        """The place a frame that passed :meth:`allows` earns its sender in the peer table (:mod:`.peers`):
+        signed with our key; without signing, a frame that talks like a ground station (a GCS HEARTBEAT
+        or a write, from an allowed system id); anything else ranks as a stranger's."""
+        if self.signed(m):
+            return RANK_SIGNED
+        if self.key is not None:
+            return RANK_STRANGER
+        if self.allowed and m.get_srcSystem() not in self.allowed:
+            return RANK_STRANGER
+        if kind in WRITES or (kind == "HEARTBEAT" and getattr(m, "type", None) == MAV_TYPE.MAV_TYPE_GCS):
+            return RANK_GCS
+        return RANK_STRANGER

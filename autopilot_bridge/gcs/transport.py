@@ -12,26 +12,35 @@
 * ``serial:DEVICE:BAUD`` - a telemetry radio on a serial port, through pyserial.
 * ``HOST:PORT`` - as ``udpout:``.
 
-Peers are learned only from valid MAVLink frames (a fuzzer's garbage does not make it a peer) and
-kept up to ``max_peers`` per endpoint, the least recently heard dropped first. Every transport
-has the same small interface: :meth:`receive` gives ``(peer, bytes)`` chunks (at most ``max_reads``
-reads per peer, none from the peers in ``hold``: the link's frame budget; a held TCP peer is throttled
-by TCP's own flow control), :meth:`send`
-fans a frame out to every peer, :meth:`heard` records a peer as a talker.
+Peers are earned (issue 31, :mod:`.peers`): a sender becomes a peer only once one of its frames has
+passed the link's security gate, and the table of up to ``max_peers`` peers per endpoint keeps signed
+ground stations (or, without signing, those that talk like one) ahead of strangers; a TCP connection
+that earns no place, or falls silent, is closed. Every transport has the same small interface:
+:meth:`receive` gives ``(peer, bytes)`` chunks (at most ``max_reads`` reads per peer, none from the
+peers in ``hold``: the link's frame budget; a held TCP peer is throttled by TCP's own flow control;
+``(peer, b"")`` says a stream ended), :meth:`send` fans a frame out to every peer, :meth:`heard`
+records that a frame of a given rank from a peer passed the gate.
 """
 
 from __future__ import annotations
 
 import socket
-from collections import OrderedDict
-from collections.abc import Collection
+import time
+from collections import Counter
+from collections.abc import Callable, Collection
 from typing import Any
 
+from autopilot_bridge.gcs.peers import RANK_STRANGER, PeerTable
 from common import connection
 from common.udp import UdpEndpoint
 
 KINDS = ("udpout", "udpin", "tcp", "tcpin", "serial")
 RECONNECT_S = 1.0  # tcp: seconds between connection attempts while the ground station is away
+TCP_PENDING = 4          # tcpin: connections at once that have not yet sent a frame that passed the gate
+TCP_PER_ADDRESS = 4      # tcpin: connections at once from one IP address
+TCP_PROVE_S = 5.0        # tcpin: s a new connection has to send a frame that passes the gate
+TCP_IDLE_S = 10.0        # tcpin: s without a frame (a GCS sends a HEARTBEAT every second) before a peer is closed
+TCP_ACCEPTS_PER_CALL = 16
 
 
 def parse_endpoint(text: str) -> tuple[str, str, int]:
@@ -45,17 +54,18 @@ def parse_endpoint(text: str) -> tuple[str, str, int]:
 
 
 class UdpTransport:
-    """udpout / udpin over :class:`common.udp.UdpEndpoint`."""
+    """udpout / udpin over :class:`common.udp.UdpEndpoint`; the peers answered are a :class:`.peers.PeerTable`."""
 
     stream = False
 
-    def __init__(self, kind: str, host: str, port: int, max_peers: int = 8) -> None:
+    def __init__(self, kind: str, host: str, port: int, max_peers: int = 8, *,
+                 counts: Counter[str] | None = None, clock: Callable[[], float] = time.monotonic) -> None:
         self.kind = kind
         bind = f"{host}:{port}" if kind == "udpin" else ("127.0.0.1:0" if host in ("127.0.0.1", "localhost")
                                                          else "0.0.0.0:0")
         self.ep = UdpEndpoint(bind, [])
         self.fixed = [(socket.gethostbyname(host), port)] if kind == "udpout" else []
-        self.peers: OrderedDict[Any, None] = OrderedDict()
+        self.peers = PeerTable(max_peers, clock, counts)
         self.max_peers = max_peers
         self.sent = 0
 
@@ -75,14 +85,14 @@ class UdpTransport:
             out.append((self.ep.last_sender, data))
         return out
 
-    def heard(self, peer: Any) -> None:
-        self.peers[peer] = None
-        self.peers.move_to_end(peer)
-        while len(self.peers) > self.max_peers:
-            self.peers.popitem(last=False)
+    def heard(self, peer: Any, rank: int = RANK_STRANGER) -> None:
+        """A frame from ``peer`` passed the security gate with ``rank``: it becomes (or stays) a peer if it
+        earns a place in the table."""
+        self.peers.earn(peer, rank)
 
     def send(self, data: bytes) -> None:
-        for dest in self.fixed + [p for p in self.peers if p not in self.fixed]:
+        dests: list[Any] = self.fixed + [p for p in self.peers if p not in self.fixed]
+        for dest in dests:
             try:
                 self.ep.sock.sendto(data, dest)
                 self.sent += 1
@@ -94,11 +104,21 @@ class UdpTransport:
 
 
 class TcpServerTransport:
-    """tcpin: a listening socket; each accepted connection is a peer (bounded)."""
+    """tcpin: a listening socket; each accepted connection is a peer, bounded and earned.
+
+    A new connection is *pending* until a frame of it passes the security gate; then it asks the
+    :class:`.peers.PeerTable` (``max_peers`` places, ranks as for UDP) for a place. At most
+    :data:`TCP_PENDING` connections are pending at once (a newcomer closes the oldest pending one),
+    at most :data:`TCP_PER_ADDRESS` connections come from one IP address (a newcomer closes that
+    address's oldest pending connection, or is closed itself when none is pending), a pending
+    connection that has not earned a place within :data:`TCP_PROVE_S` is closed, and a peer not heard
+    for :data:`TCP_IDLE_S` is closed. Every close is counted in ``counts``.
+    """
 
     stream = True
 
-    def __init__(self, host: str, port: int, max_peers: int = 8) -> None:
+    def __init__(self, host: str, port: int, max_peers: int = 8, *, counts: Counter[str] | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.lsock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self.lsock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
@@ -106,11 +126,16 @@ class TcpServerTransport:
         except OSError as exc:
             self.lsock.close()
             raise ValueError(f"cannot listen on TCP {host}:{port}: {exc.strerror or exc}") from None
-        self.lsock.listen(4)
+        self.lsock.listen(16)
         self.lsock.setblocking(False)
+        self.clock = clock
+        self.counts: Counter[str] = counts if counts is not None else Counter()
         self.conns: dict[Any, socket.socket] = {}
+        self.pending: dict[Any, float] = {}      # connection -> when it was accepted (s, clock)
+        self.peers = PeerTable(max_peers, clock, self.counts)
         self.max_peers = max_peers
         self.sent = 0
+        self._closed: list[Any] = []             # connections closed here, reported by the next receive()
 
     @property
     def address(self) -> tuple[str, int]:
@@ -119,24 +144,44 @@ class TcpServerTransport:
     def fileno(self) -> int:
         return self.lsock.fileno()
 
+    def _from(self, ip: str) -> list[Any]:
+        return [p for p in self.conns if p[1][0] == ip]
+
     def _accept(self) -> None:
-        while True:
+        for _ in range(TCP_ACCEPTS_PER_CALL):
             try:
                 conn, addr = self.lsock.accept()
-            except (BlockingIOError, InterruptedError):
+            except OSError:   # nothing waiting (BlockingIOError) or the listener failed
                 return
-            except OSError:
-                return
-            if len(self.conns) >= self.max_peers:
-                conn.close()
-                continue
+            peer = ("tcp", addr)
+            same = self._from(addr[0])
+            if len(same) >= TCP_PER_ADDRESS:
+                pending = [p for p in same if p in self.pending]
+                if not pending:
+                    self.counts["tcp_per_address_cap"] += 1
+                    conn.close()
+                    continue
+                self._close(min(pending, key=self.pending.__getitem__), "tcp_per_address_cap")
+            if len(self.pending) >= TCP_PENDING:
+                self._close(min(self.pending, key=self.pending.__getitem__), "tcp_pending_displaced")
             conn.setblocking(False)
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self.conns[("tcp", addr)] = conn
+            self.conns[peer] = conn
+            self.pending[peer] = self.clock()
+
+    def _expire(self) -> None:
+        now = self.clock()
+        for peer, since in list(self.pending.items()):
+            if now - since > TCP_PROVE_S:
+                self._close(peer, "tcp_idle_closed")
+        for peer in self.peers.idle(TCP_IDLE_S):
+            self._close(peer, "tcp_idle_closed")
 
     def receive(self, max_reads: int = 16, hold: Collection[Any] = ()) -> list[tuple[Any, bytes]]:
+        self._expire()
         self._accept()
-        out = []
+        out: list[tuple[Any, bytes]] = [(peer, b"") for peer in self._closed]   # tells the link they ended
+        self._closed.clear()
         for peer, conn in list(self.conns.items()):
             if peer in hold:
                 continue
@@ -154,23 +199,38 @@ class TcpServerTransport:
                 out.append((peer, data))
         return out
 
-    def heard(self, peer: Any) -> None:
-        pass  # every connection is a peer already
+    def heard(self, peer: Any, rank: int = RANK_STRANGER) -> None:
+        if peer not in self.conns:
+            return
+        ok, victim = self.peers.earn(peer, rank)
+        if ok:
+            self.pending.pop(peer, None)
+        if victim is not None:
+            self._close(victim, "tcp_peer_displaced")
+
+    def _close(self, peer: Any, why: str) -> None:
+        if peer in self.conns:
+            self.counts[why] += 1
+            self._drop(peer)
+            self._closed.append(peer)
 
     def _drop(self, peer: Any) -> None:
+        self.pending.pop(peer, None)
+        self.peers.drop(peer)
         conn = self.conns.pop(peer, None)
         if conn is not None:
             conn.close()
 
     def send(self, data: bytes) -> None:
-        for peer, conn in list(self.conns.items()):
-            try:
+        for peer, conn in list(self.conns.items()):   # pending ones too: at most TCP_PENDING, and they
+            try:                                         # hear the refusal of what they sent
                 conn.sendall(data)
                 self.sent += 1
             except (BlockingIOError, InterruptedError):
                 pass  # a GCS that does not read loses telemetry, the boat never blocks
             except OSError:
                 self._drop(peer)
+                self._closed.append(peer)
 
     def close(self) -> None:
         for peer in list(self.conns):
@@ -278,7 +338,7 @@ class TcpClientTransport:
             out.append((peer, data))
         return out
 
-    def heard(self, peer: Any) -> None:
+    def heard(self, peer: Any, rank: int = RANK_STRANGER) -> None:
         pass
 
     def send(self, data: bytes) -> None:
@@ -338,7 +398,7 @@ class SerialTransport:
             out.append((("serial", self.device), data))
         return out
 
-    def heard(self, peer: Any) -> None:
+    def heard(self, peer: Any, rank: int = RANK_STRANGER) -> None:
         pass
 
     def send(self, data: bytes) -> None:
@@ -352,18 +412,21 @@ class SerialTransport:
         self.port.close()
 
 
-def open_endpoint(spec: str, max_peers: int = 8):
+def open_endpoint(spec: str, max_peers: int = 8, counts: Counter[str] | None = None,
+                  clock: Callable[[], float] = time.monotonic):
     """A transport from a connection string (ValueError with one line on bad input, a busy port,
-    a ground station that cannot be reached, a serial port that cannot be opened)."""
+    a ground station that cannot be reached, a serial port that cannot be opened). ``counts`` receives
+    the peer table's and the TCP server's refusals (``peer_table_full``, ``tcp_idle_closed`` ...); ``clock``
+    (s, monotonic) times the peers' silences."""
     kind, host, port = parse_endpoint(spec)
     if kind == "tcpin":
-        return TcpServerTransport(host, port, max_peers)
+        return TcpServerTransport(host, port, max_peers, counts=counts, clock=clock)
     if kind == "tcp":
         return TcpClientTransport(host, port)
     if kind == "serial":
         return SerialTransport(host, port)
     try:
-        return UdpTransport(kind, host, port, max_peers)
+        return UdpTransport(kind, host, port, max_peers, counts=counts, clock=clock)
     except socket.gaierror as exc:
         raise ValueError(f"{spec!r}: unknown host ({exc})") from None
 

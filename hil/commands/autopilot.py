@@ -6,6 +6,7 @@ import argparse
 import json
 import os
 import signal
+import sys
 from dataclasses import replace
 
 from common.readiness import Ready, announce
@@ -177,10 +178,15 @@ def run(args: argparse.Namespace) -> int:
         sensed_cells=tuple(map(tuple, autopilot.sensed.cells().tolist())),
     )
     table = to_table(summary)
+    written = True
     if args.summary_out:
-        write_json_atomic(args.summary_out, table, private=bool(cfg.gcs.signing_key_file))
+        try:
+            write_json_atomic(args.summary_out, table, private=bool(cfg.gcs.signing_key_file))
+        except OSError as exc:   # a full disk: one line, the summary still goes to stdout (issue 31)
+            print(f"autopilot: cannot write {args.summary_out}: {exc.strerror or exc}", file=sys.stderr)
+            written = False
     if args.json:
         emit(args, table)
     else:
         emit(args, {k: v for k, v in table.items() if k not in summary.BULKY})
-    return 0
+    return 0 if written else 1

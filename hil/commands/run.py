@@ -107,6 +107,10 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     from hil.commands.autopilot import add_gcs_arguments
 
     add_gcs_arguments(p)
+    p.add_argument("--instance", metavar="N", type=int, default=None,
+                   help="run instance 0-99, as SITL's -I: ground-station ports + 10 N, autopilot.system_id + N, so "
+                        "concurrent runs never share a ground station (default: the lowest instance no other "
+                        "hil run on this machine holds; 0 when alone)")
     p.add_argument("--demo", action="store_true",
                    help=f"constant-thrust demo controller (port {DEMO_CONTROLS[0]}, starboard {DEMO_CONTROLS[1]}) "
                         "instead of the autopilot; prints distance, final state, messages, wall time")
@@ -131,14 +135,31 @@ def run(args: argparse.Namespace) -> int:
         args.overrides.append("sim.lockstep_pipeline=true")
     if args.autopilot == "ardupilot":
         _check_ardupilot_options(args)
-    from hil import placement
+    from hil import instances, placement
 
     cpus = placement.parse(args.cpus)
+    if getattr(args, "gcs", None) is not None:   # --gcs: this run's endpoints, shifted by its instance
+        from hil.commands.autopilot import gcs_overrides
+
+        args.overrides += gcs_overrides(argparse.Namespace(gcs=args.gcs))
+        args.gcs = None
     cfg = load_settings(args)  # fail here, with one line, on a bad configuration
     check_can(cfg, "hil run")
-    previous_term = signal.signal(signal.SIGTERM, _raise_terminated)
     if args.demo and cfg.can.actuators == "can":
         raise UsageError("--demo drives the simulator over MAVLink; --actuators can needs the autopilot (drop --demo)")
+    instance = None
+    if cfg.gcs.endpoints and not args.demo:   # each concurrent run its own GCS ports and system id (hil.instances)
+        instance = instances.claim(args.instance)
+        try:
+            args.overrides += instances.overrides(cfg.gcs.endpoints, cfg.autopilot.system_id, instance.n)
+            cfg = load_settings(args)
+        except BaseException:
+            instance.close()
+            raise
+        if instance.n or args.instance is not None:
+            progress(f"run: instance {instance.n}: ground stations at {', '.join(cfg.gcs.endpoints)}, "
+                     f"system id {cfg.autopilot.system_id}")
+    previous_term = signal.signal(signal.SIGTERM, _raise_terminated)
     try:
         if args.demo:
             if args.out:
@@ -150,6 +171,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_hil(args, cfg, cpus)
     finally:
         signal.signal(signal.SIGTERM, previous_term)
+        if instance is not None:
+            instance.close()
 
 
 def _check_ardupilot_options(args: argparse.Namespace) -> None:

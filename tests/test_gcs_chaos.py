@@ -1,0 +1,122 @@
+"""A chaos ground station against a live `hil run` (issue 31, point 7; tests/support/chaos_gcs.py).
+
+A real `hil run --wait-for-arm` (lockstep paced to wall time, udpin and tcpin GCS endpoints) takes the
+seeded chaos client for ``CHAOS_S`` seconds (default 40 per leg: the suite's short version, about
+2 minutes with both legs on a loaded 2-core machine), with signing off and on. Then:
+
+* nothing crashed: the run is still going (ended by our SIGINT, outcome "interrupted"), no collision;
+* the vessel computer's memory and descriptors grew within a stated bound (RSS <= 64 MB, fds <= 8);
+* every refusal the client heard was counted by the vessel (its mission and command acks by result),
+  and with signing on the refused frames are counted by reason.
+
+The long versions: ``CHAOS_S=300 python -m pytest tests/test_gcs_chaos.py`` (5 minutes a leg) and
+``CHAOS_S=3600 ...`` (an hour a leg); docs/security.md records the figures.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import pytest
+from support.chaos_gcs import ChaosGcs
+from support.gcs_client import start_run, stop_run
+
+from hil import instances
+from hil.hilrun import free_udp_port
+
+CHAOS_S = float(os.environ.get("CHAOS_S", "40"))
+RSS_GROWTH_MB = 64.0
+FD_GROWTH = 8
+KEY = bytes(range(100, 132))
+
+
+def _autopilot_pid(run_pid: int, timeout: float = 120.0) -> int | None:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        for p in Path("/proc").iterdir():
+            if not p.name.isdigit():
+                continue
+            try:
+                stat = (p / "stat").read_text().rsplit(")", 1)[1].split()
+                cmd = (p / "cmdline").read_bytes().split(b"\0")
+            except OSError:
+                continue
+            if int(stat[1]) == run_pid and b"autopilot" in cmd:
+                return int(p.name)
+        time.sleep(0.5)
+    return None
+
+
+def _usage(pid: int) -> tuple[float, int]:
+    """(RSS in MB, open descriptors) of a process."""
+    rss = next(int(line.split()[1]) for line in Path(f"/proc/{pid}/status").read_text().splitlines()
+               if line.startswith("VmRSS:"))
+    return rss / 1024.0, len(os.listdir(f"/proc/{pid}/fd"))
+
+
+def _free_tcp_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signing", [False, True], ids=["signing_off", "signing_on"])
+def test_a_chaos_ground_station_crashes_nothing_and_every_refusal_is_counted(tmp_path, signing):
+    held = instances.claim(None)          # an instance no other run holds: its ports are ours alone
+    n = held.n
+    held.close()
+    udp, tcp = free_udp_port(), _free_tcp_port()
+    args = ["--scenario", "harbour", "--wait-for-arm", "--duration", "100000", "--instance", str(n),
+            "--gcs", f"udpin:127.0.0.1:{udp - 10 * n}", "--gcs", f"tcpin:127.0.0.1:{tcp - 10 * n}"]
+    if signing:
+        key_file = tmp_path / "gcs.key"
+        key_file.write_text(KEY.hex())
+        args += ["--set", f'gcs.signing_key_file="{key_file}"']
+    proc = start_run(tmp_path / "run", *args)
+    chaos = None
+    try:
+        ap = _autopilot_pid(proc.pid)
+        assert ap is not None, "no autopilot process"
+        chaos = ChaosGcs(seed=31, udp=("127.0.0.1", udp), tcp=("127.0.0.1", tcp), key=KEY if signing else None)
+        chaos.wait_for(("HEARTBEAT",), 120.0)
+        rss0, fd0 = _usage(ap)
+        stats = chaos.run(CHAOS_S)
+        rss1, fd1 = _usage(ap)
+        assert proc.poll() is None, "the run ended under the chaos"
+    finally:
+        if chaos is not None:
+            chaos.close()
+        out, err = stop_run(proc)
+        print("hil run stderr (tail):\n" + err[-3000:])
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    print(f"\nchaos {'signed' if signing else 'unsigned'} {stats.wall_s:.0f} s: actions {dict(stats.actions)}; "
+          f"mission acks {dict(stats.mission_acks)}; command acks {dict(stats.command_acks)}; "
+          f"connections {stats.connections}; frames {stats.frames_sent}; RSS {rss0:.1f} -> {rss1:.1f} MB; "
+          f"fds {fd0} -> {fd1}; gcs security_rejects {summary['gcs']['security_rejects']}; "
+          f"signature_failures {summary['gcs']['signature_failures']}; attacks {dict(stats.attacks)}")
+    assert summary["outcome"] == "interrupted", (summary["outcome"], err[-2000:])
+    assert summary["collision_time_s"] is None
+    assert rss1 - rss0 <= RSS_GROWTH_MB and fd1 - fd0 <= FD_GROWTH, (rss0, rss1, fd0, fd1)
+    gcs = summary["gcs"]
+    assert stats.heard["HEARTBEAT"] > 0 and sum(stats.actions.values()) > 20
+    assert stats.tcp_connect_failures == 0, "the vessel's TCP server refused a connection"
+    # Every refusal the client heard, the vessel counted (it counts those to every GCS, so >=).
+    for result, count in stats.mission_acks.items():
+        assert gcs["mission_acks"].get(result, 0) >= count, (result, gcs["mission_acks"])
+    for result, count in stats.command_acks.items():
+        assert gcs["command_acks"].get(result, 0) >= count, (result, gcs["command_acks"])
+    if signing:
+        # Each kind of bad signed frame the client sent was refused and counted by reason (a replay may be
+        # counted as one only while its stream has moved on, so replays are judged together with "future").
+        refused = gcs["signature_failures"]
+        if stats.attacks["bad_signature"]:
+            assert refused.get("bad_signature", 0) >= 1, refused
+        if stats.attacks["future"]:
+            assert refused.get("future", 0) >= 1, refused
+        assert sum(refused.values()) >= 1 or not stats.attacks, refused
