@@ -183,8 +183,10 @@ class Helm:
 
     def drive(self, s: NavState, dt: float, psi_ref: float, u_ref: float, r_ref: float = 0.0) -> Thrust:
         """Heading (rad, with yaw-rate feed-forward r_ref rad/s) and speed over ground (m/s) set-points to
-        thrust; the estimated current along the bow is fed forward."""
-        return self._drive(s, dt, psi_ref, u_ref, self.current.along(s.psi), r_ref)
+        thrust. Under way the speed loop's integral takes up the current (feeding the estimate forward here
+        too moved the COLREGs encounters' trajectories: crossing-right seed 3 turned to port); station
+        keeping, where the current is the whole load, feeds it forward (:meth:`_station_keep`)."""
+        return self._drive(s, dt, psi_ref, u_ref, 0.0, r_ref)
 
     def _drive(self, s: NavState, dt: float, psi_ref: float, u_ref: float, u_current: float,
                r_ref: float = 0.0, yaw_limit: float = math.inf) -> Thrust:
