@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from autopilot_bridge import guidance
+from autopilot_bridge.battery_monitor import FS_NONE, FS_RTL, BatteryMonitor
 from autopilot_bridge.behaviour import STATION, Behaviour, BehaviourMachine
 from autopilot_bridge.computer_setup import AutopilotStats, ComputerConfig, Devices, RunOptions
 from autopilot_bridge.control import (
@@ -60,6 +61,7 @@ from autopilot_bridge.mission_commands import MissionCommand
 from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavigationFilter, NavState
 from autopilot_bridge.obstacle_map import SensedObstacles, path_blocked
+from autopilot_bridge.onboard_status import OnboardSensors, OnboardStatus
 from autopilot_bridge.parameters import Param, ParamTable
 from autopilot_bridge.plan_commitment import CommitmentParams, keep_current
 from autopilot_bridge.plan_handoff import PlanHandoff
@@ -132,6 +134,8 @@ class Autopilot:
         self._pace_anchor: tuple[float, float, float] | None = None
         self._status: VehicleStatus | None = None
         self.planning = PlanHandoff(self.worker, params, self.lockstep, self.seed, self.stats, self._event)
+        # Telemetry's truth: sensor health and the pack (BATT_* parameters, low-battery failsafe).
+        self.onboard = OnboardSensors(BatteryMonitor(config.battery, self._battery_failsafe, self._event))
         self._reset()
         self.param_table = ParamTable(self.parameters())
 
@@ -153,6 +157,7 @@ class Autopilot:
         self._path_invalid = False   # the followed path is blocked (sensed) or traffic asks for a new one
         if self.traffic is not None:
             self.traffic.reset()
+        self.onboard.reset()
 
     def _event(self, t: float, text: str, warning: bool = False) -> None:
         self.stats.events.append((t, text))
@@ -265,6 +270,7 @@ class Autopilot:
         self.last_t, self.last_frame_usec = t, f.time_usec
         self._fuse(f)
         s = self.nav.state()
+        self.onboard.on_frame(f, self.nav.stats.updates, s is not None)
         if s is None:
             self._send(f.time_usec, self.zero_thrust, received_at)
             return
@@ -471,6 +477,20 @@ class Autopilot:
         esc = getattr(self.actuators, "esc_telemetry", None)
         return esc() if callable(esc) else []
 
+    def onboard_status(self) -> OnboardStatus:
+        """Sensor health, the GPS receiver's account of itself and the pack, as of the newest frame."""
+        return self.onboard.status()
+
+    def _battery_failsafe(self, action: int) -> None:
+        """BATT_FS_LOW_ACT's action when the battery monitor's failsafe triggers: RTL (Hold where RTL
+        cannot be entered, e.g. without home) or Hold; nothing while disarmed or for action 0."""
+        if action == FS_NONE or not self.vehicle.armed:
+            return
+        position = self._position()
+        if action == FS_RTL and self.vehicle.set_mode(Mode.RTL, position)[0]:
+            return
+        self.vehicle.set_mode(Mode.HOLD, position)
+
     def parameters(self) -> list[Param]:
         """The tunables this vessel computer owns (the GCS parameter service lists them)."""
 
@@ -516,6 +536,7 @@ class Autopilot:
                   "speed loop natural frequency", "rad/s"),
             Param("WP_RADIUS", lambda: self.vehicle.default_radius, set_radius, 0.5, 50.0,
                   "acceptance radius of items that give none (and of RTL/GUIDED)", "m"),
+            *self.onboard.battery.parameters(),
         ]
 
     def _pace(self, t: float, speedup: float) -> None:

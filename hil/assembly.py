@@ -95,7 +95,7 @@ def build(cfg, scenario_name: str, lockstep: bool, planner_factory: str | None =
 
     traffic = TrafficAwareness(cfg.tracking, cfg.colregs, geo)  # AIS targets, COLREGs encounters
     autopilot = Autopilot(
-        ComputerConfig(ap, cfg.navigation, cfg.control, propulsion), world,
+        ComputerConfig(ap, cfg.navigation, cfg.control, propulsion, cfg.battery_monitor), world,
         Devices(link, worker, telemetry, traffic=traffic, actuators=actuators),
         RunOptions(lockstep=lockstep, seed=cfg.sim.seed,
                    int14_commands=cfg.esc.int14_resolution or cfg.can.actuators == "can",

@@ -17,6 +17,7 @@ from common.current_field import CurrentField
 from common.dronecan_layout import RAW_COMMAND_MAX
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE, Codec
+from simulator.battery import BatteryParams, Pack, thruster_power
 from simulator.rangefinder import Rangefinder, WorldMap
 from simulator.sensors import Compass, Dvl, G, Gps, Imu, sensor_rngs
 from simulator.vessel import Vessel, hull_dynamics, hull_rk4_step
@@ -76,7 +77,7 @@ class SimulatorCore:
         self.waves = WaveModel(cfg.waves, cfg.vessel, rngs["waves"])
         self.imu = Imu(s.imu, rngs["imu"], self.frame_dt)
         self.compass = Compass(s.compass, rngs["compass"])
-        self.gps = Gps(s.gps, rngs["gps"], rngs["gps_events"], self.geo, self.frame_dt)
+        self.gps = Gps(s.gps, rngs["gps"], rngs["gps_events"], self.geo, self.frame_dt, rngs["gps_satellites"])
         self.dvl = Dvl(s.dvl, rngs["dvl"]) if s.dvl.enabled else None
         self.gps_due = _Schedule(s.gps.rate_hz, self.frame_dt)
         self.truth_due = _Schedule(cfg.sim.truth_rate_hz, self.frame_dt)
@@ -84,6 +85,9 @@ class SimulatorCore:
         self.rangefinder = (Rangefinder(s.rangefinder, world, rngs["rangefinder"])
                             if world is not None and s.rangefinder.enabled else None)
         self.rangefinder_due = _Schedule(s.rangefinder.rate_hz, self.frame_dt)
+        bp = getattr(cfg, "battery", None) or BatteryParams()
+        self.battery = Pack(bp)
+        self.battery_due = _Schedule(bp.rate_hz, self.frame_dt)
         self.codec = Codec(cfg.link.system_id, cfg.link.component_id, accept=("HIL_ACTUATOR_CONTROLS",))
         # The only peer whose commands count: the vessel computer's ids from the same configuration.
         self.peer_ids = (cfg.autopilot.system_id, cfg.autopilot.component_id)
@@ -166,7 +170,10 @@ class SimulatorCore:
         self.commands_received += 1
 
     def thrusts(self) -> tuple[float, float]:
-        """Port and starboard thrust set-points (N) now, after the stale-command failsafe."""
+        """Port and starboard thrust set-points (N) now, after the stale-command failsafe (and none
+        from a depleted battery: its BMS has cut the thrusters off)."""
+        if self.battery.depleted:
+            return 0.0, 0.0
         if self.t - self.last_command_t > self.cfg.sim.stale_command_timeout + 1e-9:
             if not self.stale:
                 self.stale = True
@@ -195,6 +202,9 @@ class SimulatorCore:
         self.thrust = (sp + (tp - sp) * a, ss + (ts - ss) * a)
         tau = self.vessel.propulsion(*self.thrust)
         coefficients = self.vessel.coefficients
+        esc, vp = self.cfg.esc, self.cfg.vessel
+        self.battery.draw(thruster_power(self.thrust[0], esc, vp) + thruster_power(self.thrust[1], esc, vp)
+                          + self.battery.p.hotel_power, self.frame_dt)
         for k in range(1, self.substeps + 1):
             tau_w, cur = self._env
             x0, y0 = self.state[0], self.state[1]
@@ -239,6 +249,9 @@ class SimulatorCore:
                 [nan, nan, nan, nan], bu, bv, bw, nan, nan, nan, [nan] + [0.0] * 20,
                 [var, 0, 0, 0, 0, 0, var, 0, 0, 0, 0, var] + [0.0] * 9, 0, 0, 100))
             self.messages_sent["ODOMETRY"] += 1
+        if self.battery_due.due(self.n):
+            parts.append(self.codec.encode("battery_status", **self.battery.battery_status()))
+            self.messages_sent["BATTERY_STATUS"] += 1
         if self.rangefinder is not None and self.rangefinder_due.due(self.n):
             rf = self.rangefinder
             parts.append(self.codec.encode(
