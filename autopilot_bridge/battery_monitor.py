@@ -18,8 +18,8 @@ vessel decides what the action means for its modes.
 
 Defaults (configs/default.toml [battery_monitor]) where they differ from ArduRover's, and why: a boat
 in a current that runs its pack flat drifts where the current takes it, so the voltage failsafe is on
-(19.8 V, 3.3 V a Li-ion cell under load, ~10 % left on the OCV curve of simulator/battery.py at the
-~8 A of cruising) and its action is RTL; BATT_CAPACITY is the pack's label rather than 3300 mAh.
+(19.8 V, 3.3 V a Li-ion cell under load: 6.7 % left on the OCV curve of simulator/battery.py at the
+~10 A of cruising at 1.5 m/s) and its action is RTL; BATT_CAPACITY is the pack's label rather than 3300 mAh.
 """
 
 from __future__ import annotations
