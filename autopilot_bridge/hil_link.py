@@ -352,7 +352,7 @@ def _gps_status(m) -> GpsStatus:
         return max(0, min(UINT16_MAX, int(v)))
 
     fix = max(0, min(8, int(m.fix_type)))
-    if fix < 3:
+    if fix < 2:   # no fix: no position
         return GpsStatus(fix, min(255, int(m.satellites_visible)) if fix else 0, 0, 0, 0, UINT16_MAX, UINT16_MAX,
                          0, UINT16_MAX)
     return GpsStatus(fix, min(255, int(m.satellites_visible)), int(m.lat), int(m.lon), int(m.alt), u16(m.eph),

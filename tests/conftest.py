@@ -63,8 +63,8 @@ UNIT_MODULES = frozenset("""
     run_plot scenarios sim_sensors sim_vessel sim_waves summaries tiers tracking_stats traffic_planning vehicle
 """.split())
 INTEGRATION_MODULES = frozenset("""
-    autopilot_link battery bench_frame bench_planner busy_poll cli connection cpu_load executors gcs_esc_telemetry gcs_fuzz
-    gcs_security gcs_link gcs_mission hil_link_fast_path montecarlo output placement plan_cli planner_warmup
+    autopilot_link battery bench_frame bench_planner busy_poll cli connection cpu_load executors gcs_esc_telemetry
+    gcs_fuzz gcs_security gcs_link gcs_mission hil_link_fast_path montecarlo output placement plan_cli planner_warmup
     planning_worker range_sensing
     readme security_gates sim_link sim_pipeline sim_udp startup_errors tap_fast_path traffic_ais
 """.split())

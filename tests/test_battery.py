@@ -149,3 +149,31 @@ def test_hil_gps_carries_the_satellite_count_and_none_in_a_dropout():
     assert in_dropout and all(g.fix_type == 0 and g.satellites == 0 for g in in_dropout)
     assert all(g.fix_type == 3 and 8 <= g.satellites <= 16 for g in outside)
     assert len({g.satellites for g in outside}) > 1   # one event a second: the count moves
+
+
+def test_the_link_drops_an_implausible_pack_or_accelerometer_and_keeps_the_frame():
+    from common.mavlink import MAV_TYPE as M
+    from common.mavlink import Codec
+
+    cfg = settings.load(None, [])
+    sim = Codec(cfg.link.system_id, cfg.link.component_id)
+    link = HilLink("127.0.0.1:0", (), LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, 0.0),
+                   sim_ids=(cfg.link.system_id, cfg.link.component_id))
+
+    def frame(k: int, acc: float, cells: list[int], current: int) -> bytes:
+        return (sim.encode("hil_sensor", k * 10_000, acc, 0.0, -9.8, 0.0, 0.0, 0.01, 0.2, 0.0, 0.0, 0, 0, 0, 0, 0x1FF)
+                + sim.encode("battery_status", 0, M.MAV_BATTERY_FUNCTION_ALL, M.MAV_BATTERY_TYPE_LION, 32767,
+                             cells + [65535] * (10 - len(cells)), current, 10, 100, 90))
+
+    try:
+        good = link.decode(frame(0, 0.1, [4000] * 6, 850))
+        assert good is not None and good.accel == pytest.approx((0.1, 0.0, -9.8))
+        assert good.battery is not None and good.battery.voltage == pytest.approx(24.0)
+        assert good.battery.current == pytest.approx(8.5) and good.battery.remaining == 90
+        for k, (acc, cells, amps) in enumerate([(float("nan"), [65535] * 6, 100), (1e4, [11_000] * 10, 100),
+                                                (0.0, [4000] * 6, 32_500)], start=1):
+            f = link.decode(frame(k, acc, cells, amps))
+            assert f is not None and f.battery is None and f.heading is not None   # the rest of the frame kept
+        assert link.rejects["implausible_battery"] == 3 and link.rejects["implausible_accel"] == 2
+    finally:
+        link.close()
