@@ -78,7 +78,7 @@ class SimulatorServer:
 
     def _publish(self, datagram: bytes) -> None:
         if self.esc is not None:
-            self.esc.publish(self.core.t, self.core.thrust)
+            self.esc.publish(self.core.t, self.core.thrust, self.core.battery.voltage)
         self.ep.send(datagram)
         self.datagrams_sent += 1
 
