@@ -225,9 +225,9 @@ class HilLink:
             yaw_rate = None
         accel = None
         if int(sensor.fields_updated) & HIL_SENSOR_ACCEL == HIL_SENSOR_ACCEL:
-            a = (float(sensor.xacc), float(sensor.yacc), float(sensor.zacc))
-            if all(math.isfinite(v) and abs(v) <= MAX_ACCEL for v in a):
-                accel = a
+            ax, ay, az = float(sensor.xacc), float(sensor.yacc), float(sensor.zacc)
+            if abs(ax) <= MAX_ACCEL and abs(ay) <= MAX_ACCEL and abs(az) <= MAX_ACCEL:   # NaN fails these
+                accel = (ax, ay, az)
             else:
                 self.rejects[IMPLAUSIBLE + "accel"] += 1
         fix, dropout, gps_status = None, False, None

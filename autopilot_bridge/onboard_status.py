@@ -29,8 +29,8 @@ GPS_TIMEOUT = 1.0        # s: ten 10 Hz fixes (ArduPilot's GPS is unhealthy afte
 GYRO, ACCEL, MAG, GPS = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO, M.MAV_SYS_STATUS_SENSOR_3D_ACCEL,
                          M.MAV_SYS_STATUS_SENSOR_3D_MAG, M.MAV_SYS_STATUS_SENSOR_GPS)
 AHRS, BATTERY = M.MAV_SYS_STATUS_AHRS, M.MAV_SYS_STATUS_SENSOR_BATTERY
-# The filter's update kinds (NavigationFilter.stats.updates) that count for each sensor.
-_FUSED = {GYRO: ("gyro",), MAG: ("compass",), GPS: ("gps_pos",)}
+# The filter's update kind (NavigationFilter.stats.updates) that counts for each sensor.
+_FUSED = ((GYRO, "gyro"), (MAG, "compass"), (GPS, "gps_pos"))
 _TIMEOUTS = {GYRO: SENSOR_TIMEOUT, MAG: SENSOR_TIMEOUT, ACCEL: SENSOR_TIMEOUT, GPS: GPS_TIMEOUT}
 
 
@@ -67,25 +67,29 @@ class OnboardSensors:
         (a new filter's counter starts again from zero)."""
         t = f.t
         self.t, self.has_estimate = t, has_estimate
+        last_ok = self.last_ok
+        seen = self.seen
         if f.yaw_rate is not None:
-            self.seen |= GYRO
+            seen |= GYRO
         if f.heading is not None:
-            self.seen |= MAG
+            seen |= MAG
         if f.accel is not None:
-            self.seen |= ACCEL
-            self.last_ok[ACCEL] = t
+            seen |= ACCEL
+            last_ok[ACCEL] = t
         if f.gps_status is not None:
             self.gps = f.gps_status
             if f.gps_status.fix_type > 0:
-                self.seen |= GPS
+                seen |= GPS
+        self.seen = seen
         if id(fused) != self._stats_id:            # a new filter (restart, numeric fault)
             self._stats_id, self._counts = id(fused), {}
-        for bit, kinds in _FUSED.items():
-            n = sum(fused.get(k, 0) for k in kinds)
-            if n != self._counts.get(kinds[0], 0):
-                self.last_ok[bit] = t
+        counts = self._counts
+        for bit, kind in _FUSED:                   # data the filter accepted: present, and healthy for now
+            n = fused.get(kind, 0)
+            if n != counts.get(kind, 0):
+                counts[kind] = n
+                last_ok[bit] = t
                 self.seen |= bit
-            self._counts[kinds[0]] = n
         if f.battery is not None:
             self.seen |= BATTERY
             self.battery.on_reading(t, f.battery)

@@ -28,15 +28,16 @@ and ESC ~0.8, propeller figure of merit ~0.55), plausible for a small thruster.
 
 from __future__ import annotations
 
-import bisect
 import math
 from dataclasses import dataclass
 from typing import Any
 
+from common.mavlink import MAV_TYPE as M
 from common.params import param
 
 # A typical NMC Li-ion cell's open-circuit voltage (V) at state of charge 0, 0.05, 0.1, ..., 1.0.
-OCV_SOC = tuple(i * 0.05 for i in range(21))
+OCV_STEPS = 20
+OCV_SOC = tuple(i / OCV_STEPS for i in range(OCV_STEPS + 1))
 OCV_VOLTS = (3.00, 3.30, 3.45, 3.52, 3.57, 3.61, 3.64, 3.66, 3.68, 3.70, 3.72, 3.75, 3.78, 3.82, 3.86,
              3.90, 3.95, 4.00, 4.05, 4.11, 4.18)
 
@@ -52,7 +53,7 @@ class BatteryParams:
     initial_soc: float = param("state of charge at the start of a run", "", ge=0, le=1, default=1.0)
     hotel_power: float = param("electronics' constant draw (computer, GNSS, radio, lidar)", "W", ge=0, le=5000,
                                default=30.0)
-    rate_hz: float = param("BATTERY_STATUS rate in the HIL datagram", "Hz", gt=0, le=100, default=10.0)
+    rate_hz: float = param("BATTERY_STATUS rate in the HIL datagram", "Hz", gt=0, le=100, default=2.0)
 
     @property
     def capacity_ah(self) -> float:
@@ -66,19 +67,30 @@ class BatteryParams:
 
 def cell_ocv(soc: float) -> float:
     """Open-circuit voltage (V) of one cell at state of charge ``soc`` (0..1, clamped), piecewise linear."""
-    s = min(max(soc, 0.0), 1.0)
-    i = min(bisect.bisect_right(OCV_SOC, s), len(OCV_SOC) - 1)
-    s0, s1 = OCV_SOC[i - 1], OCV_SOC[i]
-    v0, v1 = OCV_VOLTS[i - 1], OCV_VOLTS[i]
-    return v0 + (v1 - v0) * (s - s0) / (s1 - s0)
+    x = min(max(soc, 0.0), 1.0) * OCV_STEPS    # the grid is uniform: its interval directly
+    i = min(int(x), OCV_STEPS - 1)
+    v0 = OCV_VOLTS[i]
+    return v0 + (OCV_VOLTS[i + 1] - v0) * (x - i)
+
+
+class ThrusterPower:
+    """Electrical power (W) one thruster draws at a thrust (N): [esc] max_power at full thrust either
+    way, power ~ rpm^3, thrust ~ rpm^2 (``esc``: EscParams; ``vessel``: VesselParams)."""
+
+    def __init__(self, esc: Any, vessel: Any) -> None:
+        self.p_max, self.t_max, self.t_min = float(esc.max_power), float(vessel.T_max), float(vessel.T_min)
+
+    def __call__(self, thrust: float) -> float:
+        full = self.t_max if thrust >= 0 else self.t_min
+        if not full:
+            return 0.0
+        ratio = thrust / full
+        return self.p_max * (ratio * math.sqrt(ratio) if ratio < 1.0 else 1.0)
 
 
 def thruster_power(thrust: float, esc: Any, vessel: Any) -> float:
-    """Electrical power (W) one thruster draws at ``thrust`` N: [esc] max_power at full thrust either
-    way, power ~ rpm^3, thrust ~ rpm^2 (``esc``: EscParams; ``vessel``: VesselParams)."""
-    full = vessel.T_max if thrust >= 0 else vessel.T_min
-    ratio = min(abs(thrust / full), 1.0) if full else 0.0
-    return float(esc.max_power * ratio ** 1.5)
+    """:class:`ThrusterPower` once."""
+    return ThrusterPower(esc, vessel)(thrust)
 
 
 class Pack:
@@ -87,17 +99,21 @@ class Pack:
     def __init__(self, p: BatteryParams) -> None:
         self.p = p
         self.capacity_c = p.capacity_ah * 3600.0      # C
+        self.resistance = p.resistance                # ohm, the pack's
+        self.series = p.cells_series
         self.soc = p.initial_soc
         self.current = 0.0                            # A, discharge positive
         self.voltage = self.ocv                       # V at the terminals
         self.consumed_c = 0.0                         # C since the start of the run
         self.energy_j = 0.0                           # J delivered since the start
         self.depleted = self.soc <= 0.0
+        n = p.cells_series
+        self._unused = [65535] * max(0, 10 - n)       # BATTERY_STATUS voltages beyond the pack
 
     @property
     def ocv(self) -> float:
         """Open-circuit voltage of the pack now (V)."""
-        return cell_ocv(self.soc) * self.p.cells_series
+        return cell_ocv(self.soc) * self.series
 
     @property
     def consumed_mah(self) -> float:
@@ -105,7 +121,10 @@ class Pack:
 
     def current_for(self, power: float) -> float:
         """Current (A) that delivers ``power`` W at the terminals now (at most the pack's maximum-power current)."""
-        e, r = self.ocv, self.p.resistance
+        return self._current(power, self.ocv)
+
+    def _current(self, power: float, e: float) -> float:
+        r = self.resistance
         if power <= 0.0:
             return 0.0
         if r <= 0.0:
@@ -117,8 +136,9 @@ class Pack:
 
     def draw(self, power: float, dt: float) -> None:
         """Deliver ``power`` W (>= 0) for ``dt`` s: current and voltage held over the interval."""
-        i = self.current_for(max(0.0, power))
-        v = self.ocv - i * self.p.resistance
+        e = self.ocv
+        i = self._current(power, e)
+        v = e - i * self.resistance
         self.current, self.voltage = i, v
         charge = i * dt
         self.consumed_c += charge
@@ -130,11 +150,9 @@ class Pack:
     def battery_status(self) -> dict[str, Any]:
         """Keyword arguments of pymavlink's battery_status_encode: MAVLink units (mV per cell, cA,
         mAh, hJ, %), cells balanced; cells beyond the pack UINT16_MAX as the message asks."""
-        from common.mavlink import MAV_TYPE as M
-
-        n = self.p.cells_series
+        n = self.series
         cell_mv = max(0, min(65534, int(round(self.voltage / n * 1000))))
-        cells = [cell_mv] * min(n, 10) + [65535] * max(0, 10 - n)
+        cells = [cell_mv] * min(n, 10) + self._unused
         ext = [cell_mv if k < n - 10 else 0 for k in range(4)]
         state = (M.MAV_BATTERY_CHARGE_STATE_EMERGENCY if self.depleted else M.MAV_BATTERY_CHARGE_STATE_OK)
         return dict(id=0, battery_function=M.MAV_BATTERY_FUNCTION_ALL, type=M.MAV_BATTERY_TYPE_LION,

@@ -17,7 +17,7 @@ from common.current_field import CurrentField
 from common.dronecan_layout import RAW_COMMAND_MAX
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE, Codec
-from simulator.battery import BatteryParams, Pack, thruster_power
+from simulator.battery import BatteryParams, Pack, ThrusterPower
 from simulator.rangefinder import Rangefinder, WorldMap
 from simulator.sensors import Compass, Dvl, G, Gps, Imu, sensor_rngs
 from simulator.vessel import Vessel, hull_dynamics, hull_rk4_step
@@ -87,6 +87,10 @@ class SimulatorCore:
         self.rangefinder_due = _Schedule(s.rangefinder.rate_hz, self.frame_dt)
         bp = getattr(cfg, "battery", None) or BatteryParams()
         self.battery = Pack(bp)
+        self.thruster_power = ThrusterPower(cfg.esc, cfg.vessel)
+        # Electrical energy (J) of the frames since the pack last drew it: the pack is integrated when
+        # its BATTERY_STATUS is due, with the mean power of those frames (a pack changes over minutes).
+        self._energy_due, self._frames_due = 0.0, 0
         self.battery_due = _Schedule(bp.rate_hz, self.frame_dt)
         self.codec = Codec(cfg.link.system_id, cfg.link.component_id, accept=("HIL_ACTUATOR_CONTROLS",))
         # The only peer whose commands count: the vessel computer's ids from the same configuration.
@@ -202,9 +206,9 @@ class SimulatorCore:
         self.thrust = (sp + (tp - sp) * a, ss + (ts - ss) * a)
         tau = self.vessel.propulsion(*self.thrust)
         coefficients = self.vessel.coefficients
-        esc, vp = self.cfg.esc, self.cfg.vessel
-        self.battery.draw(thruster_power(self.thrust[0], esc, vp) + thruster_power(self.thrust[1], esc, vp)
-                          + self.battery.p.hotel_power, self.frame_dt)
+        power = self.thruster_power
+        self._energy_due += power(self.thrust[0]) + power(self.thrust[1])
+        self._frames_due += 1
         for k in range(1, self.substeps + 1):
             tau_w, cur = self._env
             x0, y0 = self.state[0], self.state[1]
@@ -250,6 +254,7 @@ class SimulatorCore:
                 [var, 0, 0, 0, 0, 0, var, 0, 0, 0, 0, var] + [0.0] * 9, 0, 0, 100))
             self.messages_sent["ODOMETRY"] += 1
         if self.battery_due.due(self.n):
+            self.settle_battery()
             parts.append(self.codec.encode("battery_status", **self.battery.battery_status()))
             self.messages_sent["BATTERY_STATUS"] += 1
         if self.rangefinder is not None and self.rangefinder_due.due(self.n):
@@ -267,6 +272,13 @@ class SimulatorCore:
                 parts += self.traffic.truth_messages(t, self.truth_codec)
                 self.messages_sent["AIS_VESSEL_TRUTH"] += len(self.traffic.ships)
         return b"".join(parts)
+
+    def settle_battery(self) -> None:
+        """Let the pack deliver the thrusters' energy of the frames since it last did, plus the hotel load."""
+        if self._frames_due:
+            pack = self.battery
+            pack.draw(self._energy_due / self._frames_due + pack.p.hotel_power, self._frames_due * self.frame_dt)
+            self._energy_due, self._frames_due = 0.0, 0
 
     def truth(self) -> dict[str, float]:
         x, y, psi, u, v, r = self.state

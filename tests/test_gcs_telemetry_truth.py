@@ -73,7 +73,7 @@ def test_battery_gps_and_health_are_the_simulators_truth(tmp_path):
     # current, consumed), the consumed charge grows, and the pack is a 6S pack being drawn on.
     truth = {(tuple(m.voltages), m.current_battery, m.current_consumed, m.battery_remaining)
              for m in _simulator_battery(out / "run.tlog")}
-    assert len(truth) > 100
+    assert len(truth) > 60           # 2 Hz for 45 s
     got = by["BATTERY_STATUS"]
     for m in got:
         assert (tuple(m.voltages), m.current_battery, m.current_consumed, m.battery_remaining) in truth
