@@ -280,6 +280,14 @@ class SimulatorCore:
             pack.draw(self._energy_due / self._frames_due + pack.p.hotel_power, self._frames_due * self.frame_dt)
             self._energy_due, self._frames_due = 0.0, 0
 
+    def battery_summary(self) -> dict[str, float | bool]:
+        """The pack at the end: state of charge (0-1), terminal voltage (V), consumed mAh and Wh, empty."""
+        self.settle_battery()
+        b = self.battery
+        return {"state_of_charge": round(b.soc, 5), "voltage_v": round(b.voltage, 3),
+                "consumed_mah": round(b.consumed_mah, 1), "energy_wh": round(b.energy_j / 3600.0, 3),
+                "depleted": b.depleted}
+
     def truth(self) -> dict[str, float]:
         x, y, psi, u, v, r = self.state
         lat, lon = self.geo.sea_level_to_geodetic(x, y)

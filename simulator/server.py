@@ -304,6 +304,7 @@ class SimulatorServer:
                              "kernel_drops": self.ep.kernel_drops()},
             "jitter_ms": self.jitter_ms(),
             "gps": {"fixes": c.gps.fixes, "dropout_fixes": c.gps.dropout_fixes, "glitches": c.gps.glitches},
+            "battery": c.battery_summary(),
             "distance_m": c.distance,
             "ais": None if c.traffic is None else {"ships": len(c.traffic.ships), "reports": c.traffic.reports_sent,
                                                    "lost": c.traffic.reports_lost},

@@ -82,6 +82,8 @@ def test_battery_gps_and_health_are_the_simulators_truth(tmp_path):
     assert consumed == sorted(consumed) and consumed[-1] > consumed[0] > -1
     assert 95 <= got[-1].battery_remaining <= 100
     assert any(m.current_battery > 300 for m in got)         # > 3 A: thrusters at work, not just the hotel load
+    pack = json.loads((out / "summary.json").read_text())["simulator"]["battery"]
+    assert pack["consumed_mah"] >= consumed[-1] and not pack["depleted"] and 0.95 < pack["state_of_charge"] < 1.0
 
     # SYS_STATUS carries the same pack, never -1.
     volts = [m.voltage_battery for m in by["SYS_STATUS"]]
