@@ -49,6 +49,7 @@ import numpy as np
 
 from autopilot_bridge import guidance
 from autopilot_bridge.actuators import Actuators, MavlinkActuators
+from autopilot_bridge.battery_monitor import FS_NONE, FS_RTL, BatteryMonitor
 from autopilot_bridge.behaviour import STATION, Behaviour
 from autopilot_bridge.computer_setup import AutopilotStats, ComputerConfig, Devices, RunOptions
 from autopilot_bridge.control import HeadingPID, SpeedController, Thrust
@@ -59,6 +60,7 @@ from autopilot_bridge.local_planning import World, WorldUpdate, map_to_ned_path
 from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavigationFilter, NavState
 from autopilot_bridge.obstacle_map import SensedObstacles, path_blocked
+from autopilot_bridge.onboard_status import OnboardSensors, OnboardStatus
 from autopilot_bridge.parameters import ParamTable, bind
 from autopilot_bridge.plan_acceptance import PlanAcceptance
 from autopilot_bridge.plan_handoff import PlanHandoff
@@ -138,12 +140,14 @@ class Autopilot:
                          self.station, self._event, self._count_fallback)
         self.station.zero_thrust = self.helm.zero_thrust
         self.nav = NavigationFilter(self.nav_params)
+        # Telemetry's truth: sensor health and the pack (BATT_* parameters, low-battery failsafe).
+        self.onboard = OnboardSensors(BatteryMonitor(config.battery, self._battery_failsafe, self._event))
         self._reset()
         # One table of every component's own declarations: the parameter service reads and writes them.
         self.param_table = ParamTable(bind(self.vehicle, self.planning, self.planner_tuning, self.helm.heading_pid,
-                                           self.helm.speed_ctl, self.station))
+                                           self.helm.speed_ctl, self.station, self.onboard.battery))
         self.commands = VehicleCommands(self.vehicle, self.grid, safety, self.param_table, self.actuators,
-                                        lambda: self._status, self._record_event)
+                                        lambda: self._status, self._record_event, onboard=self.onboard_status)
 
     # -- state ---------------------------------------------------------------------------------
     def _reset(self) -> None:
@@ -159,6 +163,7 @@ class Autopilot:
         self.helm.last_t = None
         if self.traffic is not None:
             self.traffic.reset()
+        self.onboard.reset()
 
     @property
     def local_paths(self) -> list[dict[str, Any]]:
@@ -176,6 +181,20 @@ class Autopilot:
 
     def _count_fallback(self) -> None:
         self.stats.fallback_activations += 1
+
+    def onboard_status(self) -> OnboardStatus:
+        """Sensor health, the GPS receiver's account of itself and the pack, as of the newest frame."""
+        return self.onboard.status()
+
+    def _battery_failsafe(self, action: int) -> None:
+        """BATT_FS_LOW_ACT's action when the battery monitor's failsafe triggers: RTL (Hold where RTL
+        cannot be entered, e.g. without home) or Hold; nothing while disarmed or for action 0."""
+        if action == FS_NONE or not self.vehicle.armed:
+            return
+        position = None if self._status is None else self._status.position
+        if action == FS_RTL and self.vehicle.set_mode(Mode.RTL, position)[0]:
+            return
+        self.vehicle.set_mode(Mode.HOLD, position)
 
     # -- navigation ----------------------------------------------------------------------------
     def _fuse(self, f: SensorFrame) -> None:
@@ -226,6 +245,7 @@ class Autopilot:
         self.helm.last_t = t
         self._fuse(f)
         s = self.nav.state()
+        self.onboard.on_frame(f, self.nav.stats.updates, s is not None)
         if s is None:
             self._send(f.time_usec, self.helm.zero_thrust, received_at)
             return

@@ -78,7 +78,7 @@ class SimulatorServer:
 
     def _publish(self, datagram: bytes) -> None:
         if self.esc is not None:
-            self.esc.publish(self.core.t, self.core.thrust)
+            self.esc.publish(self.core.t, self.core.thrust, self.core.battery.voltage)
         self.ep.send(datagram)
         self.datagrams_sent += 1
 
@@ -304,6 +304,7 @@ class SimulatorServer:
                              "kernel_drops": self.ep.kernel_drops()},
             "jitter_ms": self.jitter_ms(),
             "gps": {"fixes": c.gps.fixes, "dropout_fixes": c.gps.dropout_fixes, "glitches": c.gps.glitches},
+            "battery": c.battery_summary(),
             "distance_m": c.distance,
             "ais": None if c.traffic is None else {"ships": len(c.traffic.ships), "reports": c.traffic.reports_sent,
                                                    "lost": c.traffic.reports_lost},

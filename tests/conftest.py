@@ -57,19 +57,20 @@ def hil_main(capsys):
 UNIT_MODULES = frozenset("""
     can_codec can_esc collision_cone colregs colregs_oracle config config_layers control current_field geodesy
     global_route guidance_kernel mavlink_crc mavlink_fast_path mission_executor modes navigation navigation_fast
-    online percentiles plan_commitment plan_start_course readiness
+    online percentiles plan_commitment plan_start_course readiness battery_monitor
     planner_algorithms planner_config planner_cost planner_dynamic_domain planner_gridmap
     planner_guidance planner_kgrowth planner_metrics planner_postprocess process_logging reactive route_planning
     run_plot scenarios sim_sensors sim_vessel sim_waves summaries tiers tracking_stats traffic_planning vehicle
 """.split())
 INTEGRATION_MODULES = frozenset("""
-    autopilot_link bench_frame bench_planner busy_poll cli connection cpu_load executors gcs_esc_telemetry gcs_fuzz
-    gcs_security gcs_link gcs_mission hil_link_fast_path montecarlo output placement plan_cli planner_warmup
+    autopilot_link battery bench_frame bench_planner busy_poll cli connection cpu_load executors gcs_esc_telemetry
+    gcs_fuzz gcs_security gcs_link gcs_mission hil_link_fast_path montecarlo output placement plan_cli planner_warmup
     planning_worker range_sensing
     readme security_gates sim_link sim_pipeline sim_udp startup_errors tap_fast_path traffic_ais vessel_parameters
 """.split())
 E2E_MODULES = frozenset("""
-    by_hand can_vcan colregs_loop gcs_mavproxy gcs_mavsdk gcs_rover gcs_session hil_faults hil_loop hil_vcan
+    by_hand can_vcan colregs_loop gcs_mavproxy gcs_mavsdk gcs_rover gcs_session gcs_telemetry_truth hil_faults hil_loop
+    hil_vcan
     mission_done route_mission security_loop sparse_routes
 """.split())
 TIERS = ("unit", "integration", "e2e")
