@@ -54,6 +54,8 @@ from autopilot_bridge.behaviour import STATION, Behaviour
 from autopilot_bridge.computer_setup import AutopilotStats, ComputerConfig, Devices, RunOptions
 from autopilot_bridge.control import HeadingPID, SpeedController, Thrust
 from autopilot_bridge.course import Course
+from autopilot_bridge.current_estimate import CurrentObserver
+from autopilot_bridge.geofence import FENCE_HOLD, FENCE_RTL, GeoFence
 from autopilot_bridge.helm import Helm
 from autopilot_bridge.hil_link import RangeScan, SensorFrame
 from autopilot_bridge.local_planning import World, WorldUpdate, map_to_ned_path
@@ -73,6 +75,7 @@ from autopilot_bridge.vehicle_api import VehicleStatus
 from autopilot_bridge.vehicle_commands import VehicleCommands
 from common.dronecan_layout import RAW_COMMAND_MAX, quantize
 from common.mavlink import MAV_TYPE as M
+from planner.fence import Fence
 from planner.gridmap import OccupancyGrid
 
 _logger = logging.getLogger(__name__)
@@ -123,6 +126,7 @@ class Autopilot:
         self._route_version = 0
         self._world_version = 0
         self._sent_overrides: dict[str, float] = {}
+        self._fence_enabled = 1.0
         # Lockstep with a ground station attached: simulated time passes at most pace_speedup x wall
         # time (None: only while disarmed, at 1x), so that a person can follow the boat.
         self.pace_speedup = pace_speedup
@@ -134,20 +138,39 @@ class Autopilot:
         self.planner_tuning = PlannerTuning(world.params)
         self.acceptance = PlanAcceptance(params, self.grid, self.sensed, self.planning, self.course, self.stats)
         self.station = StationKeeper(params.loiter_radius, params.loiter_speed,
-                                     Thrust(0.0, 0.0, 0.0, 0.0, False))
+                                     Thrust(0.0, 0.0, 0.0, 0.0, False), params.station_keeping)
+        self.current = CurrentObserver(propulsion.surge, prior=self._field_prior(world))
         self.helm = Helm(params, propulsion, self.course, self.vehicle, self.grid, safety, self.planning,
                          self.acceptance, HeadingPID(config.control), SpeedController(config.control, propulsion.surge),
-                         self.station, self._event, self._count_fallback)
+                         self.station, self.current, self._event, self._count_fallback)
         self.station.zero_thrust = self.helm.zero_thrust
+        self.geofence = GeoFence()
+        self._fence_versions = 0
+        self.vehicle.rally_target = self.geofence.rally_point
+        self.helm.fence_depth = self.geofence.depth
         self.nav = NavigationFilter(self.nav_params)
         # Telemetry's truth: sensor health and the pack (BATT_* parameters, low-battery failsafe).
         self.onboard = OnboardSensors(BatteryMonitor(config.battery, self._battery_failsafe, self._event))
         self._reset()
         # One table of every component's own declarations: the parameter service reads and writes them.
         self.param_table = ParamTable(bind(self.vehicle, self.planning, self.planner_tuning, self.helm.heading_pid,
-                                           self.helm.speed_ctl, self.station, self.onboard.battery))
+                                           self.helm.speed_ctl, self.station, self.geofence,
+                                           self.onboard.battery))
         self.commands = VehicleCommands(self.vehicle, self.grid, safety, self.param_table, self.actuators,
-                                        lambda: self._status, self._record_event, onboard=self.onboard_status)
+                                        lambda: self._status, self._record_event, self.geofence,
+                                        self._fence_changed, onboard=self.onboard_status)
+
+    @staticmethod
+    def _field_prior(world: World) -> Callable[[float, float], tuple[float, float]] | None:
+        """The planner's current field (map frame: x east, y north) as a prior, NED in and out."""
+        field = world.field
+        if field is None:
+            return None
+
+        def at(north: float, east: float) -> tuple[float, float]:
+            vx, vy = field.at(east, north)
+            return float(vy), float(vx)
+        return at
 
     # -- state ---------------------------------------------------------------------------------
     def _reset(self) -> None:
@@ -155,6 +178,8 @@ class Autopilot:
         self.nav = NavigationFilter(self.nav_params)
         self.helm.heading_pid.reset()
         self.helm.speed_ctl.reset()
+        self.current.reset()
+        self.station.reset()
         self.course.restart()
         self.planning.reset()
         self.last_frame_usec: int | None = None
@@ -169,6 +194,50 @@ class Autopilot:
     def local_paths(self) -> list[dict[str, Any]]:
         """The accepted local paths, for the run's record."""
         return [asdict(p) for p in self.acceptance.local_paths]
+
+    # -- the geofence -------------------------------------------------------------------------------
+    def _fence_changed(self, fence: Fence | None = None) -> None:
+        """A new fence (upload, clear) or the fence switched on or off or breached: the grids and the route."""
+        if fence is not None:
+            self._fence_versions += 1
+            self.geofence.fence = Fence(fence.inclusion_polygons, fence.exclusion_polygons, fence.inclusion_circles,
+                                        fence.exclusion_circles, version=self._fence_versions)
+        occ = self.world.occ.copy()
+        cells = self.sensed.cells()
+        if len(cells):
+            occ[cells[:, 0], cells[:, 1]] = True
+        plan_fence = self.geofence.for_planning()
+        if not plan_fence.empty:
+            occ |= plan_fence.forbidden(occ.shape, self.grid.resolution)
+        self.grid.replace(occ)
+        if self.vehicle.route is not None and len(self.routes.waypoints) >= 2:
+            self.course.reference_ned = self.routes.set_route(self.routes.waypoints)
+        self._world_version += 1
+
+    def _check_fence(self, t: float, s: NavState) -> None:
+        """A breach acts once (FENCE_ACTION); the fence leaves the planning grids until the boat is back."""
+        if self.geofence.enable != self._fence_enabled:
+            self._fence_enabled = self.geofence.enable
+            self._fence_changed()
+        change = self.geofence.check(s.x, s.y)
+        if change is None:
+            return
+        self._fence_changed()
+        if change == "cleared":
+            self._event(t, "fence: back inside, breach over")
+            return
+        action = self.geofence.action
+        v = self.vehicle
+        if action == FENCE_RTL and v.mode != Mode.RTL:
+            ok, why = v.set_mode(Mode.RTL, (s.x, s.y))
+            self._event(t, f"fence breach: {why if ok else 'RTL refused (' + why + '), holding station'}", True)
+            if not ok:
+                v.set_mode(Mode.LOITER, (s.x, s.y))
+        elif action == FENCE_HOLD:
+            v.set_mode(Mode.LOITER, (s.x, s.y))
+            self._event(t, "fence breach: holding station (LOITER)", True)
+        else:
+            self._event(t, "fence breach (FENCE_ACTION 0: reported only)", True)
 
     def _event(self, t: float, text: str, warning: bool = False) -> None:
         self.stats.events.append((t, text))
@@ -187,14 +256,15 @@ class Autopilot:
         return self.onboard.status()
 
     def _battery_failsafe(self, action: int) -> None:
-        """BATT_FS_LOW_ACT's action when the battery monitor's failsafe triggers: RTL (Hold where RTL
-        cannot be entered, e.g. without home) or Hold; nothing while disarmed or for action 0."""
+        """BATT_FS_LOW_ACT's action when the battery monitor's failsafe triggers: RTL, or hold station
+        (LOITER, as the GCS failsafe's hold; also where RTL cannot be entered); nothing while disarmed or
+        for action 0."""
         if action == FS_NONE or not self.vehicle.armed:
             return
         position = None if self._status is None else self._status.position
         if action == FS_RTL and self.vehicle.set_mode(Mode.RTL, position)[0]:
             return
-        self.vehicle.set_mode(Mode.HOLD, position)
+        self.vehicle.set_mode(Mode.LOITER, position)
 
     # -- navigation ----------------------------------------------------------------------------
     def _fuse(self, f: SensorFrame) -> None:
@@ -246,6 +316,9 @@ class Autopilot:
         self._fuse(f)
         s = self.nav.state()
         self.onboard.on_frame(f, self.nav.stats.updates, s is not None)
+        if s is not None:
+            last = self.last_command
+            self.current.update(s, 0.0 if last is None else last.port + last.stdb, dt)
         if s is None:
             self._send(f.time_usec, self.helm.zero_thrust, received_at)
             return
@@ -266,6 +339,7 @@ class Autopilot:
             self.track.extend((t, s.x, s.y, s.psi))
 
         self.vehicle.update(s.x, s.y, t)
+        self._check_fence(t, s)
         self._apply_route(t)
         v = self.vehicle
         # The active mode decides where the thrust comes from (autopilot_bridge.modes); disarmed: none.
@@ -327,7 +401,9 @@ class Autopilot:
         if self._world_version == 0:   # no route, re-planned route or parameter since the start
             return None
         ref = self.course.reference_ned[:, ::-1].copy()          # NED -> map (x east, y north)
-        return WorldUpdate(self._world_version, (float(ref[-1][0]), float(ref[-1][1])), ref, dict(overrides))
+        fence = self.geofence.for_planning()
+        return WorldUpdate(self._world_version, (float(ref[-1][0]), float(ref[-1][1])), ref, dict(overrides),
+                           None if fence.empty else fence)
 
     def _pace(self, t: float, speedup: float) -> None:
         """Lockstep with a person watching: let simulated time pass no faster than ``speedup`` x wall time.

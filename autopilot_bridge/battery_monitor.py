@@ -9,8 +9,8 @@ https://ardupilot.org/rover/docs/parameters.html lists them under BATT_):
 * BATT_LOW_VOLT: the pack's voltage below this for BATT_LOW_TIMER seconds running (a sag under
   load shorter than that does not count), 0 = off;
 * BATT_LOW_MAH: remaining capacity, BATT_CAPACITY minus the consumed mAh, below this, 0 = off;
-* BATT_FS_LOW_ACT: what the boat does then (Rover's values 0 None, 1 RTL, 2 Hold; the others,
-  SmartRTL and Terminate, the boat does not have).
+* BATT_FS_LOW_ACT: what the boat does then (Rover's values 0 None, 1 RTL, 2 Hold, here holding
+  station in LOITER as the GCS failsafe's hold; the others, SmartRTL and Terminate, the boat does not have).
 
 Once triggered the failsafe stays triggered (as ArduPilot's, until a reboot: the pack does not
 recover). It sends one STATUSTEXT (critical), records an event, and calls ``on_low(action)``: the

@@ -68,6 +68,11 @@ class AutopilotParams:
     mission_done: Literal["loiter", "hold"] = param(
         "after the final goal: loiter (hold position at the goal, as ArduPilot boats do in LOITER) or hold "
         "(thrusters off, drift)", default="loiter")
+    station_keeping: Literal["into-current", "drift-and-return"] = param(
+        "how the boat keeps station (LOITER, mission end, RTL/GUIDED arrival): into-current (point into the water "
+        "velocity needed, feed the current forward: autopilot_bridge/station_keeping.py) or drift-and-return "
+        "(ArduRover's boats: drift within the radius, then steer back bow first; kept for comparison, hil bench "
+        "station)", default="into-current")
     loiter_radius: float = param("loiter: drifting this far from the final goal starts the way back", "m", gt=0,
                                  default=3.0)
     loiter_speed: float = param("loiter: speed set-point of the way back to the goal", "m/s", gt=0, default=0.8)

@@ -120,8 +120,13 @@ class SpeedController:
         self.integral = 0.0
         self.u_d = u
 
-    def update(self, u_ref: float, u: float, v: float, r: float, dt: float) -> float:
-        """Surge force (N) to bring surge speed ``u`` (m/s) to the set-point ``u_ref``."""
+    def update(self, u_ref: float, u: float, v: float, r: float, dt: float, u_current: float = 0.0) -> float:
+        """Surge force (N) to bring surge speed over ground ``u`` (m/s) to the set-point ``u_ref``.
+
+        ``u_current`` (m/s): the current's component along the bow, when known
+        (:mod:`autopilot_bridge.current_estimate`): the hull's drag is that of its speed through the
+        water, ``u - u_current``, so the feed-forward holds a speed over ground against the stream
+        instead of leaving it to the bounded integral."""
         m, w, z = self.model, self.bandwidth, self.p.speed_damping
         if self.u_d is None:
             self.u_d = u
@@ -133,7 +138,7 @@ class SpeedController:
             self.integral += e * dt
             lim = self.p.speed_integral_limit / max(m.m11 * w * w, 1e-9)
             self.integral = min(max(self.integral, -lim), lim)
-        return m.damping(u) - m.m22 * v * r + m.m11 * (du_d - 2.0 * z * w * e - w * w * self.integral)
+        return m.damping(u - u_current) - m.m22 * v * r + m.m11 * (du_d - 2.0 * z * w * e - w * w * self.integral)
 
 
 @dataclass(frozen=True)

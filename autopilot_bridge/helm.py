@@ -13,7 +13,7 @@ import math
 import time
 from collections.abc import Callable
 
-from autopilot_bridge.behaviour import STATION, Behaviour
+from autopilot_bridge.behaviour import STATION, Behaviour, BehaviourMachine
 from autopilot_bridge.computer_setup import Propulsion
 from autopilot_bridge.config import AutopilotParams
 from autopilot_bridge.control import (
@@ -25,6 +25,7 @@ from autopilot_bridge.control import (
     heading_error_speed_cap,
 )
 from autopilot_bridge.course import Course
+from autopilot_bridge.current_estimate import CurrentObserver
 from autopilot_bridge.guidance import GuidanceOutput
 from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavState
@@ -41,11 +42,18 @@ class Helm:
     def __init__(self, params: AutopilotParams, propulsion: Propulsion, course: Course, vehicle: Vehicle,
                  grid: OccupancyGrid, safety_radius: float, planning: PlanHandoff, acceptance: PlanAcceptance,
                  heading_pid: HeadingPID, speed_ctl: SpeedController, station: StationKeeper,
-                 event: Callable[[float, str], None], on_fallback: Callable[[], None]) -> None:
+                 current: CurrentObserver, event: Callable[[float, str], None],
+                 on_fallback: Callable[[], None]) -> None:
         self.p, self.prop, self.course, self.vehicle = params, propulsion, course, vehicle
         self.grid, self.safety_radius = grid, safety_radius
         self.planning, self.acceptance = planning, acceptance
         self.heading_pid, self.speed_ctl, self.station = heading_pid, speed_ctl, station
+        self.current = current
+        self.hold_clearance = 2.0 * safety_radius      # m: HOLD drifts no nearer to an obstacle or the fence
+        self.fence_depth: Callable[[float, float], float] = lambda _n, _e: math.inf
+        self.last_safe: tuple[float, float] | None = None
+        self.holding = False
+        self._hold_behaviour = BehaviourMachine()    # the station keeper's state in HOLD (not the route's)
         self.reactive = ReactiveAvoidance(grid, params.fallback_range, params.min_clearance, params.fallback_speed)
         self.tracking = TrackingStats()
         self.zero_thrust = allocate(0.0, 0.0, propulsion.B_u, propulsion.T_max, propulsion.T_min)
@@ -59,6 +67,29 @@ class Helm:
         """Thrusters at zero (disarmed, HOLD, a mode without a route)."""
         self.course.behaviour.pause()
         return self.zero_thrust
+
+    def hold(self, s: NavState, dt: float) -> Thrust:
+        """HOLD, armed: thrusters off and the boat drifts, as ArduRover's HOLD - while it is at least
+        ``hold_clearance`` (twice the planner's safety radius) from every charted or sensed obstacle and
+        as far inside the geofence. Nearer, it keeps station at the last point that was that far, so a
+        current never sets it onto the rocks or across the fence (issue 33)."""
+        self.course.behaviour.pause()
+        clearance = self.grid.clearance_at(s.y, s.x)
+        safe = clearance >= self.hold_clearance and self.fence_depth(s.x, s.y) >= self.hold_clearance
+        if safe:
+            self.last_safe = (s.x, s.y)
+            self.holding = False
+            return self.zero_thrust
+        if not self.holding:
+            self.holding = True
+            self._event(s.t, f"HOLD: {min(clearance, self.fence_depth(s.x, s.y)):.1f} m from an obstacle or the "
+                        "fence: keeping station at the last safe point")
+            self.station.reset()
+        point = self.last_safe if self.last_safe is not None else (s.x, s.y)
+        return self.station.command(s, dt, point, True, self._hold_behaviour,
+                                    lambda st, h, psi, u, uc: self._drive(st, h, psi, u, uc,
+                                                                          yaw_limit=self.turn_on_the_spot),
+                                    self.current.velocity, lambda: self.reset_controllers(s))
 
     def manual(self, stick: tuple[float, float, float] | None) -> Thrust:
         """MANUAL_CONTROL x (surge) and r (yaw), each -1..1, given at wall time stick[2]; zero when older than 1 s."""
@@ -151,10 +182,24 @@ class Helm:
         return self.drive(s, dt, psi_ref, u_ref, r_ref)
 
     def drive(self, s: NavState, dt: float, psi_ref: float, u_ref: float, r_ref: float = 0.0) -> Thrust:
-        """Heading (rad, with yaw-rate feed-forward r_ref rad/s) and speed (m/s) set-points to thrust."""
+        """Heading (rad, with yaw-rate feed-forward r_ref rad/s) and speed over ground (m/s) set-points to
+        thrust; the estimated current along the bow is fed forward."""
+        return self._drive(s, dt, psi_ref, u_ref, self.current.along(s.psi), r_ref)
+
+    def _drive(self, s: NavState, dt: float, psi_ref: float, u_ref: float, u_current: float,
+               r_ref: float = 0.0, yaw_limit: float = math.inf) -> Thrust:
         tau_r = self.heading_pid.update(psi_ref, s.psi, s.r, dt, r_ref)
-        tau_u = self.speed_ctl.update(u_ref, s.u, s.v, s.r, dt)
+        tau_r = min(max(tau_r, -yaw_limit), yaw_limit)
+        tau_u = self.speed_ctl.update(u_ref, s.u, s.v, s.r, dt, u_current)
         return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
+
+    @property
+    def turn_on_the_spot(self) -> float:
+        """The largest yaw moment (N m) that leaves zero surge force possible: a full differential with a
+        reverse thrust weaker than the forward one pushes the boat ahead (``allocate`` keeps the yaw
+        moment first), 53 N on this hull, enough to sail off the point while turning on it."""
+        prop = self.prop
+        return 0.95 * min(-prop.T_min, prop.T_max) * prop.B_u
 
     def _near_obstacle_speed(self, s: NavState) -> float:
         """Speed cap (m/s) near obstacles: the set-point beyond ``slow_clearance`` of the vessel's
@@ -168,5 +213,8 @@ class Helm:
         """After the route's end: loiter when the route says so or MIS_DONE_BEHAVE is loiter, else hold."""
         route = self.vehicle.route
         loiter = self.vehicle.mission_done == MIS_DONE_LOITER or (route is not None and route.loiter)
-        return self.station.command(s, dt, self.course.goal_ned, loiter, self.course.behaviour, self.drive,
+        return self.station.command(s, dt, self.course.goal_ned, loiter, self.course.behaviour,
+                                    lambda st, h, psi, u, uc: self._drive(st, h, psi, u, uc,
+                                                                          yaw_limit=self.turn_on_the_spot),
+                                    self.current.velocity,
                                     lambda: self.reset_controllers(s))

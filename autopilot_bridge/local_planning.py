@@ -24,6 +24,7 @@ from planner.cost import path_length
 
 if TYPE_CHECKING:
     from autopilot_bridge.planning_worker import PlanRequest
+    from planner.fence import Fence
     from planner.field import GridField
     from planner.online import OnlineContext, OnlineParams
     from planner.params import PlannerParams
@@ -55,6 +56,7 @@ class WorldUpdate:
     goal: tuple[float, float]
     reference_path: np.ndarray
     planner_overrides: dict[str, float]    # PlannerParams field -> value a ground station set
+    fence: Fence | None = None             # the geofence the planner keeps out of (None: none)
 
 
 @dataclass(frozen=True)
@@ -107,36 +109,43 @@ def online_cycle_handler(world: World, warm_up: CycleInput | None = None) \
     from planner.gridmap import OccupancyGrid
     from planner.online import VesselState, make_context, plan_cycle
 
-    def context(sensed: np.ndarray | None) -> OnlineContext:
+    def context(sensed: np.ndarray | None, fence: Fence | None = None) -> OnlineContext:
         grid = OccupancyGrid(world.occ.copy(), world.resolution)
         if sensed is not None:
             grid.mark(sensed)
+        if fence is not None and not fence.empty:
+            grid.replace(grid.occ | fence.forbidden(grid.occ.shape, grid.resolution))
         return make_context(grid, world.goal, world.reference_path, world.params, world.online,
                             world.algorithm, world.field)
 
     ctx = context(None)
     version = 0
 
-    applied = {"version": None}
+    applied: dict[str, int | None] = {"version": None}
+    applied_fence: list[int | None] = [None]     # the version of the fence the context was built with
 
     def handle(request: PlanRequest[CycleInput]) -> LocalPlan:
         nonlocal ctx, version
         start: CycleInput = request.problem
         rebuilt = False
-        if start.sensed_version != version:
-            # The map known a priori plus what is sensed: inflated maps are rebuilt only when it grows.
+        update = start.world
+        fence = update.fence if update is not None else None
+        fence_key = None if fence is None or fence.empty else fence.version
+        if start.sensed_version != version or fence_key != applied_fence[0]:
+            # The map known a priori plus what is sensed, less what the fence forbids: inflated maps are
+            # rebuilt only when they change.
             progress = ctx.progress           # where along the reference path the vessel is
-            ctx, version = context(start.sensed), start.sensed_version
+            ctx, version = context(start.sensed, fence), start.sensed_version
+            applied_fence[0] = fence_key
             ctx.progress = progress
             rebuilt = True
-        update = getattr(start, "world", None)
         if update is not None and (rebuilt or update.version != applied["version"]):
             # Same maps (and their inflation caches); new route and planner parameters.
             ctx.goal = (float(update.goal[0]), float(update.goal[1]))
             ctx.reference_path = np.asarray(update.reference_path, dtype=float).reshape(-1, 2)
             if update.version != applied["version"]:
                 ctx.progress = 0              # a new route begins where the vessel is
-            ctx.params = replace(ctx.params, **update.planner_overrides)
+            ctx.params = replace(ctx.params, **update.planner_overrides)  # type: ignore[arg-type]  # float fields
             applied["version"] = update.version
         if request.iterations is not None:
             ctx.online = replace(world.online, local_iterations=int(request.iterations), local_time=0.0)

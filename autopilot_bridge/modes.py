@@ -7,8 +7,10 @@ comes from (:meth:`RoverMode.output`):
 
 * MANUAL (0): thrusters from MANUAL_CONTROL (x: surge, r: yaw, each -1000..1000); zero without input.
 * HOLD (4): both thrusters at zero, the boat drifts with wind and current (as Rover's HOLD does for
-  boats; no station keeping).
-* LOITER (5): keep station where the mode was entered (drift within ``loiter_radius``, then steer back).
+  boats) - but never onto an obstacle or across the fence: near them it keeps station
+  (:meth:`autopilot_bridge.helm.Helm.hold`).
+* LOITER (5): keep station where the mode was entered, against the current
+  (:mod:`autopilot_bridge.station_keeping`).
 * AUTO (10): run the mission (:mod:`autopilot_bridge.mission_executor`); the online planner (section 2.2
   of the paper) plans local paths along the global reference path [position, waypoints of the leg...].
 * RTL (11): reference path [position, home]; keeps station at home (``mission_done``).
@@ -51,6 +53,8 @@ class Driver(Protocol):
 
     def navigate(self, s: NavState, dt: float) -> Thrust: ...  # follow vehicle.route (planned/fallback, station)
 
+    def hold(self, s: NavState, dt: float) -> Thrust: ...      # HOLD: drift, but never onto an obstacle or the fence
+
 
 _AUTO_FLAGS = M.MAV_MODE_FLAG_AUTO_ENABLED | M.MAV_MODE_FLAG_GUIDED_ENABLED | M.MAV_MODE_FLAG_STABILIZE_ENABLED
 _GUIDED_FLAGS = M.MAV_MODE_FLAG_GUIDED_ENABLED | M.MAV_MODE_FLAG_STABILIZE_ENABLED
@@ -92,6 +96,9 @@ class ModeManual(RoverMode):
 class ModeHold(RoverMode):
     number = Mode.HOLD
 
+    def output(self, driver: Driver, v: Vehicle, s: NavState, dt: float) -> Thrust:
+        return driver.hold(s, dt)
+
 
 class ModeLoiter(RoverMode):
     number, flags, needs_position, drives = Mode.LOITER, _GUIDED_FLAGS, True, True
@@ -125,11 +132,13 @@ class ModeRTL(RoverMode):
     number, flags, needs_position, drives = Mode.RTL, _AUTO_FLAGS, True, True
 
     def enter(self, v: Vehicle, position: tuple[float, float] | None) -> tuple[bool, str]:
-        if v.home is None:
-            return False, "RTL: no home position"
         assert position is not None  # needs_position: Vehicle.set_mode checked it
-        v.new_route([position, v.home], v.default_radius)
-        return True, self.name
+        rally = v.rally_target(position)
+        target = rally if rally is not None else v.home
+        if target is None:
+            return False, "RTL: no home position"
+        v.new_route([position, target], v.default_radius)
+        return True, self.name if rally is None else f"{self.name} to rally point {rally[0]:.0f} m N {rally[1]:.0f} m E"
 
 
 class ModeGuided(RoverMode):

@@ -39,6 +39,14 @@ class Param:
     unit: str = ""
 
 
+DECLARED: list[tuple[type, Tunable]] = []   # every declaration, with its owner class, as classes are made
+
+# The modules whose classes own parameters (imported by :func:`markdown_table`).
+OWNER_MODULES = ("autopilot_bridge.vehicle", "autopilot_bridge.plan_handoff", "autopilot_bridge.planner_tuning",
+                 "autopilot_bridge.control", "autopilot_bridge.station_keeping", "autopilot_bridge.geofence",
+                 "autopilot_bridge.gcs.failsafe", "autopilot_bridge.gcs.identity")
+
+
 class Tunable:
     """A data descriptor: a parameter's declaration (name, range, units, doc) on its owner's class."""
 
@@ -54,6 +62,7 @@ class Tunable:
 
     def __set_name__(self, owner: type, attr: str) -> None:
         self.attr = attr
+        DECLARED.append((owner, self))
 
     def bounds(self, obj: object) -> tuple[float, float]:
         lo = self.lo(obj) if callable(self.lo) else self.lo
@@ -159,3 +168,32 @@ class ParamTable:
             msg = str(exc)
             return False, msg if msg.startswith(name) else f"{name}: {msg}"
         return True, f"{name} = {value:g}"
+
+
+def _bound_text(b: Bound) -> str:
+    if callable(b):
+        code = getattr(b, "__code__", None)
+        return "0.95 x planning period" if code is not None and "planning_period" in code.co_names else "(computed)"
+    return f"{b:g}"
+
+
+def markdown_table() -> str:
+    """The parameters every component declares, as the Markdown table of docs/gcs.md."""
+    import importlib
+
+    for m in OWNER_MODULES:
+        importlib.import_module(m)
+    rows = ["| name | range | units | owner | what |", "| --- | --- | --- | --- | --- |"]
+    order = {m: i for i, m in enumerate(OWNER_MODULES)}
+    for owner, d in sorted(DECLARED, key=lambda od: order.get(od[0].__module__, len(order))):
+        rng = f"{_bound_text(d.lo)} - {_bound_text(d.hi)}" + (" (whole)" if d.integer else "")
+        rows.append(f"| {d.name} | {rng} | {d.unit} | `{owner.__module__.removeprefix('autopilot_bridge.')}."
+                    f"{owner.__name__}` | {d.doc} |")
+    return "\n".join(rows)
+
+
+if __name__ == "__main__":
+    # Run as a script this file is a second module: the owners' classes register in the imported one.
+    from autopilot_bridge import parameters
+
+    print(parameters.markdown_table())

@@ -8,6 +8,7 @@ thrust whatever the mode. All positions NED metres, times s of vehicle (simulate
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -85,6 +86,8 @@ class Vehicle:
         self._last_reported = -1              # the item reported last (each is reported once)
         self._at_route_end = False
         self.manual: tuple[float, float, float] | None = None  # (x, r, wall time) of MANUAL_CONTROL
+        # RTL's destination other than home: the nearest rally point inside the fence (autopilot_bridge.geofence)
+        self.rally_target: Callable[[tuple[float, float]], tuple[float, float] | None] = lambda _p: None
         if scenario_route is not None and self.active.number == Mode.AUTO:
             # The scenario's reference path as given (version 0): runs without a GCS stay as they were.
             self.route = Route(0, np.asarray(scenario_route, dtype=float), self._final_radius())

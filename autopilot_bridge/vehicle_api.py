@@ -20,6 +20,7 @@ from autopilot_bridge.parameters import Param
 
 if TYPE_CHECKING:
     from autopilot_bridge.gcs.mission import MissionItem
+    from planner.fence import Fence
 
 
 @dataclass(frozen=True)
@@ -86,6 +87,14 @@ class VehicleApi(Protocol):
         unreachable by water, as ``(seq, MAV_MISSION_RESULT, reason)``; None when the route is good.
         ``to_ned(lat, lon)`` -> (north, east) m."""
         ...
+
+    def replace_fence(self, fence: Fence) -> None: ...          # map frame m; empty: no fence
+
+    def fence(self) -> Fence: ...
+
+    def replace_rally(self, points: tuple[tuple[float, float], ...]) -> None: ...   # NED m
+
+    def check_rally(self, points: tuple[tuple[float, float], ...]) -> tuple[int, str] | None: ...
 
     def manual_input(self, x: float, r: float, wall_time: float) -> None: ...  # each -1..1
 

@@ -12,13 +12,16 @@ import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
+from autopilot_bridge.geofence import GeoFence
 from autopilot_bridge.mission_commands import MissionCommand
 from autopilot_bridge.modes import Mode
 from autopilot_bridge.onboard_status import OnboardStatus
 from autopilot_bridge.parameters import Param, ParamTable
-from autopilot_bridge.route_planning import check_mission, check_mission_items
+from autopilot_bridge.route_planning import POSITION_COMMANDS, check_mission, check_mission_items
 from autopilot_bridge.vehicle import SPEED_RANGE, Vehicle
 from autopilot_bridge.vehicle_api import Result, VehicleStatus
+from common.mavlink import MAV_TYPE as M
+from planner.fence import Fence
 from planner.gridmap import OccupancyGrid
 
 if TYPE_CHECKING:
@@ -31,11 +34,13 @@ class VehicleCommands:
 
     def __init__(self, vehicle: Vehicle, grid: OccupancyGrid, safety_radius: float, params: ParamTable,
                  actuators: Actuators, status: Callable[[], VehicleStatus | None],
-                 record: Callable[[str], None], onboard: Callable[[], OnboardStatus] | None = None) -> None:
+                 record: Callable[[str], None], geofence: GeoFence, fence_changed: Callable[[Fence], None],
+                 onboard: Callable[[], OnboardStatus] | None = None) -> None:
         """``onboard``: the sensors' and the pack's state (autopilot_bridge.onboard_status; None: nothing known)."""
         self.vehicle, self.grid, self.safety_radius = vehicle, grid, safety_radius
         self.param_table, self.actuators = params, actuators
         self._status, self._record = status, record
+        self.geofence, self._fence_changed = geofence, fence_changed
         self._onboard = onboard
 
     def _position(self) -> tuple[float, float] | None:
@@ -46,6 +51,8 @@ class VehicleCommands:
         """Why a boat cannot be sent to (north, east): off the chart, in an obstacle, unreachable; or None."""
         if not (math.isfinite(north) and math.isfinite(east)):
             return f"{what}: position not finite"
+        if not self.geofence.allows(north, east):
+            return f"{what}: outside the geofence or inside an exclusion zone"
         bad = check_mission(self.grid, [(north, east)], self.safety_radius, self._position())
         return None if bad is None else f"{what}: {bad[2]}"
 
@@ -114,6 +121,10 @@ class VehicleCommands:
     def check_mission(self, items: tuple[MissionItem, ...],
                       to_ned: Callable[[float, float], tuple[float, float]]) -> tuple[int, int, str] | None:
         first = 1 if self.vehicle.home_item else 0   # ArduPilot's item 0 is home: not a place to sail to
+        for seq, it in enumerate(items):
+            if seq >= first and it.command in POSITION_COMMANDS and not (it.x == 0 and it.y == 0) \
+                    and not self.geofence.allows(*to_ned(it.lat, it.lon)):
+                return seq, M.MAV_MISSION_INVALID, "outside the geofence or inside an exclusion zone"
         bad = check_mission_items(items[first:], to_ned, self.grid, self.safety_radius, self._position())
         if bad is not None:
             return bad[0] + first, bad[1], bad[2]
@@ -123,13 +134,32 @@ class VehicleCommands:
                           first: int) -> tuple[int, int, str] | None:
         """DO_SET_HOME items with a position: a home a later RTL could reach."""
         from autopilot_bridge.gcs.mission import has_position
-        from common.mavlink import MAV_TYPE as M
 
         for seq, it in enumerate(items):
             if seq >= first and it.command == M.MAV_CMD_DO_SET_HOME and has_position(it):
                 why = self.check_target(*to_ned(it.lat, it.lon), "DO_SET_HOME")
                 if why is not None:
                     return seq, M.MAV_MISSION_INVALID, why
+        return None
+
+    def replace_fence(self, fence: Fence) -> None:
+        """A new geofence (map frame; an empty one clears it): planning keeps out of it from now on."""
+        self._fence_changed(fence)
+
+    def fence(self) -> Fence:
+        return self.geofence.fence
+
+    def replace_rally(self, points: tuple[tuple[float, float], ...]) -> None:
+        """New rally points (NED m): RTL goes to the nearest one inside the fence."""
+        self.geofence.rally = tuple((float(n), float(e)) for n, e in points)
+
+    def check_rally(self, points: tuple[tuple[float, float], ...]) -> tuple[int, str] | None:
+        """(index, why) of the first rally point off the chart, in an obstacle, unreachable or outside the
+        fence; None when all are good."""
+        for i, (n, e) in enumerate(points):
+            why = self.check_target(n, e, "rally point")
+            if why is not None:
+                return i, why
         return None
 
     def manual_input(self, x: float, r: float, wall_time: float) -> None:

@@ -68,7 +68,7 @@ def build(cfg: HilConfig, scenario_name: str, lockstep: bool, planner_factory: s
     from common.geodesy import LocalFrame
     from hil import scenario as scenarios
 
-    scen = scenarios.load(scenario_name, cfg.current, cfg.planner.safety_radius)
+    scen = scenarios.load(scenario_name, cfg.current, cfg.planner.safety_radius, cfg.geodesy)
     world = planning_world(cfg, scen)
     ap = cfg.autopilot
     geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)

@@ -18,11 +18,11 @@ import re
 import sys
 from typing import Any
 
-from hil import console
+from hil import config, console
 from hil.errors import HilError
 
 # Subcommand modules under hil/commands/, in the order `hil --help` lists them.
-COMMANDS = ("run", "sim", "autopilot", "plan", "montecarlo", "bench", "soak", "vcan")
+COMMANDS = ("run", "sim", "autopilot", "plan", "montecarlo", "bench", "soak", "vcan", "geo")
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -74,7 +74,11 @@ def main(argv: list[str] | None = None) -> int:
     args, extra = parser.parse_known_args(argv)
     if extra:  # reported by the command's own parser: 'hil COMMAND: error: ...', its --help named
         commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-        commands.choices[args.command].error(f"unrecognized arguments: {' '.join(extra)}")
+        command = commands.choices[args.command]
+        flag = next((e.split("=")[0] for e in extra if e.startswith("--")), None)
+        options = [o for a in command._actions for o in a.option_strings if o.startswith("--")]
+        hint = config.suggest(flag, options, or_list=False) if flag else ""
+        command.error(f"unrecognized arguments: {' '.join(extra)}{hint}")
     if getattr(args, "config", None) is not None:
         args.config = tuple(args.config)
     console.configure_logging()

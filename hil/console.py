@@ -15,10 +15,18 @@ if TYPE_CHECKING:  # hil.settings pulls every component's config (filterpy, scip
 
 
 def load_settings(args: argparse.Namespace) -> HilConfig:
-    """The configuration named by ``--config`` with the ``--set`` overrides applied."""
+    """The configuration named by ``--config`` with the ``--set`` overrides applied. A scenario
+    whose map is a chart (``--scenario``) puts the NED origin at its map's corner: the overrides
+    that say so join ``args.overrides``, so the processes a command starts get them too."""
     from hil import settings
+    from hil.charts import geodesy_overrides
 
-    return settings.load(args.config, args.overrides)
+    cfg = settings.load(args.config, args.overrides)
+    extra = [o for o in geodesy_overrides(getattr(args, "scenario", None), cfg.geodesy) if o not in args.overrides]
+    if extra:
+        args.overrides = [*args.overrides, *extra]
+        cfg = settings.load(args.config, args.overrides)
+    return cfg
 
 
 # The processes' packages log under their own names (``logging.getLogger(__name__)``); a `hil` command

@@ -13,7 +13,9 @@ has an own-ship sample at the same instant. From those:
   instant the ship is on a collision course (eq. 10 with R = own_radius + its hull radius +
   margin, closest approach within ``horizon``), or "no risk" if it never is;
 * **our action** between that instant and the CPA, from the true track: "starboard turn" /
-  "port turn" (course changed by at least ``TURN_DEG``), "slow down" (speed below
+  "port turn" (course at least ``TURN_DEG`` off the planned route's course where she is and farther
+  off it than at the risk instant, so closing on the route is none; without a route: changed by at
+  least ``TURN_DEG`` from the course at the risk instant), "slow down" (speed below
   ``SLOW_RATIO`` of the speed at the start), else "stand on"; with the instant it began;
 * **compliance**: no collision, CPA at least the safety radius (own_radius + the ship's hull
   radius), and the rule's manoeuvre: head-on, the ship passes on our port side (port to port);
@@ -79,8 +81,12 @@ class ShipTrack:
 class EncounterJudge:
     """Collects own/ship truth pairs, flags hull overlaps as they happen, reports per encounter."""
 
-    def __init__(self, own_length: float, own_width: float, colregs: ColregsParams) -> None:
+    def __init__(self, own_length: float, own_width: float, colregs: ColregsParams,
+                 route: np.ndarray | None = None) -> None:
+        """``route``: the boat's planned route (map frame: x east, y north, m); its manoeuvres are then
+        judged against the route's course where she is, so turning onto the route is no manoeuvre."""
         self.L, self.W, self.p = own_length, own_width, colregs
+        self.route = None if route is None or len(route) < 2 else np.asarray(route, dtype=float)[:, ::-1]  # NED
         self.ships: dict[int, ShipTrack] = {}
         self.collision: tuple[float, int] | None = None   # (t s, mmsi)
 
@@ -98,6 +104,18 @@ class EncounterJudge:
                 hers = _corners(north, east, course, b, s, p, d)
                 if hulls_overlap(mine, hers):
                     self.collision = (t_us * 1e-6, mmsi)
+
+    def planned_course(self, north: np.ndarray, east: np.ndarray) -> np.ndarray | None:
+        """The course (rad, clockwise from north) of the route's leg nearest each point; None without a route."""
+        if self.route is None:
+            return None
+        a, b = self.route[:-1], self.route[1:]
+        d = b - a
+        p = np.stack([north, east], axis=1)[:, None, :]                     # (N, 1, 2)
+        u = np.clip(((p - a) * d).sum(-1) / np.maximum((d * d).sum(-1), 1e-12), 0.0, 1.0)
+        gap = np.hypot(*(a + u[..., None] * d - p).transpose(2, 0, 1))      # (N, legs)
+        leg = np.argmin(gap, axis=1)
+        return np.arctan2(d[leg, 1], d[leg, 0])
 
     def report(self, own_truth: dict[int, tuple[float, float, float, float]]) -> list[dict[str, Any]]:
         """One entry per ship; ``own_truth``: time_usec -> (north, east, vn, ve)."""
@@ -148,9 +166,17 @@ class EncounterJudge:
                          min_target_speed=p.min_target_speed)
         seg = slice(i0, k + 1)
         course = np.arctan2(ove[seg], ovn[seg])
-        dev = np.degrees(np.angle(np.exp(1j * (course - own_course))))   # + = to starboard
+        planned = self.planned_course(on[seg], oe[seg])
+        if planned is None:
+            dev = np.degrees(np.angle(np.exp(1j * (course - own_course))))   # + = to starboard
+            turned = np.abs(dev) >= TURN_DEG
+        else:
+            # Against the route's course: a turn takes her off it by TURN_DEG, and farther than she
+            # was at the risk instant (closing on the route, e.g. her first turn onto it, is none).
+            dev = np.degrees(np.angle(np.exp(1j * (course - planned))))
+            turned = (np.abs(dev) >= TURN_DEG) & (np.abs(dev) > abs(dev[0]))
+            dev = np.where(turned, dev, 0.0)
         speed = np.hypot(ovn[seg], ove[seg])
-        turned = np.abs(dev) >= TURN_DEG
         slowed = speed < SLOW_RATIO * max(own_speed, 1e-6)
         acted = np.nonzero(turned | slowed)[0]
         stbd, port = float(max(dev.max(), 0.0)), float(max(-dev.min(), 0.0))

@@ -20,17 +20,20 @@ from typing import Any
 
 import numpy as np
 
-from planner.params import ALGORITHM_NAMES
+from planner.params import ALGORITHM_NAMES, REGISTRY
 
 ALGORITHMS = ALGORITHM_NAMES  # the planner's registry; the order fixes the per-algorithm seeds
-LABELS = {"rrt-star": "RRT*", "informed-rrt-star": "IRRT*", "ddrrt-star": "DDRRT*"}
+LABELS = {e.name: e.label for e in REGISTRY}
 
 # Per-run CSV columns; DETERMINISTIC ones must be identical for the same seed whatever --jobs is
 # (with an iteration budget); the time columns are wall-clock measurements.
 DETERMINISTIC = ("run", "algorithm", "planner_seed", "reached", "reason", "cycles", "iterations", "cost", "length",
                  "sum_cos", "sum_sin", "cf", "turns", "total_curvature", "bending_energy", "smoothing_fallbacks",
-                 "start_x", "start_y", "goal_x", "goal_y")
-TIMES = ("time_s", "planning_time_s", "wall_s")
+                 "start_x", "start_y", "goal_x", "goal_y", "search_iterations", "search_checks")
+# Table 3's "time" four ways (issue 34): time_s (wall clock), time_cpu_s (the planning thread's CPU
+# time), search_iterations and search_checks (iterations and collision checks), each summed over the
+# cycles to each cycle's first solution (the whole cycle where it found none).
+TIMES = ("time_s", "time_cpu_s", "planning_time_s", "wall_s")
 COLUMNS = DETERMINISTIC + TIMES
 
 # Table 3 as the paper reports it (its numbers are missing from our copy; only the relative
@@ -142,7 +145,9 @@ def run_task(task: Task) -> dict[str, Any]:
         "bending_energy": m.get("bending_energy", math.nan),
         "smoothing_fallbacks": int(sum(1 for c in res.cycles if len(c.smooth_path) >= 2 and not c.smoothed_ok)),
         "start_x": sc.start[0], "start_y": sc.start[1], "goal_x": sc.goal[0], "goal_y": sc.goal[1],
-        "time_s": res.search_time_s, "planning_time_s": res.planning_time_s, "wall_s": time.monotonic() - t0,
+        "search_iterations": res.search_iterations, "search_checks": res.search_checks,
+        "time_s": res.search_time_s, "time_cpu_s": res.search_cpu_s, "planning_time_s": res.planning_time_s,
+        "wall_s": time.monotonic() - t0,
     }
     if task.detail:
         row["_detail"] = res
@@ -209,6 +214,8 @@ def read_runs_csv(path: Path) -> list[dict[str, Any]]:
                     row[k] = v == "1"
                 elif k in ("run", "cycles", "iterations", "planner_seed", "smoothing_fallbacks"):
                     row[k] = int(v)
+                elif k in ("search_iterations", "search_checks"):
+                    row[k] = int(float(v))
                 else:
                     row[k] = float(v)
             out.append(row)
@@ -239,10 +246,13 @@ def table3(rows: Sequence[dict[str, Any]], algorithms: Sequence[str] = ALGORITHM
         rec["cost"], rec["cost_std"] = _mean_std([r["cost"] for r in ok])
         for k in ("sum_cos", "sum_sin", "cf", "length", "turns", "bending_energy", "cycles"):
             rec[k] = _mean_std([float(r[k]) for r in ok])[0]
+        for k in ("time_cpu_s", "search_iterations", "search_checks"):  # absent from runs.csv before issue 34
+            rec[k] = _mean_std([float(r.get(k, math.nan)) for r in ok])[0]
         out.append(rec)
     base = next((r for r in out if r["algorithm"] == "rrt-star"), None)
     for rec in out:
-        for k in ("time_s", "cost", "sum_cos", "sum_sin", "cf", "time_std_s", "cost_std"):
+        for k in ("time_s", "cost", "sum_cos", "sum_sin", "cf", "time_std_s", "cost_std", "time_cpu_s",
+                  "search_iterations", "search_checks"):
             b = base[k] if base else math.nan
             rec[f"{k}_vs_rrt_pct"] = (rec[k] - b) / abs(b) * 100.0 if base and b and math.isfinite(b) else math.nan
     return out
@@ -251,7 +261,8 @@ def table3(rows: Sequence[dict[str, Any]], algorithms: Sequence[str] = ALGORITHM
 TABLE_COLUMNS = ("algorithm", "runs", "reached", "success_rate", "time_s", "time_std_s", "cost", "cost_std",
                  "sum_cos", "sum_sin", "cf", "length", "turns", "bending_energy", "cycles",
                  "time_s_vs_rrt_pct", "cost_vs_rrt_pct", "sum_cos_vs_rrt_pct", "sum_sin_vs_rrt_pct", "cf_vs_rrt_pct",
-                 "time_std_s_vs_rrt_pct", "cost_std_vs_rrt_pct")
+                 "time_std_s_vs_rrt_pct", "cost_std_vs_rrt_pct", "time_cpu_s", "search_iterations", "search_checks",
+                 "time_cpu_s_vs_rrt_pct", "search_iterations_vs_rrt_pct", "search_checks_vs_rrt_pct")
 
 
 def write_table_csv(path: Path, table: Sequence[dict[str, Any]]) -> Path:
@@ -289,8 +300,9 @@ def table_markdown(table: Sequence[dict[str, Any]], title: str = "") -> str:
         "",
         "Relative to RRT* (ours; the paper's in brackets where section 4.2 gives it):",
         "",
-        "| algorithm | time | cost | time EVP | cost EVP | Σcos α_y | Σsin α_y | cf(π) |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
+        "| algorithm | time | cost | time EVP | cost EVP | Σcos α_y | Σsin α_y | cf(π) | CPU time | iterations | "
+        "collision checks |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in table:
         if r["algorithm"] == "rrt-star":
@@ -301,7 +313,9 @@ def table_markdown(table: Sequence[dict[str, Any]], title: str = "") -> str:
         lines.append(f"| {LABELS.get(r['algorithm'], r['algorithm'])} | {_pct(r['time_s_vs_rrt_pct'])} | "
                      f"{_pct(r['cost_vs_rrt_pct'])} | {_pct(r['time_std_s_vs_rrt_pct'])} | "
                      f"{_pct(r['cost_std_vs_rrt_pct'])} | {_pct(r['sum_cos_vs_rrt_pct'])}{pc} | "
-                     f"{_pct(r['sum_sin_vs_rrt_pct'])}{ps} | {_pct(r['cf_vs_rrt_pct'])} |")
+                     f"{_pct(r['sum_sin_vs_rrt_pct'])}{ps} | {_pct(r['cf_vs_rrt_pct'])} | "
+                     f"{_pct(r['time_cpu_s_vs_rrt_pct'])} | {_pct(r['search_iterations_vs_rrt_pct'])} | "
+                     f"{_pct(r['search_checks_vs_rrt_pct'])} |")
     return "\n".join(lines) + "\n"
 
 

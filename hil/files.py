@@ -7,14 +7,20 @@ import tempfile
 from pathlib import Path
 
 
-def write_json_atomic(path: str | Path, data: dict) -> None:
-    """Write JSON to ``path`` via a temporary file and rename: never a half-written file."""
+def write_json_atomic(path: str | Path, data: dict, private: bool = False) -> None:
+    """Write JSON to ``path`` via a temporary file and rename: never a half-written file. The file is
+    owner-only (0600) when ``private`` (a run with a signing key), else readable as the other files of
+    a run folder are (0666 less the umask; mkstemp alone would leave it 0600)."""
     from hil.console import to_json
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
+        if not private:
+            umask = os.umask(0)
+            os.umask(umask)
+            os.fchmod(fd, 0o666 & ~umask)
         with os.fdopen(fd, "w") as fh:
             fh.write(to_json(data) + "\n")
         os.replace(tmp, path)
@@ -68,3 +74,16 @@ def check_output_file(path: str | Path, option: str, suffixes: tuple[str, ...]) 
         raise UsageError(f"{option} {path}: is not writable")
     check_output_folder(path.parent, option)
     return path
+
+
+def tidy_failed_start(out: Path, fresh: bool) -> None:
+    """After a run that failed: drop the files it left empty (a run.tlog nothing reached), and the
+    folder itself when this run made it and nothing is left in it. Logs that say why stay."""
+    try:
+        for p in out.iterdir():
+            if p.is_file() and p.stat().st_size == 0:
+                p.unlink()
+        if fresh and not any(out.iterdir()):
+            out.rmdir()
+    except OSError:
+        pass   # tidying is a courtesy: the run's own error is what the user must see

@@ -143,7 +143,8 @@ class HilRun:
 
     def __init__(self, opts: RunOptions, cfg: Any) -> None:
         self.opts, self.cfg = opts, cfg
-        self.scen = scenarios.load(opts.scenario, cfg.current, cfg.planner.safety_radius)
+        self.scen = scenarios.load(opts.scenario, cfg.current, cfg.planner.safety_radius, cfg.geodesy)
+        self.scen.check_current_time(float(opts.duration))
         if opts.traffic is not None:
             self.scen.traffic = tuple(opts.traffic)
         self.out = opts.out
@@ -155,7 +156,8 @@ class HilRun:
         self.geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
         from hil.encounter_report import EncounterJudge
 
-        self.encounter_judge = EncounterJudge(cfg.vessel.L, cfg.vessel.W, cfg.colregs) if self.scen.traffic else None
+        self.encounter_judge = (EncounterJudge(cfg.vessel.L, cfg.vessel.W, cfg.colregs, route=self.scen.reference_path)
+                                if self.scen.traffic else None)
         self.tap = Tap(self.out / "run.tlog", self.geo, self.encounter_judge, cfg.traffic.truth_component_id,
                        cfg.link.component_id, lockstep=opts.lockstep, private=bool(cfg.gcs.signing_key_file))
         goal_ned = (self.scen.goal[1], self.scen.goal[0])
@@ -208,7 +210,8 @@ class HilRun:
                 "--duration", repr(float(self.opts.duration) + 5.0), "--json", "--world", str(self.world_file),
                 "--set", f"sim.initial.x={north!r}", "--set", f"sim.initial.y={east!r}",
                 "--set", f"sim.initial.psi={psi!r}"]
-        for k in ("enabled", "origin_x", "origin_y"):
+        for k in ("enabled", "origin_x", "origin_y", "file", "uniform", "east_variable", "north_variable",
+                  "start_time"):
             v = getattr(cur, k)
             args += ["--set", f"current.{k}={json.dumps(v)}"]
         if self.traffic_file is not None:
@@ -678,5 +681,5 @@ def _run_loop(opts: RunOptions, cfg: Any) -> RunSummary:
             summary = replace(summary, plot=str(opts.out / "plot.png"))
         except Exception as exc:  # a plot must never lose the run's data
             summary = replace(summary, plot_error=f"{type(exc).__name__}: {exc}")
-    write_json_atomic(opts.out / "summary.json", to_table(summary))
+    write_json_atomic(opts.out / "summary.json", to_table(summary), private=bool(cfg.gcs.signing_key_file))
     return summary

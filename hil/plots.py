@@ -21,6 +21,8 @@ import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.colors import ListedColormap
 
+from planner.params import REGISTRY
+
 
 def _draw_map(ax, occ: np.ndarray, resolution: float, inflated: np.ndarray | None = None) -> None:
     h, w = occ.shape[0] * resolution, occ.shape[1] * resolution
@@ -119,7 +121,7 @@ def plot_runs_grid(out: str | Path, panels: Sequence[dict], cols: int = 3, title
     cols = min(cols, n)
     rows = (n + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 4.2 * rows), squeeze=False)
-    colors = {"rrt-star": "tab:blue", "informed-rrt-star": "tab:orange", "ddrrt-star": "red"}
+    colors = {e.name: e.colour for e in REGISTRY}
     for ax in axes.flat[n:]:
         ax.axis("off")
     for ax, p in zip(axes.flat, panels, strict=False):

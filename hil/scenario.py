@@ -6,6 +6,12 @@ The map's origin (x = 0, y = 0, its south-west corner) is the NED origin of the 
 a map point (x, y) is NED (north = y, east = x); the HIL loop starts the simulated vessel at
 ``start``.
 
+The map may be a grid (.npy, .png) or a vector chart in longitude/latitude (``hil.charts``: the
+grid's south-west corner becomes the run's NED origin; positions in metres count from the
+configuration's origin and are moved onto the grid). With ``positions = "latlon"`` every position
+is [latitude, longitude]. The current may be eq. (13), uniform or a CF netCDF file
+(``common.current_sources``; a file that does not cover the map is refused). docs/worlds.md.
+
 A scenario file is loaded strictly (unknown or missing keys, wrong types and out-of-range values
 are one-line errors). Its optional tables override keys of other sections:
 
@@ -45,10 +51,11 @@ from typing import Any, Literal
 import numpy as np
 
 from common.params import param
-from hil import config
+from hil import charts, config
 from hil.config import CONFIG_DIR
 from hil.errors import ConfigError, UsageError
 from hil.scenario_names import SCENARIO_DIR, available
+from simulator.config import GeodesyParams
 from simulator.traffic import ShipSpec
 
 
@@ -87,8 +94,21 @@ class ScenarioSpec:
     name: str = param("scenario name (the file's stem)")
     description: str = param("one-line description")
     kind: Literal["fixed", "random"] = param("'fixed' map and end points, or 'random' per Monte Carlo run")
-    map: str = param("map file (.npy or .png) relative to the scenario file (fixed scenarios)", default="")
+    map: str = param("map file relative to the scenario file (fixed scenarios): a grid (.npy, .png) or a vector "
+                     "chart in longitude/latitude (.geojson, .shp, .gpkg, .kml, S-57 .000; docs/worlds.md)",
+                     default="")
     resolution: float = param("map cell size", "m", gt=0, default=0.5)
+    origin: tuple[float, ...] = param(
+        "charts: [latitude, longitude] from which the scenario's positions in metres count (default: the "
+        "configuration's [geodesy] origin)", "deg", ge=-180, le=360, default=())
+    extent: tuple[float, ...] = param("charts: the map's [west, south, east, north] in metres from the origin "
+                                      "(default: the chart's bounds)", "m", ge=-50_000, le=50_000, default=())
+    positions: Literal["metres", "latlon"] = param(
+        "how start, goal, reference_path, the uncharted discs' centres and the traffic's start and waypoints are "
+        "given: 'metres' [x east, y north] of the map, or 'latlon' [latitude, longitude] in degrees",
+        default="metres")
+    chart_buffer: float = param("charts: radius given to points and half-width to lines without a 'buffer' "
+                                "property", "m", ge=0, le=1000, default=2.0)
     start: tuple[float, float] = param("start position [x east, y north]", "m", default=(0.0, 0.0))
     start_heading: float = param("start heading, counter-clockwise from east", "rad", ge=-4 * math.pi,
                                  le=4 * math.pi, default=0.0)
@@ -119,6 +139,13 @@ class ScenarioSpec:
                 raise ValueError("reference_path: needs at least two points (start ... goal), or none")
         elif self.random is None:
             raise ValueError("random: a random scenario needs a [random] table")
+        if len(self.origin) not in (0, 2) or (self.origin and not -89 <= self.origin[0] <= 89):
+            raise ValueError("origin: expected [latitude, longitude] in degrees (latitude within +-89)")
+        if len(self.extent) not in (0, 4) or (self.extent and not (self.extent[0] < self.extent[2]
+                                                                  and self.extent[1] < self.extent[3])):
+            raise ValueError("extent: expected [west, south, east, north] in m, west < east and south < north")
+        if (self.origin or self.extent) and not charts.is_chart(self.map):
+            raise ValueError("origin, extent: only for a chart map (.geojson, .shp, ...)")
         for x, y, r in self.uncharted:
             if r <= 0:
                 raise ValueError(f"uncharted: disc at ({x:g}, {y:g}) needs a positive radius, got {r:g}")
@@ -143,6 +170,8 @@ class Scenario:
     uncharted: tuple[tuple[float, float, float], ...] = ()   # discs (x, y, radius), m, map frame
     traffic: tuple[ShipSpec, ...] = ()                        # ships sailed by the simulator ([[traffic]])
     waypoints: np.ndarray | None = None                       # (K, 2) the route as given, m (None: = reference_path)
+    geodesy: Any = None                                       # simulator.config.GeodesyParams: the NED origin
+    _current_source: Any = field(default=None, init=False, repr=False, compare=False)
 
     def truth_occ(self) -> np.ndarray:
         """The simulated world's obstacles: the chart (``occ``) plus the uncharted discs."""
@@ -164,11 +193,25 @@ class Scenario:
         return self.occ.shape[0] * self.resolution
 
     def current_field(self):
-        """The eq. (13) current (``common.current_field.CurrentField``, NED), or None when disabled."""
+        """The current the simulator applies (``common.current_sources``: eq. (13), uniform or a
+        file's; NED), or None when disabled. Built once per scenario (a file is read once)."""
         if not self.current.enabled:
             return None
-        from common.current_field import CurrentField
-        return CurrentField(self.current)
+        if self._current_source is None:
+            from common.current_sources import make_current
+            self._current_source = make_current(self.current, geodesy_frame(self.geodesy))
+        return self._current_source
+
+    def check_current_time(self, duration: float, source: str = "") -> None:
+        """ConfigError (one line) when a current file does not cover run times 0..``duration`` s."""
+        from common.current_sources import CurrentSourceError, GriddedCurrent
+
+        f = self.current_field()
+        if isinstance(f, GriddedCurrent):
+            try:
+                f.check_covers(t=(0.0, max(float(duration), self.field_time)))
+            except CurrentSourceError as exc:
+                raise ConfigError(f"{source or 'scenario ' + self.name}: current.file: {exc}") from None
 
     def map_field(self) -> MapFrameCurrent | None:
         """The current frozen at ``field_time`` as a map-frame DisturbanceField, or None."""
@@ -214,7 +257,8 @@ def load_spec(name: str) -> ScenarioSpec:
     if table.get("kind") == "fixed":
         for key in ("start", "goal"):   # defaults only for random scenarios, which draw them
             if key not in table:
-                raise ConfigError(f"{path}: {key}: missing key (a fixed scenario gives [x, y] in m)")
+                raise ConfigError(f"{path}: {key}: missing key (a fixed scenario gives [x, y] in m, or "
+                                  f"[latitude, longitude] with positions = \"latlon\")")
     spec = config.from_table(ScenarioSpec, table, str(path))
     object.__setattr__(spec, "path", str(path))
     return spec
@@ -238,6 +282,96 @@ def resolve_file(spec: ScenarioSpec, name: str) -> Path:
     return here if here.exists() or not legacy.exists() else legacy
 
 
+def geodesy_frame(geodesy: Any = None):
+    """The ``common.geodesy.LocalFrame`` of a ``[geodesy]`` section (default: the default configuration's)."""
+    from common.geodesy import LocalFrame
+
+    if geodesy is None:
+        from hil import settings
+        geodesy = settings.load().geodesy
+    return LocalFrame(geodesy.lat0, geodesy.lon0, geodesy.alt0)
+
+
+def positions_frame(spec: ScenarioSpec, geodesy: Any = None):
+    """The ``LocalFrame`` in which a chart scenario's positions in metres count: its ``origin``, else the
+    configuration's (``geodesy.positions_origin`` or ``lat0/lon0``; default: the default configuration's)."""
+    from common.geodesy import LocalFrame
+
+    if geodesy is None:
+        from hil import settings
+        geodesy = settings.load().geodesy
+    lat, lon = (spec.origin[0], spec.origin[1]) if spec.origin else geodesy.metres_origin()
+    return LocalFrame(lat, lon, geodesy.alt0)
+
+
+def map_frame(spec: ScenarioSpec, geodesy: Any = None):
+    """The ``LocalFrame`` of the scenario's map (x = 0, y = 0 at its south-west corner): a chart's
+    grid corner, else the configuration's origin (``geodesy``, default: the default configuration's)."""
+    from common.geodesy import LocalFrame
+
+    if spec.kind == "fixed" and charts.is_chart(spec.map):
+        positions = positions_frame(spec, geodesy)
+        lat0, lon0 = charts.grid_corner(resolve_file(spec, spec.map), positions, spec.extent)
+        return LocalFrame(lat0, lon0, positions.alt0)
+    return geodesy_frame(geodesy)
+
+
+MAX_LATLON_DISTANCE = 50_000.0   # m from the map's origin: a position farther is a typing mistake
+
+
+def positions_in_metres(spec: ScenarioSpec, frame: Any, source: str, given_in: Any = None) -> ScenarioSpec:
+    """``spec`` with every position (start, goal, route, uncharted centres, traffic) in map metres of
+    ``frame`` (x east, y north): from ``[latitude, longitude]`` (``positions = "latlon"``), or from metres
+    of another frame ``given_in`` (a chart's grid starts elsewhere than the positions' origin)."""
+    def xy(what: str, p: tuple[float, ...]) -> tuple[float, float]:
+        if given_in is not None:
+            lat, lon = given_in.sea_level_to_geodetic(float(p[1]), float(p[0]))
+        else:
+            lat, lon = float(p[0]), float(p[1])
+            if not (-89.0 <= lat <= 89.0 and -180.0 <= lon <= 360.0):
+                raise ConfigError(f"{source}: {what}: [{lat:g}, {lon:g}] is not [latitude, longitude] in degrees")
+        n, e = frame.geodetic_to_sea_level(lat, lon)
+        if math.hypot(n, e) > MAX_LATLON_DISTANCE:
+            raise ConfigError(f"{source}: {what}: [{lat:g}, {lon:g}] is {math.hypot(n, e) / 1000:.0f} km from the "
+                              f"map's origin ({frame.lat0:.6f}, {frame.lon0:.6f}); [latitude, longitude] swapped?")
+        return e, n
+
+    ships = tuple(dataclasses.replace(
+        ship, start=xy(f"traffic[{i}].start", ship.start),
+        waypoints=tuple(xy(f"traffic[{i}].waypoints[{j}]", w) for j, w in enumerate(ship.waypoints)))
+        for i, ship in enumerate(spec.traffic))
+    out = dataclasses.replace(
+        spec, positions="metres", start=xy("start", spec.start), goal=xy("goal", spec.goal),
+        reference_path=tuple(xy(f"reference_path[{i}]", p) for i, p in enumerate(spec.reference_path)),
+        uncharted=tuple((*xy(f"uncharted[{i}]", d[:2]), d[2]) for i, d in enumerate(spec.uncharted)),
+        traffic=ships)
+    object.__setattr__(out, "path", spec.path)
+    return out
+
+
+def _current_file(spec: ScenarioSpec, current: Any) -> Any:
+    """``current`` with its file as an absolute path: relative to the scenario file when the
+    scenario names it, else to the working directory (a configuration's or --set's)."""
+    if not current.file:
+        return current
+    path = resolve_file(spec, current.file) if "file" in spec.current else Path(current.file).expanduser()
+    return dataclasses.replace(current, file=str(path.resolve()))
+
+
+def _check_current(scen: Scenario, source: str) -> None:
+    """Build the scenario's current once (a file is read here) and refuse one that does not cover
+    the map or the planning instant: one-line ConfigError."""
+    from common.current_sources import CurrentSourceError, GriddedCurrent
+
+    try:
+        f = scen.current_field()
+        if isinstance(f, GriddedCurrent):
+            f.check_covers((0.0, scen.height), (0.0, scen.width), (scen.field_time, scen.field_time),
+                           what=f"the {scen.width:g} m x {scen.height:g} m map")
+    except CurrentSourceError as exc:
+        raise ConfigError(f"{source}: current: {exc}") from None
+
+
 def _current_params(base_current: Any, overrides: dict[str, Any], source: str) -> tuple[Any, float]:
     table = config.to_table(base_current)
     ov = dict(overrides)
@@ -246,6 +380,12 @@ def _current_params(base_current: Any, overrides: dict[str, Any], source: str) -
         raise ConfigError(f"{source}: current.field_time: expected a number, got {field_time!r}")
     if not 0.0 <= field_time <= config.MAX_MAGNITUDE:
         raise ConfigError(f"{source}: current.field_time: must be a finite number of seconds >= 0 (got {field_time})")
+    # The scenario's source replaces the configuration's: its file drops a configured uniform current
+    # and the other way round (both at once is refused).
+    if "file" in ov and "uniform" in table:
+        table["uniform"] = []
+    if "uniform" in ov and "file" in table:
+        table["file"] = ""
     for k, v in ov.items():
         if k not in table:
             raise ConfigError(f"{source}: current.{k}: unknown key{config.suggest(k, list(table) + ['field_time'])}")
@@ -277,12 +417,13 @@ def _check_point(what: str, p: tuple[float, float], occ: np.ndarray, res: float,
         raise ConfigError(f"{source}: {what}: ({p[0]:g}, {p[1]:g}) m is inside an obstacle")
 
 
-def load(name: str, base_current: Any = None, safety_radius: float | None = None) -> Scenario:
+def load(name: str, base_current: Any = None, safety_radius: float | None = None, geodesy: Any = None) -> Scenario:
     """Load a fixed scenario (for a random one, use :func:`instance` with a run's generator).
     ``safety_radius`` (m): the configuration's ``planner.safety_radius`` (default: the default
-    configuration's); the scenario's own ``[planner]`` value wins, as for the planner."""
+    configuration's); the scenario's own ``[planner]`` value wins, as for the planner.
+    ``geodesy``: the configuration's ``[geodesy]`` (default: the default configuration's)."""
     spec = load_spec(name)
-    return instance(spec, None, base_current, safety_radius)
+    return instance(spec, None, base_current, safety_radius, geodesy=geodesy)
 
 
 def _safety_radius(spec: ScenarioSpec, base: float | None, source: str) -> float:
@@ -326,17 +467,44 @@ def _default_current() -> Any:
 
 
 def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: Any = None,
-             safety_radius: float | None = None, source: str | None = None) -> Scenario:
+             safety_radius: float | None = None, source: str | None = None, geodesy: Any = None) -> Scenario:
     """A concrete :class:`Scenario`; random scenarios draw map and end points from ``rng``.
     ``source`` names the file in error messages (default: the file the spec was read from)."""
     source = source or spec.path or str(scenario_path(spec.name))
+    positions = None
+    if spec.kind == "fixed" and charts.is_chart(spec.map):
+        positions = positions_frame(spec, geodesy)
+        frame = map_frame(spec, geodesy)
+        if spec.positions == "latlon":
+            spec = positions_in_metres(spec, frame, source)
+        elif (frame.lat0, frame.lon0) != (positions.lat0, positions.lon0):
+            spec = positions_in_metres(spec, frame, source, given_in=positions)
+    elif spec.positions == "latlon":
+        spec = positions_in_metres(spec, map_frame(spec, geodesy), source)
+    scen = _instance(spec, rng, base_current, safety_radius, source, positions)
+    if scen.geodesy is None:        # a chart sets its own origin (its map's south-west corner)
+        scen.geodesy = geodesy
+    _check_current(scen, source)
+    return scen
+
+
+def _instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: Any,
+              safety_radius: float | None, source: str, positions: Any = None) -> Scenario:
     current, field_time = _current_params(base_current if base_current is not None else _default_current(),
                                           spec.current, source)
+    current = _current_file(spec, current)
     if spec.kind == "fixed":
         map_path = resolve_file(spec, spec.map)
         if not map_path.exists():
             raise ConfigError(f"{source}: map: no such file {map_path}")
-        occ = load_occupancy(map_path, spec.resolution)
+        geodesy = None
+        if charts.is_chart(map_path):
+            grid = charts.rasterise(map_path, spec.resolution, positions, spec.extent, spec.chart_buffer)
+            occ = grid.occ
+            geodesy = GeodesyParams(grid.origin[0], grid.origin[1], positions.alt0,
+                                    (positions.lat0, positions.lon0))
+        else:
+            occ = load_occupancy(map_path, spec.resolution)
         for what, p in (("start", spec.start), ("goal", spec.goal)):
             _check_point(what, p, occ, spec.resolution, source)
         if spec.global_route:
@@ -351,7 +519,8 @@ def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: 
             wps = ref = np.asarray(spec.reference_path, dtype=float)
         scen = Scenario(spec.name, spec.description, occ, spec.resolution, spec.start, spec.start_heading,
                         spec.goal, ref, current, field_time, dict(spec.planner), dict(spec.online),
-                        tuple(tuple(map(float, d)) for d in spec.uncharted), traffic=spec.traffic, waypoints=wps)
+                        tuple(tuple(map(float, d)) for d in spec.uncharted), traffic=spec.traffic, waypoints=wps,
+                        geodesy=geodesy)
         truth = scen.truth_occ()
         for what, p in (("start", spec.start), ("goal", spec.goal)):
             if truth[int(p[1] / spec.resolution), int(p[0] / spec.resolution)]:

@@ -8,10 +8,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any, Protocol
 
-from planner.params import ALGORITHM_NAMES, PlannerParams
+from planner.params import ALGORITHM_NAMES, REGISTRY, PlannerParams
 
-# The one registry of algorithm names (hil's commands, experiments and benches use it). It is
-# importable without numba: `import planner.params` only loads this light module.
+# The one registry of planners (planner.params.REGISTRY: name, label, colour, class; hil's commands,
+# experiments, figures and benches read it). Importable without numba: `import planner.params` only
+# loads that light module.
 ALGORITHMS = ALGORITHM_NAMES
 
 if TYPE_CHECKING:
@@ -36,37 +37,28 @@ class Planner(Protocol):
 
 
 def make_planner(name: str, params: PlannerParams, seed: int | None = None) -> Planner:
-    """The planner called ``name`` (one of ALGORITHMS); ValueError for an unknown name."""
-    if name == "rrt-star":
-        from planner.rrt_star import RRTStar
+    """The planner called ``name`` (one of ALGORITHMS, the table ``planner.params.REGISTRY``);
+    ValueError for an unknown name."""
+    from planner.registry import make_planner as _make
 
-        return RRTStar(params, seed)
-    if name == "informed-rrt-star":
-        from planner.informed_rrt_star import InformedRRTStar
-
-        return InformedRRTStar(params, seed)
-    if name == "ddrrt-star":
-        from planner.ddrrt_star import DDRRTStar
-
-        return DDRRTStar(params, seed)
-    raise ValueError(f"unknown planner {name!r} (expected one of: {', '.join(ALGORITHMS)})")
+    return _make(name, params, seed)
 
 
 def warm_up() -> float:
     """Load or compile the numba core before time-critical use (once per process: call it in
     every worker before its first timed solve); returns the seconds spent."""
-    from planner.core import warm_up as _warm_up
+    from planner.registry import warm_up as _warm_up
 
     return _warm_up()
 
 
 def warm_up_info():
-    """:func:`warm_up`, returning ``planner.core.WarmUp(seconds, compiled)``: ``compiled`` is
+    """:func:`warm_up`, returning ``planner.registry.WarmUp(seconds, compiled)``: ``compiled`` is
     True when numba had to compile (a cold cache) rather than load machine code."""
-    from planner.core import warm_up_info as _info
+    from planner.registry import warm_up_info as _info
 
     return _info()
 
 
-__all__ = ["warm_up", "warm_up_info", "ALGORITHMS", "Planner", "PlannerParams", "PlannerResult", "PlanningProblem",
-           "Termination", "make_planner"]
+__all__ = ["warm_up", "warm_up_info", "ALGORITHMS", "REGISTRY", "Planner", "PlannerParams", "PlannerResult",
+           "PlanningProblem", "Termination", "make_planner"]

@@ -21,25 +21,41 @@ from numba.extending import intrinsic
 CORNER_EPS = 1e-9
 
 
-@intrinsic
-def _clock_gettime_monotonic(typingctx, buf):
-    sig = types.int64(buf)
+def _clock_gettime(clock_id: int):
+    """An intrinsic calling libc clock_gettime(clock_id, buf) on an int64[2] (a timespec)."""
 
-    def codegen(context, builder, signature, args):
-        arr = context.make_array(signature.args[0])(context, builder, args[0])
-        ptr = builder.bitcast(arr.data, ir.IntType(8).as_pointer())
-        fnty = ir.FunctionType(ir.IntType(32), [ir.IntType(32), ir.IntType(8).as_pointer()])
-        fn = cgutils.get_or_insert_function(builder.module, fnty, "clock_gettime")
-        builder.call(fn, [ir.Constant(ir.IntType(32), 1), ptr])  # 1 = CLOCK_MONOTONIC on Linux
-        return ir.Constant(ir.IntType(64), 0)
+    @intrinsic
+    def call(typingctx, buf):
+        sig = types.int64(buf)
 
-    return sig, codegen
+        def codegen(context, builder, signature, args):
+            arr = context.make_array(signature.args[0])(context, builder, args[0])
+            ptr = builder.bitcast(arr.data, ir.IntType(8).as_pointer())
+            fnty = ir.FunctionType(ir.IntType(32), [ir.IntType(32), ir.IntType(8).as_pointer()])
+            fn = cgutils.get_or_insert_function(builder.module, fnty, "clock_gettime")
+            builder.call(fn, [ir.Constant(ir.IntType(32), clock_id), ptr])
+            return ir.Constant(ir.IntType(64), 0)
+
+        return sig, codegen
+
+    return call
+
+
+_clock_gettime_monotonic = _clock_gettime(1)   # CLOCK_MONOTONIC on Linux
+_clock_gettime_thread_cpu = _clock_gettime(3)  # CLOCK_THREAD_CPUTIME_ID on Linux
 
 
 @njit(cache=True)
 def monotonic_ns(buf):
     """Nanoseconds of CLOCK_MONOTONIC; ``buf`` is a scratch int64[2] (timespec)."""
-    _clock_gettime_monotonic(buf)  # type: ignore[call-arg]  # numba passes the typing context itself
+    _clock_gettime_monotonic(buf)  # numba passes the typing context itself
+    return buf[0] * 1_000_000_000 + buf[1]
+
+
+@njit(cache=True)
+def thread_cpu_ns(buf):
+    """Nanoseconds of the calling thread's CPU clock (time.thread_time_ns's clock on Linux)."""
+    _clock_gettime_thread_cpu(buf)  # numba passes the typing context itself
     return buf[0] * 1_000_000_000 + buf[1]
 
 

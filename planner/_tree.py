@@ -17,7 +17,7 @@ import math
 import numpy as np
 from numba import njit
 
-from planner._kernels import edge_cost, field_at, monotonic_ns, segment_free
+from planner._kernels import edge_cost, field_at, monotonic_ns, segment_free, thread_cpu_ns
 
 # algorithm codes
 RRT_STAR = 0
@@ -37,13 +37,14 @@ C_GX, C_GY, C_SX, C_SY, C_RES, C_FRES, C_FOX, C_FOY, C_KGROW = range(20, 29)
 C_DD0, C_DDGROW, C_DDSHRINK, C_DDMIN = range(29, 33)
 N_FCFG = 33
 # int config indices
-I_ALGO, I_FIELD, I_K, I_NBX, I_NBY, I_CAP, I_PNG = range(7)
-N_ICFG = 7
+I_ALGO, I_FIELD, I_K, I_NBX, I_NBY, I_CAP, I_PNG, I_FAILTURN, I_PNGREPAIR = range(9)
+N_ICFG = 9
 # int state indices
 S_N, S_GOAL, S_ITER, S_REJ, S_CLOSEST, S_FIRST_ITER, S_CHECKS, S_FAILED = range(8)
-N_ISTATE = 8
+S_FAILED_TURN, S_PNG_HIT, S_FIRST_CHECKS, S_PNG_WASTED = range(8, 12)
+N_ISTATE = 12
 # float state indices
-F_CLOSEST_D, F_FIRST_NS = range(2)
+F_CLOSEST_D, F_FIRST_NS, F_FIRST_CPU_NS = range(3)
 N_FSTATE = 4
 
 NEAR_CAP = 1024
@@ -417,6 +418,16 @@ def _dd_failed(i, dd, fc):
 
 
 @njit(cache=True)
+def _turn_failed(i, dd, fc, st):
+    """An extension from node i refused by the turning-radius fan (section 2.4), counted as a
+    failed extension when the paper's reading is chosen (failed_extension = "collision+turn"): the
+    paper counts constraint violations as well as collisions."""
+    st[S_FAILED] += 1
+    st[S_FAILED_TURN] += 1
+    _dd_failed(i, dd, fc)
+
+
+@njit(cache=True)
 def _sort_by(keys, idx, m):
     """Insertion sort of idx[:m] by keys[:m] (m is small)."""
     for a in range(1, m):
@@ -483,6 +494,8 @@ def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, occ, fc, ic, fvx, fv
                     if track_failed:
                         st[S_FAILED] += 1
                         _dd_failed(j, dd, fc)
+                elif track_failed and ic[I_FAILTURN] != 0:
+                    _turn_failed(j, dd, fc, st)
             return -1, 0.0
         tries += 1
         if lower_bounds:  # make exact every key that may be the minimum, until none is left
@@ -524,12 +537,22 @@ def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, occ, fc, ic, fvx, fv
             if track_failed:
                 st[S_FAILED] += 1
                 _dd_failed(j, dd, fc)
+        elif track_failed and ic[I_FAILTURN] != 0:
+            _turn_failed(j, dd, fc, st)
         for a in range(b, left - 1):  # drop candidate b, keeping the others' order
             near_c[a] = near_c[a + 1]
             near_i[a] = near_i[a + 1]
             near_x[a] = near_x[a + 1]
         left -= 1
     return -1, 0.0
+
+
+@njit(cache=True)
+def _first_counts(st, fs, clockbuf):
+    """At the first exact solution: the collision checks so far and the thread's CPU clock, so
+    that time to a first solution can be judged independent of the platform (issue 34)."""
+    st[S_FIRST_CHECKS] = st[S_CHECKS]
+    fs[F_FIRST_CPU_NS] = thread_cpu_ns(clockbuf)
 
 
 @njit(cache=True)
@@ -550,6 +573,7 @@ def _try_goal(i, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, 
             st[S_GOAL] = i
             st[S_FIRST_ITER] = st[S_ITER]
             fs[F_FIRST_NS] = monotonic_ns(clockbuf)
+            _first_counts(st, fs, clockbuf)
         return
     c = cost[i] + _cost(X[i, 0], X[i, 1], gx, gy, fc, ic, fvx, fvy)
     if g >= 0 and c >= cost[g] - 1e-12:
@@ -570,6 +594,7 @@ def _try_goal(i, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, 
         st[S_GOAL] = g
         st[S_FIRST_ITER] = st[S_ITER]
         fs[F_FIRST_NS] = monotonic_ns(clockbuf)
+        _first_counts(st, fs, clockbuf)
         fs[F_CLOSEST_D] = 0.0
         st[S_CLOSEST] = g
     else:
@@ -678,9 +703,11 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
             return DONE_FULL
         st[S_ITER] += 1
         # ---- sample: PNG node with probability P (DDRRT*), else goal bias, else uniform/informed
-        if ic[I_PNG] != 0 and np.random.random() < fc[C_PNGP]:
+        from_png = False
+        if ic[I_PNG] != 0 and st[S_PNG_HIT] == 0 and np.random.random() < fc[C_PNGP]:
             sx = fc[C_PNGX]
             sy = fc[C_PNGY]
+            from_png = True
         elif np.random.random() < fc[C_GOALBIAS]:
             sx = fc[C_GX]
             sy = fc[C_GY]
@@ -728,6 +755,10 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
             q0 = ext_i[b0]
             d0 = math.hypot(sx - X[q0, 0], sy - X[q0, 1])
             if d0 < 1e-9:
+                if from_png:
+                    st[S_PNG_WASTED] += 1
+                    if ic[I_PNGREPAIR] != 0:
+                        st[S_PNG_HIT] = 1  # a node sits on the PGNode: drawing it again would be wasted
                 continue
             if d0 > step:
                 nx = X[q0, 0] + (sx - X[q0, 0]) * step / d0
@@ -766,6 +797,8 @@ def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib
                 dd[p] *= fc[C_DDGROW]  # a successful extension grows a bounded domain (adaptive form)
             new = _add_node(nx, ny, p, pc, X, parent, cost, head, dd, first_child, next_sib, fc, ic,
                             bucket_head, node_next, st, nv, fvx, fvy)
+            if from_png and ic[I_PNGREPAIR] != 0 and nx == sx and ny == sy:
+                st[S_PNG_HIT] = 1
             hx = math.cos(head[new])
             hy = math.sin(head[new])
             # ---- lines 18-21: rewire the other extendable nodes (within a step of q_new) through it

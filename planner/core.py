@@ -25,7 +25,7 @@ from planner import _tree
 from planner.cost import min_cost_factor, path_cost, path_length
 from planner.field import GridField
 from planner.gridmap import OccupancyGrid
-from planner.params import Objective, PlannerParams
+from planner.params import PlannerParams
 from planner.problem import PlanningProblem
 from planner.result import PlannerResult
 from planner.termination import Termination
@@ -54,69 +54,6 @@ def compiled_clock_ok() -> bool:
     return _CLOCK_OK
 
 
-@dataclasses.dataclass(frozen=True)
-class WarmUp:
-    """What :func:`warm_up_info` did: ``seconds`` spent, and whether numba had to compile
-    (``compiled``: a cold or stale cache; otherwise the machine code came from the cache)."""
-
-    seconds: float
-    compiled: bool
-
-
-_WARM: WarmUp | None = None
-
-
-def _cache_misses() -> int:
-    from planner import _kernels
-
-    n = 0
-    for mod in (_tree, _kernels):
-        for obj in vars(mod).values():
-            stats = getattr(obj, "stats", None)
-            if stats is not None and hasattr(stats, "cache_misses"):
-                n += sum(stats.cache_misses.values())
-    return n
-
-
-def warm_up_info() -> WarmUp:
-    """Load (or, with a cold cache, compile) every compiled function by solving tiny problems
-    with each strategy, with and without a current field, as the online loop does (heading,
-    reference path, perceptual domain). Only the first call in a process does work; later calls
-    return the first call's record. The first solve in a process otherwise pays ~0.2 s of cache
-    loading (~7 s of compilation with a cold cache) inside its time budget."""
-    global _WARM
-    if _WARM is not None:
-        return _WARM
-    from planner.ddrrt_star import DDRRTStar
-    from planner.informed_rrt_star import InformedRRTStar
-    from planner.rrt_star import RRTStar
-
-    t0 = time.monotonic()
-    misses0 = _cache_misses()
-    occ = np.zeros((40, 40), dtype=bool)
-    occ[10:30, 19:21] = True
-    grid = OccupancyGrid(occ, 0.5)
-    grid.segment_free(1.0, 1.0, 18.0, 18.0)
-    ref = np.array([[2.0, 10.0], [18.0, 10.0]])
-    grid.polyline_free(ref)
-    cases: tuple[tuple[Objective, GridField | None], ...] = (("length", None),
-                                                            ("current", GridField.uniform(0.3, 0.1)))
-    for objective, field in cases:
-        params = PlannerParams(max_nodes=2000, objective=objective)
-        for cls in (RRTStar, InformedRRTStar, DDRRTStar):
-            problem = PlanningProblem(grid, (2.0, 10.0), (18.0, 10.0), start_heading=0.0, field=field,
-                                      reference_path=ref, domain_center=(10.0, 10.0), domain_radius=12.0)
-            cls(params).solve(problem, Termination.iterations(300))
-    compiled_clock_ok()
-    _WARM = WarmUp(seconds=time.monotonic() - t0, compiled=_cache_misses() > misses0)
-    return _WARM
-
-
-def warm_up() -> float:
-    """:func:`warm_up_info`, returning the seconds it took."""
-    return warm_up_info().seconds
-
-
 def _none(reason: str, t0: float, start=None) -> PlannerResult:
     nodes = np.zeros((0, 2)) if start is None else np.asarray([start], dtype=np.float64)
     return PlannerResult(
@@ -136,14 +73,28 @@ def free_regions(grid: OccupancyGrid) -> np.ndarray:
     return labels
 
 
-def sampled_field(problem: PlanningProblem) -> GridField | None:
+def sampled_field(problem: PlanningProblem, params: PlannerParams | None = None) -> GridField | None:
+    """The disturbance alpha_y is measured against, on a grid: the current, or (``params.alpha_y``
+    = "resultant" and a wave drift given) the current plus the wave drift."""
     f = problem.field
-    if f is None:
+    drift = problem.wave_drift if params is not None and params.alpha_y == "resultant" else None
+    if f is None and drift is None:
         return None
-    if isinstance(f, GridField):
-        return f
-    res = max(FIELD_SAMPLE_RESOLUTION, problem.grid.resolution)
-    return GridField.sample(f, problem.grid.width, problem.grid.height, res)
+    if f is None:
+        return GridField.uniform(float(drift[0]), float(drift[1])) if drift is not None else None
+    g = f if isinstance(f, GridField) else GridField.sample(
+        f, problem.grid.width, problem.grid.height, max(FIELD_SAMPLE_RESOLUTION, problem.grid.resolution))
+    if drift is None:
+        return g
+    return g.shifted(float(drift[0]), float(drift[1]))
+
+
+def disturbance(problem: PlanningProblem, params: PlannerParams):
+    """The field eq. (12)'s alpha_y is measured against (see :func:`sampled_field`); problem.field
+    itself when alpha_y = "current" (the costs stay those of the caller's field)."""
+    if params.alpha_y == "resultant" and problem.wave_drift is not None:
+        return sampled_field(problem, params)
+    return problem.field
 
 
 class TreePlanner:
@@ -168,6 +119,7 @@ class TreePlanner:
             raise ValueError("termination has no iteration or time bound: combine it with "
                              "Termination.iterations(n) or Termination.deadline(s)")
         t0 = time.monotonic()
+        cpu0_ns = time.thread_time_ns()  # the thread's CPU clock, from the same instant as t0
         termination.reset()
         p = self.params
         grid = problem.grid
@@ -186,7 +138,7 @@ class TreePlanner:
             return PlannerResult("exact", path, 0.0, 0.0, 0, 0.0, time.monotonic() - t0, "start is the goal",
                                  path.copy(), np.array([-1]), 0)
 
-        field = sampled_field(problem) if p.objective == "current" else None
+        field = sampled_field(problem, p) if p.objective == "current" else None
         bx0, bx1, by0, by1 = problem.sampling_box()
         if not (bx1 > bx0 and by1 > by0):
             return _none("empty sampling domain (bounds/perceptual domain outside the map)", t0, (sx, sy))
@@ -196,6 +148,7 @@ class TreePlanner:
         nby = int(math.ceil(grid.height / bucket)) + 1
 
         png = self.png_node(problem) if self.uses_png and p.png_probability > 0 else None
+        self.last_png = png
         free_area = float((~grid.occ).mean()) * (bx1 - bx0) * (by1 - by0)
         gamma_star = 2.0 * math.sqrt(1.5) * math.sqrt(max(free_area, 1e-9) / math.pi)  # K&F 2011, d = 2
 
@@ -215,11 +168,11 @@ class TreePlanner:
         if p.dynamic_domain == "off":
             fc[_tree.C_DD0] = math.inf
         else:
-            fc[_tree.C_DD0] = p.dynamic_domain_radius
+            fc[_tree.C_DD0] = p.dynamic_domain_start
         adaptive = p.dynamic_domain == "adaptive"
         fc[_tree.C_DDGROW] = 1.0 + p.dd_alpha if adaptive else 1.0
         fc[_tree.C_DDSHRINK] = 1.0 - p.dd_alpha if adaptive else 1.0
-        fc[_tree.C_DDMIN] = min(p.dd_min_factor * p.step, p.dynamic_domain_radius)
+        fc[_tree.C_DDMIN] = min(p.dd_min_factor * p.step, p.dynamic_domain_start)
         fc[_tree.C_FMIN] = min_cost_factor(p.d_alpha, p.gamma_alpha) if field is not None else 1.0
         fc[_tree.C_BUCKET] = bucket
         fc[_tree.C_BX0], fc[_tree.C_BX1], fc[_tree.C_BY0], fc[_tree.C_BY1] = bx0, bx1, by0, by1
@@ -244,6 +197,8 @@ class TreePlanner:
         ic[_tree.I_NBY] = nby
         ic[_tree.I_CAP] = cap
         ic[_tree.I_PNG] = 1 if png is not None else 0
+        ic[_tree.I_FAILTURN] = 1 if p.failed_extension == "collision+turn" else 0
+        ic[_tree.I_PNGREPAIR] = 1 if p.png_repair else 0
 
         # node arrays are filled as nodes are added (np.empty: no page touching for unused capacity)
         X = np.empty((cap, 2))
@@ -305,9 +260,10 @@ class TreePlanner:
                 why = f"tree full (max_nodes = {cap})"
                 break
         termination.notify(int(st[_tree.S_ITER]), bool(st[_tree.S_GOAL] >= 0))
-        return self._result(problem, t0, X, parent, cost, st, fs, why, dd)
+        cpu_s = (time.thread_time_ns() - cpu0_ns) * 1e-9
+        return self._result(problem, t0, X, parent, cost, st, fs, why, dd, cpu_s, cpu0_ns, png)
 
-    def _result(self, problem, t0, X, parent, cost, st, fs, why, dd) -> PlannerResult:
+    def _result(self, problem, t0, X, parent, cost, st, fs, why, dd, cpu_s=0.0, cpu0_ns=0, png=None) -> PlannerResult:
         n = int(st[_tree.S_N])
         goal = int(st[_tree.S_GOAL])
         if goal >= 0:
@@ -331,7 +287,7 @@ class TreePlanner:
         first = None
         if fs[_tree.F_FIRST_NS] >= 0:
             first = max(0.0, fs[_tree.F_FIRST_NS] * 1e-9 - t0)
-        c = path_cost(path, problem.field, self.params) if len(path) else math.inf
+        c = path_cost(path, disturbance(problem, self.params), self.params) if len(path) else math.inf
         length = path_length(path) if len(path) else math.inf
         return PlannerResult(
             status=status, path=path, cost=c, length=length, iterations=int(st[_tree.S_ITER]),
@@ -342,6 +298,15 @@ class TreePlanner:
                          "first_solution_iteration": int(st[_tree.S_FIRST_ITER]) if goal >= 0 else None,
                          "algorithm": self.name,
                          "dynamic_domains": int(np.sum(np.isfinite(dd[:n]))),  # DDRRT* nodes with a bounded DD
-                         "failed_extensions": int(st[_tree.S_FAILED]),  # DDRRT*: colliding parent attempts
+                         "failed_extensions": int(st[_tree.S_FAILED]),  # DDRRT*: failed parent attempts
+                         "failed_turns": int(st[_tree.S_FAILED_TURN]),  # of which refused by the fan
+                         # time to the first solution measured four ways (issue 34 point 4)
+                         "first_solution_checks": int(st[_tree.S_FIRST_CHECKS]) if goal >= 0 else None,
+                         "first_solution_cpu_s": max(0.0, (fs[_tree.F_FIRST_CPU_NS] - cpu0_ns) * 1e-9)
+                         if goal >= 0 else None,
+                         "thread_cpu_s": cpu_s,  # thread CPU time of the search (as planning_time_s, less the result)
+                         "png_node": None if png is None else [float(png[0]), float(png[1])],
+                         "png_reached": bool(st[_tree.S_PNG_HIT]),
+                         "png_wasted": int(st[_tree.S_PNG_WASTED]),  # PNG samples on an existing node
                          },
         )

@@ -24,9 +24,8 @@ import math
 
 import numpy as np
 
-from planner import _tree
-from planner.core import TreePlanner
-from planner.png import pg_node
+from planner import _png, _tree
+from planner.core import TreePlanner, free_regions
 from planner.problem import PlanningProblem
 
 
@@ -36,31 +35,24 @@ class DDRRTStar(TreePlanner):
     uses_png = True
 
     def png_node(self, problem: PlanningProblem) -> tuple[float, float] | None:
+        """The PGNode (compiled, :mod:`planner._png`); with ``png_repair`` moved into usable free
+        space (None where the start's free region has no cell in the sampling domain)."""
+        p = self.params
         sx, sy = map(float, problem.start)
         gx, gy = map(float, problem.goal)
-        ref = problem.reference_path
-        if ref is None or len(ref) < 2:
-            ref = np.array([[sx, sy], [gx, gy]])
-        ref = np.asarray(ref, dtype=np.float64)
-        j = int(np.argmin(np.hypot(ref[:, 0] - sx, ref[:, 1] - sy)))
-        k = int(np.argmin(np.hypot(ref[:, 0] - gx, ref[:, 1] - gy)))
-        if k <= j:
-            k = min(j + 1, len(ref) - 1)
-        if j == len(ref) - 1:
-            j = max(0, j - 1)
-        seg = np.diff(ref[j:k + 1], axis=0)
-        arc = float(np.sum(np.hypot(seg[:, 0], seg[:, 1]))) if len(seg) else 0.0
-        arc = max(arc, math.hypot(gx - sx, gy - sy))
-        t_head = math.atan2(ref[j + 1, 1] - ref[j, 1], ref[j + 1, 0] - ref[j, 0])
-        heading = problem.start_heading
-        if heading is None:
-            dx, dy = ref[j, 0] - sx, ref[j, 1] - sy
-            heading = math.atan2(dy, dx) if math.hypot(dx, dy) > 1e-9 else t_head
-        p = self.params
-        # the USV (twice the target's speed) covers its straight-line distance to the goal in one
-        # guidance step: the PGNode is never farther away than the (sub)goal
-        s_t = 0.5 * min(arc, math.hypot(gx - sx, gy - sy))
-        x, y = pg_node((sx, sy), heading, ref[j], t_head, s_t, p.png_nav_ratio, p.png_tolerance,
-                       p.png_max_iterations)
-        bx0, bx1, by0, by1 = problem.sampling_box()
-        return min(max(x, bx0), bx1), min(max(y, by0), by1)
+        ref = _png.reference(problem.reference_path, (sx, sy), (gx, gy))
+        heading = math.nan if problem.start_heading is None else float(problem.start_heading)
+        box = np.array(problem.sampling_box(), dtype=np.float64)
+        x, y = _png.raw_target(sx, sy, heading, gx, gy, ref, float(p.png_nav_ratio), float(p.png_tolerance),
+                               int(p.png_max_iterations), box)
+        if not p.png_repair:
+            return x, y
+        grid = problem.grid
+        labels = free_regions(grid)
+        region = int(labels[grid.cell_of(sx, sy)])
+        cx, cy, radius = 0.0, 0.0, 0.0
+        if problem.domain_center is not None and problem.domain_radius is not None:
+            cx, cy = map(float, problem.domain_center)
+            radius = float(problem.domain_radius)
+        x, y = _png.repair(x, y, grid._u8, labels, float(grid.resolution), region, box, cx, cy, radius)
+        return None if math.isnan(x) else (x, y)

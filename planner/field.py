@@ -54,6 +54,10 @@ class GridField:
         """A constant field."""
         return cls(np.full((1, 1), vx), np.full((1, 1), vy), 1.0)
 
+    def shifted(self, dx: float, dy: float) -> GridField:
+        """This field plus a uniform vector (m/s), e.g. the current plus the wave drift."""
+        return GridField(self.vx + dx, self.vy + dy, self.resolution, self.origin)
+
     def at(self, x: float, y: float) -> tuple[float, float]:
         """``self(x, y)`` for one point, in plain Python floats: the same operations in the same
         order, so bit-identical, ~10x faster than the vectorised call on one point (the online

@@ -181,6 +181,14 @@ class OccupancyGrid:
                     out[r0:r1, c0:c1] |= occ[r0 + dr:r1 + dr, c0 + dc:c1 + dc]
         return OccupancyGrid(out[1:-1, 1:-1], self.resolution)
 
+    def replace(self, occ: np.ndarray) -> None:
+        """New obstacles of the same shape, in place (holders of this grid see them); caches dropped."""
+        occ = np.asarray(occ, dtype=bool)
+        if occ.shape != self.occ.shape:
+            raise ValueError(f"replace: shape {occ.shape} is not the grid's {self.occ.shape}")
+        self.occ[...] = occ
+        self._clearance = self._free_labels = None
+
     def mark(self, cells: np.ndarray) -> None:
         """Make the cells ``(K, 2)`` [row, col] obstacles, in place (e.g. obstacles sensed on the way)."""
         cells = np.asarray(cells, dtype=np.int64).reshape(-1, 2)

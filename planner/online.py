@@ -31,7 +31,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from dataclasses import field as dc_field
-from typing import Any, cast
+from typing import Any, Literal
 
 import numpy as np
 from scipy import ndimage
@@ -40,7 +40,7 @@ from planner import make_planner
 from planner.cost import path_cost_fn, path_length
 from planner.gridmap import OccupancyGrid
 from planner.metrics import path_metrics
-from planner.params import AlgorithmName, PlannerParams
+from planner.params import PlannerParams
 from planner.postprocess import check_and_replan, prune
 from planner.problem import PlanningProblem
 from planner.result import PlannerResult
@@ -50,6 +50,9 @@ from planner.termination import Termination
 
 def _p(help: str, unit: str = "", **bounds: float) -> dict[str, Any]:
     return {"help": help, "unit": unit, **bounds}
+
+
+EXECUTION_MODELS = ("receding", "whole-path")
 
 
 @dataclass(frozen=True)
@@ -75,8 +78,14 @@ class OnlineParams:
         "accept a subgoal only within one perceptual radius along the reference path (see select_local_subgoal)"))
     velocity_inflation: bool = dc_field(default=True, metadata=_p(
         "extra obstacle inflation from the velocity estimated on the reference path (section 3.3)"))
+    execution: Literal["receding", "whole-path"] = dc_field(default="receding", metadata=_p(
+        "how much of each local path the vessel sails before the next cycle plans: 'receding' (speed * "
+        "cycle_time, then replan) or 'whole-path' (the whole local path, the next planned from its end, as "
+        "section 3.5 executes it; the tree is not reused)"))
 
     def __post_init__(self) -> None:
+        if self.execution not in EXECUTION_MODELS:
+            raise ValueError(f"execution: must be one of {', '.join(EXECUTION_MODELS)} (got {self.execution!r})")
         if self.local_iterations == 0 and self.local_time == 0:
             raise ValueError("local_iterations: a cycle needs a budget (local_iterations or local_time > 0)")
 
@@ -111,6 +120,11 @@ class CycleRecord:
     travelled: np.ndarray = dc_field(default_factory=lambda: np.zeros((0, 2)))
     reason: str = ""
     speed_factor: float = 1.0      # traffic: sail this path at this fraction of the planned speed
+    # search_time_s measured three more ways (issue 34 point 4): the thread's CPU time, the
+    # iterations and the collision checks to the first solution (the whole cycle's when none)
+    search_cpu_s: float = 0.0
+    search_iterations: int = 0
+    search_checks: int = 0
 
 
 @dataclass
@@ -125,6 +139,9 @@ class OnlineResult:
     search_time_s: float           # Table 3 "time"
     planning_time_s: float         # total planning time of all cycles
     metrics: dict[str, float]      # cost, length, sum_cos, sum_sin, cf, turns, ... (executed path)
+    search_cpu_s: float = 0.0      # Table 3 "time" as thread CPU time, iterations and collision checks
+    search_iterations: int = 0
+    search_checks: int = 0
 
 
 @dataclass
@@ -137,6 +154,7 @@ class OnlineContext:
     params: PlannerParams
     online: OnlineParams
     field: Any = None              # DisturbanceField in the map frame, or None
+    wave_drift: tuple[float, float] | None = None  # m/s, map frame (PlannerParams.alpha_y = "resultant")
     safe_grid: OccupancyGrid | None = None
     _free_index: np.ndarray | None = None
     _velocity_grids: dict = dc_field(default_factory=dict)
@@ -429,7 +447,7 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
     problem = PlanningProblem(
         grid=grid, start=pos, goal=goal, start_heading=state.heading, field=ctx.field,
         reference_path=ctx.reference_path, bounds=(xmin, xmax, ymin, ymax),
-        domain_center=pos, domain_radius=r,
+        domain_center=pos, domain_radius=r, wave_drift=ctx.wave_drift,
     )
     termination = _termination(online, clock)
     planner = make_planner(params.algorithm, replace(params, seed=int(seed)))
@@ -437,6 +455,7 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
     search = result.time_to_first_solution_s
     if search is None:
         search = result.planning_time_s
+    measures = _search_measures(result)
     if result.status == "none" and state.heading is not None:
         # Boxed in by the turning-radius fan (e.g. heading into a wall): the twin-thruster vessel
         # can turn on the spot, so plan once more without the heading limit at the root.
@@ -445,13 +464,14 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
             replace(problem, start_heading=None), termination)
         first = retry.time_to_first_solution_s
         search += first if first is not None else retry.planning_time_s
+        measures = tuple(a + b for a, b in zip(measures, _search_measures(retry), strict=True))  # type: ignore[assignment]
         retry.planning_time_s += result.planning_time_s
         retry.iterations += result.iterations
         result = retry
     if result.status == "none" or len(result.path) < 2:
-        return CycleRecord(index, state, goal, rule, result.status, float(search), result.planning_time_s,
-                           result.iterations, empty, empty, False, result.tree_nodes, result.tree_parents,
-                           reason=result.reason or "no local path")
+        return _measured(CycleRecord(index, state, goal, rule, result.status, float(search), result.planning_time_s,
+                                     result.iterations, empty, empty, False, result.tree_nodes, result.tree_parents,
+                                     reason=result.reason or "no local path"), measures)
 
     local = prune(result.path, grid, path_cost_fn(ctx.field, params))
     radius = params.turn_radius_factor * params.speed
@@ -477,12 +497,28 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
             smoothed, ok = _densify(local, 0.5), False
         when = first_conflict(local, traffic, ignore_within=keep)
         if when is not None:
-            return CycleRecord(index, state, goal, rule, "none", float(search), result.planning_time_s,
-                               result.iterations, empty, empty, False, result.tree_nodes, result.tree_parents,
-                               reason=f"traffic conflict {when:.1f} s along the path")
-    return CycleRecord(index, state, goal, rule, result.status, float(search), result.planning_time_s,
-                       result.iterations, local, smoothed, ok, result.tree_nodes, result.tree_parents,
-                       reason="traffic moved the subgoal" if moved else result.reason)
+            return _measured(CycleRecord(index, state, goal, rule, "none", float(search), result.planning_time_s,
+                                         result.iterations, empty, empty, False, result.tree_nodes,
+                                         result.tree_parents, reason=f"traffic conflict {when:.1f} s along the path"),
+                             measures)
+    return _measured(CycleRecord(index, state, goal, rule, result.status, float(search), result.planning_time_s,
+                                 result.iterations, local, smoothed, ok, result.tree_nodes, result.tree_parents,
+                                 reason="traffic moved the subgoal" if moved else result.reason), measures)
+
+
+def _search_measures(result: PlannerResult) -> tuple[float, int, int]:
+    """(thread CPU s, iterations, collision checks) to the first solution, or of the whole search
+    when there was none: search_time_s counted three more ways."""
+    d = result.diagnostics or {}
+    if result.status == "exact" and d.get("first_solution_iteration") is not None:
+        return (float(d.get("first_solution_cpu_s") or 0.0), int(d["first_solution_iteration"]),
+                int(d.get("first_solution_checks") or 0))
+    return float(d.get("thread_cpu_s", 0.0)), int(result.iterations), int(d.get("collision_checks", 0))
+
+
+def _measured(rec: CycleRecord, measures: tuple[float, int, int]) -> CycleRecord:
+    rec.search_cpu_s, rec.search_iterations, rec.search_checks = measures
+    return rec
 
 
 def _beside_free(grid: OccupancyGrid, pos: tuple[float, float], point: tuple[float, float], radius: float,
@@ -578,7 +614,8 @@ def run_online(ctx: OnlineContext, start: VesselState, seed: int,
             state = replace(state, t=state.t + online.cycle_time)
             continue
         failures = 0
-        travelled, heading = advance(rec.smooth_path, step)
+        travelled, heading = advance(rec.smooth_path, step if online.execution == "receding"
+                                     else path_length(rec.smooth_path))
         rec.travelled = travelled
         executed.append(travelled[1:])
         sailed = path_length(travelled)
@@ -600,6 +637,9 @@ def run_online(ctx: OnlineContext, start: VesselState, seed: int,
         reached=reached, reason=reason, cycles=cycles, executed=path, final=state,
         search_time_s=float(sum(c.search_time_s for c in cycles)),
         planning_time_s=float(sum(c.planning_time_s for c in cycles)),
+        search_cpu_s=float(sum(c.search_cpu_s for c in cycles)),
+        search_iterations=int(sum(c.search_iterations for c in cycles)),
+        search_checks=int(sum(c.search_checks for c in cycles)),
         metrics={k: float(v) for k, v in metrics.items() if np.isscalar(v)},  # type: ignore[arg-type]  # real numbers
     )
 
@@ -608,4 +648,4 @@ def make_context(grid: OccupancyGrid, goal: tuple[float, float], reference_path:
                  params: PlannerParams, online: OnlineParams, algorithm: str, field: Any = None) -> OnlineContext:
     """An :class:`OnlineContext` for ``algorithm`` (one of ``planner.ALGORITHMS``)."""
     return OnlineContext(grid=grid, goal=(float(goal[0]), float(goal[1])), reference_path=reference_path,
-                         params=replace(params, algorithm=cast(AlgorithmName, algorithm)), online=online, field=field)
+                         params=replace(params, algorithm=algorithm), online=online, field=field)

@@ -10,12 +10,37 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
-ALGORITHM_NAMES = ("rrt-star", "informed-rrt-star", "ddrrt-star")
-AlgorithmName = Literal["rrt-star", "informed-rrt-star", "ddrrt-star"]
+
+@dataclass(frozen=True)
+class PlannerEntry:
+    """One planner of the registry: adding a planner is its class and one entry in ``REGISTRY``.
+    Commands (choices), experiments (labels, seeds), figures (colours), ``make_planner`` and the
+    warm-up all read the table."""
+
+    name: str      # the configuration's and the command line's name
+    label: str     # short name in tables and legends
+    colour: str    # matplotlib colour of its paths in figures
+    target: str    # "module:Class", a planner.core.TreePlanner subclass, imported on first use
+
+
+# The order fixes the per-algorithm planner seeds of the Monte Carlo experiments (hil.experiment).
+REGISTRY: tuple[PlannerEntry, ...] = (
+    PlannerEntry("rrt-star", "RRT*", "tab:blue", "planner.rrt_star:RRTStar"),
+    PlannerEntry("informed-rrt-star", "IRRT*", "tab:orange", "planner.informed_rrt_star:InformedRRTStar"),
+    PlannerEntry("ddrrt-star", "DDRRT*", "red", "planner.ddrrt_star:DDRRTStar"),
+)
+ENTRIES = {e.name: e for e in REGISTRY}
+ALGORITHM_NAMES = tuple(e.name for e in REGISTRY)
+if TYPE_CHECKING:
+    AlgorithmName = str
+else:  # the names as a Literal read from the table (hil.config offers them as choices)
+    AlgorithmName = Literal[ALGORITHM_NAMES]
 Objective = Literal["length", "current"]
 DYNAMIC_DOMAINS = ("off", "constant", "adaptive")
+FAILED_EXTENSIONS = ("collision", "collision+turn")
+ALPHA_Y_REFERENCES = ("current", "resultant")
 OBJECTIVES = ("length", "current")
 SEED_MAX = 2**63 - 1  # the compiled generator (numpy.random.seed under numba) takes a signed 64-bit integer
 
@@ -30,7 +55,7 @@ class PlannerParams:
     """Tuning of the sampling-based local planners (map frame: x east, y north, metres)."""
 
     algorithm: AlgorithmName = _p(
-        "planner: rrt-star | informed-rrt-star | ddrrt-star", default="ddrrt-star")
+        "planner: " + " | ".join(ALGORITHM_NAMES), default="ddrrt-star")
     objective: Objective = _p(
         "path cost: 'length' (Euclidean) or 'current' (cost distance D_C of eq. (12))", default="current")
     step: float = _p("maximum extension length of one tree edge", "m", gt=0, default=4.0)
@@ -45,6 +70,22 @@ class PlannerParams:
         "'adaptive' also shrinks DD by (1 - dd_alpha) at every further failure and grows it by (1 + dd_alpha) "
         "at every success (Jaillet et al. 2005). Samples outside the domains of all k nearest nodes are "
         "dropped (docs/planner.md)", default="adaptive")
+    dd_radius: float = _p(
+        "DDRRT*: the radius a node's dynamic domain takes at its first failed extension; 0 = DR of eq. (11) "
+        "(dr_factor v sigma_t = 40 m, the paper's, which exceeds the 33 m perceptual radius and never acts: "
+        "docs/planner.md)", "m", ge=0, default=0.0)
+    failed_extension: Literal["collision", "collision+turn"] = _p(
+        "DDRRT*: what counts as a failed extension that bounds a node's dynamic domain: 'collision' only, or "
+        "'collision+turn' (also an edge outside the turning-radius fan of section 2.4, as the paper counts "
+        "constraint violations)", default="collision")
+    png_repair: bool = _p(
+        "DDRRT*: move a PGNode that lies in an obstacle, outside the sampling domain or in another free region "
+        "to the nearest usable cell centre, and stop drawing it once a tree node sits on it (issue 34)",
+        default=False)
+    alpha_y: Literal["current", "resultant"] = _p(
+        "the disturbance alpha_y of eqs. (11)-(12) is measured against: 'current' alone, or 'resultant' of the "
+        "current and the wave drift (section 3.4: 'the resultant moment direction of current and wave "
+        "moments'; PlanningProblem.wave_drift)", default="current")
     dd_alpha: float = _p("adaptive dynamic domain: relative growth on success / shrink on failure", "", ge=0, lt=1,
                          default=0.1)
     dd_min_factor: float = _p("adaptive dynamic domain: DD never shrinks below dd_min_factor * step", "", gt=0,
@@ -87,6 +128,11 @@ class PlannerParams:
         if self.dynamic_domain not in DYNAMIC_DOMAINS:
             raise ValueError(f"dynamic_domain: must be one of {', '.join(DYNAMIC_DOMAINS)} "
                              f"(got {self.dynamic_domain!r})")
+        if self.failed_extension not in FAILED_EXTENSIONS:
+            raise ValueError(f"failed_extension: must be one of {', '.join(FAILED_EXTENSIONS)} "
+                             f"(got {self.failed_extension!r})")
+        if self.alpha_y not in ALPHA_Y_REFERENCES:
+            raise ValueError(f"alpha_y: must be one of {', '.join(ALPHA_Y_REFERENCES)} (got {self.alpha_y!r})")
         if self.objective not in OBJECTIVES:
             raise ValueError(f"objective: must be one of {', '.join(OBJECTIVES)} (got {self.objective!r})")
 
@@ -94,6 +140,11 @@ class PlannerParams:
     def dynamic_domain_radius(self) -> float:
         """DR of eq. (11): dr_factor * v * sigma_t (m)."""
         return self.dr_factor * self.speed * self.sigma_t
+
+    @property
+    def dynamic_domain_start(self) -> float:
+        """DD of a node after its first failed extension (m): dd_radius, or DR when that is 0."""
+        return self.dd_radius if self.dd_radius > 0 else self.dynamic_domain_radius
 
     @property
     def turning_radius(self) -> float:

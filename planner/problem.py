@@ -23,6 +23,9 @@ class PlanningProblem:
     bounds: tuple[float, float, float, float] | None = None   # xmin, xmax, ymin, ymax sampling box
     domain_center: tuple[float, float] | None = None          # perceptual domain centre
     domain_radius: float | None = None                        # perceptual domain radius (m)
+    # the vessel's steady drift under the wave moment (m/s, map frame), added to the current where
+    # alpha_y is measured against their resultant (PlannerParams.alpha_y = "resultant")
+    wave_drift: tuple[float, float] | None = None
 
     def sampling_box(self) -> tuple[float, float, float, float]:
         """The sampling box clipped to the map (and to the perceptual domain's bounding box)."""

@@ -60,6 +60,23 @@ class CurrentParams:
     speed_scale: float = param("velocity of unit stream-function gradient", "m/s", ge=0)
     origin_x: float = param("north coordinate of the jet's origin", "m")
     origin_y: float = param("east coordinate of the jet's axis", "m")
+    # The other sources (common.current_sources): a file or a uniform current replaces eq. (13).
+    file: str = param("netCDF file of the current (CF eastward/northward_sea_water_velocity on latitude, "
+                      "longitude[, time]); relative to the scenario file when a scenario names it; '' = none",
+                      default="")
+    uniform: tuple[float, ...] = param("a uniform current [east, north]; [] = none", "m/s", ge=-10.0, le=10.0,
+                                       default=())
+    east_variable: str = param("the file's eastward velocity variable ('' = found by CF standard_name)", default="")
+    north_variable: str = param("the file's northward velocity variable ('' = found by CF standard_name)",
+                                default="")
+    start_time: str = param("the file's time at the run's t = 0 (ISO 8601, UTC; '' = the file's first time)",
+                            default="")
+
+    def __post_init__(self) -> None:
+        if len(self.uniform) not in (0, 2):
+            raise ValueError(f"uniform: expected [east, north] in m/s or [], got {len(self.uniform)} items")
+        if self.file and self.uniform:
+            raise ValueError("uniform: give either a file or a uniform current, not both")
 
 
 @dataclass(frozen=True)
@@ -199,3 +216,14 @@ class GeodesyParams:
     lat0: float = param("latitude of the NED origin", "deg", ge=-89, le=89)
     lon0: float = param("longitude of the NED origin", "deg", ge=-180, le=180)
     alt0: float = param("height of the NED origin above the ellipsoid", "m")
+    positions_origin: tuple[float, ...] = param(
+        "[lat, lon] from which a chart scenario's positions in metres count, when the NED origin was moved to its "
+        "map's corner (set by hil with lat0/lon0; [] = lat0, lon0)", "deg", ge=-180, le=360, default=())
+
+    def __post_init__(self) -> None:
+        if len(self.positions_origin) not in (0, 2):
+            raise ValueError("positions_origin: expected [latitude, longitude] or []")
+
+    def metres_origin(self) -> tuple[float, float]:
+        """(lat, lon) of the frame in which a scenario's positions in metres are given."""
+        return (self.positions_origin[0], self.positions_origin[1]) if self.positions_origin else (self.lat0, self.lon0)

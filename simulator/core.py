@@ -13,7 +13,7 @@ import math
 from collections import Counter
 from typing import Any
 
-from common.current_field import CurrentField
+from common.current_sources import NoCurrent, make_current
 from common.dronecan_layout import RAW_COMMAND_MAX
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE, Codec
@@ -70,8 +70,9 @@ class SimulatorCore:
         self.frame_dt, self.substeps = frame_layout(cfg.sim.dt, cfg.sensors.imu.rate_hz)
         self.dt = self.frame_dt / self.substeps
         self.vessel = Vessel(cfg.vessel)
-        self.current = CurrentField(cfg.current)
         self.geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
+        # eq. (13), a uniform current or a file's (common.current_sources): the planner's source too
+        self.current = make_current(cfg.current, self.geo) or NoCurrent()
         rngs = sensor_rngs(cfg.sim.seed)
         s = cfg.sensors
         self.waves = WaveModel(cfg.waves, cfg.vessel, rngs["waves"])

@@ -55,22 +55,28 @@ def hil_main(capsys):
 # `pytest -m "not e2e"` is the developer's loop; the README's command and CI run every tier.
 # A new test module must be listed here: collection fails otherwise, so no test falls through.
 UNIT_MODULES = frozenset("""
-    can_codec can_esc collision_cone colregs colregs_oracle config config_layers control current_field geodesy
+    can_codec can_esc charts collision_cone colregs colregs_oracle config config_layers control current_field
+    current_sources geodesy
     global_route guidance_kernel mavlink_crc mavlink_fast_path mission_executor modes navigation navigation_fast
-    online percentiles plan_commitment plan_start_course readiness battery_monitor
-    planner_algorithms planner_config planner_cost planner_dynamic_domain planner_gridmap
+    encounter_route online percentiles plan_commitment plan_start_course readiness battery_monitor
+    planner_algorithms planner_config planner_cost planner_dynamic_domain planner_fence planner_gridmap
+    planner_issue34 flow_optimum planner_registry
     planner_guidance planner_kgrowth planner_metrics planner_postprocess process_logging reactive route_planning
     run_plot scenarios sim_sensors sim_vessel sim_waves summaries tiers tracking_stats traffic_planning vehicle
 """.split())
 INTEGRATION_MODULES = frozenset("""
+    ardupilot_json
     autopilot_link battery bench_frame bench_planner busy_poll cli connection cpu_load executors gcs_esc_telemetry
-    gcs_fuzz gcs_security gcs_link gcs_mission hil_link_fast_path montecarlo output placement plan_cli planner_warmup
+    gcs_fuzz
+    first_run friction gcs_security gcs_link gcs_mission geo_cli hil_link_fast_path montecarlo output placement plan_cli
+    planner_warmup
     planning_worker range_sensing
     readme security_gates sim_link sim_pipeline sim_udp startup_errors tap_fast_path traffic_ais vessel_parameters
 """.split())
 E2E_MODULES = frozenset("""
-    by_hand can_vcan colregs_loop gcs_mavproxy gcs_mavsdk gcs_rover gcs_session gcs_telemetry_truth hil_faults hil_loop
-    hil_vcan
+    ardupilot_sitl by_hand can_vcan colregs_loop example_world gcs_mavproxy gcs_mavsdk gcs_rover gcs_session
+    gcs_telemetry_truth
+    hil_faults hil_loop hil_vcan holding_ground
     mission_done route_mission security_loop sparse_routes
 """.split())
 TIERS = ("unit", "integration", "e2e")

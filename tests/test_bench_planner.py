@@ -102,3 +102,19 @@ def test_bench_planner_quick_json(hil):
 def test_bench_planner_bad_budget(hil_main):
     p = hil_main("bench", "planner", "--budgets", "0,1")
     assert p.returncode == 2 and "Traceback" not in p.stderr
+
+
+def test_bench_planner_current_objective_on_the_island(hil_main):
+    """Issue 34: --objective current divides each planner's eq. (12) cost by the judge's optimum;
+    on the island the shortest path is far from it (the stream's channel is the longer one)."""
+    p = hil_main("bench", "planner", "--quick", "--objective", "current", "--maps", "island",
+                 "--algorithms", "rrt-star", "--no-ompl", "--json")
+    assert p.returncode == 0, p.stderr
+    e = json.loads(p.stdout)["maps"]["island"]
+    assert e["optimum_m"] == pytest.approx(54.0)                      # the straight south channel
+    assert e["shortest_path_eq12"] == pytest.approx(54.0 / (1 + math.exp(-1)), rel=1e-6)  # upstream all along
+    assert e["shortest_path_eq12"] > 1.25 * e["optimum_eq12"]
+    for b in ("0.05", "0.2"):
+        r = e["planners"]["rrt-star"]["ratio"][b]
+        assert r is None or r == "inf" or r >= 1.0 - 1e-6
+    assert "end_to_end" not in e and "ompl_rrt_star" not in e

@@ -179,3 +179,63 @@ def test_mavproxy_mission_with_speed_loiter_and_return_to_launch(tmp_path):
         mp.close()
         stop_run(proc)
     check_mission_session(out / "run.tlog", GEO)
+
+
+def test_mavproxy_flies_a_qgc_plan_as_ardurover_with_pause_resume_guided_hold_and_rtl(tmp_path):
+    """Issue 36, with the boat in its default identity (ArduPilot Rover): MAVProxy's Rover mode table and
+    its mission convention (item 0 of the QGC file is home, never executed). The mission is flown with a
+    pause (HOLD) and a resume (AUTO), every item from 1 reached once and in order; then GUIDED to a point
+    (MAVProxy's `guided`), HOLD and RTL."""
+    wp = tmp_path / "mission.waypoints"
+    wp.write_text(qgc_wpl(qgc_mission(GEO)))
+    port = free_udp_port()
+    out = tmp_path / "run"
+    proc = start_run(out, "--scenario", "harbour", "--duration", "5000", "--wait-for-arm", "--speedup", "6",
+                     "--gcs", f"udpin:127.0.0.1:{port}", identity="ardupilot")
+    state = tmp_path / "mavproxy"
+    mp = Console([MAVPROXY, f"--master=udpout:127.0.0.1:{port}", "--source-system=255",
+                  "--default-modules=wp,param,mode,arm,cmdlong,log", f"--state-basedir={state}"], tmp_path)
+    watcher = None
+    try:
+        mp.expect("Detected vehicle 1:1", timeout=240)
+        mp.expect("Mode HOLD")
+        mp.send(f"wp load {wp}")
+        mp.expect("Got MISSION_ACK: TYPE_MISSION: ACCEPTED")
+        watcher = Gcs(f"udpout:127.0.0.1:{port}", sysid=254)
+        assert watcher.connect(60) is not None and watcher.recv("GLOBAL_POSITION_INT", 60) is not None
+        mp.send("arm throttle")
+        mp.expect("COMPONENT_ARM_DISARM: ACCEPTED")
+        mp.send("mode AUTO")
+        mp.expect("DO_SET_MODE: ACCEPTED")
+        assert watcher.recv("MISSION_ITEM_REACHED", 120, lambda m: m.seq == 1) is not None
+        mp.send("mode HOLD")                                  # pause ...
+        mp.expect("DO_SET_MODE: ACCEPTED")
+        assert watcher.recv("HEARTBEAT", 10, lambda h: h.custom_mode == 4) is not None
+        mp.send("mode AUTO")                                  # ... and resume where it stood
+        mp.expect("DO_SET_MODE: ACCEPTED")
+        assert watcher.recv("MISSION_ITEM_REACHED", 300, lambda m: m.seq == 5) is not None
+        pos = watcher.recv("GLOBAL_POSITION_INT", 10)
+        assert pos is not None and at_home(pos, GEO), pos
+        lat, lon = GEO.sea_level_to_geodetic(50.0, 28.0)
+        mp.send(f"guided {lat:.7f} {lon:.7f} 0")
+        assert watcher.recv("HEARTBEAT", 30, lambda h: h.custom_mode == 15) is not None     # GUIDED
+        assert watcher.recv("STATUSTEXT", 300, lambda t: "destination reached" in t.text) is not None
+        mp.send("mode HOLD")
+        mp.expect("DO_SET_MODE: ACCEPTED")
+        mp.send("mode RTL")
+        mp.expect("DO_SET_MODE: ACCEPTED")
+        assert watcher.recv("HEARTBEAT", 10, lambda h: h.custom_mode == 11) is not None
+        assert watcher.recv("STATUSTEXT", 300, lambda t: "RTL: destination reached" in t.text) is not None
+    finally:
+        if watcher is not None:
+            watcher.close()
+        mp.close()
+        stop_run(proc)
+    from pymavlink import mavutil
+
+    log = mavutil.mavlink_connection(str(out / "run.tlog"), dialect="ardupilotmega")
+    reached = []
+    while (m := log.recv_match(type="MISSION_ITEM_REACHED")) is not None:
+        if m.get_srcSystem() == 1:
+            reached.append(m.seq)
+    assert reached[:5] == [1, 2, 3, 4, 5], reached          # item 0 (home) never: ArduPilot's convention

@@ -132,8 +132,10 @@ def test_count_limits_busy_clear_and_plan_types():
     ms.handle(item(0), 0.0)
     ms.handle(item(1), 0.0)
     assert len(ms.items) == 2
-    (o,) = ms.handle(msg("mission_count", 1, 1, 3, M.MAV_MISSION_TYPE_FENCE), 0.0)
-    assert o.args[2:] == (M.MAV_MISSION_UNSUPPORTED, M.MAV_MISSION_TYPE_FENCE)
+    (o,) = ms.handle(msg("mission_count", 1, 1, 3, 7), 0.0)            # no such plan type
+    assert o.args[2:] == (M.MAV_MISSION_UNSUPPORTED, 7)
+    (o,) = ms.handle(msg("mission_count", 1, 1, 3, M.MAV_MISSION_TYPE_FENCE), 0.0)   # a fence upload begins
+    assert o.name == "mission_request_int" and o.args[2:] == (0, M.MAV_MISSION_TYPE_FENCE)
     (o,) = ms.handle(msg("mission_request_list", 1, 1, M.MAV_MISSION_TYPE_RALLY), 0.0)
     assert o.name == "mission_count" and o.args[2:] == (0, M.MAV_MISSION_TYPE_RALLY)
     (o,) = ms.handle(msg("mission_clear_all", 1, 1, 0), 0.0)
@@ -190,3 +192,66 @@ def test_mission_progress_by_radius_or_passing_and_a_new_mission_restarts():
     v.replace_mission([Waypoint(20.0, 0.0, 3.0)], (0.0, 41.0))
     assert v.current == 0 and v.route.version == version + 1 and v.route.path.tolist() == [[0.0, 41.0], [20.0, 0.0]]
     assert not v.complete
+
+
+# -- geofence and rally plans (issue 33) ---------------------------------------------------------------
+FENCE, RALLY = M.MAV_MISSION_TYPE_FENCE, M.MAV_MISSION_TYPE_RALLY
+INC, EXC = M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
+CIRCLE_EXC = M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION
+
+
+def plan_item(seq: int, command: int, p1: float, lat: int, lon: int, mtype: int, src=GCS):
+    return msg("mission_item_int", 1, 1, seq, M.MAV_FRAME_GLOBAL, command, 0, 1, p1, 0.0, 0.0, 0.0, lat, lon, 0.0,
+               mtype, src=src)
+
+
+def upload_plan(ms: MissionServer, items: list[tuple[int, float, int, int]], mtype: int):
+    outs = ms.handle(msg("mission_count", 1, 1, len(items), mtype), 0.0)
+    for seq, (command, p1, lat, lon) in enumerate(items):
+        if outs[-1].name == "mission_ack":      # refused before the end
+            return outs
+        assert outs[-1].name == "mission_request_int" and outs[-1].args[2:] == (seq, mtype), outs
+        outs = ms.handle(plan_item(seq, command, p1, lat, lon, mtype), 0.0)
+    return outs
+
+
+SQUARE = [(INC, 4, LAT, LON), (INC, 4, LAT + 2000, LON), (INC, 4, LAT + 2000, LON + 2000), (INC, 4, LAT, LON + 2000)]
+
+
+def test_fence_and_rally_plans_are_stored_read_back_exactly_and_cleared_apart_from_the_mission():
+    ms = MissionServer()
+    upload(ms, 2)
+    fence = [*SQUARE, (CIRCLE_EXC, 5.0, LAT + 1000, LON + 1000)]
+    (ack,) = upload_plan(ms, fence, FENCE)
+    assert ack.name == "mission_ack" and ack.args[2:] == (M.MAV_MISSION_ACCEPTED, FENCE)
+    (ack,) = upload_plan(ms, [(M.MAV_CMD_NAV_RALLY_POINT, 0.0, LAT + 500, LON + 500)], RALLY)
+    assert ack.args[2:] == (M.MAV_MISSION_ACCEPTED, RALLY)
+    assert [e.mission_type for e in ms.take_events()] == [0, FENCE, RALLY]
+    (c,) = ms.handle(msg("mission_request_list", 1, 1, FENCE), 0.0)
+    assert c.args[2:] == (5, FENCE)
+    for seq, (command, p1, lat, lon) in enumerate(fence):
+        (it,) = ms.handle(msg("mission_request_int", 1, 1, seq, FENCE), 0.0)
+        assert it.name == "mission_item_int" and it.args[4] == command and it.args[7] == p1
+        assert it.args[11:13] == (lat, lon) and it.args[-1] == FENCE
+    assert len(ms.items) == 2                                   # the mission untouched
+    (ack,) = ms.handle(msg("mission_clear_all", 1, 1, FENCE), 0.0)
+    assert ack.args[2:] == (M.MAV_MISSION_ACCEPTED, FENCE) and ms.plans[FENCE] == () and len(ms.plans[RALLY]) == 1
+    ms.handle(msg("mission_clear_all", 1, 1, M.MAV_MISSION_TYPE_ALL), 0.0)
+    assert ms.plans[RALLY] == () and ms.items == ()
+
+
+def test_bad_fence_and_rally_items_are_refused_with_their_reason():
+    ms = MissionServer()
+    # A polygon announced with 4 vertices but given 3, then an exclusion vertex.
+    (ack,) = upload_plan(ms, [*SQUARE[:3], (EXC, 4, LAT, LON)], FENCE)
+    assert ack.args[2:] == (M.MAV_MISSION_INVALID_PARAM1, FENCE) and ms.plans[FENCE] == ()
+    (ack,) = upload_plan(ms, [(INC, 2, LAT, LON), (INC, 2, LAT + 1, LON)], FENCE)      # 2 vertices
+    assert ack.args[2] == M.MAV_MISSION_INVALID_PARAM1
+    (ack,) = upload_plan(ms, [(CIRCLE_EXC, -1.0, LAT, LON)], FENCE)                   # negative radius
+    assert ack.args[2] == M.MAV_MISSION_INVALID_PARAM1
+    (ack,) = upload_plan(ms, [(M.MAV_CMD_NAV_WAYPOINT, 0.0, LAT, LON)], RALLY)        # not a rally point
+    assert ack.args[2] == M.MAV_MISSION_UNSUPPORTED
+    # The vehicle's own check (a rally point outside the fence, in an obstacle): its code and reason.
+    ms = MissionServer(plan_checks={RALLY: lambda items: (0, M.MAV_MISSION_INVALID, "outside the geofence")})
+    (ack,) = upload_plan(ms, [(M.MAV_CMD_NAV_RALLY_POINT, 0.0, LAT, LON)], RALLY)
+    assert ack.args[2:] == (M.MAV_MISSION_INVALID, RALLY) and ms.last_reject == (0, "outside the geofence")

@@ -273,8 +273,10 @@ def test_tlog_and_summaries_are_owner_only_when_a_key_is_set(tmp_path):
     tap = Tap(old, GEO, lockstep=True, private=True)
     tap.close()
     assert stat.S_IMODE(os.stat(old).st_mode) == 0o600
-    write_json_atomic(tmp_path / "summary.json", {"outcome": "goal"})
+    write_json_atomic(tmp_path / "summary.json", {"outcome": "goal"}, private=True)
     assert stat.S_IMODE(os.stat(tmp_path / "summary.json").st_mode) == 0o600
+    write_json_atomic(tmp_path / "public.json", {"outcome": "goal"})     # no key: as the other run files
+    assert stat.S_IMODE(os.stat(tmp_path / "public.json").st_mode) == 0o666 & ~_umask()
     public = Tap(tmp_path / "public.tlog", GEO, lockstep=True)
     public.close()
     assert stat.S_IMODE(os.stat(tmp_path / "public.tlog").st_mode) & 0o044 == 0o044 & ~_umask()

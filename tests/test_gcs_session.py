@@ -124,13 +124,13 @@ def test_gcs_session_mission_commands_params_failsafe(live_run):
     out_status = gcs.recv("ACTUATOR_OUTPUT_STATUS", 10, lambda m: m.actuator[0] == 0.0 and m.actuator[1] == 0.0)
     assert out_status is not None
 
-    # Link loss: armed in AUTO, the GCS goes quiet; after 2 s the boat holds and says so.
+    # Link loss: armed in AUTO, the GCS goes quiet; after 2 s the boat holds station (LOITER) and says so.
     assert gcs.arm(True).result == M.MAV_RESULT_ACCEPTED
     assert gcs.set_mode(10).result == M.MAV_RESULT_ACCEPTED
     gcs.heartbeats_on = False
     text = gcs.recv("STATUSTEXT", 30, lambda m: "failsafe" in m.text)
     assert text is not None
-    hb = gcs.recv("HEARTBEAT", 10, lambda h: h.custom_mode == 4)
+    hb = gcs.recv("HEARTBEAT", 10, lambda h: h.custom_mode == 5)
     assert hb is not None and hb.system_status == M.MAV_STATE_CRITICAL
     gcs.heartbeats_on = True
     gcs.close()

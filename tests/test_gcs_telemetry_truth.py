@@ -124,10 +124,11 @@ def test_battery_gps_and_health_are_the_simulators_truth(tmp_path):
 @pytest.mark.slow
 def test_low_battery_failsafe_warns_and_leaves_auto(tmp_path):
     """A pack started at 5 % falls below BATT_LOW_VOLT (19.8 V) under load; after BATT_LOW_TIMER the boat
-    says so, leaves AUTO for BATT_FS_LOW_ACT's RTL (Hold where RTL cannot be entered) and reports the pack low."""
+    says so, leaves AUTO for BATT_FS_LOW_ACT's RTL (station keeping where RTL cannot be entered) and reports
+    the pack low."""
 
     def heard(seen: list[Any]) -> bool:
-        return any(m.get_type() == "HEARTBEAT" and m.custom_mode in (4, 11) for m in seen)
+        return any(m.get_type() == "HEARTBEAT" and m.custom_mode in (5, 11) for m in seen)
 
     seen, out = _session(tmp_path, "--set", "battery.initial_soc=0.05", "--set", "battery_monitor.low_timer=2.0",
                          until=40.0, stop=heard)
@@ -135,7 +136,7 @@ def test_low_battery_failsafe_warns_and_leaves_auto(tmp_path):
     low = [x for x in texts if x.startswith("Battery 1 is low")]
     assert len(low) == 1 and "failsafe RTL" in low[0], texts
     modes = [m.custom_mode for m in seen if m.get_type() == "HEARTBEAT"]
-    assert modes[0] == 10 and modes[-1] in (4, 11)            # AUTO, then RTL or HOLD
+    assert modes[0] == 10 and modes[-1] in (5, 11)            # AUTO, then RTL or LOITER (hold station)
     i = next(k for k, m in enumerate(seen) if m.get_type() == "STATUSTEXT" and m.text.startswith("Battery 1"))
     after = [m for m in seen[i:] if m.get_type() in ("SYS_STATUS", "BATTERY_STATUS")]
     for m in after:

@@ -24,6 +24,9 @@ class Driver:
     def navigate(self, s, dt):
         return "navigate"
 
+    def hold(self, s, dt):
+        return "hold"
+
 
 ONE_WAYPOINT = (waypoint(0.0, 10.0, 2.0),)
 
@@ -48,7 +51,7 @@ def test_rover_numbers_and_heartbeat_flags():
 
 def test_manual_drives_from_the_stick_and_hold_drifts():
     v = vehicle()
-    assert output(v) == "idle" and v.route is None
+    assert output(v) == "hold" and v.route is None          # the helm's HOLD: drift, kept off the rocks
     v.manual = (0.5, -0.2, 7.0)
     assert v.set_mode(Mode.MANUAL, None) == (True, "MANUAL")
     assert output(v) == ("manual", (0.5, -0.2, 7.0))

@@ -253,3 +253,39 @@ def test_cold_cache_compiles_before_the_clock(hil, wall_map, tmp_path):
     assert "compiled the planner (cold numba cache)" in p.stderr
     d = json.loads(p.stdout)
     assert d["compiled"] is True and d["status"] == "exact" and d["iterations"] > 0
+
+
+def _plan_json(hil_main, *args):
+    p = hil_main("plan", *args, "--iterations", "400", "--deadline", "30", "--json")
+    assert p.returncode in (0, 1), p.stderr
+    return json.loads(p.stdout)
+
+
+def test_the_users_current_reaches_the_planner(hil_main):
+    """Issue 34: `--set current.*` changed nothing (the scenario's current came from the default
+    configuration); now the speed scale and the jet's shape change the cost of eq. (12)."""
+    base = ("--scenario", "labyrinth", "--objective", "current", "--algorithm", "rrt-star")
+    plain = _plan_json(hil_main, *base)
+    assert plain["current"].startswith("scenario labyrinth")
+    still = _plan_json(hil_main, *base, "--set", "current.speed_scale=0")
+    assert still["current"].startswith("scenario labyrinth")
+    assert still["cost"] == pytest.approx(still["length"])  # no current: eq. (12) is the length
+    assert plain["cost"] < 0.8 * plain["length"]
+    other = _plan_json(hil_main, *base, "--set", "current.b=3")
+    assert (other["path"], other["cost"]) != (plain["path"], plain["cost"])
+
+
+def test_map_current_option_or_a_clear_none(hil_main, wall_map):
+    path, _ = wall_map
+    base = ("--map", str(path), "--resolution", "0.5", "--start", "2,17", "--goal", "18,17", "--inflate", "0.5",
+            "--objective", "current", "--algorithm", "rrt-star")
+    none = _plan_json(hil_main, *base)
+    assert none["current"].startswith("none (--map has no current")
+    assert none["cost"] == pytest.approx(none["length"])
+    down = _plan_json(hil_main, *base, "--current", "0.5,0")     # straight downstream: 0.27 a metre
+    assert down["current"].startswith("uniform")
+    assert down["cost"] < 0.35 * down["length"]
+    up = _plan_json(hil_main, *base, "--current", "-0.5,0")      # upstream: 0.73 a metre
+    assert up["cost"] > 0.7 * up["length"]
+    bad = hil_main("plan", *base, "--current", "east")
+    _one_line_error(bad)

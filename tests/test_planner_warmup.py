@@ -37,11 +37,11 @@ def test_warm_up_compiles_every_specialisation_the_online_loop_uses():
 
 def test_each_worker_warms_up_with_the_planner():
     """The campaign's per-worker warm-up (hil.executors runs it once per worker) is planner.warm_up()."""
-    import planner.core as core
+    import planner.registry as registry
     from hil import executors
 
     executors._warm_once(experiment.warm_up)
-    assert core._WARM is not None and core._WARM.seconds >= 0
+    assert registry._WARM is not None and registry._WARM.seconds >= 0
 
 
 def test_campaign_rows_identical_for_any_jobs():

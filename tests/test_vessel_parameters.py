@@ -23,6 +23,7 @@ from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavState
 from autopilot_bridge.parameters import Tunable, declarations
 from common.geodesy import LocalFrame
+from planner.fence import Circle, Fence
 
 M = mavlink2
 START = (40.0, 22.0)          # the harbour's start, NED m
@@ -74,7 +75,8 @@ def test_parameters_are_declared_by_their_owners_once_with_range_units_and_doc(s
     names = [p.name for p in table.params]
     assert len(names) == len(set(names))
     owners = (s.ap.vehicle, s.ap.planning, s.ap.planner_tuning, s.ap.helm.heading_pid, s.ap.helm.speed_ctl,
-              s.ap.station, s.link.failsafe, s.link.identity, s.ap.onboard.battery)
+              s.ap.station, s.ap.geofence, s.link.failsafe, s.link.identity,
+              s.ap.onboard.battery)
     declared = [d.name for o in owners for d in declarations(o)]
     assert sorted(declared) == sorted(names)
     for o in owners:
@@ -137,6 +139,8 @@ def _far(s: Session, d: float) -> NavState:
 
 def test_mission_done_behaviour_and_loiter_radius_reach_the_station_keeper():
     s = Session()
+    s.ap.current.north = s.ap.current.east = 0.0             # still water: the boat may drift within the radius
+    s.ap.current.u_water = 0.0
     s.ap.course.behaviour.to(Behaviour.IDLE)
     s.ap.course.behaviour.to(Behaviour.COMPLETE)
     zero = s.ap.helm.zero_thrust
@@ -236,7 +240,7 @@ def test_battery_parameters_reach_the_battery_monitor_and_its_failsafe():
     _feed(s, 0.3, _pack(20.8))
     assert not mon.failsafe and s.ap.vehicle.mode == Mode.AUTO    # below for 0.3 s of BATT_LOW_TIMER's 0.5
     _feed(s, 0.3, _pack(20.8))
-    assert mon.failsafe and s.ap.vehicle.mode == Mode.HOLD        # BATT_FS_LOW_ACT 2: Hold
+    assert mon.failsafe and s.ap.vehicle.mode == Mode.LOITER      # BATT_FS_LOW_ACT 2: hold station
     s = Session(wait_for_arm=False)
     s.fix()
     mon = s.ap.onboard.battery
@@ -249,6 +253,48 @@ def test_battery_parameters_reach_the_battery_monitor_and_its_failsafe():
     tested("BATT_CAPACITY", "BATT_LOW_VOLT", "BATT_LOW_MAH", "BATT_LOW_TIMER", "BATT_FS_LOW_ACT")
 
 
+def test_fence_parameters_reach_the_planning_grid_and_the_breach_action():
+    s = Session(wait_for_arm=False)
+    s.fix()
+    n, e = START
+    # An exclusion circle 10 m east of the boat: its cells become obstacles while FENCE_ENABLE is 1.
+    s.ap.commands.replace_fence(Fence(exclusion_circles=(Circle(e + 10.0, n, 3.0),)))
+    row, col = s.ap.grid.cell_of(e + 10.0, n)
+    assert s.ap.grid.occ[row, col]
+    assert s.param_set("FENCE_ENABLE", 0)
+    s.fix(0.05)
+    assert not s.ap.grid.occ[row, col]
+    assert s.param_set("FENCE_ENABLE", 1)
+    s.fix(0.05)
+    assert s.ap.grid.occ[row, col]
+    # A fence the boat is outside of: FENCE_ACTION decides what the breach does.
+    assert s.param_set("FENCE_ACTION", 2)
+    s.ap.commands.replace_fence(Fence(exclusion_circles=(Circle(e, n, 5.0),)))
+    s.fix(0.05)
+    assert s.ap.geofence.breached and s.ap.vehicle.mode == Mode.LOITER
+    s.ap.commands.set_mode(Mode.AUTO)
+    s.ap.commands.replace_fence(Fence())
+    s.fix(0.05)
+    assert not s.ap.geofence.breached
+    assert s.param_set("FENCE_ACTION", 1)
+    s.ap.commands.replace_fence(Fence(exclusion_circles=(Circle(e, n, 5.0),)))
+    s.fix(0.05)
+    assert s.ap.vehicle.mode == Mode.RTL
+    tested("FENCE_ENABLE", "FENCE_ACTION")
+
+
 def test_every_parameter_has_its_effect_tested(s):
     """Runs last in this module: a parameter added without a test of its effect fails here."""
     assert TESTED == {p.name for p in s.link.params_table.params}
+
+
+def test_the_docs_table_is_the_declarations():
+    """docs/gcs.md's parameter table is what the components declare (python -m autopilot_bridge.parameters)."""
+    import re
+    from pathlib import Path
+
+    from autopilot_bridge.parameters import markdown_table
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "gcs.md").read_text()
+    table = re.search(r"<!-- parameters: generated -->\n(.*?)\n<!-- /parameters -->", doc, re.S)
+    assert table is not None and table.group(1) == markdown_table()

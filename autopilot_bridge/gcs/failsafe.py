@@ -1,9 +1,12 @@
 """The GCS-heartbeat failsafe (wall time: it watches a real link), with ArduRover's parameters.
 
 Armed, in any mode but HOLD and RTL (as ArduRover's), no heartbeat from a ground station
-(MAV_TYPE_GCS; signed when signing is on) for FS_GCS_TIMEOUT seconds triggers FS_ACTION: 1 RTL
-(HOLD where no home is set), 2 HOLD, 0 nothing. FS_GCS_ENABLE 0 turns it off; 2 lets a mission in
-AUTO go on. A mode change, a mission start or a goto by a GCS clears the failsafe.
+(MAV_TYPE_GCS; signed when signing is on) for FS_GCS_TIMEOUT seconds triggers FS_ACTION: 1 RTL (to
+the nearest rally point inside the fence, else home), 2 hold, 0 nothing. Hold is station keeping
+(LOITER), never ArduRover's zero-thrust HOLD, which drifts with the current (a harbour run drifted
+onto the breakwater 146 s after such a failsafe: issue 33); where RTL is refused (no home), it holds
+too. FS_GCS_ENABLE 0 turns it off; 2 lets a mission in AUTO go on. A mode change, a mission start or
+a goto by a GCS clears the failsafe.
 
 ArduRover ships FS_GCS_ENABLE = 0; a boat in a current that loses its operator should not carry on
 blind or drift, so it is on here by default (``[gcs] failsafe_action``, ``failsafe_timeout``).
@@ -27,8 +30,9 @@ class GcsFailsafe:
     enable = Tunable("FS_GCS_ENABLE", 0, 2, "", "GCS failsafe: 0 off, 1 on, 2 on but a mission in AUTO goes on",
                      integer=True)
     timeout = Tunable("FS_GCS_TIMEOUT", 1.0, 120.0, "s", "no GCS heartbeat for this long triggers the failsafe")
-    action = Tunable("FS_ACTION", 0, 2, "", "failsafe action: 0 nothing, 1 RTL (HOLD without home), 2 HOLD",
-                     integer=True)
+    action = Tunable("FS_ACTION", 0, 2, "",
+                     "failsafe action: 0 nothing, 1 RTL (nearest rally point inside the fence, else home), "
+                     "2 hold station (LOITER; ArduRover's Hold drifts)", integer=True)
 
     def __init__(self, out: Outbox, view: VehicleView, timeout: float, action: str,
                  require_signed: bool) -> None:
@@ -65,9 +69,14 @@ class GcsFailsafe:
             return
         self.active = True
         self.events += 1
-        target = Mode.RTL if self.action == FS_RTL and st.home is not None else Mode.HOLD
-        api.set_mode(target)
-        msg = f"GCS failsafe: no heartbeat {now - self.last_heartbeat:.1f}s: {target.name}"
+        # ArduRover's Hold (FS_ACTION 2) lets a boat drift with the current; here it keeps station (LOITER).
+        target = Mode.RTL if self.action == FS_RTL and st.home is not None else Mode.LOITER
+        r = api.set_mode(target)
+        if not r.ok and target == Mode.RTL:
+            target = Mode.LOITER
+            api.set_mode(target)
+        what = "holding station (LOITER)" if target == Mode.LOITER else target.name
+        msg = f"GCS failsafe: no heartbeat {now - self.last_heartbeat:.1f}s: {what}"
         self.out.log(f"gcs: {msg}")
         self.out.statustext(msg, M.MAV_SEVERITY_CRITICAL)
         api.record_event(msg)

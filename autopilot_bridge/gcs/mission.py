@@ -16,8 +16,10 @@ Follows https://mavlink.io/en/services/mission.html:
 * legacy: MISSION_ITEM is accepted like MISSION_ITEM_INT (float degrees); a GCS that uploads with
   it is asked with MISSION_REQUEST, and MISSION_REQUEST is answered with MISSION_ITEM.
 * MISSION_CLEAR_ALL (and an upload of count 0) clears; MISSION_SET_CURRENT selects the item to go to.
-* geofence and rally plans are not supported: their uploads are refused with MAV_MISSION_UNSUPPORTED
-  and their downloads report 0 items (so a GCS that asks for them does not wait).
+* geofence and rally plans (``mission_type`` FENCE and RALLY) travel the same way, each stored on its
+  own: fence items are inclusion/exclusion polygon vertices and circles (MAV_CMD_NAV_FENCE_*), rally
+  items are MAV_CMD_NAV_RALLY_POINT; each type has its own whole-plan check (``plan_checks``), cleared
+  with MISSION_CLEAR_ALL of its type (or MAV_MISSION_TYPE_ALL).
 
 Inputs are decoded pymavlink messages plus the time ``now`` (s, any monotonic clock); outputs are
 :class:`Out` records (message name and encode() arguments) for the link to send, and
@@ -35,6 +37,13 @@ from autopilot_bridge import mission_commands as mc
 from common.mavlink import MAV_TYPE as M
 
 MISSION = M.MAV_MISSION_TYPE_MISSION
+FENCE = M.MAV_MISSION_TYPE_FENCE
+RALLY = M.MAV_MISSION_TYPE_RALLY
+PLAN_TYPES = (MISSION, FENCE, RALLY)
+FENCE_COMMANDS = (M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION,
+                  M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION,
+                  M.MAV_CMD_NAV_FENCE_RETURN_POINT)
+RALLY_COMMANDS = (M.MAV_CMD_NAV_RALLY_POINT,)
 SUPPORTED_FRAMES = (M.MAV_FRAME_GLOBAL, M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_INT,
                     M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
 SUPPORTED_COMMANDS = tuple(sorted(mc.ACCEPTED))   # executed or stored-and-skipped: see mission_commands
@@ -81,6 +90,7 @@ class MissionEvent:
     kind: str                               # "replaced" | "set_current" | "rejected"
     items: tuple[MissionItem, ...] = ()
     seq: int = 0
+    mission_type: int = MISSION
 
 
 @dataclass
@@ -88,6 +98,7 @@ class _Upload:
     partner: tuple[int, int]
     count: int
     legacy: bool
+    mission_type: int = MISSION
     items: list[MissionItem] = field(default_factory=list)
     last_request: float = 0.0
     retries: int = 0
@@ -101,6 +112,46 @@ def _same(a: float, b: float) -> bool:
 PositionCheck = Callable[[float, float], "tuple[int, str] | None"]
 # The whole upload, once complete (route through the chart): (seq, code, text) of the first bad item, or None.
 MissionCheck = Callable[[tuple["MissionItem", ...]], "tuple[int, int, str] | None"]
+
+
+def validate_fence_or_rally(item: MissionItem, mission_type: int,
+                            position_check: PositionCheck | None = None) -> tuple[int, str] | None:
+    """One fence or rally item: its command, coordinates and radius or vertex count."""
+    cmd = item.command
+    allowed = FENCE_COMMANDS if mission_type == FENCE else RALLY_COMMANDS
+    if cmd not in allowed:
+        return M.MAV_MISSION_UNSUPPORTED, f"command {cmd} is not a {'fence' if mission_type == FENCE else 'rally'} item"
+    if not -90.0 <= item.lat <= 90.0 or (item.x == 0 and item.y == 0):
+        return M.MAV_MISSION_INVALID_PARAM5_X, f"latitude {item.lat:.7f} out of range"
+    if not -180.0 <= item.lon <= 180.0:
+        return M.MAV_MISSION_INVALID_PARAM6_Y, f"longitude {item.lon:.7f} out of range"
+    if cmd in (M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION) and \
+            not (math.isfinite(item.param1) and 0.0 < item.param1 <= 100e3):
+        return M.MAV_MISSION_INVALID_PARAM1, f"fence circle radius {item.param1} m"
+    if cmd in (M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION) and \
+            not (math.isfinite(item.param1) and 3 <= item.param1 <= 1000 and item.param1 == int(item.param1)):
+        return M.MAV_MISSION_INVALID_PARAM1, f"fence polygon vertex count {item.param1} (3 or more)"
+    if mission_type == RALLY and position_check is not None:
+        return position_check(item.lat, item.lon)
+    return None
+
+
+def fence_polygons(items: tuple[MissionItem, ...]) -> tuple[list[tuple[int, list[MissionItem]]], str | None]:
+    """The fence items' polygons as (command, vertices) runs, each as long as its vertices' count; or why not."""
+    polys: list[tuple[int, list[MissionItem]]] = []
+    i = 0
+    while i < len(items):
+        it = items[i]
+        if it.command in (M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION):
+            n = int(it.param1)
+            run = list(items[i:i + n])
+            if len(run) < n or any(v.command != it.command or int(v.param1) != n for v in run):
+                return polys, f"fence item {i}: a polygon of {n} vertices needs {n} such items in a row"
+            polys.append((it.command, run))
+            i += n
+        else:
+            i += 1
+    return polys, None
 
 
 def validate_item(item: MissionItem, position_check: PositionCheck | None = None) -> tuple[int, str] | None:
@@ -154,13 +205,18 @@ class MissionServer:
     def __init__(self, items: tuple[MissionItem, ...] = (), *, system_id: int = 1, component_id: int = 1,
                  max_items: int = 200, item_timeout: float = 0.25, retries: int = 5,
                  position_check: PositionCheck | None = None, mission_check: MissionCheck | None = None,
-                 home: Callable[[], MissionItem | None] | None = None) -> None:
+                 home: Callable[[], MissionItem | None] | None = None,
+                 plan_checks: dict[int, MissionCheck] | None = None) -> None:
         """``home``: where item 0 is home (ArduPilot's convention), the current home as an item (None
         before there is one); an uploaded item 0 is then stored as it came and not checked, and a
-        download's item 0 is the home in force."""
-        self.items: tuple[MissionItem, ...] = tuple(items)
+        download's item 0 is the home in force. ``plan_checks``: the whole-plan check of the FENCE and
+        RALLY types (the MISSION type's is ``mission_check``)."""
+        self.plans: dict[int, tuple[MissionItem, ...]] = {MISSION: tuple(items), FENCE: (), RALLY: ()}
         self.home = home
+        self.plan_checks = dict(plan_checks or {})
         self.mission_check = mission_check
+        if mission_check is not None:
+            self.plan_checks[MISSION] = mission_check
         self.sysid, self.compid = system_id, component_id
         self.max_items, self.item_timeout, self.retries = max_items, item_timeout, retries
         self.position_check = position_check
@@ -169,6 +225,15 @@ class MissionServer:
         self.last_reject: tuple[int, str] | None = None  # (seq, why) of the last refused item
         self.stats: dict[str, int] = {}
         self._last_done: tuple[tuple[int, int], int, float] | None = None  # partner, count, time
+
+    @property
+    def items(self) -> tuple[MissionItem, ...]:
+        """The mission (MISSION type)."""
+        return self.plans[MISSION]
+
+    @items.setter
+    def items(self, items: tuple[MissionItem, ...]) -> None:
+        self.plans[MISSION] = tuple(items)
 
     def _count(self, key: str) -> None:
         self.stats[key] = self.stats.get(key, 0) + 1
@@ -183,7 +248,7 @@ class MissionServer:
     def _request(self, up: _Upload, now: float) -> Out:
         up.last_request = now
         name = "mission_request" if up.legacy else "mission_request_int"
-        return Out(name, (up.partner[0], up.partner[1], len(up.items), MISSION))
+        return Out(name, (up.partner[0], up.partner[1], len(up.items), up.mission_type))
 
     # -- inputs ------------------------------------------------------------------------------
     def handle(self, msg: Any, now: float) -> list[Out]:
@@ -203,27 +268,27 @@ class MissionServer:
         if up.retries >= self.retries:
             self.upload = None
             self._count("upload_timeouts")
-            return [self._ack(up.partner, M.MAV_MISSION_OPERATION_CANCELLED)]
+            return [self._ack(up.partner, M.MAV_MISSION_OPERATION_CANCELLED, up.mission_type)]
         up.retries += 1
         self._count("re_requests")
         return [self._request(up, now)]
 
     def _on_mission_count(self, msg: Any, sender: tuple[int, int], now: float) -> list[Out]:
         mtype = getattr(msg, "mission_type", MISSION)
-        if mtype != MISSION:
+        if mtype not in PLAN_TYPES:
             self._count("unsupported_plan_type")
             return [self._ack(sender, M.MAV_MISSION_UNSUPPORTED, mtype)]
         if self.upload is not None and self.upload.partner != sender:
             self._count("busy")
-            return [self._ack(sender, M.MAV_MISSION_DENIED)]
+            return [self._ack(sender, M.MAV_MISSION_DENIED, mtype)]
         if msg.count > self.max_items:
             self.upload = None
             self._count("rejected_no_space")
-            return [self._ack(sender, M.MAV_MISSION_NO_SPACE)]
+            return [self._ack(sender, M.MAV_MISSION_NO_SPACE, mtype)]
         if msg.count == 0:
             self.upload = None
-            return self._replace((), sender, now)
-        self.upload = _Upload(sender, int(msg.count), legacy=False)
+            return self._replace((), sender, now, mtype)
+        self.upload = _Upload(sender, int(msg.count), legacy=False, mission_type=mtype)
         return [self._request(self.upload, now)]
 
     def _on_mission_item_int(self, msg: Any, sender: tuple[int, int], now: float, legacy: bool = False) -> list[Out]:
@@ -236,13 +301,13 @@ class MissionServer:
                 return [self._ack(sender, M.MAV_MISSION_ACCEPTED)]
             self._count("item_without_upload")
             return [self._ack(sender, M.MAV_MISSION_INVALID_SEQUENCE, mtype)]
-        if mtype != MISSION:
+        if mtype != up.mission_type:
             self.upload = None
-            return [self._ack(sender, M.MAV_MISSION_UNSUPPORTED, mtype)]
+            return [self._ack(sender, M.MAV_MISSION_INVALID_SEQUENCE, mtype)]
         if msg.seq >= up.count:
             self.upload = None
             self._count("rejected_sequence")
-            return [self._ack(sender, M.MAV_MISSION_INVALID_SEQUENCE)]
+            return [self._ack(sender, M.MAV_MISSION_INVALID_SEQUENCE, mtype)]
         up.legacy = up.legacy or legacy
         if msg.seq != len(up.items):
             self._count("out_of_sequence")  # recoverable: drop it, ask again for the expected one
@@ -253,68 +318,86 @@ class MissionServer:
             x, y = int(msg.x), int(msg.y)
         item = MissionItem(int(msg.frame), int(msg.command), int(msg.autocontinue), float(msg.param1),
                            float(msg.param2), float(msg.param3), float(msg.param4), x, y, float(msg.z))
-        bad = None if (self.home is not None and msg.seq == 0) else validate_item(item, self.position_check)
+        if mtype != MISSION:
+            bad = validate_fence_or_rally(item, mtype, self.position_check)
+        elif self.home is not None and msg.seq == 0:
+            bad = None
+        else:
+            bad = validate_item(item, self.position_check)
         if bad is not None:
             self.upload = None
             self._count("rejected_item")
-            self.events.append(MissionEvent("rejected", seq=int(msg.seq)))
+            self.events.append(MissionEvent("rejected", seq=int(msg.seq), mission_type=mtype))
             self.last_reject = (int(msg.seq), bad[1])
-            return [self._ack(sender, bad[0])]
+            return [self._ack(sender, bad[0], mtype)]
         up.items.append(item)
         up.retries = 0
         if len(up.items) < up.count:
             return [self._request(up, now)]
         self.upload = None
-        whole = self.mission_check(tuple(up.items)) if self.mission_check is not None else None
-        if whole is not None:   # e.g. an item inside an obstacle or unreachable: the old mission stays
+        whole = self._check_plan(tuple(up.items), mtype)
+        if whole is not None:   # e.g. an item inside an obstacle or unreachable: the old plan stays
             seq, code, why = whole
             self._count("rejected_item")
-            self.events.append(MissionEvent("rejected", seq=int(seq)))
+            self.events.append(MissionEvent("rejected", seq=int(seq), mission_type=mtype))
             self.last_reject = (int(seq), why)
-            return [self._ack(sender, code)]
-        return self._replace(tuple(up.items), sender, now)
+            return [self._ack(sender, code, mtype)]
+        return self._replace(tuple(up.items), sender, now, mtype)
+
+    def _check_plan(self, items: tuple[MissionItem, ...], mtype: int) -> tuple[int, int, str] | None:
+        if mtype == FENCE:
+            _, why = fence_polygons(items)
+            if why is not None:
+                return 0, M.MAV_MISSION_INVALID_PARAM1, why
+        check = self.plan_checks.get(mtype)
+        return check(items) if check is not None else None
 
     def _on_mission_item(self, msg: Any, sender: tuple[int, int], now: float) -> list[Out]:
         return self._on_mission_item_int(msg, sender, now, legacy=True)
 
-    def _replace(self, items: tuple[MissionItem, ...], sender: tuple[int, int], now: float) -> list[Out]:
-        self.items = items
-        self._last_done = (sender, len(items), now)
-        self._count("uploads_accepted")
-        self.events.append(MissionEvent("replaced", items))
-        return [self._ack(sender, M.MAV_MISSION_ACCEPTED)]
+    def _replace(self, items: tuple[MissionItem, ...], sender: tuple[int, int], now: float,
+                 mtype: int = MISSION) -> list[Out]:
+        self.plans[mtype] = items
+        if mtype == MISSION:
+            self._last_done = (sender, len(items), now)
+        self._count("uploads_accepted" if mtype == MISSION else f"{_TYPE_NAMES[mtype]}_uploads_accepted")
+        self.events.append(MissionEvent("replaced", items, mission_type=mtype))
+        return [self._ack(sender, M.MAV_MISSION_ACCEPTED, mtype)]
 
     def _on_mission_request_list(self, msg: Any, sender: tuple[int, int], now: float) -> list[Out]:
         mtype = getattr(msg, "mission_type", MISSION)
-        count = len(self.items) if mtype == MISSION else 0
+        count = len(self.plans.get(mtype, ()))
         return [Out("mission_count", (sender[0], sender[1], count, mtype))]
 
     def _on_mission_request_int(self, msg: Any, sender: tuple[int, int], now: float, legacy: bool = False) -> list[Out]:
         mtype = getattr(msg, "mission_type", MISSION)
-        if mtype != MISSION or not 0 <= msg.seq < len(self.items):
+        plan = self.plans.get(mtype, ())
+        if not 0 <= msg.seq < len(plan):
             return [self._ack(sender, M.MAV_MISSION_INVALID_SEQUENCE, mtype)]
-        it = self.items[msg.seq]
-        if msg.seq == 0 and self.home is not None:
+        it = plan[msg.seq]
+        if mtype == MISSION and msg.seq == 0 and self.home is not None:
             it = self.home() or it
         if legacy:
             return [Out("mission_item", (sender[0], sender[1], msg.seq, it.frame, it.command, 0, it.autocontinue,
                                          it.param1, it.param2, it.param3, it.param4, it.x * 1e-7, it.y * 1e-7,
-                                         it.z, MISSION))]
+                                         it.z, mtype))]
         return [Out("mission_item_int", (sender[0], sender[1], msg.seq, it.frame, it.command, 0, it.autocontinue,
-                                         it.param1, it.param2, it.param3, it.param4, it.x, it.y, it.z, MISSION))]
+                                         it.param1, it.param2, it.param3, it.param4, it.x, it.y, it.z, mtype))]
 
     def _on_mission_request(self, msg: Any, sender: tuple[int, int], now: float) -> list[Out]:
         return self._on_mission_request_int(msg, sender, now, legacy=True)
 
     def _on_mission_clear_all(self, msg: Any, sender: tuple[int, int], now: float) -> list[Out]:
         mtype = getattr(msg, "mission_type", MISSION)
-        if mtype not in (MISSION, M.MAV_MISSION_TYPE_ALL):
+        if mtype not in (*PLAN_TYPES, M.MAV_MISSION_TYPE_ALL):
             return [self._ack(sender, M.MAV_MISSION_UNSUPPORTED, mtype)]
         if self.upload is not None and self.upload.partner != sender:
             return [self._ack(sender, M.MAV_MISSION_DENIED, mtype)]
         self.upload = None
-        out = self._replace((), sender, now)
-        return [self._ack(sender, M.MAV_MISSION_ACCEPTED, mtype)] if mtype != MISSION else out
+        for t in (PLAN_TYPES if mtype == M.MAV_MISSION_TYPE_ALL else (mtype,)):
+            if t == MISSION or self.plans[t]:
+                self._replace((), sender, now, t)
+        return [self._ack(sender, M.MAV_MISSION_ACCEPTED, mtype)]
 
     def _on_mission_set_current(self, msg: Any, sender: tuple[int, int], now: float) -> list[Out]:
         if not 0 <= msg.seq < len(self.items):
@@ -329,6 +412,9 @@ class MissionServer:
     def take_events(self) -> list[MissionEvent]:
         ev, self.events = self.events, []
         return ev
+
+
+_TYPE_NAMES = {MISSION: "mission", FENCE: "fence", RALLY: "rally"}
 
 
 def same_items(a: MissionItem, b: MissionItem) -> bool:

@@ -7,11 +7,14 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from autopilot_bridge import mission_commands as mc
 from autopilot_bridge.gcs.context import Outbox, VehicleView
-from autopilot_bridge.gcs.mission import MissionItem, MissionServer, has_position
+from autopilot_bridge.gcs.mission import FENCE, MISSION, RALLY, MissionItem, MissionServer, fence_polygons, has_position
 from autopilot_bridge.mission_commands import MissionCommand
 from common.mavlink import MAV_TYPE as M
+from planner.fence import Circle, Fence
 
 # Every MISSION_* message the protocol state machine has a handler for.
 MISSION_MESSAGES = tuple(sorted(name[len("_on_"):].upper() for name in vars(MissionServer)
@@ -34,7 +37,8 @@ class MissionService:
                                     component_id=self.view.compid, max_items=max_items, item_timeout=item_timeout,
                                     retries=retries, position_check=self.view.on_chart,
                                     mission_check=self._check_mission,
-                                    home=self._home_item if self.home_item else None)
+                                    home=self._home_item if self.home_item else None,
+                                    plan_checks={RALLY: self._check_rally})
 
     def _home_item(self) -> MissionItem | None:
         """The home in force as mission item 0 (a NAV_WAYPOINT at home, as ArduPilot sends it)."""
@@ -64,6 +68,29 @@ class MissionService:
         if has_position(it):
             north, east = self.view.geo.geodetic_to_sea_level(it.lat, it.lon)
         return MissionCommand(it.command, north, east, it.param1, it.param2, it.param3, it.param4)
+
+    def fence_of(self, items: tuple[MissionItem, ...]) -> Fence:
+        """Fence items (checked: whole polygons) as planning geometry, map frame (x east, y north) m."""
+        def xy(it: MissionItem) -> tuple[float, float]:
+            n, e = self.view.geo.geodetic_to_sea_level(it.lat, it.lon)
+            return e, n
+
+        polys, _ = fence_polygons(items)
+        inc, exc = (tuple(np.array([xy(v) for v in run]) for cmd, run in polys if cmd == kind)
+                    for kind in (M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+                                 M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION))
+        circles = {c: tuple(Circle(*xy(it), float(it.param1)) for it in items if it.command == c)
+                   for c in (M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION)}
+        return Fence(inc, exc, circles[M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION],
+                     circles[M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION])
+
+    def rally_of(self, items: tuple[MissionItem, ...]) -> tuple[tuple[float, float], ...]:
+        return tuple(self.view.geo.geodetic_to_sea_level(it.lat, it.lon) for it in items)
+
+    def _check_rally(self, items: tuple[MissionItem, ...]) -> tuple[int, int, str] | None:
+        api = self.view.api
+        bad = None if api is None else api.check_rally(self.rally_of(items))
+        return None if bad is None else (bad[0], M.MAV_MISSION_INVALID, bad[1])
 
     def _check_mission(self, items: tuple[MissionItem, ...]) -> tuple[int, int, str] | None:
         """A complete upload's route through the chart: ``(seq, MAV_MISSION_RESULT, reason)`` or None."""
@@ -95,7 +122,14 @@ class MissionService:
         server, api = self.server, self.view.api
         assert server is not None
         for ev in server.take_events():
-            if ev.kind == "replaced" and api is not None:
+            if ev.kind == "replaced" and api is not None and ev.mission_type == FENCE:
+                fence = self.fence_of(ev.items)
+                api.replace_fence(fence)
+                self.out.statustext(f"fence: {len(ev.items)} items accepted" if ev.items else "fence cleared")
+            elif ev.kind == "replaced" and api is not None and ev.mission_type == RALLY:
+                api.replace_rally(self.rally_of(ev.items))
+                self.out.statustext(f"rally: {len(ev.items)} points accepted" if ev.items else "rally points cleared")
+            elif ev.kind == "replaced" and api is not None and ev.mission_type == MISSION:
                 commands = tuple(self.command_of(it) for it in ev.items)
                 api.replace_mission(commands)
                 skipped = sum(c.command in mc.STORED_ONLY for c in commands)
@@ -108,4 +142,5 @@ class MissionService:
                 self.on_changed()
             elif ev.kind == "rejected" and server.last_reject is not None:
                 seq, why = server.last_reject
-                self.out.statustext(f"mission item {seq} rejected: {why}", M.MAV_SEVERITY_WARNING)
+                kind = {FENCE: "fence", RALLY: "rally"}.get(ev.mission_type, "mission")
+                self.out.statustext(f"{kind} item {seq} rejected: {why}", M.MAV_SEVERITY_WARNING)

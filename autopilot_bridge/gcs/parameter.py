@@ -1,5 +1,5 @@
 """The parameter microservice (https://mavlink.io/en/services/parameter.html) over the table that
-:func:`autopilot_bridge.gcs.params.collect` builds from every component's declarations.
+:func:`autopilot_bridge.parameters.bind` makes from every component's declarations.
 
 PARAM_REQUEST_LIST starts a dump that is paced: at most :data:`DUMP_PER_CALL` PARAM_VALUE per service
 call (:meth:`ParameterService.tick`, at the end of the call), and one dump at a time. A list request

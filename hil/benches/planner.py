@@ -38,6 +38,7 @@ if TYPE_CHECKING:
     import numpy as np
 
 MAPS = ("bench_discs", "bench_bugtrap", "bench_maze")
+CURRENT_MAPS = ("labyrinth", "harbour", "island")
 ALGORITHMS = ALGORITHM_NAMES
 BUDGETS = (0.05, 0.2, 1.0)
 FIRST_SOLUTION_CAP_S = 2.0
@@ -71,8 +72,9 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
         description=__doc__.split("\n\n", 1)[1] if __doc__ else None,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--maps", type=_names(MAPS), default=MAPS, metavar="LIST",
-                   help=f"comma-separated maps (default {','.join(MAPS)})")
+    p.add_argument("--maps", type=_names(MAPS + CURRENT_MAPS), default=MAPS, metavar="LIST",
+                   help=f"comma-separated maps (default {','.join(MAPS)}; also {','.join(CURRENT_MAPS)}, "
+                        f"which have a current)")
     p.add_argument("--algorithms", type=_names(ALGORITHMS), default=ALGORITHMS, metavar="LIST",
                    help=f"comma-separated planners (default {','.join(ALGORITHMS)})")
     p.add_argument("--seeds", type=int, default=5, metavar="N", help="seeds per measurement (median; default 5)")
@@ -83,9 +85,48 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--no-ompl", action="store_true", help="do not run OMPL even if it is installed")
     p.add_argument("--no-end-to-end", action="store_true",
                    help="skip the end-to-end `hil plan --deadline B` processes")
+    p.add_argument("--objective", choices=("length", "current"), default="length",
+                   help="length (default; against the exact shortest path) or current: eq. (12) in the scenario's "
+                        "current, each path costed by hil.flow_optimum and divided by its optimum (issue 34); "
+                        "OMPL and the end-to-end runs are skipped")
     p.add_argument("--step", type=float, default=None, metavar="M",
                    help="extension length / OMPL range (m, default: [planner] step)")
     p.set_defaults(func=run)
+
+
+class IslandWorld:
+    """Issue 34 point 6: a 60 m x 40 m sound with an island (x 15-45 m, y 15-30 m) and a stream
+    circling it, 0.5 m/s east in the north channel (y > 22.5 m) and west in the south one. Start
+    (3, 10) and goal (57, 10) lie by the south channel: the shortest path (61.0 m) goes south,
+    against the stream; eq. (12)'s optimum goes round the north, with it."""
+
+    name = "island"
+    resolution = 0.5
+    start = (3.0, 10.0)
+    goal = (57.0, 10.0)
+    start_heading = 0.0
+
+    def __init__(self) -> None:
+        import numpy as np
+
+        occ = np.zeros((80, 120), dtype=bool)
+        occ[30:60, 30:90] = True
+        self.occ = occ
+
+    @staticmethod
+    def map_field():
+        import numpy as np
+
+        def stream(x, y):
+            x = np.asarray(x, dtype=float)
+            y = np.asarray(y, dtype=float)
+            vx = np.where(y > 22.5, 0.5, -0.5) + 0.0 * x
+            return vx, np.zeros_like(vx)
+        return stream
+
+    def planning_field(self):
+        from planner.field import GridField
+        return GridField.sample(self.map_field(), 60.0, 40.0, 0.5)
 
 
 def _median(values: list[float]) -> float | None:
@@ -98,8 +139,9 @@ def _median(values: list[float]) -> float | None:
 class OursRunner:
     """Runs one of our planners on a fixed problem with a given budget."""
 
-    def __init__(self, algorithm: str, params: Any, problem: Any) -> None:
+    def __init__(self, algorithm: str, params: Any, problem: Any, judge: Any = None) -> None:
         self.algorithm, self.params, self.problem = algorithm, replace(params, algorithm=algorithm), problem
+        self.judge = judge  # hil.flow_optimum.FlowJudge: "length" is then the path's eq. (12) cost
 
     def solve(self, seed: int, budget_s: float, first: bool = False) -> dict[str, Any]:
         from planner import make_planner
@@ -109,7 +151,8 @@ class OursRunner:
         if first:
             term = Termination.any_of(Termination.exact_solution(), term)
         r = planner.solve(self.problem, term)
-        return {"exact": r.status == "exact", "length": r.length if r.status == "exact" else math.inf,
+        value = r.length if self.judge is None else (self.judge.path_cost(r.path) if len(r.path) > 1 else 0.0)
+        return {"exact": r.status == "exact", "length": value if r.status == "exact" else math.inf,
                 "iterations": r.iterations, "time": r.planning_time_s,
                 "first": r.time_to_first_solution_s if r.status == "exact" else None}
 
@@ -235,7 +278,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--seeds must be >= 1")
     settings = console.load_settings(args)
     base = scenarios.base_planner_params(settings)
-    params = replace(base, objective="length", safety_radius=0.0, turn_radius_factor=0.0,
+    params = replace(base, objective=args.objective, safety_radius=0.0, turn_radius_factor=0.0,
                      velocity_inflation_gain=0.0, step=args.step if args.step else base.step)
     if not (params.step > 0):
         raise UsageError("--step must be > 0")
@@ -251,22 +294,34 @@ def run(args: argparse.Namespace) -> int:
     console.progress(f"hil bench planner: {len(args.maps)} maps x {len(args.algorithms)} planners, {seeds_n} seeds, "
                      f"budgets {', '.join(f'{b:g}' for b in budgets)} s, step {params.step:g} m; OMPL: {ompl_note}")
     seeds = list(range(1, seeds_n + 1))
-    report: dict[str, Any] = {"seeds": seeds_n, "budgets_s": list(budgets), "step_m": params.step,
+    report: dict[str, Any] = {"objective": args.objective, "seeds": seeds_n, "budgets_s": list(budgets),
+                              "step_m": params.step,
                               "ompl": ompl_note, "targets": TARGETS, "maps": {}}
     for name in args.maps:
-        sc = scenarios.load(name, settings.current)
+        sc = IslandWorld() if name == "island" else scenarios.load(name, settings.current)
         grid = OccupancyGrid(sc.occ, sc.resolution)
         opt = shortest_path(sc.occ, sc.resolution, sc.start, sc.goal)
         if not math.isfinite(opt.length):
             raise UsageError(f"{name}: no path from start to goal")
-        problem = PlanningProblem(grid=grid, start=sc.start, goal=sc.goal)
+        judge = None
+        optimum = opt.length
+        field = sc.planning_field() if args.objective == "current" else None
+        problem = PlanningProblem(grid=grid, start=sc.start, goal=sc.goal, field=field)
         entry: dict[str, Any] = {"optimum_m": opt.length, "optimum_vertices": opt.vertices, "planners": {}}
         console.progress(f"{name}: optimum {opt.length:.2f} m ({opt.vertices} visibility vertices)")
+        if args.objective == "current":
+            from hil.flow_optimum import FlowJudge
+            judge = FlowJudge(sc.occ, sc.resolution, sc.map_field(), params.d_alpha, params.gamma_alpha)
+            optimum = judge.optimum(sc.start, sc.goal).cost
+            entry["optimum_eq12"] = optimum
+            entry["shortest_path_eq12"] = short = judge.path_cost(opt.path)
+            console.progress(f"{name}: eq. (12) optimum {optimum:.2f} (hil.flow_optimum); the shortest path "
+                             f"costs {short:.2f} = {short / optimum:.3f} x the optimum")
         for alg in args.algorithms:
-            runner = OursRunner(alg, params, problem)
+            runner = OursRunner(alg, params, problem, judge)
             runner.solve(0, 0.05)    # warm-up: numba compilation / cache load outside the timings
-            entry["planners"][alg] = _measure(runner, seeds, budgets, opt.length, f"{name} {alg}")
-        if have_ompl:
+            entry["planners"][alg] = _measure(runner, seeds, budgets, optimum, f"{name} {alg}")
+        if have_ompl and judge is None:
             try:
                 orunner = OmplRunner(sc.occ, sc.resolution, sc.start, sc.goal, params.step)
                 entry["ompl_rrt_star"] = m = _measure(orunner, seeds, budgets, opt.length, f"{name} ompl")
@@ -281,7 +336,7 @@ def run(args: argparse.Namespace) -> int:
                     }
             except Exception as exc:  # an OMPL API mismatch must not lose our own figures
                 entry["ompl_rrt_star"] = {"error": f"{type(exc).__name__}: {exc}"}
-        if not args.no_end_to_end:
+        if not args.no_end_to_end and judge is None:
             alg = "ddrrt-star" if "ddrrt-star" in args.algorithms else args.algorithms[0]
             entry["end_to_end"] = [end_to_end(name, alg, b, args) for b in budgets]
             for e2e in entry["end_to_end"]:
@@ -338,7 +393,8 @@ def _print_table(report: dict[str, Any]) -> None:
         lines.append("(one `hil plan --scenario MAP --deadline B` process each: wall = what a user waits; search is "
                      "the budget; set-up, warm-up (numba cache load or compile) and startup (interpreter, imports, "
                      "output) are one-off costs)")
-    lines.append(f"(x@B = path length at budget B / optimum, median over {report['seeds']} seeds, 'unsolved' = no "
+    what = "path length" if report.get("objective", "length") == "length" else "eq. (12) cost (hil.flow_optimum)"
+    lines.append(f"(x@B = {what} at budget B / optimum, median over {report['seeds']} seeds, 'unsolved' = no "
                  f"exact solution in most seeds; "
                  f"targets: >= 15000 iter/s, first <= 40 ms on bug trap and maze, <= 1.03 @0.2 s, <= 1.01 @1 s)")
     console.progress("\n".join(lines))

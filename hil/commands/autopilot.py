@@ -178,7 +178,7 @@ def run(args: argparse.Namespace) -> int:
     )
     table = to_table(summary)
     if args.summary_out:
-        write_json_atomic(args.summary_out, table)
+        write_json_atomic(args.summary_out, table, private=bool(cfg.gcs.signing_key_file))
     if args.json:
         emit(args, table)
     else:

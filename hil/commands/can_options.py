@@ -6,12 +6,14 @@ import argparse
 import json
 
 
-def add_can_arguments(p: argparse.ArgumentParser, actuators: bool = True) -> None:
+def add_can_arguments(p: argparse.ArgumentParser, actuators: bool = True, default: str = "can.actuators = mavlink"
+                      ) -> None:
+    """The CAN options; ``default`` is what --help says --actuators defaults to (a command may set its own)."""
     g = p.add_argument_group("CAN actuators (DroneCAN over python-can)")
     if actuators:
         g.add_argument("--actuators", choices=("mavlink", "can"), default=None,
                        help="thruster set-points as HIL_ACTUATOR_CONTROLS over UDP (mavlink) or as DroneCAN "
-                            "ESC RawCommand over CAN with ESC Status back (can) (default: can.actuators = mavlink)")
+                            "ESC RawCommand over CAN with ESC Status back (can) (default: " + default + ")")
     g.add_argument("--can-interface", metavar="NAME", default=None,
                    help="python-can interface of the bus, e.g. socketcan, pcan, kvaser "
                         "(default: can.interface = socketcan); "

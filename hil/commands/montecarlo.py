@@ -65,6 +65,9 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                         "the runs are timed like the paper's but no longer reproducible")
     g.add_argument("--cycle-time", metavar="S", type=float, default=None,
                    help="simulated seconds the vessel sails along each local path before replanning")
+    g.add_argument("--execution", choices=("receding", "whole-path"), default=None,
+                   help="receding: sail speed x cycle time of each local path, then replan (default); whole-path: "
+                        "sail the whole local path and plan the next from its end, as the paper (no tree reuse)")
     g.add_argument("--baseline-objective", choices=("current", "length"), default=None,
                    help="objective of RRT* and IRRT* (default: the [planner] objective, as DDRRT*). 'length' "
                         "makes them optimise Euclidean length as in their original papers while DDRRT* keeps "
@@ -213,7 +216,8 @@ def run(args: argparse.Namespace) -> int:
     settings = console.load_settings(args)
     spec = scenarios.load_spec(args.scenario)
     online_ov = {k: v for k, v in (("local_iterations", args.local_iterations), ("local_time", args.local_time),
-                                   ("cycle_time", args.cycle_time)) if v is not None}
+                                   ("cycle_time", args.cycle_time), ("execution", args.execution))
+                 if v is not None}
     # Validate everything once in this process (one-line errors) before starting workers.
     online = scenarios.online_params({**spec.online, **online_ov}, "command line")
     scenarios.planner_params(scenarios.base_planner_params(settings), spec.planner, f"scenario {spec.name}")
@@ -288,7 +292,7 @@ def _figures(args, spec, camp, out: Path) -> dict[str, str]:
     from hil import scenario as scenarios
 
     files = {}
-    algs = [a for a in ("ddrrt-star", "informed-rrt-star", "rrt-star") if a in camp.details]
+    algs = [a for a in reversed(experiment.ALGORITHMS) if a in camp.details]  # every registered planner
     if algs:
         sc = experiment.scenario_instance(args.scenario, args.seed, 0, args.config, tuple(args.overrides))
         from planner.gridmap import OccupancyGrid

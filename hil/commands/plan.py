@@ -39,6 +39,29 @@ def _angle(text: str) -> float:
     return value
 
 
+def _current(text: str) -> str | tuple[float, float]:
+    if text in ("none", "config"):
+        return text
+    try:
+        return _point(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"expected none, config or VE,VN in m/s (e.g. 0.3,-0.1), got {text!r}") \
+            from None
+
+
+def wave_drift(settings) -> tuple[float, float] | None:
+    """The vessel's steady drift under the mean wave force of eq. (6) (m/s, map frame: x east,
+    y north), or None with waves off: the following-seas surge force 0.5 rho alpha^2 L C_X over the
+    surge damping d_u, towards the waves' mean direction (NED, clockwise from north). The drift
+    the current causes is the current itself, so the two add as velocities: alpha_y = "resultant"
+    measures eq. (12)'s angle against their sum."""
+    w, v = settings.waves, settings.vessel
+    if not w.enabled:
+        return None
+    speed = 0.5 * v.rho * w.amplitude ** 2 * v.L * w.C_X / v.d_u
+    return speed * math.sin(w.direction), speed * math.cos(w.direction)
+
+
 def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "plan", parents=parents,
@@ -52,7 +75,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     src = p.add_argument_group("problem (either --scenario or --map/--resolution/--start/--goal)")
     src.add_argument("--scenario", metavar="NAME",
                      help=f"take map, start, goal, heading and current from configs/scenarios/NAME.toml "
-                          f"({', '.join(scenario_names())})")
+                          f"({', '.join(scenario_names('fixed'))})")
     src.add_argument("--map", metavar="FILE", type=Path,
                      help="occupancy map: .npy (bool/0-1) or .png (dark = obstacle)")
     src.add_argument("--resolution", metavar="R", type=float, help="map cell size (m per cell, > 0)")
@@ -61,6 +84,10 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     src.add_argument("--heading", metavar="RAD", type=_angle, default=None,
                      help="start heading (rad, counter-clockwise from east); enables the turning-radius fan at the "
                           "root (default: the scenario's, none with --map)")
+    src.add_argument("--current", metavar="C", type=_current, default=None,
+                     help="the current eq. (12) is costed in: 'config' (the [current] of the configuration, eq. (13), "
+                          "frozen at t = 0), VE,VN (uniform, m/s east and north) or 'none'. Default: the scenario's "
+                          "current (built from [current] and its --set overrides), none with --map")
     alg = p.add_argument_group("planner")
     alg.add_argument("--algorithm", choices=ALGORITHMS, default=None,
                      help="planner (default: [planner] algorithm of the configuration)")
@@ -82,7 +109,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.set_defaults(func=run)
 
 
-def _problem_inputs(args: argparse.Namespace):
+def _problem_inputs(args: argparse.Namespace, settings):
     from hil import scenario as scenarios
 
     """(occ, resolution, start, goal, heading, field or None, overrides, label)"""
@@ -90,7 +117,8 @@ def _problem_inputs(args: argparse.Namespace):
         if args.map is not None or args.resolution is not None:
             raise UsageError("--scenario already names the map: do not combine it with --map/--resolution")
         spec = scenarios.load_spec(args.scenario)
-        sc = scenarios.instance(spec, None)
+        sc = scenarios.instance(spec, None, base_current=settings.current,
+                                safety_radius=settings.planner.safety_radius)
         start = args.start or sc.start
         goal = args.goal or sc.goal
         heading = args.heading if args.heading is not None else sc.start_heading
@@ -105,6 +133,45 @@ def _problem_inputs(args: argparse.Namespace):
         raise UsageError(f"--map {args.map}: no such file")
     occ = scenarios.load_occupancy(args.map, args.resolution)
     return occ, args.resolution, args.start, args.goal, args.heading, None, {}, args.map.name
+
+
+def _map_field(args: argparse.Namespace, settings, sc, raw):
+    """(the map-frame current or None, a phrase saying where it came from)."""
+    from hil.scenario import MapFrameCurrent
+
+    choice = args.current
+    if choice is None:
+        if sc is None:
+            return None, "--map has no current of its own"
+        f = sc.map_field()
+        return f, (f"scenario {sc.name}'s current" if f is not None else f"scenario {sc.name}: current disabled")
+    if choice == "none":
+        return None, "--current none"
+    if choice == "config":
+        if not settings.current.enabled:
+            return None, "[current] enabled = false"
+        from common.current_field import CurrentField
+        return MapFrameCurrent(CurrentField(settings.current), 0.0), "[current] of the configuration at t = 0"
+    ve, vn = choice
+    if not (abs(ve) <= 10.0 and abs(vn) <= 10.0):
+        raise UsageError(f"--current {ve:g},{vn:g}: each component must be within +-10 m/s")
+    from planner.field import GridField
+    return GridField.uniform(ve, vn), f"uniform {ve:g},{vn:g} m/s (east, north)"
+
+
+def _judged(grid, map_field, params, start, goal, path) -> dict[str, float]:
+    """The path's eq. (12) cost and the least one (hil.flow_optimum, independent of the planner),
+    computed after the search: the current itself (not the planner's 1 m grid of it), pieces of
+    0.25 m."""
+    from hil.flow_optimum import FlowJudge
+
+    t0 = time.monotonic()
+    judge = FlowJudge(grid.occ, grid.resolution, map_field, params.d_alpha, params.gamma_alpha)
+    best = judge.optimum(tuple(start), tuple(goal))
+    cost = judge.path_cost(path)
+    console.progress(f"hil plan: eq. (12) optimum {best.cost:.2f} (judge, {time.monotonic() - t0:.1f} s); "
+                     f"this path {cost:.2f}: {cost / best.cost:.4f} x the optimum")
+    return {"cost_judged": cost, "optimum": best.cost, "cost_over_optimum": cost / best.cost}
 
 
 def _ddrrt_hint(params, result, grid) -> str | None:
@@ -124,11 +191,19 @@ def _ddrrt_hint(params, result, grid) -> str | None:
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
+    from hil.first_run import COLD_PLAN_COMPILE_S, compile_notice
+
+    # before the planner's import, which compiles on a cold cache
+    notice = compile_notice("hil plan", COLD_PLAN_COMPILE_S)
+    if notice:
+        console.progress(notice)
+
     import numpy as np
 
     from hil import scenario as scenarios
     from planner import make_planner, warm_up_info
     from planner.core import free_regions
+    from planner.field import GridField
     from planner.gridmap import OccupancyGrid
     from planner.problem import PlanningProblem
     from planner.termination import Termination
@@ -142,7 +217,7 @@ def run(args: argparse.Namespace) -> int:
     if args.plot is not None:
         check_output_file(args.plot, "--plot", PLOT_SUFFIXES)
     settings = console.load_settings(args)
-    occ, res, start, goal, heading, sc, overrides, label = _problem_inputs(args)
+    occ, res, start, goal, heading, sc, overrides, label = _problem_inputs(args, settings)
     params = scenarios.planner_params(scenarios.base_planner_params(settings), overrides,
                                       f"scenario {label}")
     params = scenarios.with_overrides(params, algorithm=args.algorithm, objective=args.objective, seed=args.seed,
@@ -168,8 +243,16 @@ def run(args: argparse.Namespace) -> int:
                              f"obstacle or the map edge (the map inflated by [planner] safety_radius); move it "
                              f"or lower --inflate")
     free_regions(grid)  # labelled once here (cached on the grid), not inside the search budget
-    field = sc.planning_field() if (sc is not None and params.objective == "current") else None
-    problem = PlanningProblem(grid=grid, start=tuple(start), goal=tuple(goal), start_heading=heading, field=field)
+    map_field, current_source = _map_field(args, settings, sc, raw)
+    field = None
+    if params.objective == "current" and map_field is not None:
+        field = GridField.sample(map_field, raw.width, raw.height, 1.0)
+    if params.objective == "current" and field is None:
+        console.progress(f"hil plan: no current ({current_source}): --objective current costs the length; "
+                         f"give --current config or --current VE,VN")
+    drift = wave_drift(settings) if params.alpha_y == "resultant" else None
+    problem = PlanningProblem(grid=grid, start=tuple(start), goal=tuple(goal), start_heading=heading, field=field,
+                              wave_drift=drift)
     setup_s = time.monotonic() - t_setup
     console.progress(f"hil plan: {params.algorithm} on {label} ({raw.width:g} m x {raw.height:g} m), "
                      f"budget {args.deadline:g} s, seed {params.seed}; set-up {setup_s * 1e3:.1f} ms")
@@ -198,7 +281,11 @@ def run(args: argparse.Namespace) -> int:
         "compiled": warm.compiled,
         "tree_size": int(len(result.tree_nodes)),
         "samples_rejected": result.samples_rejected,
+        "current": (current_source if field is not None else f"none ({current_source})"
+                    if params.objective == "current" else f"not used: objective length ({current_source})"),
     }
+    if field is not None and result.status == "exact":
+        summary.update(_judged(grid, map_field, params, start, goal, result.path))
     hint = _ddrrt_hint(params, result, raw)
     if hint:
         summary["hint"] = hint
@@ -209,7 +296,7 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         from hil.plots import plot_plan
         plot_plan(args.plot, occ, res, start, goal, result, inflated=grid.occ,
-                  field=sc.map_field() if sc is not None else None,
+                  field=map_field,
                   title=f"{params.algorithm} on {label}: {result.status}")
         summary["plot"] = str(args.plot)
         console.progress(f"hil plan: plot written to {args.plot}")

@@ -18,6 +18,7 @@ import re
 import signal
 import subprocess
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from common.tables import to_table
@@ -93,6 +94,15 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--wall-timeout", metavar="SECONDS", type=float, default=None,
                    help="end the run after this much wall time whatever happens (default: real time "
                         "--duration / speedup + 300 s; lockstep the larger of 900 s and 3 x --duration)")
+    p.add_argument("--autopilot", choices=("vessel-computer", "ardupilot"), default="vessel-computer",
+                   help="who flies the boat: the project's vessel computer (default) or ArduPilot's ArduRover SITL "
+                        "with the simulator as its JSON physics, in lockstep (docs/ardupilot.md)")
+    p.add_argument("--ardupilot-bin", metavar="PATH", default=None,
+                   help="--autopilot ardupilot: the ArduRover SITL binary, ArduPilot's rover.parm, motorboat.parm "
+                        "and rover-skid.parm beside it (default: $ARDUPILOT_SITL)")
+    p.add_argument("--ardupilot-params", metavar="FILE", default=None,
+                   help="--autopilot ardupilot: your own ArduPilot parameter file, laid over ArduPilot's and "
+                        "the project's")
     add_can_arguments(p)
     from hil.commands.autopilot import add_gcs_arguments
 
@@ -119,6 +129,8 @@ def run(args: argparse.Namespace) -> int:
         if args.speedup is not None and not args.wait_for_arm:
             raise ConfigError("--pipeline is a lockstep mode; drop --speedup (or add --wait-for-arm)")
         args.overrides.append("sim.lockstep_pipeline=true")
+    if args.autopilot == "ardupilot":
+        _check_ardupilot_options(args)
     from hil import placement
 
     cpus = placement.parse(args.cpus)
@@ -129,11 +141,33 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--demo drives the simulator over MAVLink; --actuators can needs the autopilot (drop --demo)")
     try:
         if args.demo:
+            if args.out:
+                from hil.files import check_output_folder
+
+                check_output_folder(Path(args.out), "--out")
             client = HilClient(system_id=cfg.autopilot.system_id, component_id=cfg.autopilot.component_id)
             return _run_loop(args, client, args.speedup is None)
         return _run_hil(args, cfg, cpus)
     finally:
         signal.signal(signal.SIGTERM, previous_term)
+
+
+def _check_ardupilot_options(args: argparse.Namespace) -> None:
+    from pathlib import Path
+
+    """--autopilot ardupilot runs in plain lockstep over MAVLink actuators, without --demo, with a
+    binary that runs."""
+    for given, name in ((args.demo, "--demo"), (args.speedup is not None, "--speedup"), (args.pipeline, "--pipeline"),
+                        (args.wait_for_arm, "--wait-for-arm"), (bool(args.gcs), "--gcs"),
+                        (getattr(args, "actuators", None) == "can", "--actuators can")):
+        if given:
+            raise UsageError(f"--autopilot ardupilot runs ArduRover in lockstep; drop {name} (a ground station "
+                             f"connects to ArduRover's TCP port, printed at the start)")
+    from hil.ardupilot import find_sitl
+
+    args.sitl = find_sitl(args.ardupilot_bin)   # before anything runs: a missing binary is one line
+    if args.ardupilot_params is not None and not Path(args.ardupilot_params).is_file():
+        raise UsageError(f"--ardupilot-params: no such file {args.ardupilot_params}")
 
 
 def _default_wall_timeout(args: argparse.Namespace, paced: bool = False) -> float:
@@ -176,9 +210,28 @@ def _run_hil(args: argparse.Namespace, cfg: Any, cpus: Any = "auto") -> int:
     opts.actuators = cfg.can.actuators
     pacing = f"lockstep paced to x{opts.speedup:g} wall time" if gcs_session else \
         ("lockstep" if opts.lockstep else f"real time x{opts.speedup:g}")
+    who = "ArduRover SITL" if args.autopilot == "ardupilot" else f"actuators {cfg.can.actuators}"
     progress(f"run: scenario {args.scenario}, {pacing}, "
-             f"actuators {cfg.can.actuators}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
-    summary = run_loop(opts, cfg)
+             f"{who}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
+    from hil.first_run import compile_notice
+
+    notice = compile_notice("run")
+    if notice:
+        progress(notice)
+    from hil.errors import RunFailed
+    from hil.files import tidy_failed_start
+
+    fresh = not out.exists()
+    try:
+        if args.autopilot == "ardupilot":
+            from hil.ardupilot import run_ardupilot
+
+            summary = run_ardupilot(opts, cfg, args.sitl, args.ardupilot_params)
+        else:
+            summary = run_loop(opts, cfg)
+    except RunFailed:
+        tidy_failed_start(out, fresh)
+        raise
     emit(args, to_table(summary), human_summary(summary))
     if summary.outcome == "interrupted":
         progress(f"run: interrupted; summary in {out}")
@@ -291,5 +344,9 @@ def _run_loop(args: argparse.Namespace, client: HilClient, lockstep: bool) -> in
         "last_truth_time_s": (last_truth.time_usec / 1e6) if last_truth is not None else None,
         "simulator": sim,
     }
+    if args.out:   # the demo's run folder holds its summary (the loop's has its tlog, logs and plot too)
+        from hil.files import write_json_atomic
+
+        write_json_atomic(Path(args.out) / "summary.json", summary)
     emit(args, summary)
     return 0

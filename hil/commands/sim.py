@@ -110,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
         spec = scenarios.load_spec(args.scenario)
         if spec.kind != "fixed":
             raise UsageError(f"--scenario {args.scenario}: draws a new map per run; hil sim needs a fixed scenario")
-        scen = scenarios.instance(spec, None, base.current)
+        scen = scenarios.instance(spec, None, base.current, geodesy=base.geodesy)
         args.overrides = scenarios.simulator_overrides(scen, base.current) + list(args.overrides)
         world = WorldMap(scen.truth_occ(), scen.resolution)
         traffic = tuple(scen.traffic)
@@ -134,6 +134,9 @@ def run(args: argparse.Namespace) -> int:
         traffic = load_traffic(args.traffic)
     try:
         core = SimulatorCore(cfg, world, traffic)
+        check_covers = getattr(core.current, "check_covers", None)   # a current file: its time span
+        if check_covers is not None and cfg.sim.duration > 0:
+            check_covers(t=(0.0, cfg.sim.duration))
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     try:

@@ -56,7 +56,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--warmup", type=float, default=None, metavar="S",
                    help="memory baseline taken this long after start (default: 10%% of --duration, 5-60 s)")
     p.add_argument("--out", metavar="DIR", default=None, help="keep the run folder here (default: temporary)")
-    add_can_arguments(p)
+    add_can_arguments(p, default="can, for a soak")
     p.set_defaults(func=run, actuators="can")
 
 

@@ -80,13 +80,15 @@ class Gcs:
                             float("nan"), float("nan"))
 
     # -- mission ------------------------------------------------------------------------------
-    def upload(self, items: list[tuple], timeout: float = 30.0, stop_after: int | None = None) -> Any:
+    def upload(self, items: list[tuple], timeout: float = 30.0, stop_after: int | None = None,
+               mission_type: int = M.MAV_MISSION_TYPE_MISSION) -> Any:
         """Upload (frame, command, p1, p2, p3, p4, lat_e7, lon_e7, alt) items; the MISSION_ACK (or None).
 
-        ``stop_after``: answer only that many item requests, then go silent (an interrupted upload).
+        ``stop_after``: answer only that many item requests, then go silent (an interrupted upload);
+        ``mission_type``: MISSION, FENCE or RALLY.
         """
         self.drain()
-        self.mav.mission_count_send(self.target[0], self.target[1], len(items), M.MAV_MISSION_TYPE_MISSION)
+        self.mav.mission_count_send(self.target[0], self.target[1], len(items), mission_type)
         answered = 0
         end = time.monotonic() + timeout
         self.requests: list[int] = []
@@ -101,7 +103,7 @@ class Gcs:
                 continue
             fr, cmd, p1, p2, p3, p4, x, y, z = items[m.seq]
             self.mav.mission_item_int_send(self.target[0], self.target[1], m.seq, fr, cmd, 0, 1, p1, p2, p3, p4,
-                                           x, y, z, M.MAV_MISSION_TYPE_MISSION)
+                                           x, y, z, mission_type)
             answered += 1
         return None
 

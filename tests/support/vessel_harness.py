@@ -86,7 +86,7 @@ class InlineWorker:
 def build_computer(scenario: str = "harbour", overrides: tuple[str, ...] = (), wait_for_arm: bool = True
                    ) -> tuple[Autopilot, ScriptedLink, InlineWorker]:
     cfg = settings.load(None, [*overrides, f"gcs.wait_for_arm={'true' if wait_for_arm else 'false'}"])
-    scen = scenarios.load(scenario, cfg.current, cfg.planner.safety_radius)
+    scen = scenarios.load(scenario, cfg.current, cfg.planner.safety_radius, cfg.geodesy)
     world = planning_world(cfg, scen)
     link, worker = ScriptedLink(), InlineWorker(online_cycle_handler(world))
     ap = Autopilot(computer_config(cfg), world, Devices(link, worker), run_options(cfg, lockstep=True))

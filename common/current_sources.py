@@ -1,0 +1,414 @@
+"""Sea-current sources: the analytic eq. (13), a uniform current, and a gridded current read from a file.
+
+Every source answers the same two questions in the local NED frame (metres from the
+configuration's geodesy origin, seconds of run time):
+
+* ``velocity_at(north, east, t) -> (v_north, v_east)`` m/s, plain floats (the simulator's hot path);
+* ``velocity(north, east, t) -> (v_north, v_east)`` numpy arrays (the planner's sampled field).
+
+:func:`make_current` picks the source from a ``[current]`` table (``simulator.config.CurrentParams``):
+``enabled = false`` -> none; ``file = "x.nc"`` -> :class:`GriddedCurrent`; ``uniform = [east, north]``
+-> :class:`UniformCurrent`; otherwise the meandering jet of eq. (13)
+(:class:`common.current_field.CurrentField`). The simulator and the planner both build theirs here,
+so the boat feels the current the planner plans with.
+
+Files. A netCDF file (read with xarray; netCDF-4/HDF5 through the netCDF4 library, netCDF-3 through
+scipy) with the eastward and northward velocity found by CF ``standard_name``
+(``eastward_sea_water_velocity`` / ``northward_sea_water_velocity``, or their ``surface_`` and
+``_assuming_no_tide`` variants) or by the names given in ``east_variable`` / ``north_variable``, on
+1-D latitude and longitude coordinates (degrees north/east) and optionally time and depth (the
+level nearest the surface is used). Units ``m s-1`` (as variously spelt), ``cm s-1`` or knots; missing values
+(land in ocean-model output) read as still water. The run's t = 0 is the file's time ``start_time``
+(ISO 8601, UTC; default: the file's first time); a file with one time slice is a steady current.
+On loading, each time slice is resampled onto a
+regular NED grid (each node's latitude and longitude from the exact tangent-plane conversion of
+``common.geodesy``, the file bilinearly interpolated there); queries then interpolate bilinearly in
+space and linearly in time, clamped at the edges. :meth:`GriddedCurrent.check_covers` refuses, in
+one line, a file that does not cover a map or a run's time span.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+import os
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from common.geodesy import LocalFrame
+
+EAST_NAMES = ("eastward_sea_water_velocity", "surface_eastward_sea_water_velocity",
+              "eastward_sea_water_velocity_assuming_no_tide", "baroclinic_eastward_sea_water_velocity")
+NORTH_NAMES = ("northward_sea_water_velocity", "surface_northward_sea_water_velocity",
+               "northward_sea_water_velocity_assuming_no_tide", "baroclinic_northward_sea_water_velocity")
+# after lower-casing and spelling out (see _scale): "meters per second" -> "m/s", "m s^-1" -> "m s-1"
+_UNITS = {"m s-1": 1.0, "m/s": 1.0, "m.s-1": 1.0, "m s**-1": 1.0, "m/second": 1.0, "ms-1": 1.0, "mps": 1.0,
+          "cm s-1": 0.01, "cm/s": 0.01, "cm.s-1": 0.01, "cm s**-1": 0.01, "centim/second": 0.01, "centim s-1": 0.01,
+          "kn": 0.514444, "knot": 0.514444, "knots": 0.514444, "kt": 0.514444}
+MAX_SPEED = 10.0        # m/s: faster than any tidal race (Saltstraumen ~ 11 m/s is the one known exception)
+MAX_NODES = 512         # per axis of the resampled NED grid
+MAX_VALUES = 20_000_000  # time slices x nodes: a larger file must be cut down first
+
+
+class CurrentSourceError(ValueError):
+    """A current file or table that cannot be used: the message is one line for the user."""
+
+
+class CurrentSource(Protocol):
+    """A current in the NED frame."""
+
+    def velocity_at(self, north: float, east: float, t: float) -> tuple[float, float]: ...
+
+    def velocity(self, north: Any, east: Any, t: Any) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+class UniformCurrent:
+    """The same current everywhere and always: ``east``, ``north`` in m/s."""
+
+    def __init__(self, east: float, north: float) -> None:
+        if not (math.isfinite(east) and math.isfinite(north)) or math.hypot(east, north) > MAX_SPEED:
+            raise CurrentSourceError(f"current.uniform: [{east:g}, {north:g}] m/s is not a sea current "
+                                     f"(finite, at most {MAX_SPEED:g} m/s)")
+        self.east, self.north = float(east), float(north)
+
+    def velocity_at(self, north: float, east: float, t: float) -> tuple[float, float]:
+        return self.north, self.east
+
+    def velocity(self, north: Any, east: Any, t: Any) -> tuple[np.ndarray, np.ndarray]:
+        shape = np.broadcast_shapes(np.shape(north), np.shape(east), np.shape(t))
+        return np.full(shape, self.north), np.full(shape, self.east)
+
+
+@dataclass(frozen=True)
+class RawCurrentGrid:
+    """A file's surface current as read: ``u``/``v`` (east/north, m/s) [time, lat, lon]; ``times``
+    in seconds since the Unix epoch (None: a steady field, one slice)."""
+
+    lat: np.ndarray
+    lon: np.ndarray
+    times: np.ndarray | None
+    u: np.ndarray
+    v: np.ndarray
+
+
+def _find_velocity(ds: Any, names: tuple[str, ...], given: str, which: str, path: str) -> Any:
+    if given:
+        if given not in ds.variables:
+            raise CurrentSourceError(f"{path}: no variable {given!r} ({which}_variable); it has: "
+                                     f"{', '.join(map(str, ds.data_vars))}")
+        return ds[given]
+    for name in names:
+        for var in ds.data_vars.values():
+            if var.attrs.get("standard_name") == name:
+                return var
+    raise CurrentSourceError(f"{path}: no variable with standard_name {names[0]!r}; name it with "
+                             f"current.{which}_variable (variables: {', '.join(map(str, ds.data_vars))})")
+
+
+def _axis(ds: Any, var: Any, kind: str) -> str | None:
+    """The name of ``var``'s dimension that is latitude, longitude, time or depth (CF attributes or usual names)."""
+    names = {"latitude": ("lat", "latitude"), "longitude": ("lon", "longitude"),
+             "time": ("time", "t", "ocean_time"), "depth": ("depth", "z", "lev", "level", "deptht", "s_rho")}[kind]
+    units = {"latitude": ("degrees_north", "degree_north", "degree_N", "degrees_N"),
+             "longitude": ("degrees_east", "degree_east", "degree_E", "degrees_E")}.get(kind, ())
+    cf_axis = {"latitude": "Y", "longitude": "X", "time": "T", "depth": "Z"}[kind]
+    for dim in var.dims:
+        c = ds[dim] if dim in ds.variables else None
+        attrs = c.attrs if c is not None else {}
+        if (attrs.get("standard_name") == kind or attrs.get("units") in units or attrs.get("axis") == cf_axis
+                or (kind == "time" and c is not None and np.issubdtype(c.dtype, np.datetime64))):
+            return str(dim)
+    for dim in var.dims:
+        if str(dim).lower() in names and (dim in ds.variables or kind == "depth"):
+            return str(dim)
+    return None
+
+
+def _scale(var: Any, path: str) -> float:
+    units = " ".join(str(var.attrs.get("units", "m s-1")).strip().lower().replace("^", "").split())
+    units = units.replace("metres", "m").replace("meters", "m").replace("metre", "m").replace("meter", "m")
+    units = units.replace(" per second", "/s").replace("second-1", "s-1").replace("sec-1", "s-1")
+    if units not in _UNITS:
+        raise CurrentSourceError(f"{path}: {var.name}: units {var.attrs.get('units')!r} not understood "
+                                 "(expected m s-1, cm s-1 or knots)")
+    return _UNITS[units]
+
+
+def read_netcdf(path: str, east_variable: str = "", north_variable: str = "") -> RawCurrentGrid:
+    """Read a file's surface current (see the module's docstring); CurrentSourceError in one line."""
+    try:
+        import xarray as xr
+    except ImportError:  # pragma: no cover - a dependency of the project
+        raise CurrentSourceError("reading current files needs xarray (pip install xarray netCDF4)") from None
+    if not os.path.isfile(path):
+        raise CurrentSourceError(f"current.file: no such file {path}")
+    try:
+        ds = xr.open_dataset(path)
+    except Exception as exc:  # xarray raises many kinds for an unreadable file
+        raise CurrentSourceError(f"{path}: cannot be read as netCDF ({type(exc).__name__}: "
+                                 f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
+    with ds:
+        u_var = _find_velocity(ds, EAST_NAMES, east_variable, "east", path)
+        v_var = _find_velocity(ds, NORTH_NAMES, north_variable, "north", path)
+        if u_var.dims != v_var.dims:
+            raise CurrentSourceError(f"{path}: {u_var.name} and {v_var.name} are on different dimensions")
+        dims = {k: _axis(ds, u_var, k) for k in ("latitude", "longitude", "time", "depth")}
+        if dims["latitude"] is None or dims["longitude"] is None:
+            raise CurrentSourceError(f"{path}: {u_var.name}: no 1-D latitude/longitude dimensions (dims: "
+                                     f"{', '.join(map(str, u_var.dims))}; curvilinear grids are not supported)")
+        sel: dict[str, Any] = {}
+        if dims["depth"] is not None:
+            depth = np.asarray(ds[dims["depth"]].values if dims["depth"] in ds.variables
+                               else np.arange(u_var.sizes[dims["depth"]]), dtype=float)
+            sel[dims["depth"]] = int(np.argmin(np.abs(depth)))
+        for dim in u_var.dims:
+            if dim not in dims.values() and dim not in sel:
+                if u_var.sizes[dim] != 1:
+                    raise CurrentSourceError(f"{path}: {u_var.name}: dimension {dim!r} of size {u_var.sizes[dim]} "
+                                             "is neither latitude, longitude, time nor depth")
+                sel[str(dim)] = 0
+        order = [d for d in (dims["time"], dims["latitude"], dims["longitude"]) if d is not None]
+        u = np.asarray(u_var.isel(sel).transpose(*order).values, dtype=float) * _scale(u_var, path)
+        v = np.asarray(v_var.isel(sel).transpose(*order).values, dtype=float) * _scale(v_var, path)
+        lat = np.asarray(ds[dims["latitude"]].values, dtype=float)
+        lon = np.asarray(ds[dims["longitude"]].values, dtype=float)
+        times = None
+        if dims["time"] is not None:
+            tv = ds[dims["time"]].values
+            if not np.issubdtype(tv.dtype, np.datetime64):
+                raise CurrentSourceError(f"{path}: time: not decodable as dates (a CF 'units' of "
+                                         "'seconds since ...' and a standard calendar are needed)")
+            times = tv.astype("datetime64[ns]").astype(np.int64) / 1e9
+            if times.size == 1:       # one time slice: a snapshot, taken as steady
+                times, u, v = None, u[0], v[0]
+    if times is None:
+        u, v = u[None], v[None]
+    return _checked(RawCurrentGrid(lat, lon, times, u, v), path)
+
+
+def _checked(g: RawCurrentGrid, path: str) -> RawCurrentGrid:
+    lat, lon, u, v, times = g.lat, g.lon, g.u, g.v, g.times
+    if lat.size < 2 or lon.size < 2:
+        raise CurrentSourceError(f"{path}: needs at least 2 latitudes and 2 longitudes (has {lat.size} x {lon.size})")
+    if not (np.all(np.isfinite(lat)) and np.all(np.isfinite(lon)) and np.all(np.abs(lat) <= 90)):
+        raise CurrentSourceError(f"{path}: latitude/longitude values are not degrees")
+    if np.all(np.diff(lat) < 0):   # north to south, as many model files are
+        lat, u, v = lat[::-1].copy(), u[:, ::-1], v[:, ::-1]
+    if np.all(np.diff(lon) < 0):
+        lon, u, v = lon[::-1].copy(), u[:, :, ::-1], v[:, :, ::-1]
+    for name, axis in (("latitude", lat), ("longitude", lon)):
+        if not np.all(np.diff(axis) > 0):
+            raise CurrentSourceError(f"{path}: {name} is not monotonic")
+    if times is not None:
+        if not np.all(np.diff(times) > 0):
+            raise CurrentSourceError(f"{path}: time is not increasing")
+    finite = np.isfinite(u) & np.isfinite(v)
+    if not finite.any():
+        raise CurrentSourceError(f"{path}: every velocity value is missing")
+    u, v = np.where(finite, u, 0.0), np.where(finite, v, 0.0)
+    speed = float(np.max(np.hypot(u, v)))
+    if speed > MAX_SPEED:
+        raise CurrentSourceError(f"{path}: a current of {speed:.3g} m/s is not a sea current (units?)")
+    return RawCurrentGrid(lat, lon, times, np.ascontiguousarray(u), np.ascontiguousarray(v))
+
+
+def _bilinear(axis_y: np.ndarray, axis_x: np.ndarray, grid: np.ndarray, y: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``grid[..., iy, ix]`` interpolated at (y, x) (arrays of one shape), clamped to the axes."""
+    def weights(axis: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        q = np.clip(q, axis[0], axis[-1])
+        i = np.clip(np.searchsorted(axis, q, side="right") - 1, 0, axis.size - 2)
+        return i, (q - axis[i]) / (axis[i + 1] - axis[i])
+
+    iy, fy = weights(axis_y, y)
+    ix, fx = weights(axis_x, x)
+    return (grid[..., iy, ix] * (1 - fy) * (1 - fx) + grid[..., iy, ix + 1] * (1 - fy) * fx
+            + grid[..., iy + 1, ix] * fy * (1 - fx) + grid[..., iy + 1, ix + 1] * fy * fx)
+
+
+def parse_time(text: str, what: str = "current.start_time") -> float:
+    """ISO 8601 (UTC unless it says otherwise) -> seconds since the Unix epoch; CurrentSourceError."""
+    from datetime import UTC, datetime
+
+    try:
+        d = datetime.fromisoformat(text.replace("Z", "+00:00"))
+    except ValueError:
+        raise CurrentSourceError(f"{what}: {text!r} is not an ISO 8601 time (e.g. 2024-05-01T12:00:00Z)") from None
+    if d.tzinfo is None:
+        d = d.replace(tzinfo=UTC)
+    return d.timestamp()
+
+
+class GriddedCurrent:
+    """A gridded current in NED: ``vn``, ``ve`` [slice, row (north), col (east)] on a regular grid
+    (``north0 + row * dn``, ``east0 + col * de``); ``times`` (s of run time) of the slices."""
+
+    def __init__(self, raw: RawCurrentGrid, frame: LocalFrame, start_time: float | None = None,
+                 source: str = "current file") -> None:
+        self.source = source
+        lat, lon = raw.lat, raw.lon
+        lon = lon + 360.0 * np.round((frame.lon0 - lon.mean()) / 360.0)  # 0..360 files against a -180..180 origin
+        # The NED box inside the file's latitude/longitude box (its edges bow slightly in NED).
+        edge = np.linspace(0.0, 1.0, 9)
+        la = lat[0] + edge * (lat[-1] - lat[0])
+        lo = lon[0] + edge * (lon[-1] - lon[0])
+        south = [frame.geodetic_to_sea_level(lat[0], x)[0] for x in lo]
+        north = [frame.geodetic_to_sea_level(lat[-1], x)[0] for x in lo]
+        west = [frame.geodetic_to_sea_level(y, lon[0])[1] for y in la]
+        east = [frame.geodetic_to_sea_level(y, lon[-1])[1] for y in la]
+        n0, n1, e0, e1 = max(south), min(north), max(west), min(east)
+        if not (n1 > n0 and e1 > e0):
+            raise CurrentSourceError(f"{source}: the file's area is empty around the origin")
+        # Node spacing: the file's own (in metres), at most MAX_NODES per axis.
+        dlat = float(np.min(np.diff(lat))) * 111_000.0
+        dlon = float(np.min(np.diff(lon))) * 111_000.0 * max(math.cos(math.radians(frame.lat0)), 0.01)
+        nn = int(min(MAX_NODES, max(2, math.ceil((n1 - n0) / max(dlat, 1e-3)) + 1)))
+        ne = int(min(MAX_NODES, max(2, math.ceil((e1 - e0) / max(dlon, 1e-3)) + 1)))
+        slices = raw.u.shape[0]
+        if slices * nn * ne > MAX_VALUES:
+            raise CurrentSourceError(f"{source}: {slices} time slices of {nn} x {ne} nodes is too large; cut the "
+                                     "file to the area and time of the run first")
+        self.north_axis = np.linspace(n0, n1, nn)
+        self.east_axis = np.linspace(e0, e1, ne)
+        node_lat = np.empty((nn, ne))
+        node_lon = np.empty((nn, ne))
+        for i, n in enumerate(self.north_axis):
+            for j, e in enumerate(self.east_axis):
+                node_lat[i, j], node_lon[i, j] = frame.sea_level_to_geodetic(float(n), float(e))
+        self.ve = np.ascontiguousarray(_bilinear(lat, lon, raw.u, node_lat, node_lon))
+        self.vn = np.ascontiguousarray(_bilinear(lat, lon, raw.v, node_lat, node_lon))
+        self.steady = raw.times is None
+        if raw.times is None:
+            self.times = np.zeros(1)
+        else:
+            t0 = float(raw.times[0]) if start_time is None else float(start_time)
+            self.times = np.asarray(raw.times, dtype=float) - t0
+        self._times = [float(t) for t in self.times]
+        self.n0, self.e0 = float(n0), float(e0)
+        self.dn = float(self.north_axis[1] - self.north_axis[0])
+        self.de = float(self.east_axis[1] - self.east_axis[0])
+        self.rows, self.cols = nn, ne
+
+    # -- coverage ------------------------------------------------------------------------------
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """(north_min, north_max, east_min, east_max) in metres: where the file has data."""
+        return self.n0, float(self.north_axis[-1]), self.e0, float(self.east_axis[-1])
+
+    def time_span(self) -> tuple[float, float]:
+        """(first, last) run time (s) the file covers; (-inf, inf) for a steady file."""
+        if self.steady:
+            return -math.inf, math.inf
+        return self._times[0], self._times[-1]
+
+    def check_covers(self, north: tuple[float, float] | None = None, east: tuple[float, float] | None = None,
+                     t: tuple[float, float] | None = None, what: str = "the map") -> None:
+        """CurrentSourceError (one line) unless the file covers north x east (m) and times t (s)."""
+        n0, n1, e0, e1 = self.extent
+        tol = 1e-6
+        if north is not None and east is not None and (
+                north[0] < n0 - tol or north[1] > n1 + tol or east[0] < e0 - tol or east[1] > e1 + tol):
+            raise CurrentSourceError(
+                f"{self.source}: does not cover {what} (it covers north {n0:.0f}..{n1:.0f} m, east {e0:.0f}.."
+                f"{e1:.0f} m of the origin; {what} spans north {north[0]:.0f}..{north[1]:.0f} m, "
+                f"east {east[0]:.0f}..{east[1]:.0f} m)")
+        first, last = self.time_span()
+        if t is not None and (t[0] < first - tol or t[1] > last + tol):
+            raise CurrentSourceError(
+                f"{self.source}: does not cover the run's time (it covers t = {first:g}..{last:g} s of run "
+                f"time; the run needs {t[0]:g}..{t[1]:g} s; see current.start_time)")
+
+    # -- queries -------------------------------------------------------------------------------
+    def _slices(self, t: float) -> tuple[int, int, float]:
+        ts = self._times
+        if len(ts) == 1 or t <= ts[0]:
+            return 0, 0, 0.0
+        if t >= ts[-1]:
+            return len(ts) - 1, len(ts) - 1, 0.0
+        k = bisect.bisect_right(ts, t) - 1
+        return k, k + 1, (t - ts[k]) / (ts[k + 1] - ts[k])
+
+    def velocity_at(self, north: float, east: float, t: float) -> tuple[float, float]:
+        """(v_north, v_east) m/s at one point (plain floats)."""
+        gy = (north - self.n0) / self.dn
+        gx = (east - self.e0) / self.de
+        if gy != gy or gx != gx:
+            return 0.0, 0.0
+        gy = min(max(gy, 0.0), self.rows - 1.0)
+        gx = min(max(gx, 0.0), self.cols - 1.0)
+        r = min(int(gy), self.rows - 2)
+        c = min(int(gx), self.cols - 2)
+        fy, fx = gy - r, gx - c
+        k0, k1, ft = self._slices(t)
+        out = []
+        for a in (self.vn, self.ve):
+            vals = []
+            for k in (k0, k1) if k1 != k0 else (k0,):
+                vals.append(a.item(k, r, c) * (1 - fy) * (1 - fx) + a.item(k, r, c + 1) * (1 - fy) * fx
+                            + a.item(k, r + 1, c) * fy * (1 - fx) + a.item(k, r + 1, c + 1) * fy * fx)
+            out.append(vals[0] if len(vals) == 1 else vals[0] * (1 - ft) + vals[1] * ft)
+        return out[0], out[1]
+
+    def velocity(self, north: Any, east: Any, t: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Vectorised (v_north, v_east) m/s; ``t`` a scalar or an array broadcast with the points."""
+        n, e, tt = np.broadcast_arrays(np.asarray(north, float), np.asarray(east, float), np.asarray(t, float))
+        n, e = np.nan_to_num(n), np.nan_to_num(e)
+        vn = np.empty(n.shape)
+        ve = np.empty(n.shape)
+        for tv in np.unique(tt):
+            m = tt == tv
+            k0, k1, ft = self._slices(float(tv))
+            vn[m] = (_bilinear(self.north_axis, self.east_axis, self.vn[k0], n[m], e[m]) * (1 - ft)
+                     + _bilinear(self.north_axis, self.east_axis, self.vn[k1], n[m], e[m]) * ft)
+            ve[m] = (_bilinear(self.north_axis, self.east_axis, self.ve[k0], n[m], e[m]) * (1 - ft)
+                     + _bilinear(self.north_axis, self.east_axis, self.ve[k1], n[m], e[m]) * ft)
+        return vn, ve
+
+
+_FILE_CACHE: dict[tuple, GriddedCurrent] = {}
+
+
+def load_file(path: str, frame: LocalFrame, east_variable: str = "", north_variable: str = "",
+              start_time: str = "") -> GriddedCurrent:
+    """A current file as a :class:`GriddedCurrent` in ``frame`` (cached per file version and frame)."""
+    try:
+        mtime = os.stat(path).st_mtime_ns
+    except OSError:
+        raise CurrentSourceError(f"current.file: no such file {path}") from None
+    key = (os.path.abspath(path), mtime, frame.lat0, frame.lon0, frame.alt0, east_variable, north_variable,
+           start_time)
+    if key not in _FILE_CACHE:
+        raw = read_netcdf(path, east_variable, north_variable)
+        t0 = parse_time(start_time) if start_time else None
+        _FILE_CACHE[key] = GriddedCurrent(raw, frame, t0, source=os.path.basename(path))
+    return _FILE_CACHE[key]
+
+
+def make_current(params: Any, frame: LocalFrame | None = None) -> CurrentSource | None:
+    """The current a ``[current]`` table describes (duck-typed ``CurrentParams``), or None when
+    disabled. ``frame``: the geodesy origin, needed for a file."""
+    if not params.enabled:
+        return None
+    file = getattr(params, "file", "")
+    uniform = tuple(getattr(params, "uniform", ()))
+    if file:
+        if frame is None:
+            raise CurrentSourceError("current.file: needs the geodesy origin")
+        return load_file(file, frame, params.east_variable, params.north_variable, params.start_time)
+    if uniform:
+        return UniformCurrent(float(uniform[0]), float(uniform[1]))
+    from common.current_field import CurrentField
+
+    return CurrentField(params)
+
+
+class NoCurrent:
+    """Still water (``enabled = false``): the simulator's stand-in for None."""
+
+    def velocity_at(self, north: float, east: float, t: float) -> tuple[float, float]:
+        return 0.0, 0.0
+
+    def velocity(self, north: Any, east: Any, t: Any) -> tuple[np.ndarray, np.ndarray]:
+        shape = np.broadcast_shapes(np.shape(north), np.shape(east), np.shape(t))
+        return np.zeros(shape), np.zeros(shape)

@@ -1,0 +1,262 @@
+"""Vector charts as scenario maps: GeoJSON, shapefiles and the other formats GDAL reads, rasterised
+onto the planning grid.
+
+A chart holds obstacles in WGS-84 longitude/latitude: polygons (land, piers, breakwaters) as they
+are; lines and points (a mole drawn as a line, piles and buoys) grown by a buffer in metres, the
+feature's own ``buffer`` property or the scenario's ``chart_buffer``. Every feature is an obstacle
+but one whose ``obstacle`` property is false; of an S-57 cell, the obstacle layers
+(:data:`S57_OBSTACLE_LAYERS`: land, shoreline constructions, obstructions, pontoons ...).
+
+The grid covers the chart's bounds, or ``extent`` = [west, south, east, north] in metres from the
+origin of the scenario's positions (the configuration's ``[geodesy]`` origin, or the scenario's
+``origin``). Its south-west corner becomes the run's NED origin (``[geodesy] lat0/lon0``: see
+:func:`geodesy_overrides`), so the map's metres, the simulator's and the GPS's agree; positions the
+scenario gives in metres are moved onto it (``hil.scenario``). Each vertex goes to
+metres through the exact tangent-plane conversion (``common.geodesy``); buffers are taken in metres;
+a cell is an obstacle when the geometry comes within half a cell's diagonal of its centre (every
+cell the geometry touches, so obstacles are never thinned). The simulator's true world (its range
+sensor and collision judge) is this same grid plus the scenario's uncharted discs.
+
+Readers. GeoJSON (RFC 7946: always longitude/latitude) is read by the standard library and shapely.
+Other files go through pyogrio (GDAL): shapefiles (.shp with .dbf/.shx, and .prj when present),
+GeoPackage, KML and S-57 ENC cells (.000: the obstacle layers only; no S-57 cell has been read
+here). Files in a projected CRS are refused: export them
+in WGS-84 (EPSG:4326).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from common.geodesy import LocalFrame
+from hil.errors import ConfigError
+
+# S-57 object classes that are obstacles to a boat (IHO S-57 Appendix A): an ENC cell's other layers
+# (depth areas, fairways, lights ...) cover the water itself and are not read.
+S57_OBSTACLE_LAYERS = frozenset({"LNDARE", "SLCONS", "OBSTRN", "PONTON", "HULKES", "PILPNT", "MORFAC", "WRECKS",
+                                 "UWTROC", "DRYDOC", "FLODOC", "GATCON", "DAMCON", "CAUSWY", "PYLONS", "BRIDGE"})
+CHART_SUFFIXES = (".geojson", ".json", ".shp", ".gpkg", ".kml", ".000")
+MAX_CELLS = 16_000_000   # 4000 x 4000 cells: a planning grid the planner and the simulator hold in memory
+
+
+def is_chart(path: str | Path) -> bool:
+    """Whether a scenario's ``map`` names a vector chart (not a .npy/.png grid)."""
+    return Path(path).suffix.lower() in CHART_SUFFIXES
+
+
+@dataclass(frozen=True)
+class ChartFeature:
+    """One obstacle: a shapely geometry in longitude/latitude degrees and its buffer (m, None: the default)."""
+
+    geometry: Any
+    buffer: float | None
+
+
+@dataclass(frozen=True)
+class ChartGrid:
+    """A rasterised chart: ``occ`` bool [rows (north), cols (east)], True = obstacle; ``origin``
+    (lat, lon) degrees of the south-west corner; ``resolution`` m/cell."""
+
+    occ: np.ndarray
+    origin: tuple[float, float]
+    resolution: float
+
+
+def _buffer_of(props: dict[str, Any] | None, source: str) -> float | None:
+    if not props or props.get("buffer") is None:
+        return None
+    b = props["buffer"]
+    if isinstance(b, bool) or not isinstance(b, (int, float)) or not (0 <= b <= 1000):
+        raise ConfigError(f"{source}: a feature's buffer must be a number of metres in 0..1000 (got {b!r})")
+    return float(b)
+
+
+def _read_geojson(path: Path) -> list[ChartFeature]:
+    from shapely.geometry import shape
+
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ConfigError(f"{path}: not a GeoJSON file ({exc})") from None
+    if not isinstance(doc, dict) or "type" not in doc:
+        raise ConfigError(f"{path}: not a GeoJSON object (no 'type')")
+    if doc["type"] == "FeatureCollection":
+        items = doc.get("features")
+        if not isinstance(items, list):
+            raise ConfigError(f"{path}: a FeatureCollection without a 'features' list")
+    elif doc["type"] == "Feature":
+        items = [doc]
+    else:
+        items = [{"type": "Feature", "geometry": doc, "properties": {}}]
+    out = []
+    for i, f in enumerate(items):
+        if not isinstance(f, dict) or not isinstance(f.get("geometry"), dict):
+            continue   # a feature without geometry (allowed by RFC 7946) is no obstacle
+        try:
+            geom = shape(f["geometry"])
+        except Exception as exc:  # shapely raises several kinds for malformed coordinates
+            raise ConfigError(f"{path}: feature {i}: bad geometry ({type(exc).__name__}: {exc})") from None
+        props = f.get("properties") if isinstance(f.get("properties"), dict) else None
+        if props and props.get("obstacle") is False:
+            continue   # marked as no obstacle (a water area, a label)
+        out.append(ChartFeature(geom, _buffer_of(props, f"{path}: feature {i}")))
+    return out
+
+
+def _read_ogr(path: Path) -> list[ChartFeature]:
+    try:
+        import pyogrio
+        import pyogrio.raw
+        import shapely
+    except ImportError:  # pragma: no cover - dependencies of the project
+        raise ConfigError(f"{path}: reading this chart format needs pyogrio (pip install pyogrio)") from None
+    try:
+        layers = [str(name) for name, gtype in pyogrio.list_layers(path) if gtype is not None]
+        if path.suffix.lower() == ".000":
+            layers = [name for name in layers if name.upper() in S57_OBSTACLE_LAYERS]
+    except Exception as exc:  # pyogrio's DataSourceError and friends
+        raise ConfigError(f"{path}: cannot be read as a chart ({str(exc).splitlines()[0]})") from None
+    out: list[ChartFeature] = []
+    for layer in layers:
+        try:
+            meta, _fids, wkb, fields = pyogrio.raw.read(path, layer=layer, force_2d=True)
+        except Exception as exc:
+            raise ConfigError(f"{path}: layer {layer}: cannot be read ({str(exc).splitlines()[0]})") from None
+        crs = meta.get("crs")
+        if crs and crs not in ("EPSG:4326", "OGC:CRS84", "EPSG:4269", "EPSG:4258"):
+            raise ConfigError(f"{path}: layer {layer}: coordinates in {crs}; export the chart in WGS-84 "
+                              "longitude/latitude (EPSG:4326)")
+        names = [str(n) for n in meta.get("fields", [])]
+        keep = fields[names.index("obstacle")] if "obstacle" in names else None
+        buffers = fields[names.index("buffer")] if "buffer" in names else None
+        for i, g in enumerate(wkb):
+            if g is None or (keep is not None and keep[i] in (False, 0, "false", "no")):
+                continue
+            b = None if buffers is None else buffers[i]
+            b = None if b is None or (isinstance(b, float) and math.isnan(b)) else b
+            out.append(ChartFeature(shapely.from_wkb(g), _buffer_of({"buffer": b}, f"{path}: layer {layer}")))
+    return out
+
+
+_CACHE: dict[tuple, list[ChartFeature]] = {}
+
+
+def read_chart(path: str | Path) -> list[ChartFeature]:
+    """The chart's features (longitude/latitude); ConfigError in one line on a bad file."""
+    p = Path(path)
+    try:
+        key = (str(p.resolve()), os.stat(p).st_mtime_ns)
+    except OSError:
+        raise ConfigError(f"map: no such chart {p}") from None
+    if key not in _CACHE:
+        feats = _read_geojson(p) if p.suffix.lower() in (".geojson", ".json") else _read_ogr(p)
+        feats = [f for f in feats if not f.geometry.is_empty]
+        if not feats:
+            raise ConfigError(f"{p}: the chart has no features")
+        for f in feats:
+            lon0, lat0, lon1, lat1 = f.geometry.bounds
+            if not (-180 <= lon0 <= lon1 <= 360 and -89 <= lat0 <= lat1 <= 89):
+                raise ConfigError(f"{p}: coordinates ({lon0:g}, {lat0:g}) are not longitude/latitude degrees; "
+                                  "export the chart in WGS-84 (EPSG:4326)")
+        _CACHE[key] = feats
+    return _CACHE[key]
+
+
+def chart_bounds(features: list[ChartFeature]) -> tuple[float, float, float, float]:
+    """(lon_min, lat_min, lon_max, lat_max) of every feature."""
+    b = np.array([f.geometry.bounds for f in features])
+    return float(b[:, 0].min()), float(b[:, 1].min()), float(b[:, 2].max()), float(b[:, 3].max())
+
+
+def grid_corner(path: str | Path, positions: LocalFrame, extent: tuple[float, ...] = ()) -> tuple[float, float]:
+    """(lat, lon) of the map's south-west corner: ``extent``'s [west, south] metres from the positions'
+    origin when given, else the chart's south-west bound."""
+    if extent:
+        return positions.sea_level_to_geodetic(float(extent[1]), float(extent[0]))
+    lon0, lat0, _lon1, _lat1 = chart_bounds(read_chart(path))
+    return lat0, lon0
+
+
+def to_metres(geometry: Any, frame: LocalFrame) -> Any:
+    """A longitude/latitude geometry in map metres (x east, y north) of ``frame``."""
+    import shapely
+
+    def convert(coords: np.ndarray) -> np.ndarray:
+        out = np.empty_like(coords)
+        for i, (lon, lat) in enumerate(coords):
+            n, e = frame.geodetic_to_sea_level(float(lat), float(lon))
+            out[i] = (e, n)
+        return out
+
+    return shapely.transform(geometry, convert)
+
+
+def rasterise(path: str | Path, resolution: float, positions: LocalFrame, extent: tuple[float, ...] = (),
+              default_buffer: float = 2.0) -> ChartGrid:
+    """The chart at ``path`` on a grid of ``resolution`` m (see the module's docstring); ``extent``
+    [west, south, east, north] in metres of ``positions`` (the scenario's metres), or the chart's bounds."""
+    import shapely
+
+    feats = read_chart(path)
+    lat0, lon0 = grid_corner(path, positions, extent)
+    frame = LocalFrame(lat0, lon0, positions.alt0)
+    shapes = []
+    for f in feats:
+        b = default_buffer if f.buffer is None else f.buffer
+        for g in shapely.get_parts(to_metres(f.geometry, frame)):   # a collection's members one by one
+            if g.geom_type in ("Point", "LineString", "LinearRing"):
+                if b <= 0:
+                    raise ConfigError(f"{path}: points and lines need a buffer > 0 m (chart_buffer or a "
+                                      "'buffer' property)")
+                g = g.buffer(b)
+            elif b > 0 and f.buffer is not None:
+                g = g.buffer(b)
+            shapes.append(g)
+    world = shapely.union_all(shapes)
+    if extent:
+        width, height = float(extent[2] - extent[0]), float(extent[3] - extent[1])
+    else:
+        _x0, _y0, width, height = world.bounds
+    if not (width > 0 and height > 0):
+        raise ConfigError(f"{path}: the map's extent is empty ({width:g} m x {height:g} m east and north of "
+                          f"the origin {lat0:.6f}, {lon0:.6f})")
+    # (a bound less than 1 % of a cell past a whole cell adds no cell: the growth below still marks it)
+    cols, rows = int(math.ceil(width / resolution - 0.01)), int(math.ceil(height / resolution - 0.01))
+    if rows * cols > MAX_CELLS:
+        raise ConfigError(f"{path}: {width:.0f} m x {height:.0f} m at {resolution:g} m is {cols} x {rows} cells "
+                          f"(at most {MAX_CELLS:,}); choose a coarser resolution or a smaller extent")
+    # Every cell the geometry touches: grow it by half a cell's diagonal and test the centres.
+    grown = world.buffer(resolution * math.sqrt(0.5))
+    shapely.prepare(grown)
+    ys, xs = (np.mgrid[0:rows, 0:cols] + 0.5) * resolution
+    occ = shapely.contains_xy(grown, xs.ravel(), ys.ravel()).reshape(rows, cols)
+    return ChartGrid(occ, (lat0, lon0), float(resolution))
+
+
+def geodesy_overrides(scenario: str | None, geodesy: Any) -> list[str]:
+    """``--set`` overrides that put the NED origin at a chart scenario's map corner and keep the origin
+    of its positions in metres (``geodesy.positions_origin``): [] for other scenarios, and for a
+    scenario that does not load (the command reports that itself). ``geodesy``: the configuration's
+    ``[geodesy]``; the same lines again when it already holds them (a run's processes)."""
+    if not scenario:
+        return []
+    from hil import scenario as scenarios
+    from hil.errors import UsageError
+
+    try:
+        spec = scenarios.load_spec(scenario)
+        if spec.kind != "fixed" or not is_chart(spec.map):
+            return []
+        positions = scenarios.positions_frame(spec, geodesy)
+        lat0, lon0 = grid_corner(scenarios.resolve_file(spec, spec.map), positions, spec.extent)
+    except (ConfigError, UsageError):
+        return []
+    return [f"geodesy.lat0={lat0!r}", f"geodesy.lon0={lon0!r}",
+            f"geodesy.positions_origin=[{positions.lat0!r}, {positions.lon0!r}]"]

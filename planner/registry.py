@@ -1,0 +1,102 @@
+"""The planners of ``planner.params.REGISTRY``, built and warmed up from the table.
+
+Above the concrete planners: ``planner.core`` (the shared solve loop) knows none of its
+subclasses; this module imports each one named by the table, on first use.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import time
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from planner.params import ALGORITHM_NAMES, ENTRIES, REGISTRY, Objective, PlannerParams
+
+if TYPE_CHECKING:
+    from planner.core import TreePlanner
+    from planner.field import GridField
+
+
+def planner_class(name: str) -> type[TreePlanner]:
+    """The class registered as ``name``; ValueError for an unknown name."""
+    entry = ENTRIES.get(name)
+    if entry is None:
+        raise ValueError(f"unknown planner {name!r} (expected one of: {', '.join(ALGORITHM_NAMES)})")
+    module, cls = entry.target.split(":")
+    return getattr(importlib.import_module(module), cls)
+
+
+def make_planner(name: str, params: PlannerParams, seed: int | None = None) -> TreePlanner:
+    """The planner called ``name`` (one of ALGORITHM_NAMES); ValueError for an unknown name."""
+    return planner_class(name)(params, seed)
+
+
+@dataclasses.dataclass(frozen=True)
+class WarmUp:
+    """What :func:`warm_up_info` did: ``seconds`` spent, and whether numba had to compile
+    (``compiled``: a cold or stale cache; otherwise the machine code came from the cache)."""
+
+    seconds: float
+    compiled: bool
+
+
+_WARM: WarmUp | None = None
+
+
+def _cache_misses() -> int:
+    from planner import _kernels, _png, _tree, png
+
+    n = 0
+    for mod in (_tree, _kernels, _png, png):
+        for obj in vars(mod).values():
+            stats = getattr(obj, "stats", None)
+            if stats is not None and hasattr(stats, "cache_misses"):
+                n += sum(stats.cache_misses.values())
+    return n
+
+
+def warm_up_info() -> WarmUp:
+    """Load (or, with a cold cache, compile) every compiled function by solving tiny problems
+    with every registered planner, with and without a current field, as the online loop does
+    (heading, reference path, perceptual domain). Only the first call in a process does work;
+    later calls return the first call's record. The first solve in a process otherwise pays
+    ~0.2 s of cache loading (~7 s of compilation with a cold cache) inside its time budget."""
+    global _WARM
+    if _WARM is not None:
+        return _WARM
+    from planner.core import compiled_clock_ok
+    from planner.field import GridField
+    from planner.gridmap import OccupancyGrid
+    from planner.problem import PlanningProblem
+    from planner.termination import Termination
+
+    t0 = time.monotonic()
+    misses0 = _cache_misses()
+    occ = np.zeros((40, 40), dtype=bool)
+    occ[10:30, 19:21] = True
+    grid = OccupancyGrid(occ, 0.5)
+    grid.segment_free(1.0, 1.0, 18.0, 18.0)
+    ref = np.array([[2.0, 10.0], [18.0, 10.0]])
+    grid.polyline_free(ref)
+    cases: tuple[tuple[Objective, GridField | None], ...] = (("length", None),
+                                                            ("current", GridField.uniform(0.3, 0.1)))
+    for objective, field in cases:
+        for repair in (False, True):
+            params = PlannerParams(max_nodes=2000, objective=objective, png_repair=repair)
+            for entry in REGISTRY:
+                if repair and not planner_class(entry.name).uses_png:
+                    continue
+                problem = PlanningProblem(grid, (2.0, 10.0), (18.0, 10.0), start_heading=0.0, field=field,
+                                          reference_path=ref, domain_center=(10.0, 10.0), domain_radius=12.0)
+                make_planner(entry.name, params).solve(problem, Termination.iterations(300))
+    compiled_clock_ok()
+    _WARM = WarmUp(seconds=time.monotonic() - t0, compiled=_cache_misses() > misses0)
+    return _WARM
+
+
+def warm_up() -> float:
+    """:func:`warm_up_info`, returning the seconds it took."""
+    return warm_up_info().seconds

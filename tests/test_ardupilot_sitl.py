@@ -1,0 +1,141 @@
+"""`hil run --autopilot ardupilot`: the real ArduRover SITL flies the simulated boat (hil/ardupilot.py).
+
+The end-to-end tests need the ArduRover SITL binary at ../shared/ardupilot/ardurover (from the
+repository's root) and skip, saying so, where it is absent; the errors a user meets without it do not."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from conftest import REPO, run_hil
+
+SITL = REPO.parent / "shared" / "ardupilot" / "ardurover"
+needs_sitl = pytest.mark.skipif(not SITL.is_file(), reason=f"the ArduRover SITL binary is not at {SITL}")
+NO_ENV = {"ARDUPILOT_SITL": ""}
+
+
+def _one_line_error(r: subprocess.CompletedProcess, *words: str) -> str:
+    assert r.returncode == 2, r.stderr
+    lines = [ln for ln in r.stderr.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    for w in words:
+        assert w in lines[0], lines[0]
+    return lines[0]
+
+
+def test_without_a_binary_the_user_is_told_how_in_one_line(tmp_path: Path) -> None:
+    r = run_hil("run", "--scenario", "harbour", "--autopilot", "ardupilot", "--out", str(tmp_path / "r"),
+                env=NO_ENV, timeout=120)
+    _one_line_error(r, "--ardupilot-bin", "ARDUPILOT_SITL")
+    r = run_hil("run", "--autopilot", "ardupilot", "--ardupilot-bin", str(tmp_path / "none"),
+                "--out", str(tmp_path / "r2"), timeout=120)
+    _one_line_error(r, "no such file")
+
+
+def test_a_broken_binary_is_one_line(tmp_path: Path) -> None:
+    for name, body in (("garbage", b"\x7fELF not really"), ("script", b"#!/bin/sh\necho hello\n")):
+        folder = tmp_path / name
+        folder.mkdir()
+        fake = folder / "ardurover"
+        fake.write_bytes(body)
+        fake.chmod(0o755)
+        for parm in ("rover.parm", "motorboat.parm", "rover-skid.parm"):
+            (folder / parm).write_text("FRAME_CLASS 2\n")
+        r = run_hil("run", "--autopilot", "ardupilot", "--out", str(folder / "r"), env={"ARDUPILOT_SITL": str(fake)},
+                    timeout=120)
+        _one_line_error(r, str(fake))
+    os.chmod(fake, 0o644)
+    r = run_hil("run", "--autopilot", "ardupilot", "--ardupilot-bin", str(fake), "--out", str(tmp_path / "r3"),
+                timeout=120)
+    _one_line_error(r, "not executable")
+
+
+def test_a_firmware_that_never_calls_the_physics_ends_the_run_with_its_reason(tmp_path: Path) -> None:
+    """A binary that passes the check but exits at once: no servo packet for IDLE_TIMEOUT_S, one line
+    that names its exit code and its last output, exit 1, and no ArduRover left behind."""
+    folder = tmp_path / "sitl"
+    folder.mkdir()
+    fake = folder / "ardurover"
+    fake.write_text('#!/bin/sh\nif [ "$1" = --help ]; then echo "--model MODEL"; exit 0; fi\n'
+                    'echo "cannot open the JSON socket"; exit 3\n')
+    fake.chmod(0o755)
+    for parm in ("rover.parm", "motorboat.parm", "rover-skid.parm"):
+        (folder / parm).write_text("SERVO1_FUNCTION 73\nSERVO3_FUNCTION 74\n")
+    r = run_hil("run", "--autopilot", "ardupilot", "--ardupilot-bin", str(fake), "--out", str(tmp_path / "r"),
+                "--no-plot", timeout=180)
+    assert r.returncode == 1, r.stderr
+    last = r.stderr.strip().splitlines()[-1]
+    assert "sent no servo packet" in last and "exit code 3" in last and "cannot open the JSON socket" in last
+    assert "Traceback" not in r.stderr
+
+
+def test_lockstep_only(tmp_path: Path) -> None:
+    r = run_hil("run", "--autopilot", "ardupilot", "--speedup", "2", "--ardupilot-bin", str(SITL),
+                "--out", str(tmp_path / "r"), timeout=120)
+    _one_line_error(r, "--speedup")
+
+
+@needs_sitl
+def test_ardurover_flies_the_harbour_route_and_a_rerun_is_byte_identical(tmp_path: Path) -> None:
+    """ArduRover (motorboat-skid parameters plus the project's) flies the harbour's global route to the
+    goal without collision, in lockstep with the JSON physics; two runs write the same run.tlog, byte for
+    byte. A third, with a ground station connected to ArduRover's SERIAL1 at a moment of wall time, is
+    judged the same (its run.tlog is not compared: docs/ardupilot.md, "Repeatability")."""
+    from pymavlink import mavutil
+
+    outs = [tmp_path / "a", tmp_path / "b", tmp_path / "gcs"]
+    cmd = [sys.executable, "-m", "hil", "run", "--scenario", "harbour", "--autopilot", "ardupilot",
+           "--duration", "260", "--json", "--no-plot"]
+    env = {**os.environ, "ARDUPILOT_SITL": str(SITL)}
+    summaries = []
+    for out in outs:
+        proc = subprocess.Popen([*cmd, "--out", str(out)], cwd=REPO, env=env, text=True,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        try:
+            if out.name == "gcs":   # a ground station on ArduRover's SERIAL1, as on any SITL
+                port = None
+                deadline = time.monotonic() + 120
+                while port is None and time.monotonic() < deadline:
+                    line = proc.stderr.readline()
+                    if not line:
+                        break
+                    if "ground stations on TCP" in line:
+                        port = int(line.rsplit(" ", 1)[1])
+                assert port is not None, "no ground-station port announced"
+                gcs = mavutil.mavlink_connection(f"tcp:127.0.0.1:{port}", source_system=250, retries=20)
+                try:
+                    hb = gcs.wait_heartbeat(timeout=60)
+                finally:
+                    gcs.close()
+                assert hb is not None and hb.type == mavutil.mavlink.MAV_TYPE_SURFACE_BOAT
+                assert hb.autopilot == mavutil.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
+            stdout, stderr = proc.communicate(timeout=600)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate()
+        assert proc.returncode == 0, stderr[-2000:]
+        summaries.append(json.loads(stdout))
+    s = summaries[0]
+    assert s["outcome"] == "goal" and s["reached_goal"] and s["collisions"] == 0
+    assert s["min_clearance_m"] > 1.0 and s["energy_J"] > 0 and s["actuators"] == "ardupilot"
+    ap = s["simulator"]["ardupilot"]
+    assert ap["auto_at_s"] is not None and ap["mission_items"] > 10
+    assert ap["mission_time_s"] == pytest.approx(s["sim_time_s"] - ap["auto_at_s"], abs=1e-3)
+    assert any("Reached waypoint" in t for t in ap["statustext"])
+    tlogs = [(o / "run.tlog").read_bytes() for o in outs[:2]]
+    assert len(tlogs[0]) > 100_000 and tlogs[0] == tlogs[1]
+    judged = ("outcome", "reached_goal", "collisions", "min_clearance_m", "sim_time_s", "path_length_m", "energy_J")
+    for other in summaries[1:]:
+        assert {k: other[k] for k in judged} == {k: s[k] for k in judged}
+    types = set()
+    m = mavutil.mavlink_connection(str(outs[0] / "run.tlog"))
+    while (msg := m.recv_msg()) is not None:
+        types.add(msg.get_type())
+    assert {"HIL_STATE_QUATERNION", "HEARTBEAT", "MISSION_ITEM_INT", "MISSION_ACK", "COMMAND_LONG"} <= types

@@ -1,0 +1,210 @@
+"""Vector charts as scenario maps (hil.charts): GeoJSON and shapefiles in longitude/latitude rasterised
+onto the planning grid, the run's origin at the map's corner, bad charts refused in one line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("shapely")
+
+from support.world_files import LAT0, LON0, harbour_chart  # noqa: E402
+
+from common.geodesy import LocalFrame  # noqa: E402
+from hil import charts  # noqa: E402
+from hil import scenario as scenarios  # noqa: E402
+from hil.config import CONFIG_DIR  # noqa: E402
+from hil.errors import ConfigError  # noqa: E402
+
+FRAME = LocalFrame(LAT0, LON0)
+
+
+def _chart(tmp_path: Path, doc: dict | None = None, name: str = "harbour.geojson") -> Path:
+    p = tmp_path / name
+    p.write_text(json.dumps(doc if doc is not None else harbour_chart(FRAME)))
+    return p
+
+
+def _cell(grid: charts.ChartGrid, x: float, y: float) -> bool:
+    return bool(grid.occ[int(y / grid.resolution), int(x / grid.resolution)])
+
+
+def test_a_geojson_chart_is_rasterised_around_its_south_west_corner(tmp_path):
+    grid = charts.rasterise(_chart(tmp_path), 0.5, FRAME)
+    assert grid.origin == pytest.approx((LAT0, LON0), abs=1e-6)   # the bound of a curved parallel: mm
+    assert grid.occ.shape == (300, 400)                   # 150 m x 200 m (the chart's bounds) at 0.5 m
+    assert _cell(grid, 100.0, 10.0) and _cell(grid, 65.0, 80.0)          # quay, pier
+    assert _cell(grid, 122.4, 100.0) and not _cell(grid, 124.0, 100.0)  # the mole: a line grown by 3 m
+    assert _cell(grid, 151.5, 40.0) and not _cell(grid, 153.0, 40.0)    # a pile: a point grown by 2 m
+    assert not _cell(grid, 40.0, 60.0) and not _cell(grid, 100.0, 120.0)  # open water
+    # every cell the geometry touches: the pier's west edge (x = 60 m) marks the cell west of it too
+    assert _cell(grid, 59.8, 50.0) and not _cell(grid, 58.9, 50.0)
+
+
+def test_a_shapefile_gives_the_same_grid_as_the_geojson(tmp_path):
+    pyogrio = pytest.importorskip("pyogrio")
+    import shapely
+    from shapely.geometry import shape
+
+    doc = harbour_chart(FRAME)
+    geoms = [shape(f["geometry"]) for f in doc["features"]]
+    buffers = np.array([f["properties"].get("buffer", np.nan) for f in doc["features"]], dtype=float)
+    # a shapefile holds one geometry type: polygons in one file, the rest grown in the GeoJSON's way
+    poly = [i for i, g in enumerate(geoms) if g.geom_type == "Polygon"]
+    for name, idx in (("polygons.shp", poly),):
+        pyogrio.raw.write(tmp_path / name, shapely.to_wkb(np.array([geoms[i] for i in idx], dtype=object)),
+                          field_data=[buffers[idx]], fields=["buffer"], geometry_type="Polygon", crs="EPSG:4326",
+                          driver="ESRI Shapefile")
+    shp = charts.rasterise(tmp_path / "polygons.shp", 0.5, FRAME, extent=(0.0, 0.0, 200.0, 150.0))
+    only_polygons = {"type": "FeatureCollection", "features": [doc["features"][i] for i in poly]}
+    gj = charts.rasterise(_chart(tmp_path, only_polygons, "p.geojson"), 0.5, FRAME, extent=(0.0, 0.0, 200.0, 150.0))
+    assert shp.occ.sum() > 1000
+    np.testing.assert_array_equal(shp.occ, gj.occ)
+
+
+def test_a_projected_shapefile_is_refused(tmp_path):
+    pyogrio = pytest.importorskip("pyogrio")
+    import shapely
+    from shapely.geometry import box
+
+    pyogrio.raw.write(tmp_path / "utm.shp", shapely.to_wkb(np.array([box(500000, 4300000, 500100, 4300100)])),
+                      field_data=[], fields=[], geometry_type="Polygon", crs="EPSG:32651", driver="ESRI Shapefile")
+    with pytest.raises(ConfigError, match="coordinates in EPSG:32651; export the chart in WGS-84") as err:
+        charts.rasterise(tmp_path / "utm.shp", 1.0, FRAME)
+    assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("doc, message", [
+    ("not json", "not a GeoJSON file"),
+    ({"type": "FeatureCollection", "features": []}, "the chart has no features"),
+    ({"type": "Point", "coordinates": [500000.0, 4300000.0]}, "not longitude/latitude degrees"),
+    ({"type": "Feature", "properties": {"buffer": -1}, "geometry": {"type": "Point", "coordinates": [121.65, 38.92]}},
+     "buffer must be a number of metres"),
+    ({"type": "Feature", "properties": {}, "geometry": {"type": "Polygon", "coordinates": [[[1, 2]]]}},
+     "bad geometry"),
+])
+def test_bad_charts_are_refused_in_one_line(tmp_path, doc, message):
+    p = tmp_path / "bad.geojson"
+    p.write_text(doc if isinstance(doc, str) else json.dumps(doc))
+    with pytest.raises(ConfigError, match=message) as err:
+        charts.rasterise(p, 1.0, FRAME)
+    assert "\n" not in str(err.value)
+
+
+def test_a_grid_too_large_is_refused(tmp_path):
+    with pytest.raises(ConfigError, match="choose a coarser resolution"):
+        charts.rasterise(_chart(tmp_path), 0.04, FRAME)
+
+
+SCENARIO = """name = "chart"
+description = "a harbour from a GeoJSON chart"
+kind = "fixed"
+map = "harbour.geojson"
+resolution = 0.5
+start = [30.0, 50.0]
+goal = [185.0, 130.0]
+uncharted = [[100.0, 60.0, 3.0]]
+"""
+
+
+# The chart drawn 40 m west and 30 m south of the configuration's origin: its south-west bound is there.
+SHIFTED = LocalFrame(*FRAME.sea_level_to_geodetic(-30.0, -40.0))
+# SCENARIO's positions in metres from the configuration's origin, for the shifted chart
+SHIFTED_SCENARIO = (SCENARIO.replace("start = [30.0, 50.0]", "start = [-10.0, 20.0]")
+                    .replace("goal = [185.0, 130.0]", "goal = [145.0, 100.0]")
+                    .replace("[[100.0, 60.0, 3.0]]", "[[60.0, 30.0, 3.0]]"))
+
+
+def test_positions_in_metres_count_from_the_configurations_origin(tmp_path):
+    """The grid starts at the chart's south-west bound; the run's NED origin moves there, and the
+    scenario's positions in metres (from the configuration's origin) move with it."""
+    _chart(tmp_path, harbour_chart(SHIFTED))
+    (tmp_path / "s.toml").write_text(SHIFTED_SCENARIO)
+    scen = scenarios.load(str(tmp_path / "s.toml"))
+    assert scen.occ.shape == (300, 400)
+    assert (scen.geodesy.lat0, scen.geodesy.lon0) == pytest.approx((SHIFTED.lat0, SHIFTED.lon0), abs=1e-6)
+    assert scen.geodesy.positions_origin == (LAT0, LON0)
+    assert scen.start == pytest.approx((30.0, 50.0), abs=0.01) and scen.goal == pytest.approx((185.0, 130.0), abs=0.01)
+    assert scen.uncharted[0] == pytest.approx((100.0, 60.0, 3.0), abs=0.01)
+    truth = scen.truth_occ()      # the true world: the same grid plus the uncharted disc
+    assert truth[int(60 / 0.5), int(100 / 0.5)] and not scen.occ[int(60 / 0.5), int(100 / 0.5)]
+    assert np.array_equal(truth & ~scen.occ, truth ^ scen.occ)
+    # every process of a run gets this origin through --set geodesy.* (hil.console.load_settings)
+    from hil.settings import load
+
+    over = charts.geodesy_overrides(str(tmp_path / "s.toml"), load().geodesy)
+    assert over == [f"geodesy.lat0={scen.geodesy.lat0!r}", f"geodesy.lon0={scen.geodesy.lon0!r}",
+                    f"geodesy.positions_origin=[{LAT0!r}, {LON0!r}]"]
+    moved = load(None, over).geodesy        # what the run's processes load: the same scenario, the same lines
+    assert charts.geodesy_overrides(str(tmp_path / "s.toml"), moved) == over
+    again = scenarios.load(str(tmp_path / "s.toml"), geodesy=moved)
+    assert again.start == scen.start and np.array_equal(again.occ, scen.occ)
+
+
+def test_an_extent_in_metres_from_the_origin_sets_the_grid(tmp_path):
+    _chart(tmp_path, harbour_chart(SHIFTED))
+    (tmp_path / "s.toml").write_text(SHIFTED_SCENARIO + "extent = [-50.0, -40.0, 170.0, 130.0]\n")
+    scen = scenarios.load(str(tmp_path / "s.toml"))
+    assert scen.occ.shape == (340, 440)
+    assert scen.start == pytest.approx((40.0, 60.0), abs=0.01)      # -10, 20 m from the origin; grid from -50, -40
+    # the quay's south-west corner (-40, -30 m from the origin) is 10 m east and 10 m north of the grid's
+    assert scen.occ[int(10.5 / 0.5), int(10.5 / 0.5)] and not scen.occ[int(9.0 / 0.5), int(9.0 / 0.5)]
+
+
+def test_the_default_extent_is_the_charts_bounds_and_points_are_checked(tmp_path):
+    from hil.settings import load
+
+    _chart(tmp_path)
+    (tmp_path / "s.toml").write_text(SCENARIO)
+    scen = scenarios.load(str(tmp_path / "s.toml"))
+    assert (scen.width, scen.height) == (200.0, 150.0)
+    assert charts.geodesy_overrides("harbour", load().geodesy) == []
+    (tmp_path / "s.toml").write_text(SCENARIO.replace("goal = [185.0, 130.0]", "goal = [65.0, 60.0]"))
+    with pytest.raises(ConfigError, match="goal: \\(65, 60[.0-9]*\\) m is inside an obstacle"):
+        scenarios.load(str(tmp_path / "s.toml"))
+    grid_map = f'map = "{CONFIG_DIR}/maps/harbour.npy"'
+    (tmp_path / "s.toml").write_text(SCENARIO.replace('map = "harbour.geojson"', grid_map)
+                                     + "extent = [0.0, 0.0, 10.0, 10.0]\n")
+    with pytest.raises(ConfigError, match="only for a chart map"):
+        scenarios.load(str(tmp_path / "s.toml"))
+
+
+def test_the_settings_of_a_chart_scenario_carry_its_origin(tmp_path):
+    import argparse
+
+    from hil.console import load_settings
+
+    _chart(tmp_path, harbour_chart(SHIFTED))
+    (tmp_path / "s.toml").write_text(SHIFTED_SCENARIO)
+    args = argparse.Namespace(config=None, overrides=[], scenario=str(tmp_path / "s.toml"))
+    cfg = load_settings(args)
+    assert (cfg.geodesy.lat0, cfg.geodesy.lon0) == pytest.approx((SHIFTED.lat0, SHIFTED.lon0), abs=1e-6)
+    assert cfg.geodesy.positions_origin == (LAT0, LON0)
+    assert len(args.overrides) == 3
+    load_settings(args)
+    assert len(args.overrides) == 3      # once only
+
+
+def test_a_geometry_collection_grows_its_points_and_lines(tmp_path):
+    coll = {"type": "Feature", "properties": {"buffer": 2.0}, "geometry": {"type": "GeometryCollection", "geometries": [
+        {"type": "Point", "coordinates": [LON0, LAT0]},
+        {"type": "LineString", "coordinates": [list(reversed(FRAME.sea_level_to_geodetic(40.0, 0.0))),
+                                               list(reversed(FRAME.sea_level_to_geodetic(40.0, 30.0)))]}]}}
+    grid = charts.rasterise(_chart(tmp_path, coll), 0.5, FRAME)
+    assert _cell(grid, 1.0, 1.0) and not _cell(grid, 2.5, 2.5)        # the point (the corner), grown by 2 m
+    assert _cell(grid, 15.0, 41.5) and _cell(grid, 15.0, 38.5) and not _cell(grid, 15.0, 37.0)  # the line, +-2 m
+
+
+def test_a_feature_marked_as_no_obstacle_is_skipped(tmp_path):
+    doc = harbour_chart(FRAME)
+    ring = [list(reversed(FRAME.sea_level_to_geodetic(n, e))) for n, e in ((25, 5), (25, 50), (140, 50), (140, 5),
+                                                                          (25, 5))]
+    water = {"type": "Feature", "properties": {"name": "basin", "obstacle": False},
+             "geometry": {"type": "Polygon", "coordinates": [ring]}}
+    doc["features"].append(water)
+    grid = charts.rasterise(_chart(tmp_path, doc), 0.5, FRAME)
+    assert not _cell(grid, 30.0, 60.0)                # open water inside the 'basin' polygon
+    assert _cell(grid, 100.0, 10.0)                   # the quay still is land

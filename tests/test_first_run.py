@@ -1,0 +1,54 @@
+"""The first-run notice (hil.first_run): cold numba caches are found without importing numba."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+from hil import first_run
+
+
+def test_an_empty_cache_is_cold_and_the_notice_says_so(tmp_path, monkeypatch):
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    assert first_run.kernels_cold()
+    assert "compiling numba kernels, first run only, ~40 s" in first_run.compile_notice("run")
+
+
+def _fake_cache(root, newer: bool) -> None:
+    tag = f"py{sys.version_info[0]}{sys.version_info[1]}"
+    for rel in first_run.KERNEL_SOURCES:
+        src = first_run.REPO / rel
+        d = root / f"{src.parent.name}_0123abcd"
+        d.mkdir(exist_ok=True)
+        index = d / f"{src.stem}.kernel-12.{tag}.nbi"
+        index.write_bytes(b"")
+        t = src.stat().st_mtime + (10 if newer else -10)
+        os.utime(index, (t, t))
+
+
+def test_a_fresh_cache_is_warm_and_a_stale_one_cold(tmp_path, monkeypatch):
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    _fake_cache(tmp_path, newer=True)
+    assert not first_run.kernels_cold() and first_run.compile_notice("run") is None
+    _fake_cache(tmp_path, newer=False)      # a source changed since: numba recompiles
+    assert first_run.kernels_cold()
+
+
+def test_the_index_file_names_are_numbas(tmp_path, monkeypatch):
+    """A real numba cache entry (a tiny cached function compiled in a subprocess) is found."""
+    src = tmp_path / "pkg" / "kern.py"
+    src.parent.mkdir()
+    src.write_text(textwrap.dedent("""
+        from numba import njit
+
+        @njit(cache=True)
+        def twice(x):
+            return 2 * x
+    """))
+    cache = tmp_path / "cache"
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(src.parent))
+    subprocess.run([sys.executable, "-c", "import kern; kern.twice(2)"], check=True, env=env, timeout=120)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
+    assert first_run._index_files(src)

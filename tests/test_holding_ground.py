@@ -1,0 +1,284 @@
+"""A boat that holds its ground (issue 33), through MAVLink from a pymavlink ground station.
+
+Live `hil run --wait-for-arm` in lockstep on the harbour (paced at ``SPEEDUP`` x wall time), identity
+ArduPilot (item 0 of a mission is home):
+
+* GCS loss near the breakwater, in GUIDED and in AUTO, in the harbour's current: the failsafe holds
+  station; for the next 300 s of simulated time the boat is never within 1 m of an obstacle (truth from
+  the simulator, in the run's tlog) and ends within 10 m of where the failsafe fired;
+* a geofence (an inclusion polygon round the west channel, an exclusion circle across a leg) and a rally
+  point: a waypoint outside the fence is refused, the mission sails round the circle, RTL goes to the
+  rally point; a fence uploaded round another part of the channel leaves the boat outside it, and its
+  RTL brings it back inside (ArduPilot issue 31399), no planned target outside the fence (13016), no
+  stall at a waypoint with the chart and the fence both on (30995).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.ndimage import distance_transform_edt
+from support.gcs_client import Gcs, M, start_run, stop_run
+
+from common.geodesy import LocalFrame
+from hil.hilrun import free_udp_port
+
+GEO = LocalFrame(38.92, 121.65, 0.0)  # [geodesy] of configs/default.toml
+REPO = Path(__file__).resolve().parents[1]
+SPEEDUP = 25.0
+OCC = np.load(REPO / "configs" / "maps" / "harbour.npy")
+CLEARANCE = distance_transform_edt(~OCC) * 0.5     # m from each cell centre to the nearest obstacle cell
+
+
+def clearance(x: float, y: float) -> float:
+    return float(CLEARANCE[min(int(y / 0.5), OCC.shape[0] - 1), min(int(x / 0.5), OCC.shape[1] - 1)])
+
+
+def ll(x: float, y: float) -> tuple[int, int]:
+    """Map (x east, y north) m -> lat/lon degE7."""
+    lat, lon = GEO.sea_level_to_geodetic(y, x)
+    return int(round(lat * 1e7)), int(round(lon * 1e7))
+
+
+def wp(x: float, y: float, command: int = M.MAV_CMD_NAV_WAYPOINT, p1: float = 0.0) -> tuple:
+    return (M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, command, p1, 0.0, 0.0, 0.0, *ll(x, y), 0.0)
+
+
+def truth_track(tlog: Path) -> list[tuple[float, float, float]]:
+    """(vehicle s, map x, map y) of the simulator's HIL_STATE_QUATERNION in the run's tlog."""
+    from pymavlink import mavutil
+
+    log = mavutil.mavlink_connection(str(tlog), dialect="ardupilotmega")
+    out = []
+    while (m := log.recv_match(type="HIL_STATE_QUATERNION")) is not None:
+        n, e = GEO.geodetic_to_sea_level(m.lat * 1e-7, m.lon * 1e-7)
+        out.append((m.time_usec * 1e-6, e, n))
+    return out
+
+
+class Session:
+    def __init__(self, tmp_path: Path, *extra: str) -> None:
+        port = free_udp_port()
+        self.out = tmp_path / "run"
+        self.proc = start_run(self.out, "--scenario", "harbour", "--duration", "3000",
+                              "--wait-for-arm", "--speedup", str(SPEEDUP), "--gcs", f"udpin:127.0.0.1:{port}",
+                              *extra, identity="ardupilot")
+        self.gcs = Gcs(f"udpout:127.0.0.1:{port}")
+        assert self.gcs.connect() is not None
+        assert self.gcs.recv("GLOBAL_POSITION_INT", 60) is not None
+
+    def now(self) -> float:
+        m = self.gcs.recv("GLOBAL_POSITION_INT", 10)
+        assert m is not None
+        return m.time_boot_ms * 1e-3
+
+    def position(self) -> tuple[float, float]:
+        m = self.gcs.recv("GLOBAL_POSITION_INT", 10)
+        n, e = GEO.geodetic_to_sea_level(m.lat * 1e-7, m.lon * 1e-7)
+        return e, n
+
+    def text(self, needle: str, timeout: float) -> str | None:
+        m = self.gcs.recv("STATUSTEXT", timeout, lambda t: needle in t.text)
+        return None if m is None else m.text
+
+    def wait_until(self, t_vehicle: float, wall: float) -> None:
+        end = time.monotonic() + wall
+        while time.monotonic() < end:
+            if self.now() >= t_vehicle:
+                return
+        raise AssertionError(f"vehicle time did not reach {t_vehicle} s in {wall} s")
+
+    def close(self) -> dict:
+        self.gcs.close()
+        out, err = stop_run(self.proc)
+        try:
+            return json.loads(out)
+        except json.JSONDecodeError:
+            raise AssertionError(f"no summary from the run:\n{out[-2000:]}\n{err[-2000:]}") from None
+
+
+def _hold_after_failsafe(s: Session) -> tuple[float, tuple[float, float]]:
+    """Stop the heartbeats; the failsafe's vehicle time and the boat's position then."""
+    s.gcs.heartbeats_on = False
+    assert s.text("GCS failsafe", 30) is not None
+    t, pos = s.now(), s.position()
+    hb = s.gcs.recv("HEARTBEAT", 10)
+    assert hb is not None and hb.custom_mode == 5, hb   # LOITER: holding station, never a drifting HOLD
+    return t, pos
+
+
+def _judge_after(s: Session, t0: float, pos: tuple[float, float], seconds: float = 300.0) -> None:
+    s.wait_until(t0 + seconds, wall=seconds / SPEEDUP * 6 + 60)
+    s.close()
+    track = [(t, x, y) for t, x, y in truth_track(s.out / "run.tlog") if t0 <= t <= t0 + seconds]
+    assert len(track) > 1000
+    worst = min(clearance(x, y) for _, x, y in track)
+    assert worst >= 1.0 + 1.0, worst      # hull centre 1 m from the nearest obstacle, plus half its length
+    _, xe, ye = track[-1]
+    assert math.dist((xe, ye), pos) <= 10.0, ((xe, ye), pos)
+
+
+@pytest.mark.slow
+def test_gcs_loss_in_guided_near_the_breakwater_holds_station_in_the_current(tmp_path):
+    s = Session(tmp_path)
+    try:
+        target = (113.0, 102.0)           # 6 m south of the mole, beside the jet that flows north onto it
+        assert 5.0 <= clearance(*target) <= 9.0
+        assert s.gcs.arm(True).result == M.MAV_RESULT_ACCEPTED
+        lat, lon = GEO.sea_level_to_geodetic(target[1], target[0])
+        ack = s.gcs.command(M.MAV_CMD_DO_REPOSITION, -1, 0, 0, float("nan"), lat, lon, 0)
+        assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
+        assert s.text("destination reached", 600) is not None
+        t0, pos = _hold_after_failsafe(s)
+        assert math.dist(pos, target) <= 5.0
+        _judge_after(s, t0, pos)
+    finally:
+        if s.proc.poll() is None:
+            s.close()
+
+
+@pytest.mark.slow
+def test_gcs_loss_in_auto_near_the_breakwater_holds_station(tmp_path):
+    s = Session(tmp_path)
+    try:
+        mission = [wp(22.0, 40.0), wp(30.0, 70.0), wp(30.0, 101.0), wp(70.0, 101.0)]
+        ack = s.gcs.upload(mission)
+        assert ack is not None and ack.type == M.MAV_MISSION_ACCEPTED
+        assert s.gcs.arm(True).result == M.MAV_RESULT_ACCEPTED
+        assert s.gcs.command(M.MAV_CMD_MISSION_START, 0, 0).result == M.MAV_RESULT_ACCEPTED
+        # Under way along the mole, the GCS goes away.
+        assert s.gcs.recv("MISSION_CURRENT", 600, lambda m: m.seq == 3) is not None
+        t0, pos = _hold_after_failsafe(s)
+        assert clearance(*pos) <= 12.0
+        _judge_after(s, t0, pos)
+    finally:
+        if s.proc.poll() is None:
+            s.close()
+
+
+INCLUSION = [(10.0, 25.0), (36.0, 25.0), (36.0, 100.0), (10.0, 100.0)]     # the west channel, map x/y m
+EXCLUSION = (23.0, 65.0, 3.0)                                               # a circle across the leg A-B
+RALLY = (30.0, 30.0)
+
+
+def fence_items(polygon: list[tuple[float, float]], circle: tuple[float, float, float] | None) -> list[tuple]:
+    items = [(M.MAV_FRAME_GLOBAL, M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, float(len(polygon)), 0, 0, 0,
+              *ll(x, y), 0.0) for x, y in polygon]
+    if circle is not None:
+        items.append((M.MAV_FRAME_GLOBAL, M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION, circle[2], 0, 0, 0,
+                      *ll(circle[0], circle[1]), 0.0))
+    return items
+
+
+@pytest.mark.slow
+def test_a_fence_and_a_rally_point_shape_the_mission_and_rtl_comes_back_from_outside(tmp_path):
+    s = Session(tmp_path)
+    g = s.gcs
+    try:
+        ack = g.upload(fence_items(INCLUSION, EXCLUSION), mission_type=M.MAV_MISSION_TYPE_FENCE)
+        assert ack is not None and ack.type == M.MAV_MISSION_ACCEPTED, ack
+        ack = g.upload([(M.MAV_FRAME_GLOBAL, M.MAV_CMD_NAV_RALLY_POINT, 0, 0, 0, 0, *ll(*RALLY), 0.0)],
+                       mission_type=M.MAV_MISSION_TYPE_RALLY)
+        assert ack is not None and ack.type == M.MAV_MISSION_ACCEPTED, ack
+        # A rally point and a waypoint outside the fence are refused, with the reason.
+        ack = g.upload([(M.MAV_FRAME_GLOBAL, M.MAV_CMD_NAV_RALLY_POINT, 0, 0, 0, 0, *ll(70.0, 50.0), 0.0)],
+                       mission_type=M.MAV_MISSION_TYPE_RALLY)
+        assert ack is not None and ack.type == M.MAV_MISSION_INVALID
+        ack = g.upload([wp(22.0, 40.0), wp(23.0, 50.0), wp(70.0, 50.0)])
+        assert ack is not None and ack.type == M.MAV_MISSION_INVALID
+        assert s.text("outside the geofence", 10) is not None
+        lat, lon = GEO.sea_level_to_geodetic(50.0, 70.0)
+        refused = g.command(M.MAV_CMD_DO_REPOSITION, -1, 0, 0, float("nan"), lat, lon, 0)
+        assert refused is not None and refused.result == M.MAV_RESULT_DENIED
+        # The mission across the circle: sailed round it, every item reached, no stall.
+        ack = g.upload([wp(22.0, 40.0), wp(23.0, 50.0), wp(23.0, 80.0)])
+        assert ack is not None and ack.type == M.MAV_MISSION_ACCEPTED
+        assert g.arm(True).result == M.MAV_RESULT_ACCEPTED
+        t_start = s.now()
+        assert g.command(M.MAV_CMD_MISSION_START, 0, 0).result == M.MAV_RESULT_ACCEPTED
+        assert g.recv("MISSION_ITEM_REACHED", 900, lambda m: m.seq == 2) is not None
+        t_done = s.now()
+        # A fence round the south of the channel: the boat (near B) is outside it. RTL to the rally point.
+        ack = g.upload(fence_items([(10.0, 25.0), (36.0, 25.0), (36.0, 60.0), (10.0, 60.0)], None),
+                       mission_type=M.MAV_MISSION_TYPE_FENCE)
+        assert ack is not None and ack.type == M.MAV_MISSION_ACCEPTED
+        assert s.text("fence breach", 30) is not None
+        hb = g.recv("HEARTBEAT", 10, lambda h: h.custom_mode == 11)
+        assert hb is not None
+        assert s.text("back inside", 900) is not None
+        assert s.text("destination reached", 900) is not None
+        end = s.position()
+        assert math.dist(end, RALLY) <= 5.0, end
+        t_end = s.now()
+    finally:
+        summary = s.close() if s.proc.poll() is None else {}
+    track = truth_track(s.out / "run.tlog")
+    leg = [(x, y) for t, x, y in track if t_start <= t <= t_done]
+    cx, cy, r = EXCLUSION
+    assert min(math.hypot(x - cx, y - cy) for x, y in leg) > r, "the boat entered the exclusion circle"
+    assert t_done - t_start < 200.0           # ~45 m of legs: no stall at a waypoint (30995)
+    # No planned target outside the fence (13016): every local path the boat announced while the first
+    # fence was in force lies inside the inclusion polygon and outside the exclusion circle.
+    from pymavlink import mavutil
+
+    log = mavutil.mavlink_connection(str(s.out / "run.tlog"), dialect="ardupilotmega")
+    planned = []
+    while (m := log.recv_match(type="TRAJECTORY_REPRESENTATION_WAYPOINTS")) is not None:
+        if t_start <= m.time_usec * 1e-6 <= t_done:
+            planned += [(e, n) for n, e in zip(m.pos_x[:m.valid_points], m.pos_y[:m.valid_points], strict=True)]
+    assert len(planned) > 20
+    xs, ys = [p[0] for p in INCLUSION], [p[1] for p in INCLUSION]
+    for x, y in planned:
+        assert min(xs) <= x <= max(xs) and min(ys) <= y <= max(ys), (x, y)
+        assert math.hypot(x - cx, y - cy) > r, (x, y)
+    assert summary.get("collisions", 0) == 0
+    assert t_end > t_done
+
+
+def _open_water(tmp_path: Path, current: float) -> Session:
+    s = Session.__new__(Session)
+    port = free_udp_port()
+    s.out = tmp_path / "run"
+    s.proc = start_run(s.out, "--scenario", "open-water-current", "--duration", "3000", "--wait-for-arm",
+                       "--speedup", str(SPEEDUP), "--gcs", f"udpin:127.0.0.1:{port}",
+                       "--set", f"current.uniform=[0.0,{current}]", identity="ardupilot")
+    s.gcs = Gcs(f"udpout:127.0.0.1:{port}")
+    assert s.gcs.connect() is not None
+    assert s.gcs.recv("GLOBAL_POSITION_INT", 60) is not None
+    return s
+
+
+@pytest.mark.slow
+def test_a_square_in_a_strong_cross_current_finishes_every_leg_then_loiter_holds_within_3_m(tmp_path):
+    """ArduPilot issue 19306 ("boats may drift away in Auto if current is too high"): a 40 m square in
+    a 1.2 m/s current (0.8 of the cruise speed) from the south, every leg finished; then LOITER at the
+    last corner holds 95 % of the time within 3 m (ArduRover's drift-and-return sawtooths to its radius)."""
+    s = _open_water(tmp_path, 1.2)
+    g = s.gcs
+    try:
+        corners = [(60.0, 40.0), (100.0, 40.0), (100.0, 80.0), (60.0, 80.0), (60.0, 40.0)]
+        ack = g.upload([wp(40.0, 60.0)] + [wp(x, y) for x, y in corners])
+        assert ack is not None and ack.type == M.MAV_MISSION_ACCEPTED
+        assert g.arm(True).result == M.MAV_RESULT_ACCEPTED
+        assert g.command(M.MAV_CMD_MISSION_START, 0, 0).result == M.MAV_RESULT_ACCEPTED
+        reached = []
+        end = time.monotonic() + 900
+        while time.monotonic() < end and (not reached or reached[-1] != len(corners)):
+            m = g.recv("MISSION_ITEM_REACHED", 30)
+            if m is not None:
+                reached.append(m.seq)
+        assert reached == list(range(1, len(corners) + 1)), reached
+        t0 = s.now()
+        assert g.set_mode(5).result == M.MAV_RESULT_ACCEPTED          # LOITER where the square ends
+        point = s.position()
+        s.wait_until(t0 + 150.0, wall=150.0 / SPEEDUP * 6 + 60)
+    finally:
+        s.close()
+    held = [(x, y) for t, x, y in truth_track(s.out / "run.tlog") if t >= t0 + 30.0]
+    d = sorted(math.dist(p, point) for p in held)
+    assert len(d) > 1000 and d[int(0.95 * len(d))] <= 3.0, d[int(0.95 * len(d))]
