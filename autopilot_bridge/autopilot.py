@@ -49,6 +49,7 @@ import numpy as np
 
 from autopilot_bridge import guidance
 from autopilot_bridge.actuators import Actuators, MavlinkActuators
+from autopilot_bridge.battery_monitor import FS_NONE, FS_RTL, BatteryMonitor
 from autopilot_bridge.behaviour import STATION, Behaviour
 from autopilot_bridge.computer_setup import AutopilotStats, ComputerConfig, Devices, RunOptions
 from autopilot_bridge.control import HeadingPID, SpeedController, Thrust
@@ -61,6 +62,7 @@ from autopilot_bridge.local_planning import World, WorldUpdate, map_to_ned_path
 from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavigationFilter, NavState
 from autopilot_bridge.obstacle_map import SensedObstacles, path_blocked
+from autopilot_bridge.onboard_status import OnboardSensors, OnboardStatus
 from autopilot_bridge.parameters import ParamTable, bind
 from autopilot_bridge.plan_acceptance import PlanAcceptance
 from autopilot_bridge.plan_handoff import PlanHandoff
@@ -147,13 +149,16 @@ class Autopilot:
         self.vehicle.rally_target = self.geofence.rally_point
         self.helm.fence_depth = self.geofence.depth
         self.nav = NavigationFilter(self.nav_params)
+        # Telemetry's truth: sensor health and the pack (BATT_* parameters, low-battery failsafe).
+        self.onboard = OnboardSensors(BatteryMonitor(config.battery, self._battery_failsafe, self._event))
         self._reset()
         # One table of every component's own declarations: the parameter service reads and writes them.
         self.param_table = ParamTable(bind(self.vehicle, self.planning, self.planner_tuning, self.helm.heading_pid,
-                                           self.helm.speed_ctl, self.station, self.geofence))
+                                           self.helm.speed_ctl, self.station, self.geofence,
+                                           self.onboard.battery))
         self.commands = VehicleCommands(self.vehicle, self.grid, safety, self.param_table, self.actuators,
                                         lambda: self._status, self._record_event, self.geofence,
-                                        self._fence_changed)
+                                        self._fence_changed, onboard=self.onboard_status)
 
     @staticmethod
     def _field_prior(world: World) -> Callable[[float, float], tuple[float, float]] | None:
@@ -183,6 +188,7 @@ class Autopilot:
         self.helm.last_t = None
         if self.traffic is not None:
             self.traffic.reset()
+        self.onboard.reset()
 
     @property
     def local_paths(self) -> list[dict[str, Any]]:
@@ -245,6 +251,21 @@ class Autopilot:
     def _count_fallback(self) -> None:
         self.stats.fallback_activations += 1
 
+    def onboard_status(self) -> OnboardStatus:
+        """Sensor health, the GPS receiver's account of itself and the pack, as of the newest frame."""
+        return self.onboard.status()
+
+    def _battery_failsafe(self, action: int) -> None:
+        """BATT_FS_LOW_ACT's action when the battery monitor's failsafe triggers: RTL, or hold station
+        (LOITER, as the GCS failsafe's hold; also where RTL cannot be entered); nothing while disarmed or
+        for action 0."""
+        if action == FS_NONE or not self.vehicle.armed:
+            return
+        position = None if self._status is None else self._status.position
+        if action == FS_RTL and self.vehicle.set_mode(Mode.RTL, position)[0]:
+            return
+        self.vehicle.set_mode(Mode.LOITER, position)
+
     # -- navigation ----------------------------------------------------------------------------
     def _fuse(self, f: SensorFrame) -> None:
         t = f.t
@@ -294,6 +315,7 @@ class Autopilot:
         self.helm.last_t = t
         self._fuse(f)
         s = self.nav.state()
+        self.onboard.on_frame(f, self.nav.stats.updates, s is not None)
         if s is not None:
             last = self.last_command
             self.current.update(s, 0.0 if last is None else last.port + last.stdb, dt)

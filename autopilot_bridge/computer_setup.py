@@ -8,6 +8,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from autopilot_bridge.battery_monitor import BatteryMonitorParams
 from autopilot_bridge.config import AutopilotParams
 from autopilot_bridge.control import ControlParams, SurgeModel
 from autopilot_bridge.hil_link import SensorLink
@@ -41,6 +42,7 @@ class ComputerConfig:
     nav: NavigationParams
     control: ControlParams
     propulsion: Propulsion
+    battery: BatteryMonitorParams = field(default_factory=BatteryMonitorParams)
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,8 @@ from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE, Codec
 from common.udp import BusyPoll, UdpEndpoint
 
-TAKEN = ("HIL_SENSOR", "HIL_GPS", "ODOMETRY", "OBSTACLE_DISTANCE", "HIL_STATE_QUATERNION", "AIS_VESSEL")
+TAKEN = ("HIL_SENSOR", "HIL_GPS", "ODOMETRY", "OBSTACLE_DISTANCE", "HIL_STATE_QUATERNION", "AIS_VESSEL",
+         "BATTERY_STATUS")
 UINT16_MAX = 65535
 
 # Plausibility limits of a surface vessel's sensors (far beyond what the hull can do, far below
@@ -44,6 +45,10 @@ MAX_YAW_RATE = 10.0           # rad/s, gyro z
 MAX_MAG_GAUSS = 10.0          # magnetometer field magnitude (Earth: ~0.5 gauss)
 MAX_GPS_DISTANCE = 100e3      # m from the NED origin
 MAX_SPEED = 50.0              # m/s, GPS ground speed per axis and DVL velocity
+MAX_ACCEL = 16.0 * 9.80665    # m/s^2 per axis: a 16 g accelerometer's range
+MAX_PACK_VOLTAGE = 100.0      # V (24S LiPo: ~100 V)
+MAX_PACK_CURRENT = 320.0      # A (BATTERY_STATUS's int16 cA ends at 327 A)
+HIL_SENSOR_ACCEL = 0b111      # fields_updated bits of xacc, yacc, zacc
 TIMELINE_CONFIRM = 3          # consecutive consistent frames that establish a new timeline
 MAX_DATAGRAMS_PER_RECEIVE = 256
 # Real time: a vessel computer that comes back to its socket more than this late (wall s: it was paused, by
@@ -78,6 +83,35 @@ class RangeScan:
 
 
 @dataclass(frozen=True)
+class GpsStatus:
+    """What the receiver said about itself in one HIL_GPS, in its MAVLink units (a fix or not)."""
+
+    fix_type: int           # GPS_FIX_TYPE: 0 no GPS, 1 no fix, 2 2-D, 3 3-D ...
+    satellites: int         # satellites visible (255: unknown)
+    lat: int                # degE7 (0 without a fix)
+    lon: int                # degE7
+    alt: int                # mm
+    eph: int                # cm (65535: unknown)
+    epv: int                # cm
+    vel: int                # cm/s ground speed
+    cog: int                # cdeg (65535: unknown)
+
+
+@dataclass(frozen=True)
+class BatteryReading:
+    """One BATTERY_STATUS of the pack (SI units; None where the sender said "unknown")."""
+
+    voltage: float                      # V, the pack (sum of the cells)
+    cells: tuple[int, ...]              # mV of each cell reported (BATTERY_STATUS voltages)
+    current: float | None               # A, discharge positive
+    consumed_mah: float | None          # mAh since the start
+    energy_j: float | None              # J since the start
+    remaining: int | None               # % state of charge
+    time_remaining: int                 # s (0: unknown)
+    charge_state: int                   # MAV_BATTERY_CHARGE_STATE of the sender
+
+
+@dataclass(frozen=True)
 class SensorFrame:
     """One decoded sensor datagram at simulated time ``t`` (s)."""
 
@@ -88,6 +122,9 @@ class SensorFrame:
     gps_dropout: bool            # a HIL_GPS arrived with fix_type < 3
     dvl: tuple[float, float] | None  # body velocity over ground (u, v), m/s
     scan: RangeScan | None = None    # range sensor, when a scan was due
+    accel: tuple[float, float, float] | None = None   # m/s^2 specific force (FRD), when plausible
+    gps_status: GpsStatus | None = None               # the receiver's fix type and satellites, when HIL_GPS came
+    battery: BatteryReading | None = None             # the pack, when a BATTERY_STATUS came
 
     @property
     def t(self) -> float:
@@ -168,7 +205,7 @@ class HilLink:
         frames, rejects = self.codec.frames(datagram)
         for r in rejects:
             self.rejects[r] += 1
-        sensor = gps = odo = obstacles = None
+        sensor = gps = odo = obstacles = battery = None
         ais = []
         for kind, system, component, fields in frames:
             if kind != "AIS_VESSEL" and self.sim_ids is not None and (system, component) != self.sim_ids:
@@ -187,11 +224,13 @@ class HilLink:
                 odo = fields()
             elif kind == "OBSTACLE_DISTANCE":
                 obstacles = fields()
+            elif kind == "BATTERY_STATUS":
+                battery = fields()
             else:  # HIL_STATE_QUATERNION: the truth is for evaluation only
                 self.truth_ignored += 1
         if sensor is not None and not self._on_timeline(int(sensor.time_usec)):
             self.rejects[TIME_JUMP] += 1
-            sensor = gps = odo = obstacles = None
+            sensor = gps = odo = obstacles = battery = None
             ais = []
         if sensor is not None:
             self.last_t = sensor.time_usec * 1e-6
@@ -216,8 +255,16 @@ class HilLink:
         if not (math.isfinite(gyro) and abs(gyro) <= MAX_YAW_RATE):
             self.rejects[IMPLAUSIBLE + "gyro"] += 1
             yaw_rate = None
-        fix, dropout = None, False
+        accel = None
+        if int(sensor.fields_updated) & HIL_SENSOR_ACCEL == HIL_SENSOR_ACCEL:
+            ax, ay, az = float(sensor.xacc), float(sensor.yacc), float(sensor.zacc)
+            if abs(ax) <= MAX_ACCEL and abs(ay) <= MAX_ACCEL and abs(az) <= MAX_ACCEL:   # NaN fails these
+                accel = (ax, ay, az)
+            else:
+                self.rejects[IMPLAUSIBLE + "accel"] += 1
+        fix, dropout, gps_status = None, False, None
         if gps is not None:
+            gps_status = _gps_status(gps)
             if gps.fix_type >= 3:
                 fix = self._gps_fix(gps)
             else:
@@ -230,8 +277,13 @@ class HilLink:
             else:
                 self.rejects[IMPLAUSIBLE + "dvl"] += 1
         scan = self._scan(obstacles) if obstacles is not None else None
+        pack = None
+        if battery is not None:
+            pack = _battery_reading(battery)
+            if pack is None:
+                self.rejects[IMPLAUSIBLE + "battery"] += 1
         self.frames += 1
-        return SensorFrame(int(sensor.time_usec), yaw_rate, heading, fix, dropout, dvl, scan)
+        return SensorFrame(int(sensor.time_usec), yaw_rate, heading, fix, dropout, dvl, scan, accel, gps_status, pack)
 
     def _on_timeline(self, usec: int) -> bool:
         """Is a frame at ``usec`` on the current timeline (a repeat, or at most max_time_step ahead)?
@@ -349,6 +401,37 @@ class HilLink:
 
     def close(self) -> None:
         self.ep.close()
+
+
+def _gps_status(m) -> GpsStatus:
+    """HIL_GPS's own account of the fix (its integers clamped to GPS_RAW_INT's field ranges)."""
+    def u16(v: int) -> int:
+        return max(0, min(UINT16_MAX, int(v)))
+
+    fix = max(0, min(8, int(m.fix_type)))
+    if fix < 2:   # no fix: no position
+        return GpsStatus(fix, min(255, int(m.satellites_visible)) if fix else 0, 0, 0, 0, UINT16_MAX, UINT16_MAX,
+                         0, UINT16_MAX)
+    return GpsStatus(fix, min(255, int(m.satellites_visible)), int(m.lat), int(m.lon), int(m.alt), u16(m.eph),
+                     u16(m.epv), u16(m.vel), u16(m.cog))
+
+
+def _battery_reading(m) -> BatteryReading | None:
+    """BATTERY_STATUS per the MAVLink spec (mV per cell, UINT16_MAX unused; cA, mAh, hJ, % with -1 unknown),
+    or None when it is implausible for a boat's pack (no cell, a voltage or current out of range)."""
+    every = list(m.voltages) + list(getattr(m, "voltages_ext", None) or [])
+    cells = tuple(int(v) for v in every if 0 < int(v) < UINT16_MAX)
+    volts = sum(cells) * 1e-3
+    if not cells or not 0.0 < volts <= MAX_PACK_VOLTAGE:
+        return None
+    current = None if m.current_battery == -1 else m.current_battery * 0.01
+    if current is not None and abs(current) > MAX_PACK_CURRENT:
+        return None
+    consumed = None if m.current_consumed == -1 else float(m.current_consumed)
+    energy = None if m.energy_consumed == -1 else m.energy_consumed * 100.0
+    remaining = None if m.battery_remaining == -1 else max(0, min(100, int(m.battery_remaining)))
+    return BatteryReading(volts, cells, current, consumed, energy, remaining, max(0, int(m.time_remaining)),
+                          int(getattr(m, "charge_state", 0)))
 
 
 def _ais_report(m, t: float) -> AisReport:

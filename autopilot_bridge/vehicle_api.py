@@ -15,6 +15,7 @@ from autopilot_bridge.behaviour import Behaviour
 from autopilot_bridge.mission_commands import MissionCommand
 from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavState
+from autopilot_bridge.onboard_status import OnboardStatus
 from autopilot_bridge.parameters import Param
 
 if TYPE_CHECKING:
@@ -102,5 +103,7 @@ class VehicleApi(Protocol):
     def parameters(self) -> list[Param]: ...
 
     def esc_telemetry(self) -> list[dict[str, float] | None]: ...
+
+    def onboard_status(self) -> OnboardStatus: ...   # sensor health, GPS receiver, battery
 
     def status(self) -> VehicleStatus | None: ...

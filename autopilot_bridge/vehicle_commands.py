@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 from autopilot_bridge.geofence import GeoFence
 from autopilot_bridge.mission_commands import MissionCommand
 from autopilot_bridge.modes import Mode
+from autopilot_bridge.onboard_status import OnboardStatus
 from autopilot_bridge.parameters import Param, ParamTable
 from autopilot_bridge.route_planning import POSITION_COMMANDS, check_mission, check_mission_items
 from autopilot_bridge.vehicle import SPEED_RANGE, Vehicle
@@ -33,11 +34,14 @@ class VehicleCommands:
 
     def __init__(self, vehicle: Vehicle, grid: OccupancyGrid, safety_radius: float, params: ParamTable,
                  actuators: Actuators, status: Callable[[], VehicleStatus | None],
-                 record: Callable[[str], None], geofence: GeoFence, fence_changed: Callable[[Fence], None]) -> None:
+                 record: Callable[[str], None], geofence: GeoFence, fence_changed: Callable[[Fence], None],
+                 onboard: Callable[[], OnboardStatus] | None = None) -> None:
+        """``onboard``: the sensors' and the pack's state (autopilot_bridge.onboard_status; None: nothing known)."""
         self.vehicle, self.grid, self.safety_radius = vehicle, grid, safety_radius
         self.param_table, self.actuators = params, actuators
         self._status, self._record = status, record
         self.geofence, self._fence_changed = geofence, fence_changed
+        self._onboard = onboard
 
     def _position(self) -> tuple[float, float] | None:
         st = self._status()
@@ -169,3 +173,6 @@ class VehicleCommands:
 
     def esc_telemetry(self) -> list[dict[str, float] | None]:
         return self.actuators.esc_telemetry()
+
+    def onboard_status(self) -> OnboardStatus:
+        return OnboardStatus(0, 0, 0, None, None) if self._onboard is None else self._onboard()

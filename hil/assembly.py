@@ -44,7 +44,7 @@ def computer_config(cfg: HilConfig) -> ComputerConfig:
     hull = cfg.vessel
     propulsion = Propulsion(SurgeModel.from_hull(hull.m, hull.rho, hull.D, hull.L, hull.d_u), hull.B_u,
                             hull.T_max, hull.T_min)
-    return ComputerConfig(cfg.autopilot, cfg.navigation, cfg.control, propulsion)
+    return ComputerConfig(cfg.autopilot, cfg.navigation, cfg.control, propulsion, cfg.battery_monitor)
 
 
 def run_options(cfg: HilConfig, lockstep: bool) -> RunOptions:

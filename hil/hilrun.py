@@ -520,7 +520,7 @@ class HilRun:
         stopped, are counted apart (the simulator runs on in real time while the autopilot exits).
         ``busy_poll``: how each end's lockstep waits went (common.udp.BusyPoll; None where off)."""
         out = {k: sim.get(k) for k in ("steps", "commands_received", "malformed_dropped", "stale_command_events",
-                                       "lockstep_resends", "jitter_ms", "stepping", "stalls")}
+                                       "lockstep_resends", "jitter_ms", "stepping", "stalls", "battery")}
         out["busy_poll"] = {"simulator": sim.get("busy_poll"), "autopilot": ap_busy_poll}
         if "pipeline_skips" in sim:   # the pipelined lockstep (sim.lockstep_pipeline)
             out["pipeline_skips"] = sim["pipeline_skips"]

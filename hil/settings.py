@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from autopilot_bridge.ais_tracking import TrackerParams
+from autopilot_bridge.battery_monitor import BatteryMonitorParams
 from autopilot_bridge.config import AutopilotParams
 from autopilot_bridge.control import ControlParams
 from autopilot_bridge.gcs.config import GcsParams
@@ -20,6 +21,7 @@ from common.can_params import CanParams
 from hil import config
 from planner.colregs import ColregsParams
 from planner.params import PlannerParams
+from simulator.battery import BatteryParams
 from simulator.config import (
     CurrentParams,
     EscParams,
@@ -55,6 +57,9 @@ class HilConfig:
     can: CanParams = field(default_factory=CanParams)
     # The ground-station link (issue 6); defaults as configs/default.toml's [gcs].
     gcs: GcsParams = field(default_factory=GcsParams)
+    # The battery pack (simulator) and the vessel computer's monitor of it (issue 36).
+    battery: BatteryParams = field(default_factory=BatteryParams)
+    battery_monitor: BatteryMonitorParams = field(default_factory=BatteryMonitorParams)
 
     def __post_init__(self) -> None:
         # Connection strings of the HIL links (common.connection): refused here, naming the key,

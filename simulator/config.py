@@ -91,6 +91,10 @@ class GpsParams:
     dropout_duration: float = param("duration of a random dropout", "s", ge=0)
     glitch_probability: float = param("probability that a GPS fix is a glitch", "", ge=0, le=1)
     glitch_magnitude: float = param("position jump of a glitch", "m", ge=0)
+    satellites: int = param("mean number of satellites tracked (HIL_GPS satellites_visible; 0 in a dropout)",
+                            ge=4, le=60, default=12)
+    satellite_interval: float = param("mean time between a satellite rising or setting; 0 = the count stays",
+                                      "s", ge=0, default=90.0)
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from common.current_sources import NoCurrent, make_current
 from common.dronecan_layout import RAW_COMMAND_MAX
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE, Codec
+from simulator.battery import BatteryParams, Pack, ThrusterPower
 from simulator.rangefinder import Rangefinder, WorldMap
 from simulator.sensors import Compass, Dvl, G, Gps, Imu, sensor_rngs
 from simulator.vessel import Vessel, hull_dynamics, hull_rk4_step
@@ -77,7 +78,7 @@ class SimulatorCore:
         self.waves = WaveModel(cfg.waves, cfg.vessel, rngs["waves"])
         self.imu = Imu(s.imu, rngs["imu"], self.frame_dt)
         self.compass = Compass(s.compass, rngs["compass"])
-        self.gps = Gps(s.gps, rngs["gps"], rngs["gps_events"], self.geo, self.frame_dt)
+        self.gps = Gps(s.gps, rngs["gps"], rngs["gps_events"], self.geo, self.frame_dt, rngs["gps_satellites"])
         self.dvl = Dvl(s.dvl, rngs["dvl"]) if s.dvl.enabled else None
         self.gps_due = _Schedule(s.gps.rate_hz, self.frame_dt)
         self.truth_due = _Schedule(cfg.sim.truth_rate_hz, self.frame_dt)
@@ -85,6 +86,13 @@ class SimulatorCore:
         self.rangefinder = (Rangefinder(s.rangefinder, world, rngs["rangefinder"])
                             if world is not None and s.rangefinder.enabled else None)
         self.rangefinder_due = _Schedule(s.rangefinder.rate_hz, self.frame_dt)
+        bp = getattr(cfg, "battery", None) or BatteryParams()
+        self.battery = Pack(bp)
+        self.thruster_power = ThrusterPower(cfg.esc, cfg.vessel)
+        # Electrical energy (J) of the frames since the pack last drew it: the pack is integrated when
+        # its BATTERY_STATUS is due, with the mean power of those frames (a pack changes over minutes).
+        self._energy_due, self._frames_due = 0.0, 0
+        self.battery_due = _Schedule(bp.rate_hz, self.frame_dt)
         self.codec = Codec(cfg.link.system_id, cfg.link.component_id, accept=("HIL_ACTUATOR_CONTROLS",))
         # The only peer whose commands count: the vessel computer's ids from the same configuration.
         self.peer_ids = (cfg.autopilot.system_id, cfg.autopilot.component_id)
@@ -167,7 +175,10 @@ class SimulatorCore:
         self.commands_received += 1
 
     def thrusts(self) -> tuple[float, float]:
-        """Port and starboard thrust set-points (N) now, after the stale-command failsafe."""
+        """Port and starboard thrust set-points (N) now, after the stale-command failsafe (and none
+        from a depleted battery: its BMS has cut the thrusters off)."""
+        if self.battery.depleted:
+            return 0.0, 0.0
         if self.t - self.last_command_t > self.cfg.sim.stale_command_timeout + 1e-9:
             if not self.stale:
                 self.stale = True
@@ -196,6 +207,9 @@ class SimulatorCore:
         self.thrust = (sp + (tp - sp) * a, ss + (ts - ss) * a)
         tau = self.vessel.propulsion(*self.thrust)
         coefficients = self.vessel.coefficients
+        power = self.thruster_power
+        self._energy_due += power(self.thrust[0]) + power(self.thrust[1])
+        self._frames_due += 1
         for k in range(1, self.substeps + 1):
             tau_w, cur = self._env
             x0, y0 = self.state[0], self.state[1]
@@ -240,6 +254,10 @@ class SimulatorCore:
                 [nan, nan, nan, nan], bu, bv, bw, nan, nan, nan, [nan] + [0.0] * 20,
                 [var, 0, 0, 0, 0, 0, var, 0, 0, 0, 0, var] + [0.0] * 9, 0, 0, 100))
             self.messages_sent["ODOMETRY"] += 1
+        if self.battery_due.due(self.n):
+            self.settle_battery()
+            parts.append(self.codec.encode("battery_status", **self.battery.battery_status()))
+            self.messages_sent["BATTERY_STATUS"] += 1
         if self.rangefinder is not None and self.rangefinder_due.due(self.n):
             rf = self.rangefinder
             parts.append(self.codec.encode(
@@ -255,6 +273,21 @@ class SimulatorCore:
                 parts += self.traffic.truth_messages(t, self.truth_codec)
                 self.messages_sent["AIS_VESSEL_TRUTH"] += len(self.traffic.ships)
         return b"".join(parts)
+
+    def settle_battery(self) -> None:
+        """Let the pack deliver the thrusters' energy of the frames since it last did, plus the hotel load."""
+        if self._frames_due:
+            pack = self.battery
+            pack.draw(self._energy_due / self._frames_due + pack.p.hotel_power, self._frames_due * self.frame_dt)
+            self._energy_due, self._frames_due = 0.0, 0
+
+    def battery_summary(self) -> dict[str, float | bool]:
+        """The pack at the end: state of charge (0-1), terminal voltage (V), consumed mAh and Wh, empty."""
+        self.settle_battery()
+        b = self.battery
+        return {"state_of_charge": round(b.soc, 5), "voltage_v": round(b.voltage, 3),
+                "consumed_mah": round(b.consumed_mah, 1), "energy_wh": round(b.energy_j / 3600.0, 3),
+                "depleted": b.depleted}
 
     def truth(self) -> dict[str, float]:
         x, y, psi, u, v, r = self.state

@@ -111,15 +111,17 @@ class EscBank:
         return self.raw[0] / dc.RAW_COMMAND_MAX, self.raw[1] / dc.RAW_COMMAND_MAX
 
     # -- publish ---------------------------------------------------------------------------
-    def propeller(self, thrust: float) -> dict[str, float]:
-        """Propeller speed (rpm), electrical power (W), current (A), temperature (K) at ``thrust`` N."""
+    def propeller(self, thrust: float, voltage: float | None = None) -> dict[str, float]:
+        """Propeller speed (rpm), electrical power (W), current (A) at the supply ``voltage`` (V; None:
+        [esc] voltage), temperature (K) at ``thrust`` N (simulator/battery.py draws the same power)."""
         e, v = self.esc, self.vessel
         if thrust >= 0:
             rpm = e.max_rpm * math.sqrt(thrust / v.T_max)
         else:
             rpm = -e.max_rpm * math.sqrt(thrust / v.T_min)
         power = e.max_power * (abs(rpm) / e.max_rpm) ** 3
-        return {"rpm": rpm, "power": power, "current": power / e.voltage,
+        supply = e.voltage if voltage is None or voltage <= 0 else voltage
+        return {"rpm": rpm, "power": power, "current": power / supply,
                 "temperature": e.ambient_temperature + e.heating * power}
 
     def _send(self, k: int, full_name: str, payload: bytes, priority: int) -> None:
@@ -131,13 +133,15 @@ class EscBank:
                 return
         self.sent[f"{dc.short_name(full_name)}@{self.node_ids[k]}"] += 1
 
-    def publish(self, t: float, thrust: tuple[float, float]) -> None:
-        """Send whatever is due at simulated time ``t`` (s) given the applied ``thrust`` (N)."""
+    def publish(self, t: float, thrust: tuple[float, float], voltage: float | None = None) -> None:
+        """Send whatever is due at simulated time ``t`` (s) given the applied ``thrust`` (N) and the
+        supply ``voltage`` (V: the battery's terminals; None: [esc] voltage)."""
         if t + 1e-9 >= self.next_status_t:
             self.next_status_t = t + 1.0 / self.p.status_rate_hz
+            supply = self.esc.voltage if voltage is None or voltage <= 0 else voltage
             for k, th in enumerate(thrust):
-                s = self.propeller(th)
-                msg = dc.make(dc.ESC_STATUS, error_count=0, voltage=self.esc.voltage, current=s["current"],
+                s = self.propeller(th, supply)
+                msg = dc.make(dc.ESC_STATUS, error_count=0, voltage=supply, current=s["current"],
                               temperature=s["temperature"], rpm=int(round(s["rpm"])),
                               power_rating_pct=min(127, int(round(100.0 * s["power"] / self.esc.max_power))),
                               esc_index=k)

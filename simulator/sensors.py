@@ -19,7 +19,8 @@ G = 9.80665  # m/s^2, standard gravity
 UINT16_UNKNOWN = 65535
 
 # Order of the spawned streams: append new ones at the end (keeps the earlier streams unchanged).
-STREAMS = ("gps", "imu", "compass", "dvl", "waves", "gps_events", "rangefinder")  # append only: keeps the others
+STREAMS = ("gps", "imu", "compass", "dvl", "waves", "gps_events", "rangefinder",
+           "gps_satellites")  # append only: keeps the others
 
 
 def sensor_rngs(seed: int) -> dict[str, np.random.Generator]:
@@ -96,13 +97,39 @@ class Compass:
         return h * math.cos(a), -h * math.sin(a), 0.0
 
 
+class Satellites:
+    """The number of satellites the receiver tracks: a seeded birth-death process round ``mean``.
+
+    Satellites rise and set one at a time (a GNSS satellite stays above the horizon for hours, and a
+    multi-constellation receiver tracks a few dozen, so the count changes every minute or two): an
+    event every ``interval`` s on average (Poisson), a rise with probability 1/2 - (n - mean)/8 (so
+    the count reverts to the mean), within mean +- 4 and never below 4 (the fewest for a 3-D fix).
+    """
+
+    SPREAD = 4
+
+    def __init__(self, mean: int, interval: float, rng: np.random.Generator, frame_dt: float) -> None:
+        self.mean, self.u = mean, Uniforms(rng)
+        self.lo, self.hi = max(4, mean - self.SPREAD), max(4, mean + self.SPREAD)
+        self.p_event = frame_dt / interval if interval > 0 else 0.0
+        self.count = min(max(mean + int(self.u() * 3) - 1, self.lo), self.hi)   # mean - 1 .. mean + 1
+
+    def advance(self) -> None:
+        """One frame: maybe a satellite rises or sets."""
+        if self.p_event and self.u() < self.p_event:
+            rise = self.u() < 0.5 - (self.count - self.mean) / 8.0
+            self.count = min(max(self.count + (1 if rise else -1), self.lo), self.hi)
+
+
 class Gps:
-    """HIL_GPS fields: delayed, noisy position/velocity, dropouts (fix_type 0) and glitches."""
+    """HIL_GPS fields: delayed, noisy position/velocity, dropouts (fix_type 0, no satellites) and glitches."""
 
     def __init__(self, p: Any, rng: np.random.Generator, events: np.random.Generator,
-                 frame: LocalFrame, frame_dt: float) -> None:
+                 frame: LocalFrame, frame_dt: float, satellites: np.random.Generator | None = None) -> None:
         self.p, self.frame, self.frame_dt = p, frame, frame_dt
         self.n, self.u = Normals(rng), Uniforms(events)
+        self.satellites = Satellites(int(getattr(p, "satellites", 12)), float(getattr(p, "satellite_interval", 90.0)),
+                                     satellites if satellites is not None else np.random.default_rng(0), frame_dt)
         self.delay_frames = int(round(p.latency / frame_dt))
         self.history: deque = deque(maxlen=self.delay_frames + 1)
         self.random_dropout_until = -1.0
@@ -111,6 +138,7 @@ class Gps:
     def record(self, t: float, x: float, y: float, vn: float, ve: float) -> None:
         """Remember the truth of every frame (for the latency); also draws random dropouts."""
         self.history.append((x, y, vn, ve))
+        self.satellites.advance()
         if self.p.dropout_rate > 0 and t >= self.random_dropout_until:
             if self.u() < self.p.dropout_rate * self.frame_dt:
                 self.random_dropout_until = t + self.p.dropout_duration
@@ -146,7 +174,7 @@ class Gps:
                     vel=min(UINT16_UNKNOWN - 1, int(round(100 * speed))),
                     vn=int(round(100 * vn)), ve=int(round(100 * ve)), vd=0,
                     cog=int(round(math.degrees(wrap_2pi(math.atan2(ve, vn))) * 100)) % 36000,
-                    satellites_visible=12)
+                    satellites_visible=self.satellites.count)
 
 
 class Dvl:

@@ -86,7 +86,7 @@ class SimulatorServer:
 
     def _publish(self, datagram: bytes) -> None:
         if self.esc is not None:
-            self.esc.publish(self.core.t, self.core.thrust)
+            self.esc.publish(self.core.t, self.core.thrust, self.core.battery.voltage)
         self.ep.send(datagram)
         self.datagrams_sent += 1
 
@@ -331,6 +331,7 @@ class SimulatorServer:
             "stalls": {"count": self.stall_count, "total_s": round(self.stall_total_s, 3),
                        "events": [{"t_s": round(t, 3), "length_s": round(d, 3)} for t, d in self.stalls]},
             "gps": {"fixes": c.gps.fixes, "dropout_fixes": c.gps.dropout_fixes, "glitches": c.gps.glitches},
+            "battery": c.battery_summary(),
             "distance_m": c.distance,
             "ais": None if c.traffic is None else {"ships": len(c.traffic.ships), "reports": c.traffic.reports_sent,
                                                    "lost": c.traffic.reports_lost},

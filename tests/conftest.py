@@ -58,7 +58,7 @@ UNIT_MODULES = frozenset("""
     can_codec can_esc charts collision_cone colregs colregs_oracle config config_layers control current_field
     current_sources geodesy
     global_route guidance_kernel mavlink_crc mavlink_fast_path mission_executor modes navigation navigation_fast
-    config_ranges encounter_route online percentiles plan_commitment plan_start_course readiness
+    battery_monitor config_ranges encounter_route online percentiles plan_commitment plan_start_course readiness
     planner_algorithms planner_config planner_cost planner_dynamic_domain planner_fence planner_gridmap
     planner_issue34 flow_optimum planner_registry
     planner_guidance planner_kgrowth planner_metrics planner_postprocess process_logging reactive route_planning
@@ -66,16 +66,16 @@ UNIT_MODULES = frozenset("""
 """.split())
 INTEGRATION_MODULES = frozenset("""
     ardupilot_json
-    autopilot_link bench_frame bench_planner busy_poll cli connection cpu_load executors gcs_esc_telemetry gcs_fuzz
-    first_run friction gcs_security gcs_lockout gcs_link gcs_mission geo_cli hil_link_fast_path montecarlo output
-    placement plan_cli planner_warmup
+    autopilot_link battery bench_frame bench_planner busy_poll cli connection cpu_load executors gcs_esc_telemetry
+    gcs_fuzz first_run friction gcs_security gcs_lockout gcs_link gcs_mission geo_cli hil_link_fast_path montecarlo
+    output placement plan_cli planner_warmup
     planning_worker range_sensing
     readme security_gates sim_link sim_pause sim_pipeline sim_udp startup_errors tap_fast_path traffic_ais
     vehicle_commands vessel_parameters
 """.split())
 E2E_MODULES = frozenset("""
     ardupilot_sitl by_hand can_vcan colregs_loop example_world gcs_chaos gcs_mavproxy gcs_mavsdk gcs_rover
-    gcs_session hil_faults hil_loop hil_vcan holding_ground instances
+    gcs_session gcs_telemetry_truth hil_faults hil_loop hil_vcan holding_ground instances
     mission_done route_mission security_loop sparse_routes
 """.split())
 TIERS = ("unit", "integration", "e2e")

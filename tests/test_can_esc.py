@@ -52,6 +52,19 @@ def test_command_reaches_the_escs_and_status_comes_back(rig):
     assert esc.summary()["transfers_received"] == {"NodeStatus@10": 1, "RawCommand@10": 1}
 
 
+def test_status_reports_the_battery_voltage_it_is_given(rig):
+    cfg, core, esc, acts, _ = rig
+    core.battery.draw(1000.0, 1.0)          # a loaded pack: its terminal voltage sags
+    volts = core.battery.voltage
+    assert volts < cfg.esc.voltage
+    esc.publish(0.0, (core.vessel.T_max, 0.0), volts)
+    for _ in range(6):
+        acts.service(0.05)
+    port = acts.summary()["esc_status"]["port"]
+    assert port["voltage"] == pytest.approx(volts, rel=1e-3)
+    assert port["current"] == pytest.approx(cfg.esc.max_power / volts, rel=1e-3)
+
+
 def test_status_and_node_status_rates_follow_simulated_time(rig):
     cfg, core, esc, acts, _ = rig
     for n in range(100):  # 1 s of 100 Hz frames

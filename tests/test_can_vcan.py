@@ -137,8 +137,8 @@ def test_esc_telemetry_goes_to_the_ground_station_and_into_the_tlog(vcan_batch):
     assert max(r.rpm[0] for r in rows) > 100 and max(r.rpm[1] for r in rows) > 100
     assert all(r.rpm[2] == r.rpm[3] == 0 for r in rows)             # two thrusters
     assert rows[-1].count[0] > rows[0].count[0]                     # Status keeps arriving
-    volts = settings.load(None, []).esc.voltage
-    assert all(r.voltage[0] == round(volts * 100) for r in rows)    # cV
+    # cV: the battery's terminal voltage (a full 6S pack, 25.08 V open-circuit, sagging under load)
+    assert all(2000 < r.voltage[0] <= 2508 for r in rows) and len({r.voltage[0] for r in rows}) > 1
 
 
 def test_can_log_is_readable_by_python_can(vcan_batch):

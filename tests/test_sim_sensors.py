@@ -15,7 +15,7 @@ from simulator.sensors import G
 
 QUIET = ["waves.enabled=false", "current.enabled=false", "sensors.gps.glitch_probability=0.0",
          "sensors.imu.gyro_bias_walk=0.0"]
-DECODER = ("HIL_SENSOR", "HIL_GPS", "HIL_STATE_QUATERNION", "ODOMETRY")
+DECODER = ("HIL_SENSOR", "HIL_GPS", "HIL_STATE_QUATERNION", "ODOMETRY", "BATTERY_STATUS")
 
 
 def run_frames(overrides, n, controls=(0.0, 0.0)):

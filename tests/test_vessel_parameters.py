@@ -9,6 +9,7 @@ PARAM_SET is a MAVLink 2 frame encoded by pymavlink, decoded and dispatched as t
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import pytest
 from pymavlink.dialects.v20 import common as mavlink2
@@ -17,6 +18,7 @@ from support.vessel_harness import build_computer, frame
 from autopilot_bridge.behaviour import Behaviour
 from autopilot_bridge.gcs.config import GcsParams
 from autopilot_bridge.gcs.link import GcsLink
+from autopilot_bridge.hil_link import BatteryReading
 from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavState
 from autopilot_bridge.parameters import Tunable, declarations
@@ -73,7 +75,8 @@ def test_parameters_are_declared_by_their_owners_once_with_range_units_and_doc(s
     names = [p.name for p in table.params]
     assert len(names) == len(set(names))
     owners = (s.ap.vehicle, s.ap.planning, s.ap.planner_tuning, s.ap.helm.heading_pid, s.ap.helm.speed_ctl,
-              s.ap.station, s.ap.geofence, s.link.failsafe, s.link.identity)
+              s.ap.station, s.ap.geofence, s.link.failsafe, s.link.identity,
+              s.ap.onboard.battery)
     declared = [d.name for o in owners for d in declarations(o)]
     assert sorted(declared) == sorted(names)
     for o in owners:
@@ -215,6 +218,39 @@ def test_system_id_reaches_the_codec_and_the_link():
     assert not s.param_set("SYSID_THISMAV", 1, target=1)     # addressed to the old id: not for us any more
     assert s.param_set("SYSID_THISMAV", 1, target=7)
     tested("SYSID_THISMAV")
+
+
+def _pack(volts: float, consumed: float = 100.0) -> BatteryReading:
+    return BatteryReading(volts, (round(volts / 6 * 1000),) * 6, 9.0, consumed, None, 50, 0,
+                          M.MAV_BATTERY_CHARGE_STATE_OK)
+
+
+def _feed(s: Session, seconds: float, pack: BatteryReading) -> None:
+    for _ in range(int(round(seconds / 0.01))):
+        s.t += 0.01
+        s.ap.on_frame(replace(frame(s.t, *START), battery=pack), 0.0)
+
+
+def test_battery_parameters_reach_the_battery_monitor_and_its_failsafe():
+    s = Session(wait_for_arm=False)                           # armed in AUTO
+    s.fix()
+    mon = s.ap.onboard.battery
+    assert s.param_set("BATT_LOW_VOLT", 21.0) and s.param_set("BATT_LOW_TIMER", 0.5)
+    assert s.param_set("BATT_FS_LOW_ACT", 2) and (mon.low_volt, mon.low_timer, mon.fs_low_act) == (21.0, 0.5, 2)
+    _feed(s, 0.3, _pack(20.8))
+    assert not mon.failsafe and s.ap.vehicle.mode == Mode.AUTO    # below for 0.3 s of BATT_LOW_TIMER's 0.5
+    _feed(s, 0.3, _pack(20.8))
+    assert mon.failsafe and s.ap.vehicle.mode == Mode.LOITER      # BATT_FS_LOW_ACT 2: hold station
+    s = Session(wait_for_arm=False)
+    s.fix()
+    mon = s.ap.onboard.battery
+    assert s.param_set("BATT_LOW_VOLT", 0.0) and s.param_set("BATT_CAPACITY", 1000.0)
+    assert s.param_set("BATT_LOW_MAH", 300.0) and s.param_set("BATT_FS_LOW_ACT", 0)
+    _feed(s, 0.1, _pack(15.0, consumed=650.0))
+    assert not mon.failsafe and mon.remaining_mah() == 350.0      # 1000 - 650 left, BATT_LOW_VOLT off
+    _feed(s, 0.1, _pack(15.0, consumed=750.0))
+    assert mon.failsafe and s.ap.vehicle.mode == Mode.AUTO        # BATT_FS_LOW_ACT 0: nothing
+    tested("BATT_CAPACITY", "BATT_LOW_VOLT", "BATT_LOW_MAH", "BATT_LOW_TIMER", "BATT_FS_LOW_ACT")
 
 
 def test_fence_parameters_reach_the_planning_grid_and_the_breach_action():

@@ -18,6 +18,7 @@ from autopilot_bridge.gcs.context import Outbox, VehicleView, finite
 from autopilot_bridge.gcs.identity import CAPABILITIES, Identity
 from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavState
+from autopilot_bridge.onboard_status import OnboardStatus
 from common.mavlink import MAV_TYPE as M
 from common.mavlink import mavlink2
 
@@ -25,7 +26,7 @@ from common.mavlink import mavlink2
 DEFAULT_INTERVALS = {
     "HEARTBEAT": 1.0, "SYS_STATUS": 1.0, "GPS_RAW_INT": 0.5, "GLOBAL_POSITION_INT": 0.2,
     "LOCAL_POSITION_NED": 0.1, "ATTITUDE": 0.1, "VFR_HUD": 0.25, "MISSION_CURRENT": 1.0,
-    "ACTUATOR_OUTPUT_STATUS": 0.5, "HOME_POSITION": 5.0, "ESC_TELEMETRY_1_TO_4": 0.5,
+    "ACTUATOR_OUTPUT_STATUS": 0.5, "HOME_POSITION": 5.0, "ESC_TELEMETRY_1_TO_4": 0.5, "BATTERY_STATUS": 1.0,
 }
 # REQUEST_DATA_STREAM groups (ArduPilot's grouping of the same messages).
 STREAM_GROUPS = {
@@ -35,13 +36,16 @@ STREAM_GROUPS = {
     M.MAV_DATA_STREAM_EXTRA2: ("VFR_HUD",),
     M.MAV_DATA_STREAM_RAW_CONTROLLER: ("ACTUATOR_OUTPUT_STATUS",),
     M.MAV_DATA_STREAM_RC_CHANNELS: ("ACTUATOR_OUTPUT_STATUS",),
-    M.MAV_DATA_STREAM_EXTRA3: ("ESC_TELEMETRY_1_TO_4",),
+    M.MAV_DATA_STREAM_EXTRA3: ("ESC_TELEMETRY_1_TO_4", "BATTERY_STATUS"),
 }
 MSG_IDS = {name: getattr(mavlink2, f"MAVLINK_MSG_ID_{name}") for name in DEFAULT_INTERVALS}
 ID_NAMES = {v: k for k, v in MSG_IDS.items()}
 ON_REQUEST = {mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION: "AUTOPILOT_VERSION", **ID_NAMES}
 MODE_FLAGS = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | M.MAV_MODE_FLAG_HIL_ENABLED
 MIN_INTERVAL = 0.01  # s: at most once per IMU frame
+# SYS_STATUS bits the vessel computer reports besides its sensors' (autopilot_bridge.onboard_status).
+CONTROL_BITS = M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL | M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+GPS_NO_GPS, SATELLITES_UNKNOWN = 0, 255
 
 CommandResult = tuple[int, str]
 
@@ -66,6 +70,7 @@ class TelemetryService:
             "LOCAL_POSITION_NED": self._local_position, "ATTITUDE": self._attitude,
             "GLOBAL_POSITION_INT": self._global_position, "GPS_RAW_INT": self._gps_raw, "VFR_HUD": self._vfr_hud,
             "ACTUATOR_OUTPUT_STATUS": self._actuator_outputs, "AUTOPILOT_VERSION": self._autopilot_version,
+            "BATTERY_STATUS": self._battery_status,
         }
 
     # -- dispatch tables -------------------------------------------------------------------------
@@ -165,15 +170,35 @@ class TelemetryService:
         self.out.send("global_position_int", self._t_ms(), lat, lon, alt, 0, int(round(vn * 100)),
                       int(round(ve * 100)), 0, hdg)
 
+    def _onboard(self) -> OnboardStatus | None:
+        """The vessel's account of its sensors and pack (None from an API without one)."""
+        get = getattr(self.view.api, "onboard_status", None)
+        return get() if callable(get) else None
+
     def _gps_raw(self) -> None:
-        s = self._nav()
-        if s is None:
+        """The receiver's own report (its newest HIL_GPS): fix type, satellites, position, as ArduPilot
+        sends GPS_RAW_INT; before any, "no GPS" with satellites unknown."""
+        onboard = self._onboard()
+        g = None if onboard is None else onboard.gps
+        if g is None:
+            self.out.send("gps_raw_int", self._t_us(), GPS_NO_GPS, 0, 0, 0, 65535, 65535, 65535, 65535,
+                          SATELLITES_UNKNOWN)
             return
-        vn, ve, lat, lon, alt = self._fix(s)
-        cog = int(round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100)) % 36000
-        eph = min(int(round(s.position_std * 100)), 65534)
-        self.out.send("gps_raw_int", self._t_us(), 3, lat, lon, alt, eph, 65535,
-                      int(round(math.hypot(vn, ve) * 100)), cog, 255)
+        self.out.send("gps_raw_int", self._t_us(), g.fix_type, g.lat, g.lon, g.alt, g.eph, g.epv, g.vel, g.cog,
+                      g.satellites)
+
+    def _battery_status(self) -> None:
+        """The pack as the battery monitor knows it (nothing before its first reading)."""
+        onboard = self._onboard()
+        b = None if onboard is None else onboard.battery
+        if b is None:
+            return
+        cells = list(b.cells[:10]) + [65535] * (10 - min(len(b.cells), 10))
+        ext = list(b.cells[10:14]) + [0] * (4 - len(b.cells[10:14]))
+        self.out.send("battery_status", 0, M.MAV_BATTERY_FUNCTION_ALL, M.MAV_BATTERY_TYPE_LION, 32767, cells,
+                      _clamp(b.current, 100.0, -1), _clamp(b.consumed_mah, 1.0, -1, 2**31 - 1),
+                      _clamp(b.energy_j, 0.01, -1, 2**31 - 1), -1 if b.remaining is None else b.remaining,
+                      b.time_remaining, b.charge_state, ext)
 
     def _vfr_hud(self) -> None:
         s = self._nav()
@@ -231,21 +256,21 @@ class TelemetryService:
         self.out.send("mission_current", min(st.mission_current, max(total - 1, 0)), total, state, 1 if auto else 0)
 
     def _sys_status(self) -> None:
+        """Sensors present/enabled/healthy as the vessel computer sees them (autopilot_bridge.onboard_status),
+        and the pack's voltage (mV), current (cA) and remaining charge (%); -1 where unknown."""
         st = self.view.status
-        s = None if st is None else st.nav
-        present = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_MAG | M.MAV_SYS_STATUS_SENSOR_GPS
-                   | M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL | M.MAV_SYS_STATUS_AHRS
-                   | M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)
-        health = 0
-        if s is not None:
-            health |= M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_MAG | M.MAV_SYS_STATUS_AHRS
-            if s.position_std < 3.0:
-                health |= M.MAV_SYS_STATUS_SENSOR_GPS
+        onboard = self._onboard()
+        present = CONTROL_BITS | (0 if onboard is None else onboard.present)
+        enabled = CONTROL_BITS | (0 if onboard is None else onboard.enabled)
+        health = M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | (0 if onboard is None else onboard.health)
         if st is not None and st.behaviour in (Behaviour.PLANNED, Behaviour.COMPLETE, Behaviour.RETURNING):
             health |= M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL  # the planner delivers local paths
-        health |= M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+        b = None if onboard is None else onboard.battery
+        volts = 65535 if b is None else _clamp(b.voltage, 1000.0, 65535, 65534)
+        amps = -1 if b is None else _clamp(b.current, 100.0, -1, 32767)
+        remaining = -1 if b is None or b.remaining is None else b.remaining
         errors = min(self.link_errors(), 65535)
-        self.out.send("sys_status", present, present, health, 0, 0, -1, -1, 0, errors, 0, 0, 0, 0)
+        self.out.send("sys_status", present, enabled, health, 0, volts, amps, remaining, 0, errors, 0, 0, 0, 0)
 
     def home(self) -> None:
         st = self.view.status
@@ -334,3 +359,10 @@ class TelemetryService:
     def _cmd_home(self, p: list[float], x5: float, y6: float) -> CommandResult:
         self.home()
         return M.MAV_RESULT_ACCEPTED, ""
+
+
+def _clamp(value: float | None, scale: float, unknown: int, top: int = 32767) -> int:
+    """``value * scale`` rounded into a MAVLink integer field's range [0, top]; ``unknown`` for None."""
+    if value is None or not math.isfinite(value):
+        return unknown
+    return max(0, min(top, int(round(value * scale))))
