@@ -241,12 +241,14 @@ def test_a_fence_and_a_rally_point_shape_the_mission_and_rtl_comes_back_from_out
 
 
 def _open_water(tmp_path: Path, current: float) -> Session:
+    from hil.benches.station import scenario_in_current
+
     s = Session.__new__(Session)
     port = free_udp_port()
     s.out = tmp_path / "run"
-    s.proc = start_run(s.out, "--scenario", "open-water-current", "--duration", "3000", "--wait-for-arm",
-                       "--speedup", str(SPEEDUP), "--gcs", f"udpin:127.0.0.1:{port}",
-                       "--set", f"current.uniform=[0.0,{current}]", identity="ardupilot")
+    s.proc = start_run(s.out, "--scenario", str(scenario_in_current(current, tmp_path)), "--duration", "3000",
+                       "--wait-for-arm", "--speedup", str(SPEEDUP), "--gcs", f"udpin:127.0.0.1:{port}",
+                       identity="ardupilot")
     s.gcs = Gcs(f"udpout:127.0.0.1:{port}")
     assert s.gcs.connect() is not None
     assert s.gcs.recv("GLOBAL_POSITION_INT", 60) is not None

@@ -61,6 +61,21 @@ def _parse_currents(text: str) -> list[float]:
     return values
 
 
+def scenario_in_current(speed: float, folder: Path) -> Path:
+    """configs/scenarios/open-water-current.toml with the current set to ``speed`` m/s across the route
+    (a scenario's [current] wins over the configuration's, so the speed is written into a copy)."""
+    from hil.scenario_names import SCENARIO_DIR
+
+    src = SCENARIO_DIR / f"{SCENARIO}.toml"
+    text = src.read_text().replace('map = "../maps/open_water.npy"',
+                                   f'map = "{(SCENARIO_DIR / "../maps/open_water.npy").resolve()}"')
+    text = text.replace("uniform = [0.0, 1.0]", f"uniform = [0.0, {float(speed)!r}]")
+    folder.mkdir(parents=True, exist_ok=True)
+    out = folder / f"{SCENARIO}-{speed:g}.toml"
+    out.write_text(text)
+    return out
+
+
 def judge(truth: dict[int, tuple[float, float, float, float]], commands: list[tuple[int, float, float]],
           goal: tuple[float, float], t_from: float, power: Any, vessel: Any) -> dict[str, float]:
     """Distance from ``goal`` (NED m) and electrical energy per minute after ``t_from`` (s)."""
@@ -92,16 +107,20 @@ def one(current: float, method: str, args: argparse.Namespace, out: Path) -> dic
     from hil.hilrun import HilRun, RunOptions
     from simulator.battery import ThrusterPower
 
-    overrides = [f"current.uniform=[0.0,{current!r}]",
-                 'autopilot.mission_done="hold"' if method == "hold" else 'autopilot.mission_done="loiter"',
+    overrides = ['autopilot.mission_done="hold"' if method == "hold" else 'autopilot.mission_done="loiter"',
                  f'autopilot.station_keeping="{"into-current" if method == "hold" else method}"']
     cfg = settings.load(None, overrides)
-    run = HilRun(RunOptions(scenario=SCENARIO, seed=args.seed, duration=args.duration, stop_at_goal=False,
+    scenario = scenario_in_current(current, out)
+    run = HilRun(RunOptions(scenario=str(scenario), seed=args.seed, duration=args.duration, stop_at_goal=False,
                             plot=False, out=out / f"{method}-{current:g}", overrides=overrides), cfg)
     s = run.execute()
-    result = judge(run.tap.truth, list(run.tap.commands), run.judge.goal, args.duration - args.hold,
-                   ThrusterPower(cfg.esc, cfg.vessel), cfg.vessel)
-    result["reached_goal"] = bool(s.reached_goal)
+    done = [float(e.split("s ", 1)[0]) for e in s.events if "mission complete" in e]
+    # Judged from 30 s after the goal for --hold seconds (a drifting HOLD may reach the map's edge first).
+    t0 = done[0] + 30.0 if done else args.duration - args.hold
+    truth = {t: v for t, v in run.tap.truth.items() if t * 1e-6 <= t0 + args.hold}
+    result = judge(truth, list(run.tap.commands), run.judge.goal, t0, ThrusterPower(cfg.esc, cfg.vessel),
+                   cfg.vessel)
+    result["goal_s"] = done[0] if done else None
     result["collisions"] = s.collisions
     return result
 
