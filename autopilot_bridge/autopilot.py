@@ -62,6 +62,7 @@ from autopilot_bridge.local_planning import World, WorldUpdate, map_to_ned_path
 from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavigationFilter, NavState
 from autopilot_bridge.obstacle_map import SensedObstacles, path_blocked
+from autopilot_bridge.onboard_failsafes import OnboardFailsafes
 from autopilot_bridge.onboard_status import OnboardSensors, OnboardStatus
 from autopilot_bridge.parameters import ParamTable, bind
 from autopilot_bridge.plan_acceptance import PlanAcceptance
@@ -151,6 +152,7 @@ class Autopilot:
         self.nav = NavigationFilter(self.nav_params)
         # Telemetry's truth: sensor health and the pack (BATT_* parameters, low-battery failsafe).
         self.onboard = OnboardSensors(BatteryMonitor(config.battery, self._battery_failsafe, self._event))
+        self.failsafes = OnboardFailsafes(self.vehicle, self._event)
         self._reset()
         # One table of every component's own declarations: the parameter service reads and writes them.
         self.param_table = ParamTable(bind(self.vehicle, self.planning, self.planner_tuning, self.helm.heading_pid,
@@ -340,6 +342,7 @@ class Autopilot:
 
         self.vehicle.update(s.x, s.y, t)
         self._check_fence(t, s)
+        self.failsafes.check(s, c.behaviour.state)
         self._apply_route(t)
         v = self.vehicle
         # The active mode decides where the thrust comes from (autopilot_bridge.modes); disarmed: none.
