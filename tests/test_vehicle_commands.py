@@ -77,3 +77,25 @@ def test_the_fence_refuses_targets_rally_points_and_mission_items_outside_it():
     c.replace_rally(((30.0, 30.0),))
     assert ap.geofence.rally_point((45.0, 25.0)) == (30.0, 30.0)
     assert c.set_mode(Mode.RTL).ok and tuple(ap.vehicle.route.path[-1]) == (30.0, 30.0)   # RTL to the rally point
+
+
+def test_a_planner_that_keeps_failing_and_uncertain_navigation_hold_station():
+    from autopilot_bridge.behaviour import Behaviour
+    from autopilot_bridge.navigation import NavState
+    from autopilot_bridge.onboard_failsafes import PLANNER_FAIL_S, POSITION_STD_LIMIT
+
+    ap = computer()
+    ap.commands.arm(True)
+    assert ap.commands.set_mode(Mode.AUTO).ok
+    fs = ap.failsafes
+    s = NavState(t=10.0, x=40.0, y=22.0, psi=0.0, u=0.0, v=0.0, r=0.0, gyro_bias=0.0, position_std=0.5)
+    fs.check(s, Behaviour.FALLBACK)
+    fs.check(NavState(**{**s.__dict__, "t": 10.0 + PLANNER_FAIL_S - 1.0}), Behaviour.FALLBACK)
+    assert ap.vehicle.mode == Mode.AUTO
+    fs.check(NavState(**{**s.__dict__, "t": 10.0 + PLANNER_FAIL_S + 0.1}), Behaviour.FALLBACK)
+    assert ap.vehicle.mode == Mode.LOITER and fs.events == 1
+    assert any("planner failsafe" in e for _, e in ap.stats.events)
+    assert ap.commands.set_mode(Mode.GUIDED).ok
+    fs.check(NavState(**{**s.__dict__, "t": 60.0, "position_std": POSITION_STD_LIMIT + 1.0}), Behaviour.PLANNED)
+    assert ap.vehicle.mode == Mode.LOITER and fs.events == 2
+    assert any("navigation failsafe" in e for _, e in ap.stats.events)
