@@ -90,10 +90,11 @@ def _capture(planner) -> dict[str, np.ndarray]:
     kept: dict[str, np.ndarray] = {}
     inner = planner._result
 
-    def spy(problem, t0, X, parent, cost, st, fs, why, dd, *rest):
-        n = int(st[planner_core._tree.S_N])
-        kept.update(nodes=X[:n].copy(), parents=parent[:n].copy(), costs=cost[:n].copy(), dd=dd[:n].copy())
-        return inner(problem, t0, X, parent, cost, st, fs, why, dd, *rest)
+    def spy(problem, t0, tree: planner_core._tree.Tree, st, *rest):
+        n = int(st["n"])
+        kept.update(nodes=tree.X[:n].copy(), parents=tree.parent[:n].copy(), costs=tree.cost[:n].copy(),
+                    dd=tree.dd[:n].copy())
+        return inner(problem, t0, tree, st, *rest)
 
     planner._result = spy
     return kept
