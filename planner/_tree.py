@@ -229,7 +229,7 @@ def _fan_ok_cos(head, hx, hy, dx, dy, max_turn, fb):
     return _fan_ok(head, dx, dy, max_turn)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _bucket(x, y, cfg):
     bx = int(x / cfg.bucket)  # buckets cover the whole map from (0, 0)
     by = int(y / cfg.bucket)
@@ -238,7 +238,7 @@ def _bucket(x, y, cfg):
     return bx, by
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _insert_bucket(i, cfg, tree):
     bx, by = _bucket(tree.X[i, 0], tree.X[i, 1], cfg)
     b = by * cfg.nbx + bx
@@ -346,7 +346,7 @@ def _near_pos(qx, qy, radius, cfg, tree, out_i, mark):
     return m, pos
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _in_domain(x, y, cfg):
     if x < cfg.bx0 or x > cfg.bx1 or y < cfg.by0 or y > cfg.by1:
         return False
@@ -425,7 +425,7 @@ def _informed(cfg, c_best):
     return x, y
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _children_fan_ok(j, new_head, tree, max_turn):
     if max_turn >= math.pi:
         return True
@@ -474,7 +474,7 @@ def _reparent(j, p, new_cost, tree):
             c = next_sib[c]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _set_direction(i, x, y, nv, world, cfg):
     """nv[i] = the unit vector of the current at (x, y), or (0, 0) where there is none."""
     vx, vy = field_at(world.fvx, world.fvy, cfg.field_res, cfg.field_ox, cfg.field_oy, x, y)
@@ -487,7 +487,7 @@ def _set_direction(i, x, y, nv, world, cfg):
         nv[i, 1] = vy / v
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _add_node(x, y, p, c, world, cfg, tree, state):
     """Append node (x, y) with parent p and cost c; returns its index."""
     X = tree.X
@@ -508,19 +508,19 @@ def _add_node(x, y, p, c, world, cfg, tree, state):
     return i
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _cost(x0, y0, x1, y1, world, cfg):
     return edge_cost(x0, y0, x1, y1, cfg.use_field != 0, world.fvx, world.fvy, cfg.field_res, cfg.field_ox,
                      cfg.field_oy, cfg.step, cfg.d_alpha, cfg.gamma)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _free(world, cfg, state, x0, y0, x1, y1):
     state.checks += 1
     return segment_free(world.occ, cfg.res, x0, y0, x1, y1)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _dd_failed(i, dd, cfg):
     """A failed (colliding) extension from node i: its dynamic domain becomes bounded (DD0), or,
     already bounded, shrinks by the adaptive factor (Jaillet et al. 2005), never below DDMIN."""
@@ -530,7 +530,7 @@ def _dd_failed(i, dd, cfg):
         dd[i] = max(dd[i] * cfg.dd_shrink, cfg.dd_min)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _extension_refused(j, by_fan, cfg, tree, state):
     """DDRRT*: the extension from node j failed, by collision or (by_fan) by the turning-radius fan
     of section 2.4. A collision always counts as a failed extension; the fan only with the
@@ -558,7 +558,7 @@ def _sort_by(keys, idx, m):
         idx[b + 1] = ii
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _parent_key(j, nx, ny, world, cfg, tree):
     """(key, exact): the cost to (nx, ny) through node j. With a current, exact. For length, a
     square root instead of math.hypot (exact = False): within 7.2e-16 relative of the exact key,
@@ -571,7 +571,7 @@ def _parent_key(j, nx, ny, world, cfg, tree):
     return tree.cost[j] + math.sqrt(dx * dx + dy * dy), False
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _exact_key(a, near_i, near_c, near_x, nx, ny, world, cfg, tree):
     """Make candidate a's key exact: the cost to (nx, ny) through it."""
     i = near_i[a]
@@ -579,7 +579,7 @@ def _exact_key(a, near_i, near_c, near_x, nx, ny, world, cfg, tree):
     near_x[a] = True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _try_parent(j, nx, ny, world, cfg, tree, state, track_failed):
     """True if the edge from node j to (nx, ny) is in j's fan and collision-free; with
     ``track_failed`` (DDRRT*) a refusal counts as a failed extension (_extension_refused)."""
@@ -594,7 +594,7 @@ def _try_parent(j, nx, ny, world, cfg, tree, state, track_failed):
     return False
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _min_key(near_c, left):
     m = near_c[0]
     for a in range(1, left):
@@ -603,7 +603,7 @@ def _min_key(near_c, left):
     return m
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, world, cfg, tree, state, track_failed, lower_bounds):
     """RRT*'s choose-parent: the first candidate, in ascending cost order, whose edge to (nx, ny)
     is in its fan and collision-free; returns (node, cost through it) or (-1, 0.0). With
@@ -667,7 +667,7 @@ def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, world, cfg, tree, st
     return -1, 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _first_solution(state, clock):
     """At the first exact solution: the iteration, the collision checks so far, the monotonic and
     the thread's CPU clock, so that time to a first solution can be judged independent of the
@@ -678,7 +678,7 @@ def _first_solution(state, clock):
     state.first_cpu_ns = thread_cpu_ns(clock)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _try_goal(i, world, cfg, tree, state, clock):
     """After node i joined the tree: track the closest node and connect the goal exactly."""
     X = tree.X
@@ -719,7 +719,7 @@ def _try_goal(i, world, cfg, tree, state, clock):
         _reparent(g, i, c, tree)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _rewire(j, new, hx, hy, world, cfg, tree, state, fan):
     """Make q_new the parent of node j if that is cheaper and the edge is valid (fan limit for the
     edge and for j's children, collision-free): the rewiring step shared by RRT* and DDRRT*.
@@ -743,7 +743,7 @@ def _rewire(j, new, hx, hy, world, cfg, tree, state, fan):
         _reparent(j, new, c, tree)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _rewire_cannot_pay(j, new, tree, lbf, margin):
     """True if rewiring node j through q_new cannot lower its cost, decided on a square root:
     lbf * sqrt(...) * (1 - margin) <= the computed edge cost (_edge_lower_factor), and rounding is
@@ -758,7 +758,7 @@ def _rewire_cannot_pay(j, new, tree, lbf, margin):
     return tree.cost[new] + lbf * math.sqrt(dx * dx + dy * dy) * (1.0 - margin) >= tree.cost[j] - 1e-12
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _rewire_through(new, p, rw_i, count, world, cfg, tree, state, dv):
     """Rewire step (RRT* and DDRRT* lines 18-21): offer q_new as the parent of rw_i[:count]."""
     hx = math.cos(tree.head[new])
@@ -822,7 +822,7 @@ def node_direction(i, x, y, world, cfg_a, tree):
     _set_direction(i, x, y, tree.nv, world, cfg_a[0])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _sample(cfg, tree, state):
     """A sample (x, y, from_png): the PNG node with probability P (DDRRT*), else the goal with
     the goal bias, else uniform in the domain (Informed RRT* with a solution: in its ellipse)."""
@@ -837,7 +837,7 @@ def _sample(cfg, tree, state):
     return x, y, False
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _steer(q0, d0, sx, sy, X, step):
     """q_new: the sample, or the point a step from node q0 (d0 from it) towards it."""
     if d0 > step:
@@ -845,7 +845,7 @@ def _steer(q0, d0, sx, sy, X, step):
     return sx, sy
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _dd_candidates(sx, sy, cfg, tree, state, buf, dv):
     """Figure 6 lines 5-11: of the k nearest nodes, those whose dynamic domain (a disc, Yershova
     2005) holds the sample and whose D_C (eq. (12) with one alpha_y, the current at the node, as
@@ -883,7 +883,7 @@ def _dd_candidates(sx, sy, cfg, tree, state, buf, dv):
     return ne
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _first_smallest(keys, m):
     """Index of the first of the smallest keys[:m] (the head of a stable sort)."""
     b = 0
@@ -893,7 +893,7 @@ def _first_smallest(keys, m):
     return b
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _dd_choose_parent(nx, ny, ne, world, cfg, tree, state, buf, dv):
     """Figure 6 lines 12-17: the extendable nodes within a step of q_new, in D_C order (a stable
     sort of that subset, keys in buf.kn_d, gives the order sorting all of them would give it),
@@ -925,7 +925,7 @@ def _dd_choose_parent(nx, ny, ne, world, cfg, tree, state, buf, dv):
     return p, pc, ns
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _ddrrt_extend(sx, sy, from_png, world, cfg, tree, state, buf, dv):
     """One DDRRT* extension towards the sample (Figure 6); returns q_new's index or -1."""
     X = tree.X
@@ -954,7 +954,7 @@ def _ddrrt_extend(sx, sy, from_png, world, cfg, tree, state, buf, dv):
     return new
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _rrt_choose_parent(nx, ny, q0, nn, world, cfg, tree, state, buf, dv):
     """Choose-parent over the near ball buf.near_i[:nn] and the nearest node q0, in ascending cost
     order; the nearest is not required to be valid itself (with the fan limit it often is not).
@@ -989,7 +989,7 @@ def _rrt_choose_parent(nx, ny, q0, nn, world, cfg, tree, state, buf, dv):
     return _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, world, cfg, tree, state, False, dv.lower_bounds)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _rrt_extend(sx, sy, world, cfg, tree, state, buf, dv):
     """One RRT* extension towards the sample (Karaman & Frazzoli 2011, radius version); returns
     q_new's index or -1."""

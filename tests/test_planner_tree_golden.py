@@ -32,7 +32,8 @@ def _labyrinth() -> PlanningProblem:
 
     sc = scenarios.instance(scenarios.load_spec("labyrinth"), None)
     grid = OccupancyGrid(sc.occ, sc.resolution).inflate(2.0)
-    s, g = tuple(sc.start), tuple(sc.goal)
+    s = (float(sc.start[0]), float(sc.start[1]))
+    g = (float(sc.goal[0]), float(sc.goal[1]))
     ref = np.array([s, ((s[0] + g[0]) / 2, (s[1] + g[1]) / 2), g], dtype=float)
     return PlanningProblem(grid, s, g, field=sc.planning_field(), domain_center=s, domain_radius=33.0,
                            reference_path=ref, start_heading=0.3, wave_drift=(0.15, -0.1))
@@ -100,7 +101,7 @@ def _capture(planner) -> dict[str, np.ndarray]:
     return kept
 
 
-def record(name: str, problems: dict[str, PlanningProblem]) -> dict:
+def record(name: str, problems: dict[str, PlanningProblem]) -> dict[str, object]:
     case = next(c for c in CASES if c[0] == name)
     _, map_name, alg, iters, over = case
     params = replace(PlannerParams(algorithm=alg), **over)
@@ -111,7 +112,7 @@ def record(name: str, problems: dict[str, PlanningProblem]) -> dict:
         term = Termination.any_of(term, Termination.exact_solution())
     r = planner.solve(problems[map_name], term)
     d = r.diagnostics
-    out = {k: _digest(v) for k, v in kept.items()}
+    out: dict[str, object] = {k: _digest(v) for k, v in kept.items()}
     out.update(n=len(kept["nodes"]), status=r.status, path=_digest(r.path), iterations=r.iterations,
                rejected=r.samples_rejected, cost=float(r.cost).hex())
     for key in ("collision_checks", "first_solution_iteration", "first_solution_checks", "dynamic_domains",
