@@ -430,11 +430,12 @@ def _children_fan_ok(j, new_head, tree, max_turn):
     if max_turn >= math.pi:
         return True
     X = tree.X
+    next_sib = tree.next_sib
     c = tree.first_child[j]
     while c >= 0:
         if not _fan_ok(new_head, X[c, 0] - X[j, 0], X[c, 1] - X[j, 1], max_turn):
             return False
-        c = tree.next_sib[c]
+        c = next_sib[c]
     return True
 
 
@@ -509,8 +510,9 @@ def _add_node(x, y, p, c, world, cfg, tree, state):
 
 
 @njit(cache=True, inline="always")
-def _cost(x0, y0, x1, y1, world, cfg):
-    return edge_cost(x0, y0, x1, y1, cfg.use_field != 0, world.fvx, world.fvy, cfg.field_res, cfg.field_ox,
+def _cost(x0, y0, x1, y1, fvx, fvy, cfg):
+    """The edge cost (m): its length, or eq. (12) with a current (fvx, fvy)."""
+    return edge_cost(x0, y0, x1, y1, cfg.use_field != 0, fvx, fvy, cfg.field_res, cfg.field_ox,
                      cfg.field_oy, cfg.step, cfg.d_alpha, cfg.gamma)
 
 
@@ -565,18 +567,16 @@ def _parent_key(j, nx, ny, world, cfg, tree):
     which _first_valid_parent computes only for the candidates that can be the minimum."""
     X = tree.X
     if cfg.use_field != 0:
-        return tree.cost[j] + _cost(X[j, 0], X[j, 1], nx, ny, world, cfg), True
+        return tree.cost[j] + _cost(X[j, 0], X[j, 1], nx, ny, world.fvx, world.fvy, cfg), True
     dx = nx - X[j, 0]
     dy = ny - X[j, 1]
     return tree.cost[j] + math.sqrt(dx * dx + dy * dy), False
 
 
 @njit(cache=True, inline="always")
-def _exact_key(a, near_i, near_c, near_x, nx, ny, world, cfg, tree):
-    """Make candidate a's key exact: the cost to (nx, ny) through it."""
-    i = near_i[a]
-    near_c[a] = tree.cost[i] + _cost(tree.X[i, 0], tree.X[i, 1], nx, ny, world, cfg)
-    near_x[a] = True
+def _cost_through(i, nx, ny, X, cost, fvx, fvy, cfg):
+    """The exact cost to (nx, ny) through node i."""
+    return cost[i] + _cost(X[i, 0], X[i, 1], nx, ny, fvx, fvy, cfg)
 
 
 @njit(cache=True, inline="always")
@@ -625,6 +625,10 @@ def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, world, cfg, tree, st
     exp and field look-up. After LAZY_TRIES refused candidates (with the fan limit, the cheapest
     candidates often point backwards), the rest is sorted once instead (exact keys, stable merge
     sort: the same order)."""
+    X = tree.X
+    cost = tree.cost
+    fvx = world.fvx
+    fvy = world.fvy
     left = nc
     for _ in range(LAZY_TRIES):
         if left == 0:
@@ -636,7 +640,8 @@ def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, world, cfg, tree, st
                 exacted = False
                 for a in range(left):
                     if near_c[a] <= window and not near_x[a]:
-                        _exact_key(a, near_i, near_c, near_x, nx, ny, world, cfg, tree)
+                        near_c[a] = _cost_through(near_i[a], nx, ny, X, cost, fvx, fvy, cfg)
+                        near_x[a] = True
                         exacted = True
         window = _min_key(near_c, left) * (1.0 + 1e-12) + 1e-12
         b = -1
@@ -644,7 +649,8 @@ def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, world, cfg, tree, st
         for a in range(left):
             if near_c[a] <= window:
                 if not near_x[a]:  # square-root keys (see above): one pass decides
-                    _exact_key(a, near_i, near_c, near_x, nx, ny, world, cfg, tree)
+                    near_c[a] = _cost_through(near_i[a], nx, ny, X, cost, fvx, fvy, cfg)
+                    near_x[a] = True
                 if b < 0 or near_c[a] < kb:  # strict: the first of equal keys, as the stable sort would
                     kb = near_c[a]
                     b = a
@@ -658,7 +664,8 @@ def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, world, cfg, tree, st
         left -= 1
     for a in range(left):
         if not near_x[a]:
-            _exact_key(a, near_i, near_c, near_x, nx, ny, world, cfg, tree)
+            near_c[a] = _cost_through(near_i[a], nx, ny, X, cost, fvx, fvy, cfg)
+            near_x[a] = True
     order = np.argsort(near_c[:left], kind="mergesort")
     for o in range(left):
         j = near_i[order[o]]
@@ -697,7 +704,7 @@ def _try_goal(i, world, cfg, tree, state, clock):
             state.goal = i
             _first_solution(state, clock)
         return
-    c = cost[i] + _cost(X[i, 0], X[i, 1], gx, gy, world, cfg)
+    c = cost[i] + _cost(X[i, 0], X[i, 1], gx, gy, world.fvx, world.fvy, cfg)
     if g >= 0 and c >= cost[g] - 1e-12:
         return
     dx = gx - X[i, 0]
@@ -734,7 +741,7 @@ def _rewire(j, new, hx, hy, world, cfg, tree, state, fan):
     max_turn = cfg.max_turn
     if not _fan_ok_cos(tree.head[new], hx, hy, dx, dy, max_turn, fan):
         return
-    c = tree.cost[new] + _cost(nx, ny, X[j, 0], X[j, 1], world, cfg)
+    c = tree.cost[new] + _cost(nx, ny, X[j, 0], X[j, 1], world.fvx, world.fvy, cfg)
     if c >= tree.cost[j] - 1e-12:
         return
     if not _children_fan_ok(j, math.atan2(dy, dx), tree, max_turn):
@@ -744,7 +751,7 @@ def _rewire(j, new, hx, hy, world, cfg, tree, state, fan):
 
 
 @njit(cache=True, inline="always")
-def _rewire_cannot_pay(j, new, tree, lbf, margin):
+def _rewire_cannot_pay(j, new, X, cost, lbf, margin):
     """True if rewiring node j through q_new cannot lower its cost, decided on a square root:
     lbf * sqrt(...) * (1 - margin) <= the computed edge cost (_edge_lower_factor), and rounding is
     monotone, so this refuses only candidates that _rewire's exact comparison refuses too. Kept
@@ -752,24 +759,28 @@ def _rewire_cannot_pay(j, new, tree, lbf, margin):
     a thousand near nodes per sample."""
     if lbf <= 0.0:
         return False
-    X = tree.X
     dx = X[j, 0] - X[new, 0]
     dy = X[j, 1] - X[new, 1]
-    return tree.cost[new] + lbf * math.sqrt(dx * dx + dy * dy) * (1.0 - margin) >= tree.cost[j] - 1e-12
+    return cost[new] + lbf * math.sqrt(dx * dx + dy * dy) * (1.0 - margin) >= cost[j] - 1e-12
 
 
 @njit(cache=True, inline="always")
 def _rewire_through(new, p, rw_i, count, world, cfg, tree, state, dv):
     """Rewire step (RRT* and DDRRT* lines 18-21): offer q_new as the parent of rw_i[:count]."""
+    X = tree.X
+    cost = tree.cost
+    lbf = dv.lbf
+    lb_margin = dv.lb_margin
+    fan = dv.fan
     hx = math.cos(tree.head[new])
     hy = math.sin(tree.head[new])
     for a in range(count):
         j = rw_i[a]
         if j == p or j == new:
             continue
-        if _rewire_cannot_pay(j, new, tree, dv.lbf, dv.lb_margin):
+        if _rewire_cannot_pay(j, new, X, cost, lbf, lb_margin):
             continue
-        _rewire(j, new, hx, hy, world, cfg, tree, state, dv.fan)
+        _rewire(j, new, hx, hy, world, cfg, tree, state, fan)
 
 
 @njit(cache=True)
@@ -858,27 +869,34 @@ def _dd_candidates(sx, sy, cfg, tree, state, buf, dv):
     k = cfg.k
     if cfg.k_growth > 0.0 and n > 1:
         k = max(cfg.k, min(K_CAP, int(math.ceil(cfg.k_growth * math.log(n)))))
-    m = _knn(sx, sy, k, cfg, tree, buf.kn_i, buf.kn_d)
+    kn_i = buf.kn_i
+    kn_d = buf.kn_d
+    ext_i = buf.ext_i
+    ext_k = buf.ext_k
+    dd = tree.dd
+    esd_plain = dv.esd_plain
+    esd_floor = dv.esd_floor
+    m = _knn(sx, sy, k, cfg, tree, kn_i, kn_d)
     use_field = cfg.use_field != 0
     gamma = cfg.gamma
     ne = 0
     for a in range(m):
-        i = buf.kn_i[a]
-        ed = buf.kn_d[a]
-        if ed > tree.dd[i]:
+        i = kn_i[a]
+        ed = kn_d[a]
+        if ed > dd[i]:
             continue
         dc = ed
-        accept = dc <= dv.esd_plain
+        accept = dc <= esd_plain
         if use_field and ed > 0.0 and (nv[i, 0] != 0.0 or nv[i, 1] != 0.0):
             c = ((sx - X[i, 0]) * nv[i, 0] + (sy - X[i, 1]) * nv[i, 1]) / ed
             c = min(1.0, max(-1.0, c))
             e = math.exp(c - gamma * math.sqrt(max(0.0, 1.0 - c * c)))
             dc = min(ed, cfg.d_alpha * ed / (1.0 + e))
             # D_alpha DR / (1 + exp(-arg)), computed only where esd_floor does not decide
-            accept = dc <= dv.esd_floor or dc <= dv.esd_plain * e / (1.0 + e)
+            accept = dc <= esd_floor or dc <= esd_plain * e / (1.0 + e)
         if accept:
-            buf.ext_i[ne] = i
-            buf.ext_k[ne] = dc
+            ext_i[ne] = i
+            ext_k[ne] = dc
             ne += 1
     return ne
 
@@ -899,29 +917,39 @@ def _dd_choose_parent(nx, ny, ne, world, cfg, tree, state, buf, dv):
     sort of that subset, keys in buf.kn_d, gives the order sorting all of them would give it),
     into buf.rw_i; returns (parent, its cost, how many), parent -1 if none is valid."""
     X = tree.X
+    cost = tree.cost
+    ext_i = buf.ext_i
+    ext_k = buf.ext_k
+    rw_i = buf.rw_i
+    keys = buf.kn_d
+    near_i = buf.near_i
+    near_c = buf.near_c
+    near_x = buf.near_x
+    lower_bounds = dv.lower_bounds
+    lbf = dv.lbf
+    lb_margin = dv.lb_margin
     step = cfg.step
     ns = 0
     for a in range(ne):
-        i = buf.ext_i[a]
+        i = ext_i[a]
         if _within(nx - X[i, 0], ny - X[i, 1], step * (1.0 + 1e-9)):
-            buf.rw_i[ns] = i
-            buf.kn_d[ns] = buf.ext_k[a]
+            rw_i[ns] = i
+            keys[ns] = ext_k[a]
             ns += 1
-    _sort_by(buf.kn_d, buf.rw_i, ns)
+    _sort_by(keys, rw_i, ns)
     for a in range(ns):
-        i = buf.rw_i[a]
-        buf.near_i[a] = i
-        if dv.lower_bounds:
+        i = rw_i[a]
+        near_i[a] = i
+        if lower_bounds:
             # a lower bound of the key; _first_valid_parent makes exact only the keys that may be
             # the minimum (an eq. (12) edge costs an exp and a field look-up)
             ex = nx - X[i, 0]
             ey = ny - X[i, 1]
-            buf.near_c[a] = tree.cost[i] + dv.lbf * math.sqrt(ex * ex + ey * ey) * (1.0 - dv.lb_margin)
-            buf.near_x[a] = False
+            near_c[a] = cost[i] + lbf * math.sqrt(ex * ex + ey * ey) * (1.0 - lb_margin)
+            near_x[a] = False
         else:
-            buf.near_c[a], buf.near_x[a] = _parent_key(i, nx, ny, world, cfg, tree)
-    p, pc = _first_valid_parent(buf.near_i, buf.near_c, buf.near_x, ns, nx, ny, world, cfg, tree, state, True,
-                                dv.lower_bounds)
+            near_c[a], near_x[a] = _parent_key(i, nx, ny, world, cfg, tree)
+    p, pc = _first_valid_parent(near_i, near_c, near_x, ns, nx, ny, world, cfg, tree, state, True, lower_bounds)
     return p, pc, ns
 
 
@@ -965,6 +993,9 @@ def _rrt_choose_parent(nx, ny, q0, nn, world, cfg, tree, state, buf, dv):
     near_c = buf.near_c
     near_x = buf.near_x
     use_field = cfg.use_field != 0
+    lower_bounds = dv.lower_bounds
+    lbf = dv.lbf
+    lb_margin = dv.lb_margin
     nc = 0
     has_q0 = False
     for a in range(nn):
@@ -976,8 +1007,8 @@ def _rrt_choose_parent(nx, ny, q0, nn, world, cfg, tree, state, buf, dv):
         if not use_field:  # _parent_key's length case, written out: a call per near node is costly
             near_c[nc] = cost[j] + math.sqrt(ex * ex + ey * ey)
             near_x[nc] = False
-        elif dv.lower_bounds:  # see _dd_choose_parent
-            near_c[nc] = cost[j] + dv.lbf * math.sqrt(ex * ex + ey * ey) * (1.0 - dv.lb_margin)
+        elif lower_bounds:  # see _dd_choose_parent
+            near_c[nc] = cost[j] + lbf * math.sqrt(ex * ex + ey * ey) * (1.0 - lb_margin)
             near_x[nc] = False
         else:
             near_c[nc], near_x[nc] = _parent_key(j, nx, ny, world, cfg, tree)
@@ -986,7 +1017,7 @@ def _rrt_choose_parent(nx, ny, q0, nn, world, cfg, tree, state, buf, dv):
         near_i[nc] = q0
         near_c[nc], near_x[nc] = _parent_key(q0, nx, ny, world, cfg, tree)
         nc += 1
-    return _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, world, cfg, tree, state, False, dv.lower_bounds)
+    return _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, world, cfg, tree, state, False, lower_bounds)
 
 
 @njit(cache=True, inline="always")

@@ -187,7 +187,7 @@ def test_lazy_choose_parent_on_lower_bounds_matches_stable_sort_of_eq12_costs():
         assert _tree._edge_lower_factor(cfg[0]) == lbf
         nx, ny = (17.0 + 1e-3 * trial, 14.0) if trial % 2 else tuple(rng.uniform(0, 20, size=2))
         idx = rng.permutation(n)
-        exact = np.array([cost[j] + _tree._cost(X[j, 0], X[j, 1], nx, ny, world, cfg[0]) for j in idx])
+        exact = np.array([cost[j] + _tree._cost(X[j, 0], X[j, 1], nx, ny, fvx, fvy, cfg[0]) for j in idx])
         want, want_c = _first_free_by_stable_sort(exact, idx, occ, X, nx, ny)
         near_i = idx.astype(np.int64).copy()
         near_c = np.array([cost[j] + lbf * math.sqrt((nx - X[j, 0]) ** 2 + (ny - X[j, 1]) ** 2) * (1.0 - 1e-9)
