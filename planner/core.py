@@ -223,6 +223,7 @@ class TreePlanner:
         if deadline_ns >= 0 and not compiled_clock_ok():
             deadline_ns = -1
             bounds = dataclasses.replace(bounds, poll_python=True)
+        scratch = _tree.new_scratch()
         _tree.seed_rng(self.seed)
         why = "termination condition met"
         while True:
@@ -235,7 +236,7 @@ class TreePlanner:
                 budget = max(0, bounds.max_iterations - int(st["iter"]))
             else:
                 budget = _BIG
-            code = _tree.grow(world, cfg, tree, state, budget, deadline_ns, bounds.stop_on_exact)
+            code = _tree.grow(world, cfg, tree, state, scratch, budget, deadline_ns, bounds.stop_on_exact)
             if code == _tree.DONE_DEADLINE:
                 why = "deadline reached"
                 break
