@@ -45,7 +45,8 @@ certain. Collision checks are the exact cell traversal of :mod:`planner._kernels
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple, cast
 
 import numpy as np
 from numba import njit
@@ -829,8 +830,7 @@ def _derive(cfg):
     return Derived(lbf, lb_margin, use_field and lbf > 0.0, esd_plain, _esd_floor(esd_plain, cfg.gamma), fan)
 
 
-@intrinsic
-def _unowned(typingctx, arr):
+def _unowned_typer(typingctx, arr):
     """A view of ``arr`` without its reference count (a null meminfo): taking it out of a named
     tuple then costs no atomic increment and decrement. Only for arrays that the caller of
     ``grow`` keeps alive for the whole call."""
@@ -842,6 +842,9 @@ def _unowned(typingctx, arr):
         out.meminfo = cgutils.get_null_value(out.meminfo.type)
         return out._getvalue()
     return arr(arr), codegen
+
+
+_unowned = cast(Callable[[np.ndarray], np.ndarray], intrinsic(_unowned_typer))
 
 
 @njit(cache=True)
