@@ -613,7 +613,7 @@ def _min_key(near_c, left):
     return m
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, world, cfg, tree, state, track_failed, lower_bounds):
     """RRT*'s choose-parent: the first candidate, in ascending cost order, whose edge to (nx, ny)
     is in its fan and collision-free; returns (node, cost through it) or (-1, 0.0). With
