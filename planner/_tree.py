@@ -819,6 +819,7 @@ def _esd_floor(a, gamma):
 
 @njit(cache=True)
 def _derive(cfg):
+    """The Derived constants of a configuration (computed in the kernel, as before: the same floats)."""
     lbf = _edge_lower_factor(cfg)
     use_field = cfg.use_field != 0
     # length: the edge cost is hypot, within 4e-16 of the square root; eq. (12): exp and the sum
