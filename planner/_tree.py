@@ -1,9 +1,41 @@
 """The compiled tree core shared by RRT*, Informed RRT* and DDRRT*.
 
-Everything lives in preallocated arrays (see :class:`TreeArrays`); ``grow`` runs up to
-``max_iter`` iterations (one iteration = one sample drawn) and returns early at a
-``CLOCK_MONOTONIC`` deadline (checked before every iteration), at the first exact solution when
-asked, or when the tree is full.
+``grow`` runs up to ``max_iter`` iterations (one iteration = one sample drawn) and returns early
+at a ``CLOCK_MONOTONIC`` deadline (checked before every iteration), at the first exact solution
+when asked, or when the tree is full. One iteration is :func:`_sample`, then :func:`_ddrrt_extend`
+(DDRRT*: k nearest, dynamic domains, choose-parent by D_C) or :func:`_rrt_extend` (RRT*, Informed
+RRT*: nearest, near ball, choose-parent), each ending in :func:`_rewire_through`, then
+:func:`_try_goal`.
+
+State layout (everything preallocated by the caller; nothing is allocated per iteration):
+
+* ``world`` (:class:`World`, read only): ``occ`` the occupancy grid (uint8, 1 = obstacle, rows y),
+  ``fvx``/``fvy`` the current (m/s) on its grid, or 1 x 1 zeros without a current.
+* ``cfg`` (a 1-element structured array of :data:`CONFIG`, read only): the problem and the
+  parameters, SI units, map frame (x east, y north, from the map's corner). Geometry: ``step``
+  (m), ``max_turn`` (rad, the fan's half-angle of section 2.4), ``goal_tol`` (m), the sampling
+  box ``bx0..by1`` and perceptual disc ``dom_cx, dom_cy, dom_r`` (m, ``dom_r`` 0 = none), start
+  ``sx, sy`` and goal ``gx, gy`` (m), grid ``res`` (m/cell), buckets ``bucket`` (m) ``nbx`` x ``nby``,
+  tree capacity ``cap``. Sampling: ``goal_bias``, ``png_p``, ``png_x, png_y`` (m), ``use_png``,
+  ``png_repair``. Cost (eq. (12)): ``use_field``, ``field_res, field_ox, field_oy`` (m),
+  ``d_alpha``, ``gamma``, ``f_min``. DDRRT*: ``dr`` (m, DR of eq. (11)), ``k``, ``k_growth``,
+  dynamic domains ``dd0`` (m), ``dd_grow``, ``dd_shrink``, ``dd_min`` (m), ``fail_turn``. RRT*:
+  ``rewire_gamma`` (m). ``algo`` is one of the algorithm codes below.
+* ``tree`` (:class:`Tree`, written by the kernel): per node ``X`` (n x 2, m), ``parent``,
+  ``cost`` (cost from the start), ``head`` (heading of the edge from the parent, rad; NaN = none
+  at the root), ``dd`` (dynamic-domain radius, m; inf = unbounded), ``nv`` (unit vector of the
+  current at the node, or (0, 0); 1 x 2 without a current); the children as linked lists
+  ``first_child``/``next_sib``; the grid buckets of side ``bucket`` as linked lists
+  ``bucket_head`` (per bucket) / ``node_next`` (per node); ``stack``, scratch of the cost
+  propagation.
+* ``state`` (a 1-element structured array of :data:`STATE`, written by the kernel): ``n`` nodes,
+  ``goal`` (node index, -1 = none), ``closest`` / ``closest_d`` (node nearest the goal, m),
+  ``iter`` iterations, ``rejected`` samples, ``checks`` collision checks, ``failed`` failed
+  extensions (``failed_turn`` of them refused by the fan), ``png_hit``, ``png_wasted``, and at the
+  first exact solution ``first_iter``, ``first_checks``, ``first_ns`` (CLOCK_MONOTONIC, ns),
+  ``first_cpu_ns`` (the thread's CPU clock, ns).
+* :class:`Scratch` (made per search by :func:`new_scratch`): candidate buffers of the nearest / near / choose-parent
+  / rewire steps and the clock buffer; :class:`Derived`: constants derived from ``cfg``.
 
 Nearest and near searches use grid buckets of side ``step``: a near query (radius <= step) scans
 3 x 3 buckets, a k-nearest query scans rings of buckets outwards until the k-th distance is
@@ -13,9 +45,13 @@ certain. Collision checks are the exact cell traversal of :mod:`planner._kernels
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import NamedTuple, cast
 
 import numpy as np
 from numba import njit
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from planner._kernels import edge_cost, field_at, monotonic_ns, segment_free, thread_cpu_ns
 
@@ -30,22 +66,102 @@ DONE_DEADLINE = 1
 DONE_EXACT = 2
 DONE_FULL = 3
 
-# float config indices
-C_STEP, C_MAXTURN, C_GOALTOL, C_GOALBIAS, C_PNGP, C_PNGX, C_PNGY, C_DR, C_DALPHA, C_GAMMA = range(10)
-C_RGAMMA, C_FMIN, C_BUCKET, C_BX0, C_BX1, C_BY0, C_BY1, C_DCX, C_DCY, C_DR_DOM = range(10, 20)
-C_GX, C_GY, C_SX, C_SY, C_RES, C_FRES, C_FOX, C_FOY, C_KGROW = range(20, 29)
-C_DD0, C_DDGROW, C_DDSHRINK, C_DDMIN = range(29, 33)
-N_FCFG = 33
-# int config indices
-I_ALGO, I_FIELD, I_K, I_NBX, I_NBY, I_CAP, I_PNG, I_FAILTURN, I_PNGREPAIR = range(9)
-N_ICFG = 9
-# int state indices
-S_N, S_GOAL, S_ITER, S_REJ, S_CLOSEST, S_FIRST_ITER, S_CHECKS, S_FAILED = range(8)
-S_FAILED_TURN, S_PNG_HIT, S_FIRST_CHECKS, S_PNG_WASTED = range(8, 12)
-N_ISTATE = 12
-# float state indices
-F_CLOSEST_D, F_FIRST_NS, F_FIRST_CPU_NS = range(3)
-N_FSTATE = 4
+_F = np.float64
+_I = np.int64
+CONFIG = np.dtype([
+    ("step", _F), ("max_turn", _F), ("goal_tol", _F), ("goal_bias", _F),
+    ("png_p", _F), ("png_x", _F), ("png_y", _F),
+    ("dr", _F), ("d_alpha", _F), ("gamma", _F), ("rewire_gamma", _F), ("f_min", _F), ("k_growth", _F),
+    ("bucket", _F), ("bx0", _F), ("bx1", _F), ("by0", _F), ("by1", _F), ("dom_cx", _F), ("dom_cy", _F),
+    ("dom_r", _F), ("gx", _F), ("gy", _F), ("sx", _F), ("sy", _F), ("res", _F),
+    ("field_res", _F), ("field_ox", _F), ("field_oy", _F),
+    ("dd0", _F), ("dd_grow", _F), ("dd_shrink", _F), ("dd_min", _F),
+    ("algo", _I), ("use_field", _I), ("k", _I), ("nbx", _I), ("nby", _I), ("cap", _I), ("use_png", _I),
+    ("fail_turn", _I), ("png_repair", _I),
+])
+STATE = np.dtype([
+    ("n", _I), ("goal", _I), ("iter", _I), ("rejected", _I), ("closest", _I), ("first_iter", _I),
+    ("checks", _I), ("failed", _I), ("failed_turn", _I), ("png_hit", _I), ("first_checks", _I),
+    ("png_wasted", _I), ("closest_d", _F), ("first_ns", _F), ("first_cpu_ns", _F),
+])
+
+
+class World(NamedTuple):
+    """What the tree grows in (read only): obstacles and the current."""
+
+    occ: np.ndarray
+    fvx: np.ndarray
+    fvy: np.ndarray
+
+
+class Tree(NamedTuple):
+    """The tree's node arrays (capacity ``cap``) and its bucket grid; see the module docstring."""
+
+    X: np.ndarray
+    parent: np.ndarray
+    cost: np.ndarray
+    head: np.ndarray
+    dd: np.ndarray
+    nv: np.ndarray
+    first_child: np.ndarray
+    next_sib: np.ndarray
+    bucket_head: np.ndarray
+    node_next: np.ndarray
+    stack: np.ndarray
+
+
+class Scratch(NamedTuple):
+    """Per-call candidate buffers: k nearest (kn_i, kn_d), DDRRT*'s extendable nodes (ext_i,
+    ext_k), choose-parent candidates (near_i, near_c, near_x), the rewiring set (rw_i)."""
+
+    kn_i: np.ndarray
+    kn_d: np.ndarray
+    ext_i: np.ndarray
+    ext_k: np.ndarray
+    near_i: np.ndarray
+    near_c: np.ndarray
+    near_x: np.ndarray
+    rw_i: np.ndarray
+    clock: np.ndarray
+
+
+class Derived(NamedTuple):
+    """Constants derived from the configuration once per ``grow`` call."""
+
+    lbf: float            # edge cost >= lbf x length (_edge_lower_factor)
+    lb_margin: float      # relative rounding margin of the lower bounds
+    lower_bounds: bool    # choose-parent keys start as lower bounds (eq. (12))
+    esd_plain: float      # D_alpha DR, eq. (11)'s first factor
+    esd_floor: float      # _esd_floor(esd_plain, gamma)
+    fan: np.ndarray       # _fan_bounds(max_turn) as (cos_pass, cos_fail, usable)
+
+
+def new_config() -> np.ndarray:
+    """A zeroed configuration record (fill its fields by name: ``cfg["step"] = 4.0``)."""
+    return np.zeros(1, dtype=CONFIG)
+
+
+def new_state() -> np.ndarray:
+    """A zeroed state record."""
+    return np.zeros(1, dtype=STATE)
+
+
+def new_scratch() -> Scratch:
+    """The candidate buffers of one search."""
+    return Scratch(np.empty(K_CAP, np.int64), np.empty(K_CAP, np.float64), np.empty(K_CAP, np.int64),
+                   np.empty(K_CAP, np.float64), np.empty(NEAR_CAP, np.int64), np.empty(NEAR_CAP, np.float64),
+                   np.empty(NEAR_CAP, np.bool_), np.empty(NEAR_CAP, np.int64), np.zeros(2, np.int64))
+
+
+def new_tree(cap: int, n_buckets: int, with_field: bool) -> Tree:
+    """Node arrays for ``cap`` nodes (np.empty: no page touching for unused capacity), every
+    bucket empty."""
+    return Tree(X=np.empty((cap, 2)), parent=np.empty(cap, dtype=np.int64), cost=np.empty(cap),
+                head=np.empty(cap), dd=np.empty(cap), nv=np.empty((cap, 2)) if with_field else np.zeros((1, 2)),
+                first_child=np.empty(cap, dtype=np.int64), next_sib=np.empty(cap, dtype=np.int64),
+                bucket_head=-np.ones(n_buckets, dtype=np.int64), node_next=np.empty(cap, dtype=np.int64),
+                stack=np.empty(cap, dtype=np.int64))
+
 
 NEAR_CAP = 1024
 K_CAP = 64  # most nearest neighbours DDRRT* examines per sample
@@ -123,25 +239,25 @@ def _fan_ok_cos(head, hx, hy, dx, dy, max_turn, fb):
     return _fan_ok(head, dx, dy, max_turn)
 
 
-@njit(cache=True)
-def _bucket(x, y, fc, ic):
-    bx = int(x / fc[C_BUCKET])  # buckets cover the whole map from (0, 0)
-    by = int(y / fc[C_BUCKET])
-    bx = min(max(bx, 0), ic[I_NBX] - 1)
-    by = min(max(by, 0), ic[I_NBY] - 1)
+@njit(cache=True, inline="always")
+def _bucket(x, y, cfg):
+    bx = int(x / cfg.bucket)  # buckets cover the whole map from (0, 0)
+    by = int(y / cfg.bucket)
+    bx = min(max(bx, 0), cfg.nbx - 1)
+    by = min(max(by, 0), cfg.nby - 1)
     return bx, by
 
 
-@njit(cache=True)
-def _insert_bucket(i, X, fc, ic, bucket_head, node_next):
-    bx, by = _bucket(X[i, 0], X[i, 1], fc, ic)
-    b = by * ic[I_NBX] + bx
-    node_next[i] = bucket_head[b]
-    bucket_head[b] = i
+@njit(cache=True, inline="always")
+def _insert_bucket(i, cfg, tree):
+    bx, by = _bucket(tree.X[i, 0], tree.X[i, 1], cfg)
+    b = by * cfg.nbx + bx
+    tree.node_next[i] = tree.bucket_head[b]
+    tree.bucket_head[b] = i
 
 
 @njit(cache=True)
-def _knn(qx, qy, k, X, fc, ic, bucket_head, node_next, out_i, out_d):
+def _knn(qx, qy, k, cfg, tree, out_i, out_d):
     """k nearest nodes (Euclidean), ascending; returns how many were found (<= k). Squared
     distances while scanning (no square root per candidate), roots of the k results at the end.
 
@@ -150,12 +266,15 @@ def _knn(qx, qy, k, X, fc, ic, bucket_head, node_next, out_i, out_d):
     the map's border do not count; 1e-6 m of slack for bucket rounding), or ring x bucket side.
     Nodes beyond are at least as far as the k-th, and an equal distance never displaces a node
     found earlier, so the result is that of a full scan."""
-    cx, cy = _bucket(qx, qy, fc, ic)
-    nbx = ic[I_NBX]
-    nby = ic[I_NBY]
+    X = tree.X
+    bucket_head = tree.bucket_head
+    node_next = tree.node_next
+    cx, cy = _bucket(qx, qy, cfg)
+    nbx = cfg.nbx
+    nby = cfg.nby
     m = 0
     rmax = max(nbx, nby)
-    B = fc[C_BUCKET]
+    B = cfg.bucket
     for ring in range(rmax + 1):
         for by in range(cy - ring, cy + ring + 1):
             if by < 0 or by >= nby:
@@ -206,18 +325,15 @@ def _knn(qx, qy, k, X, fc, ic, bucket_head, node_next, out_i, out_d):
 
 
 @njit(cache=True)
-def _near(qx, qy, radius, X, fc, ic, bucket_head, node_next, out_i):
-    """Nodes within ``radius`` (at most NEAR_CAP of them)."""
-    return _near_pos(qx, qy, radius, X, fc, ic, bucket_head, node_next, out_i, -1)[0]
-
-
-@njit(cache=True)
-def _near_pos(qx, qy, radius, X, fc, ic, bucket_head, node_next, out_i, mark):
-    """_near, and how many nodes it had found when it reached bucket ``mark`` (NEAR_CAP if it
-    never did)."""
-    B = fc[C_BUCKET]
-    nbx = ic[I_NBX]
-    nby = ic[I_NBY]
+def _near_pos(qx, qy, radius, cfg, tree, out_i, mark):
+    """Nodes within ``radius`` (at most NEAR_CAP of them), and how many it had found when it
+    reached bucket ``mark`` (NEAR_CAP if it never did)."""
+    X = tree.X
+    bucket_head = tree.bucket_head
+    node_next = tree.node_next
+    B = cfg.bucket
+    nbx = cfg.nbx
+    nby = cfg.nby
     bx0 = int(math.floor((qx - radius) / B))
     bx1 = int(math.floor((qx + radius) / B))
     by0 = int(math.floor((qy - radius) / B))
@@ -240,23 +356,23 @@ def _near_pos(qx, qy, radius, X, fc, ic, bucket_head, node_next, out_i, mark):
     return m, pos
 
 
-@njit(cache=True)
-def _in_domain(x, y, fc):
-    if x < fc[C_BX0] or x > fc[C_BX1] or y < fc[C_BY0] or y > fc[C_BY1]:
+@njit(cache=True, inline="always")
+def _in_domain(x, y, cfg):
+    if x < cfg.bx0 or x > cfg.bx1 or y < cfg.by0 or y > cfg.by1:
         return False
-    if fc[C_DR_DOM] > 0.0:
-        return _within(x - fc[C_DCX], y - fc[C_DCY], fc[C_DR_DOM])
+    if cfg.dom_r > 0.0:
+        return _within(x - cfg.dom_cx, y - cfg.dom_cy, cfg.dom_r)
     return True
 
 
 @njit(cache=True)
-def _uniform(fc):
+def _uniform(cfg):
     x = 0.0
     y = 0.0
     for _ in range(64):
-        x = fc[C_BX0] + np.random.random() * (fc[C_BX1] - fc[C_BX0])
-        y = fc[C_BY0] + np.random.random() * (fc[C_BY1] - fc[C_BY0])
-        if _in_domain(x, y, fc):
+        x = cfg.bx0 + np.random.random() * (cfg.bx1 - cfg.bx0)
+        y = cfg.by0 + np.random.random() * (cfg.by1 - cfg.by0)
+        if _in_domain(x, y, cfg):
             break
     return x, y
 
@@ -277,16 +393,16 @@ def _in_ellipse(x, y, sx, sy, gx, gy, cb):
 
 
 @njit(cache=True)
-def _informed(fc, c_best):
+def _informed(cfg, c_best):
     """Gammell et al. 2014: uniform sample of the prolate hyperspheroid (an ellipse in 2-D) with
     foci start and goal and transverse diameter c_best / f_min (f_min D_C <= Ed keeps it a lower
     bound of the cost through a point), intersected with the sampling domain."""
-    sx = fc[C_SX]
-    sy = fc[C_SY]
-    gx = fc[C_GX]
-    gy = fc[C_GY]
+    sx = cfg.sx
+    sy = cfg.sy
+    gx = cfg.gx
+    gy = cfg.gy
     c_min = math.hypot(gx - sx, gy - sy)
-    cb = c_best / fc[C_FMIN]
+    cb = c_best / cfg.f_min
     if cb <= c_min:
         cb = c_min * (1.0 + 1e-9)
     a = 0.5 * cb                                  # semi-major axis
@@ -296,7 +412,7 @@ def _informed(fc, c_best):
     st = math.sin(th)
     mx = 0.5 * (sx + gx)
     my = 0.5 * (sy + gy)
-    box = (fc[C_BX1] - fc[C_BX0]) * (fc[C_BY1] - fc[C_BY0])
+    box = (cfg.bx1 - cfg.bx0) * (cfg.by1 - cfg.by0)
     x = mx
     y = my
     if math.pi * a * b < box:
@@ -308,22 +424,24 @@ def _informed(fc, c_best):
             ey = b * r * math.sin(phi)
             x = mx + ct * ex - st * ey
             y = my + st * ex + ct * ey
-            if _in_domain(x, y, fc):
+            if _in_domain(x, y, cfg):
                 return x, y
-        return _uniform(fc)
+        return _uniform(cfg)
     # the ellipse covers more than the box: sample the box, keep points inside the ellipse
     for _ in range(64):
-        x, y = _uniform(fc)
+        x, y = _uniform(cfg)
         if _in_ellipse(x, y, sx, sy, gx, gy, cb):
             return x, y
     return x, y
 
 
-@njit(cache=True)
-def _children_fan_ok(j, new_head, X, first_child, next_sib, max_turn):
+@njit(cache=True, inline="always")
+def _children_fan_ok(j, new_head, tree, max_turn):
     if max_turn >= math.pi:
         return True
-    c = first_child[j]
+    X = tree.X
+    next_sib = tree.next_sib
+    c = tree.first_child[j]
     while c >= 0:
         if not _fan_ok(new_head, X[c, 0] - X[j, 0], X[c, 1] - X[j, 1], max_turn):
             return False
@@ -332,9 +450,14 @@ def _children_fan_ok(j, new_head, X, first_child, next_sib, max_turn):
 
 
 @njit(cache=True)
-def _reparent(j, p, new_cost, X, parent, cost, head, first_child, next_sib, stack):
+def _reparent(j, p, new_cost, tree):
     """Make p the parent of j and propagate the cost change to j's subtree."""
-    old = parent[j]
+    X = tree.X
+    first_child = tree.first_child
+    next_sib = tree.next_sib
+    cost = tree.cost
+    stack = tree.stack
+    old = tree.parent[j]
     if old >= 0:
         if first_child[old] == j:
             first_child[old] = next_sib[j]
@@ -343,10 +466,10 @@ def _reparent(j, p, new_cost, X, parent, cost, head, first_child, next_sib, stac
             while next_sib[c] != j:
                 c = next_sib[c]
             next_sib[c] = next_sib[j]
-    parent[j] = p
+    tree.parent[j] = p
     next_sib[j] = first_child[p]
     first_child[p] = j
-    head[j] = math.atan2(X[j, 1] - X[p, 1], X[j, 0] - X[p, 0])
+    tree.head[j] = math.atan2(X[j, 1] - X[p, 1], X[j, 0] - X[p, 0])
     delta = new_cost - cost[j]
     top = 0
     stack[top] = j
@@ -362,10 +485,10 @@ def _reparent(j, p, new_cost, X, parent, cost, head, first_child, next_sib, stac
             c = next_sib[c]
 
 
-@njit(cache=True)
-def _set_direction(i, x, y, nv, fvx, fvy, fc):
+@njit(cache=True, inline="always")
+def _set_direction(i, x, y, nv, world, cfg):
     """nv[i] = the unit vector of the current at (x, y), or (0, 0) where there is none."""
-    vx, vy = field_at(fvx, fvy, fc[C_FRES], fc[C_FOX], fc[C_FOY], x, y)
+    vx, vy = field_at(world.fvx, world.fvy, cfg.field_res, cfg.field_ox, cfg.field_oy, x, y)
     v = math.hypot(vx, vy)
     if v < 1e-9:
         nv[i, 0] = 0.0
@@ -375,56 +498,61 @@ def _set_direction(i, x, y, nv, fvx, fvy, fc):
         nv[i, 1] = vy / v
 
 
-@njit(cache=True)
-def _add_node(x, y, p, c, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head,
-              node_next, st, nv, fvx, fvy):
-    i = st[S_N]
+@njit(cache=True, inline="always")
+def _add_node(x, y, p, c, world, cfg, tree, state):
+    """Append node (x, y) with parent p and cost c; returns its index."""
+    X = tree.X
+    i = state.n
     X[i, 0] = x
     X[i, 1] = y
-    if ic[I_FIELD] != 0:
-        _set_direction(i, x, y, nv, fvx, fvy, fc)
-    parent[i] = p
-    cost[i] = c
-    head[i] = math.atan2(y - X[p, 1], x - X[p, 0])
-    dd[i] = np.inf
-    first_child[i] = -1
-    next_sib[i] = first_child[p]
-    first_child[p] = i
-    _insert_bucket(i, X, fc, ic, bucket_head, node_next)
-    st[S_N] = i + 1
+    if cfg.use_field != 0:
+        _set_direction(i, x, y, tree.nv, world, cfg)
+    tree.parent[i] = p
+    tree.cost[i] = c
+    tree.head[i] = math.atan2(y - X[p, 1], x - X[p, 0])
+    tree.dd[i] = np.inf
+    tree.first_child[i] = -1
+    tree.next_sib[i] = tree.first_child[p]
+    tree.first_child[p] = i
+    _insert_bucket(i, cfg, tree)
+    state.n = i + 1
     return i
 
 
-@njit(cache=True)
-def _cost(x0, y0, x1, y1, fc, ic, fvx, fvy):
-    return edge_cost(x0, y0, x1, y1, ic[I_FIELD] != 0, fvx, fvy, fc[C_FRES], fc[C_FOX], fc[C_FOY],
-                     fc[C_STEP], fc[C_DALPHA], fc[C_GAMMA])
+@njit(cache=True, inline="always")
+def _cost(x0, y0, x1, y1, fvx, fvy, cfg):
+    """The edge cost (m): its length, or eq. (12) with a current (fvx, fvy)."""
+    return edge_cost(x0, y0, x1, y1, cfg.use_field != 0, fvx, fvy, cfg.field_res, cfg.field_ox,
+                     cfg.field_oy, cfg.step, cfg.d_alpha, cfg.gamma)
 
 
-@njit(cache=True)
-def _free(occ, fc, st, x0, y0, x1, y1):
-    st[S_CHECKS] += 1
-    return segment_free(occ, fc[C_RES], x0, y0, x1, y1)
+@njit(cache=True, inline="always")
+def _free(world, cfg, state, x0, y0, x1, y1):
+    state.checks += 1
+    return segment_free(world.occ, cfg.res, x0, y0, x1, y1)
 
 
-@njit(cache=True)
-def _dd_failed(i, dd, fc):
+@njit(cache=True, inline="always")
+def _dd_failed(i, dd, cfg):
     """A failed (colliding) extension from node i: its dynamic domain becomes bounded (DD0), or,
     already bounded, shrinks by the adaptive factor (Jaillet et al. 2005), never below DDMIN."""
     if math.isinf(dd[i]):
-        dd[i] = fc[C_DD0]
+        dd[i] = cfg.dd0
     else:
-        dd[i] = max(dd[i] * fc[C_DDSHRINK], fc[C_DDMIN])
+        dd[i] = max(dd[i] * cfg.dd_shrink, cfg.dd_min)
 
 
-@njit(cache=True)
-def _turn_failed(i, dd, fc, st):
-    """An extension from node i refused by the turning-radius fan (section 2.4), counted as a
-    failed extension when the paper's reading is chosen (failed_extension = "collision+turn"): the
-    paper counts constraint violations as well as collisions."""
-    st[S_FAILED] += 1
-    st[S_FAILED_TURN] += 1
-    _dd_failed(i, dd, fc)
+@njit(cache=True, inline="always")
+def _extension_refused(j, by_fan, cfg, tree, state):
+    """DDRRT*: the extension from node j failed, by collision or (by_fan) by the turning-radius fan
+    of section 2.4. A collision always counts as a failed extension; the fan only with the
+    paper's reading (failed_extension = "collision+turn": it counts constraint violations too)."""
+    if by_fan:
+        if cfg.fail_turn == 0:
+            return
+        state.failed_turn += 1
+    state.failed += 1
+    _dd_failed(j, tree.dd, cfg)
 
 
 @njit(cache=True)
@@ -442,24 +570,54 @@ def _sort_by(keys, idx, m):
         idx[b + 1] = ii
 
 
-@njit(cache=True)
-def _parent_key(j, nx, ny, X, cost, fc, ic, fvx, fvy):
+@njit(cache=True, inline="always")
+def _parent_key(j, nx, ny, world, cfg, tree):
     """(key, exact): the cost to (nx, ny) through node j. With a current, exact. For length, a
     square root instead of math.hypot (exact = False): within 7.2e-16 relative of the exact key,
     which _first_valid_parent computes only for the candidates that can be the minimum."""
-    if ic[I_FIELD] != 0:
-        return cost[j] + _cost(X[j, 0], X[j, 1], nx, ny, fc, ic, fvx, fvy), True
+    X = tree.X
+    if cfg.use_field != 0:
+        return tree.cost[j] + _cost(X[j, 0], X[j, 1], nx, ny, world.fvx, world.fvy, cfg), True
     dx = nx - X[j, 0]
     dy = ny - X[j, 1]
-    return cost[j] + math.sqrt(dx * dx + dy * dy), False
+    return tree.cost[j] + math.sqrt(dx * dx + dy * dy), False
+
+
+@njit(cache=True, inline="always")
+def _cost_through(i, nx, ny, X, cost, fvx, fvy, cfg):
+    """The exact cost to (nx, ny) through node i."""
+    return cost[i] + _cost(X[i, 0], X[i, 1], nx, ny, fvx, fvy, cfg)
+
+
+@njit(cache=True, inline="always")
+def _try_parent(j, nx, ny, world, cfg, tree, state, track_failed):
+    """True if the edge from node j to (nx, ny) is in j's fan and collision-free; with
+    ``track_failed`` (DDRRT*) a refusal counts as a failed extension (_extension_refused)."""
+    X = tree.X
+    if _fan_ok(tree.head[j], nx - X[j, 0], ny - X[j, 1], cfg.max_turn):
+        if _free(world, cfg, state, X[j, 0], X[j, 1], nx, ny):
+            return True
+        if track_failed:
+            _extension_refused(j, False, cfg, tree, state)
+    elif track_failed:
+        _extension_refused(j, True, cfg, tree, state)
+    return False
+
+
+@njit(cache=True, inline="always")
+def _min_key(near_c, left):
+    m = near_c[0]
+    for a in range(1, left):
+        if near_c[a] < m:
+            m = near_c[a]
+    return m
 
 
 @njit(cache=True)
-def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, occ, fc, ic, fvx, fvy, st, X, cost, head, max_turn,
-                        dd, track_failed, lower_bounds):
+def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, world, cfg, tree, state, track_failed, lower_bounds):
     """RRT*'s choose-parent: the first candidate, in ascending cost order, whose edge to (nx, ny)
     is in its fan and collision-free; returns (node, cost through it) or (-1, 0.0). With
-    ``track_failed`` (DDRRT*) a colliding candidate counts as a failed extension and bounds or
+    ``track_failed`` (DDRRT*) a refused candidate counts as a failed extension and bounds or
     shrinks its dynamic domain.
 
     The same candidates are tried in the same order as after a stable sort of near_c (ties in
@@ -474,156 +632,136 @@ def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, occ, fc, ic, fvx, fv
     _edge_lower_factor, below the exact key by any amount) the pass repeats with the new smallest
     key until every key within its window is exact: an inexact key outside the window is then
     above the minimum, so the choice is again the exact one, and most edges never pay for their
-    exp and field look-up. After LAZY_TRIES refused candidates (with the fan limit, the cheapest candidates often point
-    backwards), the rest is sorted once instead (exact keys, stable merge sort: the same order)."""
+    exp and field look-up. After LAZY_TRIES refused candidates (with the fan limit, the cheapest
+    candidates often point backwards), the rest is sorted once instead (exact keys, stable merge
+    sort: the same order)."""
+    X = tree.X
+    cost = tree.cost
+    fvx = world.fvx
+    fvy = world.fvy
     left = nc
-    tries = 0
-    while left > 0:
-        if tries == LAZY_TRIES:
-            for a in range(left):
-                if not near_x[a]:
-                    i = near_i[a]
-                    near_c[a] = cost[i] + _cost(X[i, 0], X[i, 1], nx, ny, fc, ic, fvx, fvy)
-                    near_x[a] = True
-            order = np.argsort(near_c[:left], kind="mergesort")
-            for o in range(left):
-                j = near_i[order[o]]
-                if _fan_ok(head[j], nx - X[j, 0], ny - X[j, 1], max_turn):
-                    if _free(occ, fc, st, X[j, 0], X[j, 1], nx, ny):
-                        return j, near_c[order[o]]
-                    if track_failed:
-                        st[S_FAILED] += 1
-                        _dd_failed(j, dd, fc)
-                elif track_failed and ic[I_FAILTURN] != 0:
-                    _turn_failed(j, dd, fc, st)
+    for _ in range(LAZY_TRIES):
+        if left == 0:
             return -1, 0.0
-        tries += 1
         if lower_bounds:  # make exact every key that may be the minimum, until none is left
-            while True:
-                m = near_c[0]
-                for a in range(1, left):
-                    if near_c[a] < m:
-                        m = near_c[a]
-                window = m * (1.0 + 1e-12) + 1e-12
+            exacted = True
+            while exacted:
+                window = _min_key(near_c, left) * (1.0 + 1e-12) + 1e-12
                 exacted = False
                 for a in range(left):
                     if near_c[a] <= window and not near_x[a]:
-                        i = near_i[a]
-                        near_c[a] = cost[i] + _cost(X[i, 0], X[i, 1], nx, ny, fc, ic, fvx, fvy)
+                        near_c[a] = _cost_through(near_i[a], nx, ny, X, cost, fvx, fvy, cfg)
                         near_x[a] = True
                         exacted = True
-                if not exacted:
-                    break
-        m = near_c[0]
-        for a in range(1, left):
-            if near_c[a] < m:
-                m = near_c[a]
-        window = m * (1.0 + 1e-12) + 1e-12
+        window = _min_key(near_c, left) * (1.0 + 1e-12) + 1e-12
         b = -1
         kb = 0.0
         for a in range(left):
             if near_c[a] <= window:
                 if not near_x[a]:  # square-root keys (see above): one pass decides
-                    i = near_i[a]
-                    near_c[a] = cost[i] + _cost(X[i, 0], X[i, 1], nx, ny, fc, ic, fvx, fvy)
+                    near_c[a] = _cost_through(near_i[a], nx, ny, X, cost, fvx, fvy, cfg)
                     near_x[a] = True
                 if b < 0 or near_c[a] < kb:  # strict: the first of equal keys, as the stable sort would
                     kb = near_c[a]
                     b = a
         j = near_i[b]
-        if _fan_ok(head[j], nx - X[j, 0], ny - X[j, 1], max_turn):
-            if _free(occ, fc, st, X[j, 0], X[j, 1], nx, ny):
-                return j, kb
-            if track_failed:
-                st[S_FAILED] += 1
-                _dd_failed(j, dd, fc)
-        elif track_failed and ic[I_FAILTURN] != 0:
-            _turn_failed(j, dd, fc, st)
+        if _try_parent(j, nx, ny, world, cfg, tree, state, track_failed):
+            return j, kb
         for a in range(b, left - 1):  # drop candidate b, keeping the others' order
             near_c[a] = near_c[a + 1]
             near_i[a] = near_i[a + 1]
             near_x[a] = near_x[a + 1]
         left -= 1
+    for a in range(left):
+        if not near_x[a]:
+            near_c[a] = _cost_through(near_i[a], nx, ny, X, cost, fvx, fvy, cfg)
+            near_x[a] = True
+    order = np.argsort(near_c[:left], kind="mergesort")
+    for o in range(left):
+        j = near_i[order[o]]
+        if _try_parent(j, nx, ny, world, cfg, tree, state, track_failed):
+            return j, near_c[order[o]]
     return -1, 0.0
 
 
-@njit(cache=True)
-def _first_counts(st, fs, clockbuf):
-    """At the first exact solution: the collision checks so far and the thread's CPU clock, so
-    that time to a first solution can be judged independent of the platform (issue 34)."""
-    st[S_FIRST_CHECKS] = st[S_CHECKS]
-    fs[F_FIRST_CPU_NS] = thread_cpu_ns(clockbuf)
+@njit(cache=True, inline="always")
+def _first_solution(state, clock):
+    """At the first exact solution: the iteration, the collision checks so far, the monotonic and
+    the thread's CPU clock, so that time to a first solution can be judged independent of the
+    platform (issue 34)."""
+    state.first_iter = state.iter
+    state.first_ns = monotonic_ns(clock)
+    state.first_checks = state.checks
+    state.first_cpu_ns = thread_cpu_ns(clock)
 
 
-@njit(cache=True)
-def _try_goal(i, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head, node_next,
-              st, fs, fvx, fvy, stack, clockbuf, nv):
+@njit(cache=True, inline="always")
+def _try_goal(i, world, cfg, tree, state, clock):
     """After node i joined the tree: track the closest node and connect the goal exactly."""
-    gx = fc[C_GX]
-    gy = fc[C_GY]
+    X = tree.X
+    cost = tree.cost
+    gx = cfg.gx
+    gy = cfg.gy
     d = math.hypot(X[i, 0] - gx, X[i, 1] - gy)
-    if d < fs[F_CLOSEST_D]:
-        fs[F_CLOSEST_D] = d
-        st[S_CLOSEST] = i
-    g = st[S_GOAL]
-    if d > fc[C_GOALTOL] or i == g:
+    if d < state.closest_d:
+        state.closest_d = d
+        state.closest = i
+    g = state.goal
+    if d > cfg.goal_tol or i == g:
         return
     if d < 1e-9:
         if g < 0:
-            st[S_GOAL] = i
-            st[S_FIRST_ITER] = st[S_ITER]
-            fs[F_FIRST_NS] = monotonic_ns(clockbuf)
-            _first_counts(st, fs, clockbuf)
+            state.goal = i
+            _first_solution(state, clock)
         return
-    c = cost[i] + _cost(X[i, 0], X[i, 1], gx, gy, fc, ic, fvx, fvy)
+    c = cost[i] + _cost(X[i, 0], X[i, 1], gx, gy, world.fvx, world.fvy, cfg)
     if g >= 0 and c >= cost[g] - 1e-12:
         return
     dx = gx - X[i, 0]
     dy = gy - X[i, 1]
-    if not _fan_ok(head[i], dx, dy, fc[C_MAXTURN]):
+    if not _fan_ok(tree.head[i], dx, dy, cfg.max_turn):
         return
-    if g >= 0 and not _children_fan_ok(g, math.atan2(dy, dx), X, first_child, next_sib, fc[C_MAXTURN]):
+    if g >= 0 and not _children_fan_ok(g, math.atan2(dy, dx), tree, cfg.max_turn):
         return
-    if not _free(occ, fc, st, X[i, 0], X[i, 1], gx, gy):
+    if not _free(world, cfg, state, X[i, 0], X[i, 1], gx, gy):
         return
     if g < 0:
-        if st[S_N] >= ic[I_CAP]:
+        if state.n >= cfg.cap:
             return
-        g = _add_node(gx, gy, i, c, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head,
-                      node_next, st, nv, fvx, fvy)
-        st[S_GOAL] = g
-        st[S_FIRST_ITER] = st[S_ITER]
-        fs[F_FIRST_NS] = monotonic_ns(clockbuf)
-        _first_counts(st, fs, clockbuf)
-        fs[F_CLOSEST_D] = 0.0
-        st[S_CLOSEST] = g
+        state.goal = _add_node(gx, gy, i, c, world, cfg, tree, state)
+        _first_solution(state, clock)
+        state.closest_d = 0.0
+        state.closest = state.goal
     else:
-        _reparent(g, i, c, X, parent, cost, head, first_child, next_sib, stack)
+        _reparent(g, i, c, tree)
 
 
-@njit(cache=True)
-def _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, first_child, next_sib, stack,
-            max_turn, hx, hy, fb):
+@njit(cache=True, inline="always")
+def _rewire(j, new, hx, hy, world, cfg, tree, state, fan):
     """Make q_new the parent of node j if that is cheaper and the edge is valid (fan limit for the
     edge and for j's children, collision-free): the rewiring step shared by RRT* and DDRRT*.
     The tests are side-effect free until the collision check, so the cheap ones come first;
-    (hx, hy) = (cos, sin) of q_new's heading, fb = _fan_bounds(max_turn). The caller has
+    (hx, hy) = (cos, sin) of q_new's heading, fan = _fan_bounds(max_turn). The caller has
     already refused the candidates that _rewire_cannot_pay refuses."""
+    X = tree.X
+    nx = X[new, 0]
+    ny = X[new, 1]
     dx = X[j, 0] - nx
     dy = X[j, 1] - ny
-    if not _fan_ok_cos(head[new], hx, hy, dx, dy, max_turn, fb):
+    max_turn = cfg.max_turn
+    if not _fan_ok_cos(tree.head[new], hx, hy, dx, dy, max_turn, fan):
         return
-    c = cost[new] + _cost(nx, ny, X[j, 0], X[j, 1], fc, ic, fvx, fvy)
-    if c >= cost[j] - 1e-12:
+    c = tree.cost[new] + _cost(nx, ny, X[j, 0], X[j, 1], world.fvx, world.fvy, cfg)
+    if c >= tree.cost[j] - 1e-12:
         return
-    if not _children_fan_ok(j, math.atan2(dy, dx), X, first_child, next_sib, max_turn):
+    if not _children_fan_ok(j, math.atan2(dy, dx), tree, max_turn):
         return
-    if _free(occ, fc, st, nx, ny, X[j, 0], X[j, 1]):
-        _reparent(j, new, c, X, parent, cost, head, first_child, next_sib, stack)
+    if _free(world, cfg, state, nx, ny, X[j, 0], X[j, 1]):
+        _reparent(j, new, c, tree)
 
 
-@njit(cache=True)
-def _rewire_cannot_pay(j, new, nx, ny, X, cost, lbf, margin):
+@njit(cache=True, inline="always")
+def _rewire_cannot_pay(j, new, X, cost, lbf, margin):
     """True if rewiring node j through q_new cannot lower its cost, decided on a square root:
     lbf * sqrt(...) * (1 - margin) <= the computed edge cost (_edge_lower_factor), and rounding is
     monotone, so this refuses only candidates that _rewire's exact comparison refuses too. Kept
@@ -631,20 +769,39 @@ def _rewire_cannot_pay(j, new, nx, ny, X, cost, lbf, margin):
     a thousand near nodes per sample."""
     if lbf <= 0.0:
         return False
-    dx = X[j, 0] - nx
-    dy = X[j, 1] - ny
+    dx = X[j, 0] - X[new, 0]
+    dy = X[j, 1] - X[new, 1]
     return cost[new] + lbf * math.sqrt(dx * dx + dy * dy) * (1.0 - margin) >= cost[j] - 1e-12
 
 
+@njit(cache=True, inline="always")
+def _rewire_through(new, p, rw_i, count, world, cfg, tree, state, dv):
+    """Rewire step (RRT* and DDRRT* lines 18-21): offer q_new as the parent of rw_i[:count]."""
+    X = tree.X
+    cost = tree.cost
+    lbf = dv.lbf
+    lb_margin = dv.lb_margin
+    fan = dv.fan
+    hx = math.cos(tree.head[new])
+    hy = math.sin(tree.head[new])
+    for a in range(count):
+        j = rw_i[a]
+        if j == p or j == new:
+            continue
+        if _rewire_cannot_pay(j, new, X, cost, lbf, lb_margin):
+            continue
+        _rewire(j, new, hx, hy, world, cfg, tree, state, fan)
+
+
 @njit(cache=True)
-def _edge_lower_factor(fc, ic):
+def _edge_lower_factor(cfg):
     """f with edge cost >= f x edge length for every edge: 1 for length; for eq. (12), where each
     piece costs min(1, D_alpha / (1 + exp(cos a - gamma sin a))) x its length and the exponent is
     at most 1 when gamma >= 0, f = min(1, D_alpha / (1 + e)). 0 (no bound used) otherwise."""
-    if ic[I_FIELD] == 0:
+    if cfg.use_field == 0:
         return 1.0
-    da = fc[C_DALPHA]
-    if da > 0.0 and fc[C_GAMMA] >= 0.0:
+    da = cfg.d_alpha
+    if da > 0.0 and cfg.gamma >= 0.0:
         return min(1.0, da / (1.0 + math.e))
     return 0.0
 
@@ -661,223 +818,300 @@ def _esd_floor(a, gamma):
 
 
 @njit(cache=True)
-def node_direction(i, x, y, nv, fvx, fvy, fc):
-    """Entry point for the solve loop: the root's current direction (see _set_direction)."""
-    _set_direction(i, x, y, nv, fvx, fvy, fc)
+def _derive(cfg):
+    """The Derived constants of a configuration (computed in the kernel, as before: the same floats)."""
+    lbf = _edge_lower_factor(cfg)
+    use_field = cfg.use_field != 0
+    # length: the edge cost is hypot, within 4e-16 of the square root; eq. (12): exp and the sum
+    # of pieces round too, so a wider margin
+    lb_margin = 2e-15 if cfg.use_field == 0 else 1e-9
+    esd_plain = cfg.d_alpha * cfg.dr
+    cp, cf, fan_usable = _fan_bounds(cfg.max_turn)
+    fan = np.array([cp, cf, 1.0 if fan_usable else 0.0])
+    return Derived(lbf, lb_margin, use_field and lbf > 0.0, esd_plain, _esd_floor(esd_plain, cfg.gamma), fan)
+
+
+def _unowned_typer(typingctx, arr):
+    """A view of ``arr`` without its reference count (a null meminfo): taking it out of a named
+    tuple then costs no atomic increment and decrement. Only for arrays that the caller of
+    ``grow`` keeps alive for the whole call."""
+    def codegen(context, builder, sig, args):
+        src = context.make_array(sig.args[0])(context, builder, args[0])
+        out = context.make_array(sig.return_type)(context, builder)
+        for name in ("parent", "nitems", "itemsize", "data", "shape", "strides"):
+            setattr(out, name, getattr(src, name))
+        out.meminfo = cgutils.get_null_value(out.meminfo.type)
+        return out._getvalue()
+    return arr(arr), codegen
+
+
+_unowned = cast(Callable[[np.ndarray], np.ndarray], intrinsic(_unowned_typer))
 
 
 @njit(cache=True)
-def grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib, bucket_head, node_next,
-         st, fs, stack, nv, max_iter, deadline_ns, stop_on_exact):
-    """Run up to max_iter iterations; see the module docstring for the return codes."""
-    clockbuf = np.zeros(2, np.int64)
-    k_min = ic[I_K]
-    k_growth = fc[C_KGROW]
-    kn_i = np.empty(K_CAP, np.int64)
-    kn_d = np.empty(K_CAP, np.float64)
-    ext_i = np.empty(K_CAP, np.int64)
-    ext_k = np.empty(K_CAP, np.float64)
-    near_i = np.empty(NEAR_CAP, np.int64)
-    near_c = np.empty(NEAR_CAP, np.float64)
-    near_x = np.empty(NEAR_CAP, np.bool_)
-    rw_i = np.empty(NEAR_CAP, np.int64)
-    step = fc[C_STEP]
-    max_turn = fc[C_MAXTURN]
-    algo = ic[I_ALGO]
-    lbf = _edge_lower_factor(fc, ic)
-    use_field = ic[I_FIELD] != 0
-    # length: the edge cost is hypot, within 4e-16 of the square root; eq. (12): exp and the sum
-    # of pieces round too, so a wider margin
-    lb_margin = 2e-15 if ic[I_FIELD] == 0 else 1e-9
-    lower_bounds = use_field and lbf > 0.0  # choose-parent keys start as lower bounds (eq. (12))
-    d_alpha = fc[C_DALPHA]
-    gamma = fc[C_GAMMA]
-    esd_plain = d_alpha * fc[C_DR]
-    esd_floor = _esd_floor(esd_plain, gamma)
-    cp, cf, fan_usable = _fan_bounds(max_turn)
-    fb = np.array([cp, cf, 1.0 if fan_usable else 0.0])
+def _borrowed(world, tree, buf):
+    """world, tree and buf as views without reference counts (see _unowned): the kernel reads
+    their members in every step, and numba counts a reference per read otherwise (perf: a fifth
+    of DDRRT*'s time in atomic increments and decrements)."""
+    w = World(_unowned(world.occ), _unowned(world.fvx), _unowned(world.fvy))
+    t = Tree(_unowned(tree.X), _unowned(tree.parent), _unowned(tree.cost), _unowned(tree.head), _unowned(tree.dd),
+             _unowned(tree.nv), _unowned(tree.first_child), _unowned(tree.next_sib), _unowned(tree.bucket_head),
+             _unowned(tree.node_next), _unowned(tree.stack))
+    b = Scratch(_unowned(buf.kn_i), _unowned(buf.kn_d), _unowned(buf.ext_i), _unowned(buf.ext_k),
+                _unowned(buf.near_i), _unowned(buf.near_c), _unowned(buf.near_x), _unowned(buf.rw_i),
+                _unowned(buf.clock))
+    return w, t, b
+
+
+@njit(cache=True)
+def node_direction(i, x, y, world, cfg_a, tree):
+    """Entry point for the solve loop: the root's current direction (see _set_direction)."""
+    _set_direction(i, x, y, tree.nv, world, cfg_a[0])
+
+
+@njit(cache=True, inline="always")
+def _sample(cfg, tree, state):
+    """A sample (x, y, from_png): the PNG node with probability P (DDRRT*), else the goal with
+    the goal bias, else uniform in the domain (Informed RRT* with a solution: in its ellipse)."""
+    if cfg.use_png != 0 and state.png_hit == 0 and np.random.random() < cfg.png_p:
+        return cfg.png_x, cfg.png_y, True
+    if np.random.random() < cfg.goal_bias:
+        return cfg.gx, cfg.gy, False
+    if cfg.algo == INFORMED_RRT_STAR and state.goal >= 0:
+        x, y = _informed(cfg, tree.cost[state.goal])
+        return x, y, False
+    x, y = _uniform(cfg)
+    return x, y, False
+
+
+@njit(cache=True, inline="always")
+def _steer(q0, d0, sx, sy, X, step):
+    """q_new: the sample, or the point a step from node q0 (d0 from it) towards it."""
+    if d0 > step:
+        return X[q0, 0] + (sx - X[q0, 0]) * step / d0, X[q0, 1] + (sy - X[q0, 1]) * step / d0
+    return sx, sy
+
+
+@njit(cache=True, inline="always")
+def _dd_candidates(sx, sy, cfg, tree, state, buf, dv):
+    """Figure 6 lines 5-11: of the k nearest nodes, those whose dynamic domain (a disc, Yershova
+    2005) holds the sample and whose D_C (eq. (12) with one alpha_y, the current at the node, as
+    eq. (11)'s) is within ESD (eq. (11)), in distance order: buf.ext_i, their D_C in buf.ext_k;
+    returns how many. k is the paper's constant, or (k_growth > 0) grows as k-nearest RRT* needs
+    for asymptotic optimality: max(k, ceil(k_growth log n)) (Karaman & Frazzoli 2011)."""
+    X = tree.X
+    nv = tree.nv
+    n = state.n
+    k = cfg.k
+    if cfg.k_growth > 0.0 and n > 1:
+        k = max(cfg.k, min(K_CAP, int(math.ceil(cfg.k_growth * math.log(n)))))
+    kn_i = buf.kn_i
+    kn_d = buf.kn_d
+    ext_i = buf.ext_i
+    ext_k = buf.ext_k
+    dd = tree.dd
+    esd_plain = dv.esd_plain
+    esd_floor = dv.esd_floor
+    m = _knn(sx, sy, k, cfg, tree, kn_i, kn_d)
+    use_field = cfg.use_field != 0
+    gamma = cfg.gamma
+    ne = 0
+    for a in range(m):
+        i = kn_i[a]
+        ed = kn_d[a]
+        if ed > dd[i]:
+            continue
+        dc = ed
+        accept = dc <= esd_plain
+        if use_field and ed > 0.0 and (nv[i, 0] != 0.0 or nv[i, 1] != 0.0):
+            c = ((sx - X[i, 0]) * nv[i, 0] + (sy - X[i, 1]) * nv[i, 1]) / ed
+            c = min(1.0, max(-1.0, c))
+            e = math.exp(c - gamma * math.sqrt(max(0.0, 1.0 - c * c)))
+            dc = min(ed, cfg.d_alpha * ed / (1.0 + e))
+            # D_alpha DR / (1 + exp(-arg)), computed only where esd_floor does not decide
+            accept = dc <= esd_floor or dc <= esd_plain * e / (1.0 + e)
+        if accept:
+            ext_i[ne] = i
+            ext_k[ne] = dc
+            ne += 1
+    return ne
+
+
+@njit(cache=True, inline="always")
+def _first_smallest(keys, m):
+    """Index of the first of the smallest keys[:m] (the head of a stable sort)."""
+    b = 0
+    for a in range(1, m):
+        if keys[a] < keys[b]:
+            b = a
+    return b
+
+
+@njit(cache=True, inline="always")
+def _dd_choose_parent(nx, ny, ne, world, cfg, tree, state, buf, dv):
+    """Figure 6 lines 12-17: the extendable nodes within a step of q_new, in D_C order (a stable
+    sort of that subset, keys in buf.kn_d, gives the order sorting all of them would give it),
+    into buf.rw_i; returns (parent, its cost, how many), parent -1 if none is valid."""
+    X = tree.X
+    cost = tree.cost
+    ext_i = buf.ext_i
+    ext_k = buf.ext_k
+    rw_i = buf.rw_i
+    keys = buf.kn_d
+    near_i = buf.near_i
+    near_c = buf.near_c
+    near_x = buf.near_x
+    lower_bounds = dv.lower_bounds
+    lbf = dv.lbf
+    lb_margin = dv.lb_margin
+    step = cfg.step
+    ns = 0
+    for a in range(ne):
+        i = ext_i[a]
+        if _within(nx - X[i, 0], ny - X[i, 1], step * (1.0 + 1e-9)):
+            rw_i[ns] = i
+            keys[ns] = ext_k[a]
+            ns += 1
+    _sort_by(keys, rw_i, ns)
+    for a in range(ns):
+        i = rw_i[a]
+        near_i[a] = i
+        if lower_bounds:
+            # a lower bound of the key; _first_valid_parent makes exact only the keys that may be
+            # the minimum (an eq. (12) edge costs an exp and a field look-up)
+            ex = nx - X[i, 0]
+            ey = ny - X[i, 1]
+            near_c[a] = cost[i] + lbf * math.sqrt(ex * ex + ey * ey) * (1.0 - lb_margin)
+            near_x[a] = False
+        else:
+            near_c[a], near_x[a] = _parent_key(i, nx, ny, world, cfg, tree)
+    p, pc = _first_valid_parent(near_i, near_c, near_x, ns, nx, ny, world, cfg, tree, state, True, lower_bounds)
+    return p, pc, ns
+
+
+@njit(cache=True, inline="always")
+def _ddrrt_extend(sx, sy, from_png, world, cfg, tree, state, buf, dv):
+    """One DDRRT* extension towards the sample (Figure 6); returns q_new's index or -1."""
+    X = tree.X
+    ne = _dd_candidates(sx, sy, cfg, tree, state, buf, dv)
+    if ne == 0:
+        state.rejected += 1
+        return -1
+    q0 = buf.ext_i[_first_smallest(buf.ext_k, ne)]
+    d0 = math.hypot(sx - X[q0, 0], sy - X[q0, 1])
+    if d0 < 1e-9:
+        if from_png:
+            state.png_wasted += 1
+            if cfg.png_repair != 0:
+                state.png_hit = 1  # a node sits on the PGNode: drawing it again would be wasted
+        return -1
+    nx, ny = _steer(q0, d0, sx, sy, X, cfg.step)
+    p, pc, ns = _dd_choose_parent(nx, ny, ne, world, cfg, tree, state, buf, dv)
+    if p < 0:
+        return -1
+    if not math.isinf(tree.dd[p]):
+        tree.dd[p] *= cfg.dd_grow  # a successful extension grows a bounded domain (adaptive form)
+    new = _add_node(nx, ny, p, pc, world, cfg, tree, state)
+    if from_png and cfg.png_repair != 0 and nx == sx and ny == sy:
+        state.png_hit = 1
+    _rewire_through(new, p, buf.rw_i, ns, world, cfg, tree, state, dv)
+    return new
+
+
+@njit(cache=True, inline="always")
+def _rrt_choose_parent(nx, ny, q0, nn, world, cfg, tree, state, buf, dv):
+    """Choose-parent over the near ball buf.near_i[:nn] and the nearest node q0, in ascending cost
+    order; the nearest is not required to be valid itself (with the fan limit it often is not).
+    Returns (parent, its cost), parent -1 if none is valid."""
+    X = tree.X
+    cost = tree.cost
+    near_i = buf.near_i
+    near_c = buf.near_c
+    near_x = buf.near_x
+    use_field = cfg.use_field != 0
+    lower_bounds = dv.lower_bounds
+    lbf = dv.lbf
+    lb_margin = dv.lb_margin
+    nc = 0
+    has_q0 = False
+    for a in range(nn):
+        j = near_i[a]
+        if j == q0:
+            has_q0 = True
+        ex = nx - X[j, 0]
+        ey = ny - X[j, 1]
+        if not use_field:  # _parent_key's length case, written out: a call per near node is costly
+            near_c[nc] = cost[j] + math.sqrt(ex * ex + ey * ey)
+            near_x[nc] = False
+        elif lower_bounds:  # see _dd_choose_parent
+            near_c[nc] = cost[j] + lbf * math.sqrt(ex * ex + ey * ey) * (1.0 - lb_margin)
+            near_x[nc] = False
+        else:
+            near_c[nc], near_x[nc] = _parent_key(j, nx, ny, world, cfg, tree)
+        nc += 1
+    if not has_q0 and nc < NEAR_CAP:
+        near_i[nc] = q0
+        near_c[nc], near_x[nc] = _parent_key(q0, nx, ny, world, cfg, tree)
+        nc += 1
+    return _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, world, cfg, tree, state, False, lower_bounds)
+
+
+@njit(cache=True, inline="always")
+def _rrt_extend(sx, sy, world, cfg, tree, state, buf, dv):
+    """One RRT* extension towards the sample (Karaman & Frazzoli 2011, radius version); returns
+    q_new's index or -1."""
+    X = tree.X
+    n = state.n
+    _knn(sx, sy, 1, cfg, tree, buf.kn_i, buf.kn_d)
+    q0 = buf.kn_i[0]
+    d0 = buf.kn_d[0]
+    if d0 < 1e-9:
+        return -1
+    step = cfg.step
+    nx, ny = _steer(q0, d0, sx, sy, X, step)
+    radius = step
+    if n > 1:
+        radius = min(step, cfg.rewire_gamma * math.sqrt(math.log(n) / n))
+    bx, by = _bucket(nx, ny, cfg)
+    nn, pos_new = _near_pos(nx, ny, radius, cfg, tree, buf.near_i, by * cfg.nbx + bx)
+    for a in range(nn):
+        buf.rw_i[a] = buf.near_i[a]
+    p, pc = _rrt_choose_parent(nx, ny, q0, nn, world, cfg, tree, state, buf, dv)
+    if p < 0:
+        return -1
+    new = _add_node(nx, ny, p, pc, world, cfg, tree, state)
+    # rewire: the near set as a second scan would give it: the same nodes in the same order with
+    # q_new (skipped) first in its bucket; when that scan is cut at NEAR_CAP and q_new comes before
+    # the cut, it pushes the last node out
+    if nn == NEAR_CAP and pos_new < NEAR_CAP:
+        nn -= 1
+    _rewire_through(new, p, buf.rw_i, nn, world, cfg, tree, state, dv)
+    return new
+
+
+@njit(cache=True)
+def grow(world, cfg_a, tree, state_a, scratch, max_iter, deadline_ns, stop_on_exact):
+    """Run up to max_iter iterations; see the module docstring for the arguments and the return
+    codes. ``cfg_a`` and ``state_a`` are 1-element arrays of CONFIG and STATE; the caller keeps
+    world, tree and scratch alive during the call."""
+    cfg = cfg_a[0]
+    state = state_a[0]
+    world, tree, buf = _borrowed(world, tree, scratch)
+    dv = _derive(cfg)
     for _ in range(max_iter):
-        if deadline_ns >= 0 and monotonic_ns(clockbuf) >= deadline_ns:
+        if deadline_ns >= 0 and monotonic_ns(buf.clock) >= deadline_ns:
             return DONE_DEADLINE
-        if st[S_N] + 2 > ic[I_CAP]:
+        if state.n + 2 > cfg.cap:
             return DONE_FULL
-        st[S_ITER] += 1
-        # ---- sample: PNG node with probability P (DDRRT*), else goal bias, else uniform/informed
-        from_png = False
-        if ic[I_PNG] != 0 and st[S_PNG_HIT] == 0 and np.random.random() < fc[C_PNGP]:
-            sx = fc[C_PNGX]
-            sy = fc[C_PNGY]
-            from_png = True
-        elif np.random.random() < fc[C_GOALBIAS]:
-            sx = fc[C_GX]
-            sy = fc[C_GY]
-        elif algo == INFORMED_RRT_STAR and st[S_GOAL] >= 0:
-            sx, sy = _informed(fc, cost[st[S_GOAL]])
+        state.iter += 1
+        sx, sy, from_png = _sample(cfg, tree, state)
+        if cfg.algo == DDRRT_STAR:
+            new = _ddrrt_extend(sx, sy, from_png, world, cfg, tree, state, buf, dv)
         else:
-            sx, sy = _uniform(fc)
-        n = st[S_N]
-        if algo == DDRRT_STAR:
-            # ---- Figure 6 lines 5-11: k nearest sorted by D_C, keep those with D_C <= ESD.
-            # k is the paper's constant, or (k_growth > 0) grows as k-nearest RRT* needs for
-            # asymptotic optimality: k(n) = max(k, ceil(k_growth log n)) (Karaman & Frazzoli 2011).
-            k = k_min
-            if k_growth > 0.0 and n > 1:
-                k = max(k_min, min(K_CAP, int(math.ceil(k_growth * math.log(n)))))
-            m = _knn(sx, sy, k, X, fc, ic, bucket_head, node_next, kn_i, kn_d)
-            ne = 0
-            for a in range(m):
-                i = kn_i[a]
-                ed = kn_d[a]
-                if ed > dd[i]:
-                    continue  # outside the node's dynamic domain (a disc of radius DD, Yershova 2005)
-                # eq. (12) with one alpha_y, the current at q_i (the same alpha_y as eq. (11)'s)
-                dc = ed
-                accept = dc <= esd_plain
-                if use_field and ed > 0.0 and (nv[i, 0] != 0.0 or nv[i, 1] != 0.0):
-                    c = ((sx - X[i, 0]) * nv[i, 0] + (sy - X[i, 1]) * nv[i, 1]) / ed
-                    c = min(1.0, max(-1.0, c))
-                    e = math.exp(c - gamma * math.sqrt(max(0.0, 1.0 - c * c)))
-                    dc = min(ed, d_alpha * ed / (1.0 + e))
-                    # D_alpha DR / (1 + exp(-arg)), computed only where esd_floor does not decide
-                    accept = dc <= esd_floor or dc <= esd_plain * e / (1.0 + e)
-                if accept:
-                    ext_i[ne] = i
-                    ext_k[ne] = dc
-                    ne += 1
-            if ne == 0:
-                st[S_REJ] += 1
-                continue
-            # q0: the first of the smallest D_C (the head of a stable sort of ext by D_C)
-            b0 = 0
-            for a in range(1, ne):
-                if ext_k[a] < ext_k[b0]:
-                    b0 = a
-            q0 = ext_i[b0]
-            d0 = math.hypot(sx - X[q0, 0], sy - X[q0, 1])
-            if d0 < 1e-9:
-                if from_png:
-                    st[S_PNG_WASTED] += 1
-                    if ic[I_PNGREPAIR] != 0:
-                        st[S_PNG_HIT] = 1  # a node sits on the PGNode: drawing it again would be wasted
-                continue
-            if d0 > step:
-                nx = X[q0, 0] + (sx - X[q0, 0]) * step / d0
-                ny = X[q0, 1] + (sy - X[q0, 1]) * step / d0
-            else:
-                nx = sx
-                ny = sy
-            # ---- lines 12-17: extendable nodes in order of the cost through them. Only those within
-            # a step of q_new take part, in D_C order: a stable sort of that subset (kn_d holds its
-            # keys) gives the order that sorting all of ext would give it.
-            ns = 0
-            for a in range(ne):
-                i = ext_i[a]
-                if _within(nx - X[i, 0], ny - X[i, 1], step * (1.0 + 1e-9)):
-                    rw_i[ns] = i
-                    kn_d[ns] = ext_k[a]
-                    ns += 1
-            _sort_by(kn_d, rw_i, ns)
-            for a in range(ns):
-                i = rw_i[a]
-                near_i[a] = i
-                if lower_bounds:
-                    # a lower bound of the key; _first_valid_parent makes exact only the keys that
-                    # may be the minimum (an eq. (12) edge costs an exp and a field look-up)
-                    ex = nx - X[i, 0]
-                    ey = ny - X[i, 1]
-                    near_c[a] = cost[i] + lbf * math.sqrt(ex * ex + ey * ey) * (1.0 - lb_margin)
-                    near_x[a] = False
-                else:
-                    near_c[a], near_x[a] = _parent_key(i, nx, ny, X, cost, fc, ic, fvx, fvy)
-            p, pc = _first_valid_parent(near_i, near_c, near_x, ns, nx, ny, occ, fc, ic, fvx, fvy, st, X, cost, head,
-                                        max_turn, dd, True, lower_bounds)
-            if p < 0:
-                continue
-            if not math.isinf(dd[p]):
-                dd[p] *= fc[C_DDGROW]  # a successful extension grows a bounded domain (adaptive form)
-            new = _add_node(nx, ny, p, pc, X, parent, cost, head, dd, first_child, next_sib, fc, ic,
-                            bucket_head, node_next, st, nv, fvx, fvy)
-            if from_png and ic[I_PNGREPAIR] != 0 and nx == sx and ny == sy:
-                st[S_PNG_HIT] = 1
-            hx = math.cos(head[new])
-            hy = math.sin(head[new])
-            # ---- lines 18-21: rewire the other extendable nodes (within a step of q_new) through it
-            for a in range(ns):
-                j = rw_i[a]
-                if j == p or j == new:
-                    continue
-                if _rewire_cannot_pay(j, new, nx, ny, X, cost, lbf, lb_margin):
-                    continue
-                _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, first_child, next_sib,
-                        stack, max_turn, hx, hy, fb)
-        else:
-            # ---- RRT* (Karaman & Frazzoli 2011), radius version
-            m = _knn(sx, sy, 1, X, fc, ic, bucket_head, node_next, kn_i, kn_d)
-            q0 = kn_i[0]
-            d0 = kn_d[0]
-            if d0 < 1e-9:
-                continue
-            if d0 > step:
-                nx = X[q0, 0] + (sx - X[q0, 0]) * step / d0
-                ny = X[q0, 1] + (sy - X[q0, 1]) * step / d0
-            else:
-                nx = sx
-                ny = sy
-            radius = step
-            if n > 1:
-                radius = min(step, fc[C_RGAMMA] * math.sqrt(math.log(n) / n))
-            nbx_new, nby_new = _bucket(nx, ny, fc, ic)
-            nn, pos_new = _near_pos(nx, ny, radius, X, fc, ic, bucket_head, node_next, near_i,
-                                    nby_new * ic[I_NBX] + nbx_new)
-            for a in range(nn):
-                rw_i[a] = near_i[a]
-            # choose-parent over the near ball and the nearest node, in ascending cost order; the
-            # nearest is not required to be valid itself (with the fan limit it often is not)
-            nc = 0
-            has_q0 = False
-            for a in range(nn):
-                j = near_i[a]
-                if j == q0:
-                    has_q0 = True
-                near_i[nc] = j
-                ex = nx - X[j, 0]
-                ey = ny - X[j, 1]
-                if not use_field:  # _parent_key's length case, written out: a call per near node is costly
-                    near_c[nc] = cost[j] + math.sqrt(ex * ex + ey * ey)
-                    near_x[nc] = False
-                elif lower_bounds:  # see DDRRT*'s choose-parent above
-                    near_c[nc] = cost[j] + lbf * math.sqrt(ex * ex + ey * ey) * (1.0 - lb_margin)
-                    near_x[nc] = False
-                else:
-                    near_c[nc], near_x[nc] = _parent_key(j, nx, ny, X, cost, fc, ic, fvx, fvy)
-                nc += 1
-            if not has_q0 and nc < NEAR_CAP:
-                near_i[nc] = q0
-                near_c[nc], near_x[nc] = _parent_key(q0, nx, ny, X, cost, fc, ic, fvx, fvy)
-                nc += 1
-            p, pc = _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, occ, fc, ic, fvx, fvy, st, X, cost, head,
-                                        max_turn, dd, False, lower_bounds)
-            if p < 0:
-                continue
-            new = _add_node(nx, ny, p, pc, X, parent, cost, head, dd, first_child, next_sib, fc, ic,
-                            bucket_head, node_next, st, nv, fvx, fvy)
-            hx = math.cos(head[new])
-            hy = math.sin(head[new])
-            # rewire: the near set as a second scan would give it: the same nodes in the same order
-            # with q_new (skipped) first in its bucket; when that scan is cut at NEAR_CAP and q_new
-            # comes before the cut, it pushes the last node out
-            if nn == NEAR_CAP and pos_new < NEAR_CAP:
-                nn -= 1
-            for a in range(nn):
-                j = rw_i[a]
-                if j == p or j == new:
-                    continue
-                if _rewire_cannot_pay(j, new, nx, ny, X, cost, lbf, lb_margin):
-                    continue
-                _rewire(j, new, nx, ny, occ, fvx, fvy, fc, ic, st, X, parent, cost, head, first_child, next_sib,
-                        stack, max_turn, hx, hy, fb)
-        _try_goal(new, occ, X, parent, cost, head, dd, first_child, next_sib, fc, ic, bucket_head, node_next,
-                  st, fs, fvx, fvy, stack, clockbuf, nv)
-        if stop_on_exact and st[S_GOAL] >= 0:
+            new = _rrt_extend(sx, sy, world, cfg, tree, state, buf, dv)
+        if new < 0:
+            continue
+        _try_goal(new, world, cfg, tree, state, buf.clock)
+        if stop_on_exact and state.goal >= 0:
             return DONE_EXACT
     return DONE_ITERATIONS

@@ -152,130 +152,117 @@ class TreePlanner:
         free_area = float((~grid.occ).mean()) * (bx1 - bx0) * (by1 - by0)
         gamma_star = 2.0 * math.sqrt(1.5) * math.sqrt(max(free_area, 1e-9) / math.pi)  # K&F 2011, d = 2
 
-        fc = np.zeros(_tree.N_FCFG)
-        fc[_tree.C_STEP] = p.step
-        fc[_tree.C_MAXTURN] = p.max_turn_angle
-        fc[_tree.C_GOALTOL] = p.goal_tolerance
-        fc[_tree.C_GOALBIAS] = p.goal_bias
-        fc[_tree.C_PNGP] = p.png_probability if png is not None else 0.0
+        cfg = _tree.new_config()
+        c = cfg[0]
+        c["step"] = p.step
+        c["max_turn"] = p.max_turn_angle
+        c["goal_tol"] = p.goal_tolerance
+        c["goal_bias"] = p.goal_bias
+        c["png_p"] = p.png_probability if png is not None else 0.0
         if png is not None:
-            fc[_tree.C_PNGX], fc[_tree.C_PNGY] = png
-        fc[_tree.C_DR] = p.dynamic_domain_radius
-        fc[_tree.C_DALPHA] = p.d_alpha
-        fc[_tree.C_GAMMA] = p.gamma_alpha
-        fc[_tree.C_RGAMMA] = p.rewire_gamma * gamma_star
-        fc[_tree.C_KGROW] = p.k_growth
-        if p.dynamic_domain == "off":
-            fc[_tree.C_DD0] = math.inf
-        else:
-            fc[_tree.C_DD0] = p.dynamic_domain_start
+            c["png_x"], c["png_y"] = png
+        c["dr"] = p.dynamic_domain_radius
+        c["d_alpha"] = p.d_alpha
+        c["gamma"] = p.gamma_alpha
+        c["rewire_gamma"] = p.rewire_gamma * gamma_star
+        c["k_growth"] = p.k_growth
+        c["dd0"] = math.inf if p.dynamic_domain == "off" else p.dynamic_domain_start
         adaptive = p.dynamic_domain == "adaptive"
-        fc[_tree.C_DDGROW] = 1.0 + p.dd_alpha if adaptive else 1.0
-        fc[_tree.C_DDSHRINK] = 1.0 - p.dd_alpha if adaptive else 1.0
-        fc[_tree.C_DDMIN] = min(p.dd_min_factor * p.step, p.dynamic_domain_start)
-        fc[_tree.C_FMIN] = min_cost_factor(p.d_alpha, p.gamma_alpha) if field is not None else 1.0
-        fc[_tree.C_BUCKET] = bucket
-        fc[_tree.C_BX0], fc[_tree.C_BX1], fc[_tree.C_BY0], fc[_tree.C_BY1] = bx0, bx1, by0, by1
+        c["dd_grow"] = 1.0 + p.dd_alpha if adaptive else 1.0
+        c["dd_shrink"] = 1.0 - p.dd_alpha if adaptive else 1.0
+        c["dd_min"] = min(p.dd_min_factor * p.step, p.dynamic_domain_start)
+        c["f_min"] = min_cost_factor(p.d_alpha, p.gamma_alpha) if field is not None else 1.0
+        c["bucket"] = bucket
+        c["bx0"], c["bx1"], c["by0"], c["by1"] = bx0, bx1, by0, by1
         if problem.domain_center is not None and problem.domain_radius is not None:
-            fc[_tree.C_DCX], fc[_tree.C_DCY] = problem.domain_center
-            fc[_tree.C_DR_DOM] = problem.domain_radius
-        fc[_tree.C_GX], fc[_tree.C_GY] = gx, gy
-        fc[_tree.C_SX], fc[_tree.C_SY] = sx, sy
-        fc[_tree.C_RES] = grid.resolution
+            c["dom_cx"], c["dom_cy"] = problem.domain_center
+            c["dom_r"] = problem.domain_radius
+        c["gx"], c["gy"] = gx, gy
+        c["sx"], c["sy"] = sx, sy
+        c["res"] = grid.resolution
         if field is not None:
-            fvx, fvy = field.vx, field.vy
-            fc[_tree.C_FRES] = field.resolution
-            fc[_tree.C_FOX], fc[_tree.C_FOY] = field.origin
+            world = _tree.World(grid._u8, field.vx, field.vy)
+            c["field_res"] = field.resolution
+            c["field_ox"], c["field_oy"] = field.origin
         else:
-            fvx = fvy = _NO_FIELD
-            fc[_tree.C_FRES] = 1.0
-        ic = np.zeros(_tree.N_ICFG, dtype=np.int64)
-        ic[_tree.I_ALGO] = self.algorithm_code
-        ic[_tree.I_FIELD] = 1 if field is not None else 0
-        ic[_tree.I_K] = p.k_nearest
-        ic[_tree.I_NBX] = nbx
-        ic[_tree.I_NBY] = nby
-        ic[_tree.I_CAP] = cap
-        ic[_tree.I_PNG] = 1 if png is not None else 0
-        ic[_tree.I_FAILTURN] = 1 if p.failed_extension == "collision+turn" else 0
-        ic[_tree.I_PNGREPAIR] = 1 if p.png_repair else 0
+            world = _tree.World(grid._u8, _NO_FIELD, _NO_FIELD)
+            c["field_res"] = 1.0
+        c["algo"] = self.algorithm_code
+        c["use_field"] = 1 if field is not None else 0
+        c["k"] = p.k_nearest
+        c["nbx"] = nbx
+        c["nby"] = nby
+        c["cap"] = cap
+        c["use_png"] = 1 if png is not None else 0
+        c["fail_turn"] = 1 if p.failed_extension == "collision+turn" else 0
+        c["png_repair"] = 1 if p.png_repair else 0
 
-        # node arrays are filled as nodes are added (np.empty: no page touching for unused capacity)
-        X = np.empty((cap, 2))
-        parent = np.empty(cap, dtype=np.int64)
-        cost = np.empty(cap)
-        head = np.empty(cap)
-        dd = np.empty(cap)
-        first_child = np.empty(cap, dtype=np.int64)
-        next_sib = np.empty(cap, dtype=np.int64)
-        bucket_head = -np.ones(nbx * nby, dtype=np.int64)
-        node_next = np.empty(cap, dtype=np.int64)
-        st = np.zeros(_tree.N_ISTATE, dtype=np.int64)
-        fs = np.zeros(_tree.N_FSTATE)
-        stack = np.empty(cap, dtype=np.int64)
-        nv = np.empty((cap, 2)) if field is not None else np.zeros((1, 2))  # current direction at each node
-        X[0] = (sx, sy)
+        tree = _tree.new_tree(cap, nbx * nby, field is not None)
+        tree.X[0] = (sx, sy)
         if field is not None:
-            _tree.node_direction(0, sx, sy, nv, fvx, fvy, fc)
-        parent[0] = -1
-        cost[0] = 0.0
-        dd[0] = np.inf
-        first_child[0] = -1
-        next_sib[0] = -1
-        head[0] = np.nan if problem.start_heading is None else float(problem.start_heading)
-        st[_tree.S_N] = 1
-        st[_tree.S_GOAL] = -1
-        st[_tree.S_CLOSEST] = 0
-        fs[_tree.F_CLOSEST_D] = math.hypot(gx - sx, gy - sy)
-        fs[_tree.F_FIRST_NS] = -1.0
-        bucket_head[:] = -1
-        node_next[0] = -1
+            _tree.node_direction(0, sx, sy, world, cfg, tree)
+        tree.parent[0] = -1
+        tree.cost[0] = 0.0
+        tree.dd[0] = np.inf
+        tree.first_child[0] = -1
+        tree.next_sib[0] = -1
+        tree.head[0] = np.nan if problem.start_heading is None else float(problem.start_heading)
+        tree.node_next[0] = -1
         bx, by = min(int(sx / bucket), nbx - 1), min(int(sy / bucket), nby - 1)
-        bucket_head[by * nbx + bx] = 0
+        tree.bucket_head[by * nbx + bx] = 0
+        state = _tree.new_state()
+        st = state[0]
+        st["n"] = 1
+        st["goal"] = -1
+        st["closest"] = 0
+        st["closest_d"] = math.hypot(gx - sx, gy - sy)
+        st["first_ns"] = -1.0
 
         bounds = termination.bounds()
         deadline_ns = -1 if bounds.monotonic_deadline is None else int(bounds.monotonic_deadline * 1e9)
         if deadline_ns >= 0 and not compiled_clock_ok():
             deadline_ns = -1
             bounds = dataclasses.replace(bounds, poll_python=True)
-        occ = grid._u8
+        scratch = _tree.new_scratch()
         _tree.seed_rng(self.seed)
         why = "termination condition met"
         while True:
-            termination.notify(int(st[_tree.S_ITER]), bool(st[_tree.S_GOAL] >= 0))
+            termination.notify(int(st["iter"]), bool(st["goal"] >= 0))
             if termination():
                 break
             if bounds.poll_python:
                 budget = 1
             elif bounds.max_iterations is not None:
-                budget = max(0, bounds.max_iterations - int(st[_tree.S_ITER]))
+                budget = max(0, bounds.max_iterations - int(st["iter"]))
             else:
                 budget = _BIG
-            code = _tree.grow(occ, fvx, fvy, fc, ic, X, parent, cost, head, dd, first_child, next_sib,
-                              bucket_head, node_next, st, fs, stack, nv, budget, deadline_ns, bounds.stop_on_exact)
+            code = _tree.grow(world, cfg, tree, state, scratch, budget, deadline_ns, bounds.stop_on_exact)
             if code == _tree.DONE_DEADLINE:
                 why = "deadline reached"
                 break
             if code == _tree.DONE_FULL:
                 why = f"tree full (max_nodes = {cap})"
                 break
-        termination.notify(int(st[_tree.S_ITER]), bool(st[_tree.S_GOAL] >= 0))
+        termination.notify(int(st["iter"]), bool(st["goal"] >= 0))
         cpu_s = (time.thread_time_ns() - cpu0_ns) * 1e-9
-        return self._result(problem, t0, X, parent, cost, st, fs, why, dd, cpu_s, cpu0_ns, png)
+        return self._result(problem, t0, tree, st, why, cpu_s, cpu0_ns, png)
 
-    def _result(self, problem, t0, X, parent, cost, st, fs, why, dd, cpu_s=0.0, cpu0_ns=0, png=None) -> PlannerResult:
-        n = int(st[_tree.S_N])
-        goal = int(st[_tree.S_GOAL])
+    def _result(self, problem, t0, tree: _tree.Tree, st, why, cpu_s=0.0, cpu0_ns=0, png=None) -> PlannerResult:
+        """The result of a search: the path to the goal (or to the closest node), the tree, the
+        kernel's counters; ``st`` is the kernel's state record."""
+        X, parent, cost, dd = tree.X, tree.parent, tree.cost, tree.dd
+        n = int(st["n"])
+        goal = int(st["goal"])
         if goal >= 0:
             status, end = "exact", goal
             reason = f"goal reached; {why}"
         else:
-            end = int(st[_tree.S_CLOSEST])
+            end = int(st["closest"])
             if end == 0:
                 status, reason = "none", f"no progress towards the goal from the start; {why}"
             else:
                 status = "approximate"
-                reason = f"goal not reached; path to the closest node ({fs[_tree.F_CLOSEST_D]:.2f} m away); {why}"
+                reason = f"goal not reached; path to the closest node ({st['closest_d']:.2f} m away); {why}"
         path = np.zeros((0, 2))
         if status != "none":
             chain: list[int] = []
@@ -285,28 +272,28 @@ class TreePlanner:
                 i = int(parent[i])
             path = X[chain[::-1]].copy()
         first = None
-        if fs[_tree.F_FIRST_NS] >= 0:
-            first = max(0.0, fs[_tree.F_FIRST_NS] * 1e-9 - t0)
+        if st["first_ns"] >= 0:
+            first = max(0.0, st["first_ns"] * 1e-9 - t0)
         c = path_cost(path, disturbance(problem, self.params), self.params) if len(path) else math.inf
         length = path_length(path) if len(path) else math.inf
         return PlannerResult(
-            status=status, path=path, cost=c, length=length, iterations=int(st[_tree.S_ITER]),
+            status=status, path=path, cost=c, length=length, iterations=int(st["iter"]),
             time_to_first_solution_s=first, planning_time_s=time.monotonic() - t0, reason=reason,
-            tree_nodes=X[:n].copy(), tree_parents=parent[:n].copy(), samples_rejected=int(st[_tree.S_REJ]),
-            diagnostics={"collision_checks": int(st[_tree.S_CHECKS]),
+            tree_nodes=X[:n].copy(), tree_parents=parent[:n].copy(), samples_rejected=int(st["rejected"]),
+            diagnostics={"collision_checks": int(st["checks"]),
                          "tree_cost": float(cost[end]) if status != "none" else math.inf,
-                         "first_solution_iteration": int(st[_tree.S_FIRST_ITER]) if goal >= 0 else None,
+                         "first_solution_iteration": int(st["first_iter"]) if goal >= 0 else None,
                          "algorithm": self.name,
                          "dynamic_domains": int(np.sum(np.isfinite(dd[:n]))),  # DDRRT* nodes with a bounded DD
-                         "failed_extensions": int(st[_tree.S_FAILED]),  # DDRRT*: failed parent attempts
-                         "failed_turns": int(st[_tree.S_FAILED_TURN]),  # of which refused by the fan
+                         "failed_extensions": int(st["failed"]),  # DDRRT*: failed parent attempts
+                         "failed_turns": int(st["failed_turn"]),  # of which refused by the fan
                          # time to the first solution measured four ways (issue 34 point 4)
-                         "first_solution_checks": int(st[_tree.S_FIRST_CHECKS]) if goal >= 0 else None,
-                         "first_solution_cpu_s": max(0.0, (fs[_tree.F_FIRST_CPU_NS] - cpu0_ns) * 1e-9)
+                         "first_solution_checks": int(st["first_checks"]) if goal >= 0 else None,
+                         "first_solution_cpu_s": max(0.0, (st["first_cpu_ns"] - cpu0_ns) * 1e-9)
                          if goal >= 0 else None,
                          "thread_cpu_s": cpu_s,  # thread CPU time of the search (as planning_time_s, less the result)
                          "png_node": None if png is None else [float(png[0]), float(png[1])],
-                         "png_reached": bool(st[_tree.S_PNG_HIT]),
-                         "png_wasted": int(st[_tree.S_PNG_WASTED]),  # PNG samples on an existing node
+                         "png_reached": bool(st["png_hit"]),
+                         "png_wasted": int(st["png_wasted"]),  # PNG samples on an existing node
                          },
         )

@@ -116,12 +116,23 @@ def _setup(rng, n):
     t = np.sort(rng.uniform(0, 1, size=n // 2))
     X[: n // 2] = np.c_[2.0 + 15.0 * t, 3.0 + 11.0 * t]
     cost = np.hypot(X[:, 0] - 2.0, X[:, 1] - 3.0) * rng.choice([1.0, 1.0, 1.3], size=n)
-    fc = np.zeros(_tree.N_FCFG)
-    fc[_tree.C_RES] = 0.5
-    fc[_tree.C_STEP] = 4.0
-    fc[_tree.C_FRES] = 1.0
-    ic = np.zeros(_tree.N_ICFG, dtype=np.int64)
-    return occ, X, cost, fc, ic
+    cfg = _tree.new_config()
+    cfg["res"] = 0.5
+    cfg["step"] = 4.0
+    cfg["field_res"] = 1.0
+    cfg["max_turn"] = math.pi
+    return occ, X, cost, cfg
+
+
+def _tree_of(X, cost):
+    """A kernel tree holding nodes X with costs ``cost``, no heading, unbounded domains."""
+    n = len(X)
+    tree = _tree.new_tree(n, 1, False)
+    tree.X[:] = X
+    tree.cost[:] = cost
+    tree.head[:] = np.nan
+    tree.dd[:] = np.inf
+    return tree
 
 
 def _first_free_by_stable_sort(exact, idx, occ, X, nx, ny):
@@ -139,7 +150,7 @@ def test_lazy_choose_parent_matches_stable_sort():
     no_field = np.zeros((1, 1))
     for trial in range(300):
         n = int(rng.integers(1, 120))
-        occ, X, cost, fc, ic = _setup(rng, n)
+        occ, X, cost, cfg = _setup(rng, n)
         nx, ny = (17.0 + 1e-3 * trial, 14.0) if trial % 2 else tuple(rng.uniform(0, 20, size=2))
         idx = rng.permutation(n)
         exact = np.array([cost[j] + _hyp(nx - X[j, 0], ny - X[j, 1]) for j in idx])
@@ -147,10 +158,9 @@ def test_lazy_choose_parent_matches_stable_sort():
         near_i = idx.astype(np.int64).copy()
         near_c = np.array([cost[j] + math.sqrt((nx - X[j, 0]) ** 2 + (ny - X[j, 1]) ** 2) for j in idx])
         near_x = np.zeros(n, dtype=np.bool_)
-        st = np.zeros(_tree.N_ISTATE, dtype=np.int64)
-        head = np.full(n, np.nan)
-        got, got_c = _tree._first_valid_parent(near_i, near_c, near_x, n, nx, ny, occ, fc, ic, no_field, no_field,
-                                               st, X, cost, head, math.pi, np.full(n, np.inf), False, False)
+        world = _tree.World(occ, no_field, no_field)
+        got, got_c = _tree._first_valid_parent(near_i, near_c, near_x, n, nx, ny, world, cfg[0], _tree_of(X, cost),
+                                               _tree.new_state()[0], False, False)
         assert got == want
         if want >= 0:
             assert got_c == want_c  # bit-identical cost, not only close
@@ -164,29 +174,28 @@ def test_lazy_choose_parent_on_lower_bounds_matches_stable_sort_of_eq12_costs():
     lbf = 1.0 / (1.0 + math.e)  # _edge_lower_factor for D_alpha = 1, gamma >= 0
     for trial in range(300):
         n = int(rng.integers(1, 120))
-        occ, X, cost, fc, ic = _setup(rng, n)
-        ic[_tree.I_FIELD] = 1
-        fc[_tree.C_DALPHA] = 1.0
-        fc[_tree.C_GAMMA] = 0.1
+        occ, X, cost, cfg = _setup(rng, n)
+        cfg["use_field"] = 1
+        cfg["d_alpha"] = 1.0
+        cfg["gamma"] = 0.1
         fvx = rng.normal(scale=0.5, size=(25, 25))
         fvy = rng.normal(scale=0.5, size=(25, 25))
         if trial % 3 == 0:
             fvx[:] = 0.4  # a uniform current: many keys that differ by rounding only
             fvy[:] = -0.1
-        assert _tree._edge_lower_factor(fc, ic) == lbf
+        world = _tree.World(occ, fvx, fvy)
+        assert _tree._edge_lower_factor(cfg[0]) == lbf
         nx, ny = (17.0 + 1e-3 * trial, 14.0) if trial % 2 else tuple(rng.uniform(0, 20, size=2))
         idx = rng.permutation(n)
-        exact = np.array([cost[j] + _tree._cost(X[j, 0], X[j, 1], nx, ny, fc, ic, fvx, fvy) for j in idx])
+        exact = np.array([cost[j] + _tree._cost(X[j, 0], X[j, 1], nx, ny, fvx, fvy, cfg[0]) for j in idx])
         want, want_c = _first_free_by_stable_sort(exact, idx, occ, X, nx, ny)
         near_i = idx.astype(np.int64).copy()
         near_c = np.array([cost[j] + lbf * math.sqrt((nx - X[j, 0]) ** 2 + (ny - X[j, 1]) ** 2) * (1.0 - 1e-9)
                            for j in idx])
         assert (near_c <= exact).all()
         near_x = np.zeros(n, dtype=np.bool_)
-        st = np.zeros(_tree.N_ISTATE, dtype=np.int64)
-        head = np.full(n, np.nan)
-        got, got_c = _tree._first_valid_parent(near_i, near_c, near_x, n, nx, ny, occ, fc, ic, fvx, fvy,
-                                               st, X, cost, head, math.pi, np.full(n, np.inf), False, True)
+        got, got_c = _tree._first_valid_parent(near_i, near_c, near_x, n, nx, ny, world, cfg[0], _tree_of(X, cost),
+                                               _tree.new_state()[0], False, True)
         assert got == want
         if want >= 0:
             assert got_c == want_c
@@ -209,19 +218,18 @@ def test_knn_matches_brute_force_with_ties():
     for _ in range(200):
         n = int(rng.integers(1, 300))
         X = np.round(rng.uniform(0, 50, size=(n, 2)) * 2) / 2  # on a 0.5 m lattice: many equal distances
-        fc = np.zeros(_tree.N_FCFG)
-        fc[_tree.C_BUCKET] = 4.0
-        ic = np.zeros(_tree.N_ICFG, dtype=np.int64)
-        ic[_tree.I_NBX] = ic[_tree.I_NBY] = int(math.ceil(50 / 4.0)) + 1
-        head = -np.ones(ic[_tree.I_NBX] * ic[_tree.I_NBY], dtype=np.int64)
-        nxt = np.empty(n, dtype=np.int64)
+        cfg = _tree.new_config()
+        cfg["bucket"] = 4.0
+        cfg["nbx"] = cfg["nby"] = int(math.ceil(50 / 4.0)) + 1
+        tree = _tree.new_tree(n, int(cfg["nbx"][0] * cfg["nby"][0]), False)
+        tree.X[:] = X
         for i in range(n):
-            _tree._insert_bucket(i, X, fc, ic, head, nxt)
+            _tree._insert_bucket(i, cfg[0], tree)
         qx, qy = np.round(rng.uniform(0, 50, size=2) * 2) / 2
         k = int(rng.integers(1, 12))
         out_i = np.empty(64, np.int64)
         out_d = np.empty(64)
-        m = _tree._knn(qx, qy, k, X, fc, ic, head, nxt, out_i, out_d)
+        m = _tree._knn(qx, qy, k, cfg[0], tree, out_i, out_d)
         d = (X[:, 0] - qx) ** 2 + (X[:, 1] - qy) ** 2
         assert m == min(k, n)
         assert np.array_equal(np.sqrt(np.sort(d)[:m]), out_d[:m])
