@@ -72,7 +72,7 @@ class PlanHandoff:
         lead = self.deadline
         north = s.x + (s.u * math.cos(s.psi) - s.v * math.sin(s.psi)) * lead
         east = s.y + (s.u * math.sin(s.psi) + s.v * math.cos(s.psi)) * lead
-        # The path is a ground track that the guidance steers as a course (Autopilot._control turns
+        # The path is a ground track that the guidance steers as a course (Helm._control turns
         # the hull by the drift angle): it starts along the course over ground, not the heading.
         # From the heading, in a cross-current each cycle's path began turned by the drift angle,
         # the compensation turned the hull further the same way, and the vessel spiralled off.

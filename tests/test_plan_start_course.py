@@ -1,4 +1,4 @@
-"""A local path is a ground track that the guidance steers as a course (Autopilot._control turns the
+"""A local path is a ground track that the guidance steers as a course (Helm._control turns the
 hull by the drift angle beta = atan2(v, u)), so each planning cycle starts along the course over
 ground, not along the hull's heading. Started along the heading, a cross-current made every new
 path begin turned by beta, the compensation turned the hull by beta again, and the vessel spiralled
