@@ -279,8 +279,15 @@ def test_a_square_in_a_strong_cross_current_finishes_every_leg_then_loiter_holds
         assert g.set_mode(5).result == M.MAV_RESULT_ACCEPTED          # LOITER where the square ends
         point = s.position()
         s.wait_until(t0 + 150.0, wall=150.0 / SPEEDUP * 6 + 60)
+        # Then the GCS goes away in the stream: the failsafe holds station too, never drifts.
+        assert g.command(M.MAV_CMD_MISSION_START, 0, 0).result == M.MAV_RESULT_ACCEPTED   # AUTO again
+        t1, pos1 = _hold_after_failsafe(s)
+        s.wait_until(t1 + 120.0, wall=120.0 / SPEEDUP * 6 + 60)
     finally:
         s.close()
-    held = [(x, y) for t, x, y in truth_track(s.out / "run.tlog") if t >= t0 + 30.0]
+    track = truth_track(s.out / "run.tlog")
+    held = [(x, y) for t, x, y in track if t0 + 30.0 <= t <= t0 + 150.0]
     d = sorted(math.dist(p, point) for p in held)
     assert len(d) > 1000 and d[int(0.95 * len(d))] <= 3.0, d[int(0.95 * len(d))]
+    after = [(x, y) for t, x, y in track if t1 <= t <= t1 + 120.0]
+    assert len(after) > 1000 and math.dist(after[-1], pos1) <= 10.0, (after[-1], pos1)

@@ -110,7 +110,8 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--instance", metavar="N", type=int, default=None,
                    help="run instance 0-99, as SITL's -I: ground-station ports + 10 N, autopilot.system_id + N, so "
                         "concurrent runs never share a ground station (default: the lowest instance no other "
-                        "hil run on this machine holds; 0 when alone)")
+                        "hil run on this machine holds, 0 when alone; it moves the configured ground-station ports, "
+                        "not the ones given with --gcs, which stay as given unless --instance is given too)")
     p.add_argument("--demo", action="store_true",
                    help=f"constant-thrust demo controller (port {DEMO_CONTROLS[0]}, starboard {DEMO_CONTROLS[1]}) "
                         "instead of the autopilot; prints distance, final state, messages, wall time")
@@ -138,7 +139,10 @@ def run(args: argparse.Namespace) -> int:
     from hil import instances, placement
 
     cpus = placement.parse(args.cpus)
-    if getattr(args, "gcs", None) is not None:   # --gcs: this run's endpoints, shifted by its instance
+    # Ground-station ports the user names (--gcs) are theirs: an instance found free shifts only the default
+    # ones (as SITL's -I moves its default ports); --instance N shifts whatever the endpoints are.
+    explicit_gcs = getattr(args, "gcs", None) is not None
+    if explicit_gcs:
         from hil.commands.autopilot import gcs_overrides
 
         args.overrides += gcs_overrides(argparse.Namespace(gcs=args.gcs))
@@ -151,8 +155,9 @@ def run(args: argparse.Namespace) -> int:
     if cfg.gcs.endpoints and not args.demo:   # each concurrent run its own GCS ports and system id (hil.instances)
         instance = instances.claim(args.instance)
         try:
-            args.overrides += instances.overrides(cfg.gcs.endpoints, cfg.autopilot.system_id, instance.n)
-            cfg = load_settings(args)
+            if args.instance is not None or not explicit_gcs:
+                args.overrides += instances.overrides(cfg.gcs.endpoints, cfg.autopilot.system_id, instance.n)
+                cfg = load_settings(args)
         except BaseException:
             instance.close()
             raise
