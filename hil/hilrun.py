@@ -33,7 +33,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy import ndimage
@@ -48,6 +48,9 @@ from hil.errors import RunFailed, UsageError
 from hil.progress_watch import STALL_WINDOW_S, ProgressWatch
 from hil.run_summary import RunSecurity, RunSummary, read_autopilot_summary
 from hil.tap import Tap
+
+if TYPE_CHECKING:
+    from hil.can_log import CanRecorder
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -155,7 +158,7 @@ class HilRun:
         self.scen.check_current_time(float(opts.duration))
         if opts.traffic is not None:
             self.scen.traffic = tuple(opts.traffic)
-        self.out = opts.out
+        self.out: Path = run_folder(opts)
         self.out.mkdir(parents=True, exist_ok=True)
         # A reused run folder: the processes' logs of this run start empty (_spawn), and the logs
         # of an earlier run's simulator restarts, which this run may not have, go.
@@ -192,7 +195,7 @@ class HilRun:
         self.sim: subprocess.Popen | None = None
         self.ap: subprocess.Popen | None = None
         self.sim_restarts = 0
-        self.can_recorder = None  # hil.can_log.CanRecorder when the thrusters are on CAN
+        self.can_recorder: CanRecorder | None = None  # when the thrusters are on CAN
         self.can_log: dict[str, Any] = {}
         self.placement: placement.Placement | None = None
         self._cpu_claim: placement.Claim | None = None
@@ -266,15 +269,15 @@ class HilRun:
         waiting = False   # the wait owns (and closes) read_end
         try:
             try:
-                self.ap = self._spawn([*self.autopilot_command(), "--ready-fd", str(write_end)], "autopilot",
-                                      pass_fds=(write_end,))
+                self.ap = ap = self._spawn([*self.autopilot_command(), "--ready-fd", str(write_end)], "autopilot",
+                                           pass_fds=(write_end,))
                 self.sim = self._spawn([*self.sim_command(), "--start-fd", str(go_read)], "sim",
                                        pass_fds=(go_read,))
             finally:
                 os.close(write_end)  # the children hold their own copies
                 os.close(go_read)
             waiting = True
-            self._wait_for_autopilot(read_end, ready_timeout)
+            self._wait_for_autopilot(ap, read_end, ready_timeout)
             self._place()   # the planner worker exists now; the simulator waits for GO
             try:
                 os.write(go_write, GO)
@@ -305,7 +308,7 @@ class HilRun:
             self._cpu_claim.release()
             self._cpu_claim = None
 
-    def _wait_for_autopilot(self, read_end: int, ready_timeout: float) -> None:
+    def _wait_for_autopilot(self, ap: subprocess.Popen, read_end: int, ready_timeout: float) -> None:
         log = self.out / "autopilot.log"
         deadline = time.monotonic() + ready_timeout
         wait = ReadyWait(read_end)
@@ -316,17 +319,17 @@ class HilRun:
                         break
                 except ValueError as exc:
                     raise RunFailed(f"the autopilot's start-up: {exc} (see {log})") from None
-                if wait.eof or self.ap.poll() is not None:
+                if wait.eof or ap.poll() is not None:
                     try:
-                        self.ap.wait(timeout=5.0)   # end of file: it is exiting
+                        ap.wait(timeout=5.0)   # end of file: it is exiting
                     except subprocess.TimeoutExpired:
                         raise RunFailed(f"the autopilot closed its readiness pipe without being ready (see {log})") \
                             from None
                     cause = startup_error(log)
-                    if self.ap.returncode == 2 and cause:  # a user mistake (a busy port ...): say which, exit 2
+                    if ap.returncode == 2 and cause:  # a user mistake (a busy port ...): say which, exit 2
                         raise UsageError(f"the autopilot could not start: {cause}")
                     raise RunFailed(f"the autopilot exited during start-up{': ' + cause if cause else ''} (see {log})")
-                if self.sim.poll() is not None:
+                if _exited(self.sim):
                     self._simulator_start_failed()
                 if time.monotonic() > deadline:
                     raise _NotReady(f"the autopilot was not ready after {ready_timeout:g} s (see {log})")
@@ -471,10 +474,10 @@ class HilRun:
                     outcome = "disk_full" if self.tap.write_error.errno in (errno.ENOSPC, errno.EDQUOT) \
                         else "write_error"
                     break
-                if self.ap.poll() is not None:
+                if _exited(self.ap):
                     outcome = "autopilot_exited"
                     break
-                if self.sim.poll() is not None:
+                if _exited(self.sim):
                     self.tap.pump(timeout=0.0)
                     if not self.tap.truth and not self.sim_restarts:
                         self._simulator_start_failed()  # it never sent a frame: why, in one line
@@ -643,6 +646,18 @@ class _WallTimeout(Exception):
     """--wall-timeout passed before the run started."""
 
 
+def run_folder(opts: RunOptions) -> Path:
+    """The run's folder: every run writes one (RunOptions.out is optional only in its dataclass order)."""
+    if opts.out is None:
+        raise ValueError("RunOptions.out: a run needs a folder to write")
+    return opts.out
+
+
+def _exited(proc: subprocess.Popen | None) -> bool:
+    """True when the process is not running (never started, or ended)."""
+    return proc is None or proc.poll() is not None
+
+
 def _disk_full(out: Path, exc: OSError) -> RunFailed:
     return RunFailed(f"run folder {out}: {exc.strerror or exc} (errno {exc.errno}); the run was stopped, "
                      f"nothing complete was written")
@@ -669,32 +684,33 @@ def run_loop(opts: RunOptions, cfg: Any) -> RunSummary:
     except OSError as exc:
         if exc.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO):
             raise
-        _remove_partial(opts.out)
-        raise _disk_full(opts.out, exc) from None
+        _remove_partial(run_folder(opts))
+        raise _disk_full(run_folder(opts), exc) from None
 
 
 def _run_loop(opts: RunOptions, cfg: Any) -> RunSummary:
     from hil.files import write_json_atomic
 
     run = HilRun(opts, cfg)
+    out = run.out
     summary = run.execute()
     if run.tap.write_error is not None:
         raise run.tap.write_error
-    summary = replace(summary, run_folder=str(opts.out))
+    summary = replace(summary, run_folder=str(out))
     if opts.plot:
         try:
             from hil.run_plot import plot_run
 
-            ap_path = opts.out / "autopilot.json"
+            ap_path = out / "autopilot.json"
             ap = read_autopilot_summary(json.loads(ap_path.read_text()), str(ap_path)) if ap_path.exists() else None
-            plot_run(opts.out / "plot.png", run.scen, run.tap.truth, ap, cfg,
+            plot_run(out / "plot.png", run.scen, run.tap.truth, ap, cfg,
                      ships=run.encounter_judge.ships if run.encounter_judge is not None else None,
                      encounters=summary.encounters,
                      outcome="goal reached" if summary.reached_goal else
                      f"{summary.outcome}" + (f" at {summary.collision_time_s:.1f} s"
                                              if summary.collision_time_s is not None else ""))
-            summary = replace(summary, plot=str(opts.out / "plot.png"))
+            summary = replace(summary, plot=str(out / "plot.png"))
         except Exception as exc:  # a plot must never lose the run's data
             summary = replace(summary, plot_error=f"{type(exc).__name__}: {exc}")
-    write_json_atomic(opts.out / "summary.json", to_table(summary), private=bool(cfg.gcs.signing_key_file))
+    write_json_atomic(out / "summary.json", to_table(summary), private=bool(cfg.gcs.signing_key_file))
     return summary
