@@ -175,7 +175,7 @@ class SimParams:
     lockstep_busy_poll: float = param(
         "lockstep: wait for the command polling the socket this long before sleeping on it (common.udp.BusyPoll; "
         "0 = sleep at once)", "s", ge=0, le=0.1)
-    initial: InitialState
+    initial: InitialState = param("where the vessel starts")
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE, Codec
 from simulator.rangefinder import Rangefinder, WorldMap
 from simulator.sensors import Compass, Dvl, G, Gps, Imu, sensor_rngs
-from simulator.vessel import Vessel, hull_dynamics, hull_rk4_step
+from simulator.vessel import State, Vessel, hull_dynamics, hull_rk4_step
 from simulator.waves import WaveModel
 
 # Rejections counted by the simulator besides the codec's framing reasons.
@@ -89,7 +89,7 @@ class SimulatorCore:
         # The only peer whose commands count: the vessel computer's ids from the same configuration.
         self.peer_ids = (cfg.autopilot.system_id, cfg.autopilot.component_id)
         i = cfg.sim.initial
-        self.state: tuple[float, ...] = (float(i.x), float(i.y), float(i.psi), float(i.u), float(i.v), float(i.r))
+        self.state: State = (float(i.x), float(i.y), float(i.psi), float(i.u), float(i.v), float(i.r))
         self.n = 0
         self.controls = (0.0, 0.0)
         self.thrust = (0.0, 0.0)  # N, port and starboard thrust applied now (after the ESC lag)
@@ -183,7 +183,7 @@ class SimulatorCore:
         s = self.state
         return self.waves.forces(s[2]), self.current.velocity_at(s[0], s[1], t)
 
-    def derivative(self) -> tuple[float, ...]:
+    def derivative(self) -> State:
         """State derivative now (with the thrust currently applied)."""
         tau = self.vessel.propulsion(*self.thrust)
         return hull_dynamics(self.state, tau, *self._env, self.vessel.coefficients)
