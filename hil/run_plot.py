@@ -79,7 +79,7 @@ def plot_run(path: Path, scen: Any, truth: dict[int, tuple], autopilot: Autopilo
             "xlabel": ax.get_xlabel(), "ylabel": ax.get_ylabel()}
 
 
-def _plot_ships(ax: Any, ships: dict, encounters: list, truth: dict[int, tuple]) -> None:
+def _plot_ships(ax: Any, ships: dict, encounters: Sequence[dict], truth: dict[int, tuple]) -> None:
     """Each ship's true track, and both vessels where they were at the closest point of approach."""
     by_mmsi = {e.get("mmsi"): e for e in encounters}
     times = np.array(sorted(truth)) if truth else np.zeros(0, dtype=np.int64)

@@ -225,11 +225,12 @@ class SimulatorServer:
         esc.poll(0.0)
         while esc.raw != want and (left := deadline - time.monotonic()) > 0:
             esc.poll(min(left, POLL_S))
-        if esc.raw != want:
+        controls = esc.controls()
+        if esc.raw != want or controls is None:
             self.can_commands_missing += 1  # thrust stays as it was; the stale failsafe still runs
             return
         esc.commands_seen = 0
-        self.core.apply(Command(token.time_usec, *esc.controls()))
+        self.core.apply(Command(token.time_usec, *controls))
 
     # -- real time -------------------------------------------------------------------------
     def _run_realtime(self, start: float) -> None:
@@ -265,9 +266,10 @@ class SimulatorServer:
                 self.mavlink_commands_ignored += newest is not None
                 newest = None
                 self.esc.poll(0.0)
-                if self.esc.commands_seen:
+                controls = self.esc.controls()
+                if self.esc.commands_seen and controls is not None:
                     self.esc.commands_seen = 0
-                    newest = Command(core.time_usec, *self.esc.controls())
+                    newest = Command(core.time_usec, *controls)
             if newest is not None:
                 core.apply(newest)
             core.step()

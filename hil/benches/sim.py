@@ -72,12 +72,13 @@ def bench_lockstep(args: argparse.Namespace, cfg, n: int) -> dict:
         if first is None or first.time_usec is None:
             raise RunFailed("bench sim: no first frame from the simulator")
         t0 = time.perf_counter()
-        steps, frame = 0, first
+        steps, t_usec = 0, first.time_usec
         while steps < n:
-            client.command(frame.time_usec, 0.8, 0.6)
+            client.command(t_usec, 0.8, 0.6)
             frame = client.next_frame(timeout=10.0)
-            if frame is None:
+            if frame is None or frame.time_usec is None:
                 raise RunFailed(f"bench sim: simulator stopped answering after {steps} steps")
+            t_usec = frame.time_usec
             steps += 1
         wall = time.perf_counter() - t0
     finally:
