@@ -133,7 +133,8 @@ def run(args: argparse.Namespace) -> int:
     check_can(cfg, "hil autopilot (a process of its own)")
     from hil.assembly import build
 
-    autopilot, link = build(cfg, args.scenario, args.lockstep, args.planner_factory, getattr(args, "sensors_from", None))
+    autopilot, link = build(cfg, args.scenario, args.lockstep, args.planner_factory,
+                            getattr(args, "sensors_from", None))
     stop = {"flag": False}
     if args.can_record and autopilot.can is not None:
         autopilot.can.sent_times.start(spill_to=args.can_record)
