@@ -29,13 +29,16 @@ import subprocess
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from common.frames import map_to_ned
 from common.geodesy import LocalFrame
 from hil.errors import RunFailed, UsageError
+
+if TYPE_CHECKING:
+    from hil.settings import HilConfig
 
 ENV_BINARY = "ARDUPILOT_SITL"
 PARAM_FILES = ("rover.parm", "motorboat.parm", "rover-skid.parm")   # ArduPilot's motorboat-skid frame
@@ -136,7 +139,7 @@ def full_turn_rate(vessel: Any) -> float:
 TURN_MARGIN = 0.8   # ArduRover may ask for this share of the hull's full turn rate (the rest corrects)
 
 
-def project_params(cfg: Any) -> dict[str, float]:
+def project_params(cfg: HilConfig) -> dict[str, float]:
     """The parameters this project lays over ArduPilot's, all from the configuration: the system id;
     the vessel computer's cruise speed with the throttle that holds it on this hull; what it does after
     the last waypoint (``autopilot.mission_done``, ``loiter_radius``); and the turn
@@ -194,7 +197,7 @@ class Mission:
 class ArduPilotRun:
     """One run of ArduRover on a scenario; :meth:`execute` returns the summary."""
 
-    def __init__(self, opts: Any, cfg: Any, sitl: SitlFiles, user_params: Path | None = None) -> None:
+    def __init__(self, opts: Any, cfg: HilConfig, sitl: SitlFiles, user_params: Path | None = None) -> None:
         from hil import scenario as scenarios
         from hil import settings
         from hil.hilrun import Judge
@@ -532,7 +535,7 @@ def _last_line(path: Path) -> str:
     return lines[-1].strip()[:200] if lines else ""
 
 
-def run_ardupilot(opts: Any, cfg: Any, sitl: SitlFiles, user_params: str | None = None) -> Any:
+def run_ardupilot(opts: Any, cfg: HilConfig, sitl: SitlFiles, user_params: str | None = None) -> Any:
     """`hil run --autopilot ardupilot`: the run folder (run.tlog, summary.json, plot.png, ardupilot/).
     ``user_params``: an ArduPilot parameter file laid over all others (the user's own tuning)."""
     from common.tables import to_table

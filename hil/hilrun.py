@@ -51,6 +51,7 @@ from hil.tap import Tap
 
 if TYPE_CHECKING:
     from hil.can_log import CanRecorder
+    from hil.settings import HilConfig
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -152,7 +153,7 @@ class Judge:
 class HilRun:
     """One run: processes, tap, judge; :meth:`execute` returns the summary."""
 
-    def __init__(self, opts: RunOptions, cfg: Any) -> None:
+    def __init__(self, opts: RunOptions, cfg: HilConfig) -> None:
         self.opts, self.cfg = opts, cfg
         self.scen = scenarios.load(opts.scenario, cfg.current, cfg.planner.safety_radius, cfg.geodesy)
         self.scen.check_current_time(float(opts.duration))
@@ -672,7 +673,7 @@ def _remove_partial(out: Path, names: tuple[str, ...] = ("summary.json", "plot.p
             pass
 
 
-def run_loop(opts: RunOptions, cfg: Any) -> RunSummary:
+def run_loop(opts: RunOptions, cfg: HilConfig) -> RunSummary:
     """Run the HIL loop and write the run folder (tlog, summary.json, plot.png); returns the summary.
 
     A folder that cannot be written (a full disk) ends the run with one line (RunFailed, exit 1)
@@ -688,7 +689,7 @@ def run_loop(opts: RunOptions, cfg: Any) -> RunSummary:
         raise _disk_full(run_folder(opts), exc) from None
 
 
-def _run_loop(opts: RunOptions, cfg: Any) -> RunSummary:
+def _run_loop(opts: RunOptions, cfg: HilConfig) -> RunSummary:
     from hil.files import write_json_atomic
 
     run = HilRun(opts, cfg)

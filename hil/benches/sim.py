@@ -5,11 +5,15 @@ from __future__ import annotations
 import argparse
 import subprocess
 import time
+from typing import TYPE_CHECKING
 
 from hil.console import emit, load_settings, progress
 from hil.errors import RunFailed
 from hil.processes import stop as stop_process
 from hil.sim_client import HilClient, sim_command, start_simulator
+
+if TYPE_CHECKING:
+    from hil.settings import HilConfig
 
 GOAL_LOCKSTEP_STEPS_PER_S = 2000.0
 
@@ -31,7 +35,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.set_defaults(func=run, seed=None, speedup=None)
 
 
-def bench_model(cfg, n: int) -> float:
+def bench_model(cfg: HilConfig, n: int) -> float:
     """RK4 steps per second of the hull (``simulator.vessel.hull_rk4_step``, the simulator's
     integration: thrust, waves and current held); compiled before the clock starts."""
     from simulator.vessel import Vessel, hull_rk4_step
@@ -48,7 +52,7 @@ def bench_model(cfg, n: int) -> float:
     return n / (time.perf_counter() - t0)
 
 
-def bench_core(cfg, n: int) -> float:
+def bench_core(cfg: HilConfig, n: int) -> float:
     """Frames per second of SimulatorCore (step + frame encoding), no sockets."""
     from simulator.core import Command, SimulatorCore
 
@@ -61,7 +65,7 @@ def bench_core(cfg, n: int) -> float:
     return n / (time.perf_counter() - t0)
 
 
-def bench_lockstep(args: argparse.Namespace, cfg, n: int) -> dict:
+def bench_lockstep(args: argparse.Namespace, cfg: HilConfig, n: int) -> dict:
     """Lockstep steps/s measured by the controller between the first and the last frame."""
     args.duration = n * (1.0 / cfg.sensors.imu.rate_hz)
     client = HilClient()
