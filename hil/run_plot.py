@@ -16,10 +16,11 @@ import numpy as np
 
 if TYPE_CHECKING:
     from autopilot_bridge.summary import AutopilotSummary
+    from hil.scenario import Scenario
     from hil.settings import HilConfig
 
 
-def plot_run(path: Path, scen: Any, truth: dict[int, tuple], autopilot: AutopilotSummary | None, cfg: HilConfig,
+def plot_run(path: Path, scen: Scenario, truth: dict[int, tuple], autopilot: AutopilotSummary | None, cfg: HilConfig,
              ships: dict | None = None, encounters: Sequence[dict] | None = None, outcome: str | None = None) -> dict:
     """``autopilot``: the autopilot's summary (sensed cells, local paths, estimated track), None when
     it left none; ``ships``: MMSI -> ``hil.encounter_report.ShipTrack`` (their truth); ``encounters``: the
