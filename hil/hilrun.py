@@ -3,10 +3,10 @@
 `hil run` starts ``python -m hil sim`` and ``python -m hil autopilot`` as subprocesses on loopback
 ports chosen here, and listens on a third port as a *tap*: the simulator sends its frames to the
 autopilot and the tap, the autopilot sends its commands to the simulator and the tap, and its
-telemetry to the tap. The tap writes every MAVLink frame to the run's ``.tlog`` and judges the run
-from the truth (HIL_STATE_QUATERNION): collisions and clearance against the chart, the goal,
-path length, energy, and the navigation error of the autopilot's own estimate
-(LOCAL_POSITION_NED). The run ends when the vessel reaches the goal, collides, or the simulated
+telemetry to the tap. The tap writes every MAVLink frame to the run's ``.tlog``; the run is judged
+from its truth (HIL_STATE_QUATERNION) by :mod:`hil.judging`: collisions and clearance against the
+chart, the goal, path length, energy, and the navigation error of the autopilot's own estimate
+(LOCAL_POSITION_NED). This module supervises: processes, tap, loop. The run ends when the vessel reaches the goal, collides, or the simulated
 time is up; both processes are then stopped with SIGTERM (their summaries are collected), also
 on Ctrl-C, and never left behind.
 
@@ -36,7 +36,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy import ndimage
 
 from common.frames import map_to_ned
 from common.geodesy import LocalFrame
@@ -45,6 +44,7 @@ from common.tables import to_table
 from hil import config, placement, processes
 from hil import scenario as scenarios
 from hil.errors import RunFailed, UsageError
+from hil.judging import Judge, nav_rmse, simulator_part, thrust_energy
 from hil.progress_watch import STALL_WINDOW_S, ProgressWatch
 from hil.run_summary import RunSecurity, RunSummary, read_autopilot_summary
 from hil.tap import Tap
@@ -127,27 +127,6 @@ class RunOptions:
     # hil run: Ctrl-C/SIGTERM end the run with outcome "interrupted" and its folder written (a GCS session
     # with --wait-for-arm ends that way); elsewhere (Monte Carlo, soak) the interrupt propagates.
     summary_on_interrupt: bool = False
-
-
-class Judge:
-    """Collisions, clearance and goal from the truth against the chart (map frame: x east, y north)."""
-
-    def __init__(self, occ: np.ndarray, resolution: float, hull_radius: float, goal_ned: tuple[float, float],
-                 goal_tolerance: float) -> None:
-        self.occ, self.res = occ, resolution
-        # Distance (m) from each cell centre to the nearest obstacle cell's boundary (approximately).
-        self.edt = ndimage.distance_transform_edt(~occ) * resolution - 0.5 * resolution
-        self.hull_radius = hull_radius
-        self.goal, self.tol = goal_ned, goal_tolerance
-
-    def clearance(self, north: float, east: float) -> float:
-        r, c = int(north / self.res), int(east / self.res)
-        if not (0 <= r < self.occ.shape[0] and 0 <= c < self.occ.shape[1]):
-            return 0.0
-        return float(self.edt[r, c])
-
-    def at_goal(self, north: float, east: float) -> bool:
-        return math.hypot(north - self.goal[0], east - self.goal[1]) <= self.tol
 
 
 class HilRun:
@@ -517,24 +496,6 @@ class HilRun:
         wall = time.monotonic() - wall0
         return self._summary(outcome, collision_at, min_clearance, wall, ap_summary, sim_summary, decided)
 
-    @staticmethod
-    def _simulator_part(sim: dict, end_s: float, ap_busy_poll: dict | None = None) -> dict[str, Any]:
-        """The simulator's counters for the run summary. Stale-command failsafes are those up to the
-        run's judged end (s of simulated time); those after it, while the processes were being
-        stopped, are counted apart (the simulator runs on in real time while the autopilot exits).
-        ``busy_poll``: how each end's lockstep waits went (common.udp.BusyPoll; None where off)."""
-        out = {k: sim.get(k) for k in ("steps", "commands_received", "malformed_dropped", "stale_command_events",
-                                       "lockstep_resends", "jitter_ms", "stepping", "stalls")}
-        out["busy_poll"] = {"simulator": sim.get("busy_poll"), "autopilot": ap_busy_poll}
-        if "pipeline_skips" in sim:   # the pipelined lockstep (sim.lockstep_pipeline)
-            out["pipeline_skips"] = sim["pipeline_skips"]
-        times = sim.get("stale_command_times_s")
-        if times is not None:
-            after = sum(1 for t in times if t > end_s + 1e-9)
-            out["stale_command_events"] = (sim.get("stale_command_events") or 0) - after
-            out["stale_command_events_after_end"] = after
-        return out
-
     def _summary(self, outcome: str, collision_at: float | None, min_clearance: float, wall: float,
                  ap_table: dict | None, sim: dict | None, decided: int | None = None) -> RunSummary:
         # The run is judged up to the deciding sample: what arrived while the processes were being
@@ -543,8 +504,8 @@ class HilRun:
         track = np.array([self.tap.truth[t][:2] for t in times]) if times else np.zeros((0, 2))
         speeds = np.array([math.hypot(*self.tap.truth[t][2:]) for t in times]) if times else np.zeros(0)
         length = float(np.sum(np.hypot(*np.diff(track, axis=0).T))) if len(track) > 1 else 0.0
-        energy = self._energy(times, speeds)
-        rmse = self._nav_rmse(decided)
+        energy = thrust_energy(times, speeds, self.tap.commands, self.cfg.vessel)
+        rmse = nav_rmse(self.tap.estimate, self.tap.truth_raw, decided)
         ap = None if ap_table is None else read_autopilot_summary(ap_table)
         reached = outcome == "goal" and collision_at is None
         encounters = traffic = None
@@ -587,7 +548,7 @@ class HilRun:
             simulator_restarts=self.sim_restarts,
             navigation=None if ap is None else ap.navigation,
             sensed_obstacles=None if ap is None else ap.sensed_obstacles,
-            simulator=None if sim is None else {**self._simulator_part(sim, times[-1] * 1e-6 if times else 0.0,
+            simulator=None if sim is None else {**simulator_part(sim, times[-1] * 1e-6 if times else 0.0,
                                                                        None if ap is None else ap.busy_poll),
                                                 "cpus": self.pinned or None},
             security=RunSecurity(
@@ -609,35 +570,6 @@ class HilRun:
             traffic=traffic,
             can=can,
         )
-
-    def _energy(self, times: list[int], speeds: np.ndarray) -> float:
-        """Integral of (|T_port| + |T_stdb|) * speed dt, the commands held between truth samples."""
-        if len(times) < 2 or not self.tap.commands:
-            return 0.0
-        v = self.cfg.vessel
-        cmds = sorted(self.tap.commands)
-        cmd_t = np.array([c[0] for c in cmds])
-
-        def thrust(u: float) -> float:
-            return u * v.T_max if u >= 0 else -u * v.T_min
-
-        total = 0.0
-        for i in range(len(times) - 1):
-            j = int(np.searchsorted(cmd_t, times[i], side="right")) - 1
-            if j < 0:
-                continue
-            _, p, s = cmds[j]
-            total += (abs(thrust(p)) + abs(thrust(s))) * speeds[i] * (times[i + 1] - times[i]) * 1e-6
-        return total
-
-    def _nav_rmse(self, decided: int | None = None) -> float | None:
-        errs = []
-        for (seg, ms), (n, e) in self.tap.estimate.items():
-            truth = self.tap.truth_raw.get((seg, ms * 1000))
-            if truth is not None and (decided is None or truth[2] <= decided):
-                errs.append((n - truth[0]) ** 2 + (e - truth[1]) ** 2)
-        return math.sqrt(float(np.mean(errs))) if errs else None
-
 
 class _NotReady(RunFailed):
     """The autopilot did not start listening in time."""
