@@ -6,9 +6,9 @@ autopilot and the tap, the autopilot sends its commands to the simulator and the
 telemetry to the tap. The tap writes every MAVLink frame to the run's ``.tlog``; the run is judged
 from its truth (HIL_STATE_QUATERNION) by :mod:`hil.judging`: collisions and clearance against the
 chart, the goal, path length, energy, and the navigation error of the autopilot's own estimate
-(LOCAL_POSITION_NED). This module supervises: processes, tap, loop. The run ends when the vessel reaches the goal, collides, or the simulated
-time is up; both processes are then stopped with SIGTERM (their summaries are collected), also
-on Ctrl-C, and never left behind.
+(LOCAL_POSITION_NED). This module supervises: processes, tap, loop. The run ends when the vessel
+reaches the goal, collides, or the simulated time is up; both processes are then stopped with
+SIGTERM (their summaries are collected), also on Ctrl-C, and never left behind.
 
 Each end takes only its peer (docs/security.md): the simulator takes commands only from the
 autopilot's socket (``--commands-from``), the autopilot sensor frames only from the simulator's
