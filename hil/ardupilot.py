@@ -202,7 +202,8 @@ class ArduPilotRun:
     def __init__(self, opts: RunOptions, cfg: HilConfig, sitl: SitlFiles, user_params: Path | None = None) -> None:
         from hil import scenario as scenarios
         from hil import settings
-        from hil.hilrun import Judge, run_folder
+        from hil.hilrun import run_folder
+        from hil.judging import Judge
 
         self.opts, self.sitl, self.user_params = opts, sitl, user_params
         self.scen = scenarios.load(opts.scenario, cfg.current, cfg.planner.safety_radius)
