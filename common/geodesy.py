@@ -94,7 +94,7 @@ class LocalFrame:
         x, y, z = geodetic_to_ecef(float(lat), float(lon), float(h))
         dx, dy, dz = x - self._o[0], y - self._o[1], z - self._o[2]
         r = self._r
-        return tuple(row[0] * dx + row[1] * dy + row[2] * dz for row in r)  # type: ignore[return-value]
+        return tuple(row[0] * dx + row[1] * dy + row[2] * dz for row in r)
 
     def sea_level_to_geodetic(self, n: float, e: float) -> tuple[float, float]:
         """(lat deg, lon deg) of the point at height alt0 whose tangent-plane north/east are n, e."""

@@ -29,13 +29,18 @@ import subprocess
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from common.frames import map_to_ned
 from common.geodesy import LocalFrame
 from hil.errors import RunFailed, UsageError
+
+if TYPE_CHECKING:
+    from hil.hilrun import RunOptions
+    from hil.run_summary import RunSummary
+    from hil.settings import HilConfig
 
 ENV_BINARY = "ARDUPILOT_SITL"
 PARAM_FILES = ("rover.parm", "motorboat.parm", "rover-skid.parm")   # ArduPilot's motorboat-skid frame
@@ -136,7 +141,7 @@ def full_turn_rate(vessel: Any) -> float:
 TURN_MARGIN = 0.8   # ArduRover may ask for this share of the hull's full turn rate (the rest corrects)
 
 
-def project_params(cfg: Any) -> dict[str, float]:
+def project_params(cfg: HilConfig) -> dict[str, float]:
     """The parameters this project lays over ArduPilot's, all from the configuration: the system id;
     the vessel computer's cruise speed with the throttle that holds it on this hull; what it does after
     the last waypoint (``autopilot.mission_done``, ``loiter_radius``); and the turn
@@ -194,17 +199,18 @@ class Mission:
 class ArduPilotRun:
     """One run of ArduRover on a scenario; :meth:`execute` returns the summary."""
 
-    def __init__(self, opts: Any, cfg: Any, sitl: SitlFiles, user_params: Path | None = None) -> None:
+    def __init__(self, opts: RunOptions, cfg: HilConfig, sitl: SitlFiles, user_params: Path | None = None) -> None:
         from hil import scenario as scenarios
         from hil import settings
-        from hil.hilrun import Judge
+        from hil.hilrun import run_folder
+        from hil.judging import Judge
 
         self.opts, self.sitl, self.user_params = opts, sitl, user_params
         self.scen = scenarios.load(opts.scenario, cfg.current, cfg.planner.safety_radius)
         # The simulator as `hil run` starts it on this scenario: the start and the scenario's current.
         over = [*opts.overrides, *scenarios.simulator_overrides(self.scen, cfg.current), f"sim.seed={opts.seed}"]
         self.cfg = settings.load(opts.config, over)
-        self.out: Path = opts.out
+        self.out: Path = run_folder(opts)
         self.out.mkdir(parents=True, exist_ok=True)
         self.geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
         north, east, psi = map_to_ned(self.scen.start[0], self.scen.start[1], self.scen.start_heading)
@@ -532,7 +538,7 @@ def _last_line(path: Path) -> str:
     return lines[-1].strip()[:200] if lines else ""
 
 
-def run_ardupilot(opts: Any, cfg: Any, sitl: SitlFiles, user_params: str | None = None) -> Any:
+def run_ardupilot(opts: RunOptions, cfg: HilConfig, sitl: SitlFiles, user_params: str | None = None) -> RunSummary:
     """`hil run --autopilot ardupilot`: the run folder (run.tlog, summary.json, plot.png, ardupilot/).
     ``user_params``: an ArduPilot parameter file laid over all others (the user's own tuning)."""
     from common.tables import to_table
@@ -540,18 +546,19 @@ def run_ardupilot(opts: Any, cfg: Any, sitl: SitlFiles, user_params: str | None 
 
     extra = Path(user_params).expanduser().resolve() if user_params else None
     run = ArduPilotRun(opts, cfg, sitl, extra)
+    out = run.out
     summary = run.execute()
-    summary = replace(summary, run_folder=str(opts.out))
+    summary = replace(summary, run_folder=str(out))
     if opts.plot:
         try:
             from hil.run_plot import plot_run
 
-            plot_run(opts.out / "plot.png", run.scen, run.truth, None, run.cfg,
+            plot_run(out / "plot.png", run.scen, run.truth, None, run.cfg,
                      ships=run.encounter_judge.ships if run.encounter_judge is not None else None,
                      encounters=summary.encounters,
                      outcome="ArduRover: " + ("goal reached" if summary.reached_goal else summary.outcome))
-            summary = replace(summary, plot=str(opts.out / "plot.png"))
+            summary = replace(summary, plot=str(out / "plot.png"))
         except Exception as exc:  # a plot must never lose the run's data  # noqa: BLE001
             summary = replace(summary, plot_error=f"{type(exc).__name__}: {exc}")
-    write_json_atomic(opts.out / "summary.json", to_table(summary))
+    write_json_atomic(out / "summary.json", to_table(summary))
     return summary

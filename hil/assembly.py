@@ -17,6 +17,7 @@ from hil.errors import UsageError
 if TYPE_CHECKING:
     from autopilot_bridge.autopilot import Autopilot
     from autopilot_bridge.computer_setup import ComputerConfig, RunOptions
+    from autopilot_bridge.hil_link import HilLink
     from autopilot_bridge.local_planning import World
     from hil.scenario import Scenario
     from hil.settings import HilConfig
@@ -58,8 +59,9 @@ def run_options(cfg: HilConfig, lockstep: bool) -> RunOptions:
 
 
 def build(cfg: HilConfig, scenario_name: str, lockstep: bool, planner_factory: str | None = None,
-          sensors_from: str | None = None) -> Autopilot:
-    """The autopilot and its parts from a configuration and a scenario (used by `hil run` too)."""
+          sensors_from: str | None = None) -> tuple[Autopilot, HilLink]:
+    """The autopilot and its parts from a configuration and a scenario (used by `hil run` too), with
+    its UDP link to the simulator (the process reports and closes it; the autopilot sees a SensorLink)."""
     from autopilot_bridge.autopilot import Autopilot
     from autopilot_bridge.computer_setup import Devices
     from autopilot_bridge.gcs.link import GcsLink
@@ -134,7 +136,7 @@ def build(cfg: HilConfig, scenario_name: str, lockstep: bool, planner_factory: s
                           Devices(link, worker, telemetry, traffic=traffic, actuators=actuators),
                           run_options(cfg, lockstep))
     telemetry.attach(autopilot.commands)
-    return autopilot
+    return autopilot, link
 
 
 def max_time_step(cfg: HilConfig, lockstep: bool) -> float:

@@ -100,7 +100,7 @@ def _ci_std(a: np.ndarray, b: np.ndarray, seed: int = 34, n: int = 2000) -> tupl
 
 def verdicts(rows: Sequence[dict[str, Any]], a: str = "ddrrt-star", b: str = "rrt-star") -> list[dict[str, Any]]:
     """Each claim's difference a - b (relative to b's mean too), interval and verdict."""
-    out = []
+    out: list[dict[str, Any]] = []
     for claim, col, direction, stat in CLAIMS:
         va = np.array([float(r[col]) for r in rows if r["algorithm"] == a and r["reached"] and col in r])
         vb = np.array([float(r[col]) for r in rows if r["algorithm"] == b and r["reached"] and col in r])

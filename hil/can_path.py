@@ -18,11 +18,14 @@ import json
 import signal
 import sys
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from common.dronecan_codec import TRANSFER_ID_MODULO
+
+if TYPE_CHECKING:
+    from hil.settings import HilConfig
 
 
 def pair_latency(sent_tid, sent_at, applied_tid, applied_at, modulo: int = TRANSFER_ID_MODULO) -> np.ndarray:
@@ -54,7 +57,7 @@ def esc_process_command(args: argparse.Namespace, record: Any) -> list[str]:
     return cmd
 
 
-def recording_actuators(cfg: Any) -> Any:
+def recording_actuators(cfg: HilConfig) -> Any:
     """The autopilot's CAN back-end on the configured bus, recording (transfer ID, time sent) of each
     command; a bus that cannot be opened is a one-line UsageError."""
     from autopilot_bridge.can_actuators import CanActuators

@@ -37,7 +37,7 @@ class ArgumentParser(argparse.ArgumentParser):
     def _get_value(self, action: argparse.Action, arg_string: str) -> Any:
         """argparse's conversion, then every float/int option checked against its physical range
         (``hil.commands.arg_types.CLI_RANGES``): out of range, infinite or NaN is a one-line usage error."""
-        value = super()._get_value(action, arg_string)   # type: ignore[misc]
+        value = super()._get_value(action, arg_string)
         if action.type in (float, int) and isinstance(value, (float, int)):
             from hil.commands.arg_types import check_range
 

@@ -27,12 +27,15 @@ import tomllib
 import types
 import typing
 from pathlib import Path
-from typing import Any, Literal, TypeVar, get_args, get_origin
+from typing import TYPE_CHECKING, Any, Literal, TypeVar, get_args, get_origin
 
 from common.tables import to_table as to_table  # the serialiser, re-exported
 from hil.errors import ConfigError
 
-T = TypeVar("T")
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+T = TypeVar("T", bound="DataclassInstance")
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = REPO_ROOT / "configs"
@@ -60,7 +63,7 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
         if value is not None:
             raise ValueError(f"{key}: expected null, got {value!r}")
         return None
-    if dataclasses.is_dataclass(tp):
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
             raise ValueError(f"{key}: expected a table, got {type(value).__name__}")
         return _build(tp, value, key)
@@ -463,12 +466,12 @@ def _metas(cls: type, prefix: str = "") -> dict[str, typing.Mapping[str, Any]]:
     return out
 
 
-def field_docs(cls: type) -> list[tuple[str, str, str]]:
+def field_docs(cls: type[DataclassInstance]) -> list[tuple[str, str, str]]:
     """(key, unit, help) for every field of a config dataclass, recursively, for --help texts."""
     out = []
     for f in dataclasses.fields(cls):
         tp = typing.get_type_hints(cls)[f.name]
-        if dataclasses.is_dataclass(tp):
+        if isinstance(tp, type) and dataclasses.is_dataclass(tp):
             out += [(f"{f.name}.{k}", u, h) for k, u, h in field_docs(tp)]
         else:
             out.append((f.name, f.metadata.get("unit", ""), f.metadata.get("help", "")))

@@ -41,7 +41,7 @@ class _StderrHandler(logging.StreamHandler):
         super().__init__(sys.stderr)
         self.setFormatter(logging.Formatter("%(message)s"))
 
-    @property  # type: ignore[override]
+    @property
     def stream(self):
         return sys.stderr
 
@@ -150,7 +150,8 @@ def nonzero_counters(d: Any, prefix: str = "") -> list[str]:
 
 def wrap_items(label: str, items: list[str], max_lines: int) -> list[str]:
     """``label: a, b, c`` over at most ``max_lines`` lines of MAX_LINE_CHARS, the rest counted."""
-    lines, cur = [], f"{label}:"
+    lines: list[str] = []
+    cur = f"{label}:"
     for i, it in enumerate(items):
         piece = f" {it}" if cur.endswith(":") else f", {it}"
         room = MAX_LINE_CHARS - (16 if len(lines) == max_lines - 1 else 0)  # the last line keeps room for the count

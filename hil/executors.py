@@ -27,9 +27,12 @@ import uuid
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hil.errors import UsageError
+
+if TYPE_CHECKING:
+    import multiprocessing.pool
 
 
 def default_jobs() -> int:
@@ -123,7 +126,7 @@ class LocalProcesses(Executor):
     def __init__(self, jobs: int) -> None:
         self.workers = max(1, int(jobs))
         self.description = f"{self.workers} local process(es)" if self.workers > 1 else "this process"
-        self._pool = None
+        self._pool: multiprocessing.pool.Pool | None = None
 
     def map_unordered(self, fn, items, warm_up=None):
         call = _Call(fn, warm_up)
@@ -132,10 +135,10 @@ class LocalProcesses(Executor):
                 yield call(pair)
             return
         import multiprocessing as mp
-        self._pool = mp.get_context("spawn").Pool(min(self.workers, max(1, len(items))), initializer=_pool_init,
-                                                  initargs=(warm_up,))
-        yield from self._pool.imap_unordered(call, list(enumerate(items)), chunksize=1)
-        self._pool.close()
+        self._pool = pool = mp.get_context("spawn").Pool(min(self.workers, max(1, len(items))),
+                                                         initializer=_pool_init, initargs=(warm_up,))
+        yield from pool.imap_unordered(call, list(enumerate(items)), chunksize=1)
+        pool.close()
 
     def cancel(self) -> None:
         if self._pool is not None:

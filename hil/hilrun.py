@@ -3,12 +3,12 @@
 `hil run` starts ``python -m hil sim`` and ``python -m hil autopilot`` as subprocesses on loopback
 ports chosen here, and listens on a third port as a *tap*: the simulator sends its frames to the
 autopilot and the tap, the autopilot sends its commands to the simulator and the tap, and its
-telemetry to the tap. The tap writes every MAVLink frame to the run's ``.tlog`` and judges the run
-from the truth (HIL_STATE_QUATERNION): collisions and clearance against the chart, the goal,
-path length, energy, and the navigation error of the autopilot's own estimate
-(LOCAL_POSITION_NED). The run ends when the vessel reaches the goal, collides, or the simulated
-time is up; both processes are then stopped with SIGTERM (their summaries are collected), also
-on Ctrl-C, and never left behind.
+telemetry to the tap. The tap writes every MAVLink frame to the run's ``.tlog``; the run is judged
+from its truth (HIL_STATE_QUATERNION) by :mod:`hil.judging`: collisions and clearance against the
+chart, the goal, path length, energy, and the navigation error of the autopilot's own estimate
+(LOCAL_POSITION_NED). This module supervises: processes, tap, loop. The run ends when the vessel
+reaches the goal, collides, or the simulated time is up; both processes are then stopped with
+SIGTERM (their summaries are collected), also on Ctrl-C, and never left behind.
 
 Each end takes only its peer (docs/security.md): the simulator takes commands only from the
 autopilot's socket (``--commands-from``), the autopilot sensor frames only from the simulator's
@@ -33,10 +33,9 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy import ndimage
 
 from common.frames import map_to_ned
 from common.geodesy import LocalFrame
@@ -45,9 +44,14 @@ from common.tables import to_table
 from hil import config, placement, processes
 from hil import scenario as scenarios
 from hil.errors import RunFailed, UsageError
+from hil.judging import Judge, nav_rmse, simulator_part, thrust_energy
 from hil.progress_watch import STALL_WINDOW_S, ProgressWatch
 from hil.run_summary import RunSecurity, RunSummary, read_autopilot_summary
 from hil.tap import Tap
+
+if TYPE_CHECKING:
+    from hil.can_log import CanRecorder
+    from hil.settings import HilConfig
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -125,37 +129,16 @@ class RunOptions:
     summary_on_interrupt: bool = False
 
 
-class Judge:
-    """Collisions, clearance and goal from the truth against the chart (map frame: x east, y north)."""
-
-    def __init__(self, occ: np.ndarray, resolution: float, hull_radius: float, goal_ned: tuple[float, float],
-                 goal_tolerance: float) -> None:
-        self.occ, self.res = occ, resolution
-        # Distance (m) from each cell centre to the nearest obstacle cell's boundary (approximately).
-        self.edt = ndimage.distance_transform_edt(~occ) * resolution - 0.5 * resolution
-        self.hull_radius = hull_radius
-        self.goal, self.tol = goal_ned, goal_tolerance
-
-    def clearance(self, north: float, east: float) -> float:
-        r, c = int(north / self.res), int(east / self.res)
-        if not (0 <= r < self.occ.shape[0] and 0 <= c < self.occ.shape[1]):
-            return 0.0
-        return float(self.edt[r, c])
-
-    def at_goal(self, north: float, east: float) -> bool:
-        return math.hypot(north - self.goal[0], east - self.goal[1]) <= self.tol
-
-
 class HilRun:
     """One run: processes, tap, judge; :meth:`execute` returns the summary."""
 
-    def __init__(self, opts: RunOptions, cfg: Any) -> None:
+    def __init__(self, opts: RunOptions, cfg: HilConfig) -> None:
         self.opts, self.cfg = opts, cfg
         self.scen = scenarios.load(opts.scenario, cfg.current, cfg.planner.safety_radius, cfg.geodesy)
         self.scen.check_current_time(float(opts.duration))
         if opts.traffic is not None:
             self.scen.traffic = tuple(opts.traffic)
-        self.out = opts.out
+        self.out: Path = run_folder(opts)
         self.out.mkdir(parents=True, exist_ok=True)
         # A reused run folder: the processes' logs of this run start empty (_spawn), and the logs
         # of an earlier run's simulator restarts, which this run may not have, go.
@@ -192,7 +175,7 @@ class HilRun:
         self.sim: subprocess.Popen | None = None
         self.ap: subprocess.Popen | None = None
         self.sim_restarts = 0
-        self.can_recorder = None  # hil.can_log.CanRecorder when the thrusters are on CAN
+        self.can_recorder: CanRecorder | None = None  # when the thrusters are on CAN
         self.can_log: dict[str, Any] = {}
         self.placement: placement.Placement | None = None
         self._cpu_claim: placement.Claim | None = None
@@ -266,15 +249,15 @@ class HilRun:
         waiting = False   # the wait owns (and closes) read_end
         try:
             try:
-                self.ap = self._spawn([*self.autopilot_command(), "--ready-fd", str(write_end)], "autopilot",
-                                      pass_fds=(write_end,))
+                self.ap = ap = self._spawn([*self.autopilot_command(), "--ready-fd", str(write_end)], "autopilot",
+                                           pass_fds=(write_end,))
                 self.sim = self._spawn([*self.sim_command(), "--start-fd", str(go_read)], "sim",
                                        pass_fds=(go_read,))
             finally:
                 os.close(write_end)  # the children hold their own copies
                 os.close(go_read)
             waiting = True
-            self._wait_for_autopilot(read_end, ready_timeout)
+            self._wait_for_autopilot(ap, read_end, ready_timeout)
             self._place()   # the planner worker exists now; the simulator waits for GO
             try:
                 os.write(go_write, GO)
@@ -305,7 +288,7 @@ class HilRun:
             self._cpu_claim.release()
             self._cpu_claim = None
 
-    def _wait_for_autopilot(self, read_end: int, ready_timeout: float) -> None:
+    def _wait_for_autopilot(self, ap: subprocess.Popen, read_end: int, ready_timeout: float) -> None:
         log = self.out / "autopilot.log"
         deadline = time.monotonic() + ready_timeout
         wait = ReadyWait(read_end)
@@ -316,17 +299,17 @@ class HilRun:
                         break
                 except ValueError as exc:
                     raise RunFailed(f"the autopilot's start-up: {exc} (see {log})") from None
-                if wait.eof or self.ap.poll() is not None:
+                if wait.eof or ap.poll() is not None:
                     try:
-                        self.ap.wait(timeout=5.0)   # end of file: it is exiting
+                        ap.wait(timeout=5.0)   # end of file: it is exiting
                     except subprocess.TimeoutExpired:
                         raise RunFailed(f"the autopilot closed its readiness pipe without being ready (see {log})") \
                             from None
                     cause = startup_error(log)
-                    if self.ap.returncode == 2 and cause:  # a user mistake (a busy port ...): say which, exit 2
+                    if ap.returncode == 2 and cause:  # a user mistake (a busy port ...): say which, exit 2
                         raise UsageError(f"the autopilot could not start: {cause}")
                     raise RunFailed(f"the autopilot exited during start-up{': ' + cause if cause else ''} (see {log})")
-                if self.sim.poll() is not None:
+                if _exited(self.sim):
                     self._simulator_start_failed()
                 if time.monotonic() > deadline:
                     raise _NotReady(f"the autopilot was not ready after {ready_timeout:g} s (see {log})")
@@ -471,10 +454,10 @@ class HilRun:
                     outcome = "disk_full" if self.tap.write_error.errno in (errno.ENOSPC, errno.EDQUOT) \
                         else "write_error"
                     break
-                if self.ap.poll() is not None:
+                if _exited(self.ap):
                     outcome = "autopilot_exited"
                     break
-                if self.sim.poll() is not None:
+                if _exited(self.sim):
                     self.tap.pump(timeout=0.0)
                     if not self.tap.truth and not self.sim_restarts:
                         self._simulator_start_failed()  # it never sent a frame: why, in one line
@@ -513,24 +496,6 @@ class HilRun:
         wall = time.monotonic() - wall0
         return self._summary(outcome, collision_at, min_clearance, wall, ap_summary, sim_summary, decided)
 
-    @staticmethod
-    def _simulator_part(sim: dict, end_s: float, ap_busy_poll: dict | None = None) -> dict[str, Any]:
-        """The simulator's counters for the run summary. Stale-command failsafes are those up to the
-        run's judged end (s of simulated time); those after it, while the processes were being
-        stopped, are counted apart (the simulator runs on in real time while the autopilot exits).
-        ``busy_poll``: how each end's lockstep waits went (common.udp.BusyPoll; None where off)."""
-        out = {k: sim.get(k) for k in ("steps", "commands_received", "malformed_dropped", "stale_command_events",
-                                       "lockstep_resends", "jitter_ms", "stepping", "stalls", "battery")}
-        out["busy_poll"] = {"simulator": sim.get("busy_poll"), "autopilot": ap_busy_poll}
-        if "pipeline_skips" in sim:   # the pipelined lockstep (sim.lockstep_pipeline)
-            out["pipeline_skips"] = sim["pipeline_skips"]
-        times = sim.get("stale_command_times_s")
-        if times is not None:
-            after = sum(1 for t in times if t > end_s + 1e-9)
-            out["stale_command_events"] = (sim.get("stale_command_events") or 0) - after
-            out["stale_command_events_after_end"] = after
-        return out
-
     def _summary(self, outcome: str, collision_at: float | None, min_clearance: float, wall: float,
                  ap_table: dict | None, sim: dict | None, decided: int | None = None) -> RunSummary:
         # The run is judged up to the deciding sample: what arrived while the processes were being
@@ -539,8 +504,8 @@ class HilRun:
         track = np.array([self.tap.truth[t][:2] for t in times]) if times else np.zeros((0, 2))
         speeds = np.array([math.hypot(*self.tap.truth[t][2:]) for t in times]) if times else np.zeros(0)
         length = float(np.sum(np.hypot(*np.diff(track, axis=0).T))) if len(track) > 1 else 0.0
-        energy = self._energy(times, speeds)
-        rmse = self._nav_rmse(decided)
+        energy = thrust_energy(times, speeds, self.tap.commands, self.cfg.vessel)
+        rmse = nav_rmse(self.tap.estimate, self.tap.truth_raw, decided)
         ap = None if ap_table is None else read_autopilot_summary(ap_table)
         reached = outcome == "goal" and collision_at is None
         encounters = traffic = None
@@ -583,7 +548,7 @@ class HilRun:
             simulator_restarts=self.sim_restarts,
             navigation=None if ap is None else ap.navigation,
             sensed_obstacles=None if ap is None else ap.sensed_obstacles,
-            simulator=None if sim is None else {**self._simulator_part(sim, times[-1] * 1e-6 if times else 0.0,
+            simulator=None if sim is None else {**simulator_part(sim, times[-1] * 1e-6 if times else 0.0,
                                                                        None if ap is None else ap.busy_poll),
                                                 "cpus": self.pinned or None},
             security=RunSecurity(
@@ -606,41 +571,24 @@ class HilRun:
             can=can,
         )
 
-    def _energy(self, times: list[int], speeds: np.ndarray) -> float:
-        """Integral of (|T_port| + |T_stdb|) * speed dt, the commands held between truth samples."""
-        if len(times) < 2 or not self.tap.commands:
-            return 0.0
-        v = self.cfg.vessel
-        cmds = sorted(self.tap.commands)
-        cmd_t = np.array([c[0] for c in cmds])
-
-        def thrust(u: float) -> float:
-            return u * v.T_max if u >= 0 else -u * v.T_min
-
-        total = 0.0
-        for i in range(len(times) - 1):
-            j = int(np.searchsorted(cmd_t, times[i], side="right")) - 1
-            if j < 0:
-                continue
-            _, p, s = cmds[j]
-            total += (abs(thrust(p)) + abs(thrust(s))) * speeds[i] * (times[i + 1] - times[i]) * 1e-6
-        return total
-
-    def _nav_rmse(self, decided: int | None = None) -> float | None:
-        errs = []
-        for (seg, ms), (n, e) in self.tap.estimate.items():
-            truth = self.tap.truth_raw.get((seg, ms * 1000))
-            if truth is not None and (decided is None or truth[2] <= decided):
-                errs.append((n - truth[0]) ** 2 + (e - truth[1]) ** 2)
-        return math.sqrt(float(np.mean(errs))) if errs else None
-
-
 class _NotReady(RunFailed):
     """The autopilot did not start listening in time."""
 
 
 class _WallTimeout(Exception):
     """--wall-timeout passed before the run started."""
+
+
+def run_folder(opts: RunOptions) -> Path:
+    """The run's folder: every run writes one (RunOptions.out is optional only in its dataclass order)."""
+    if opts.out is None:
+        raise ValueError("RunOptions.out: a run needs a folder to write")
+    return opts.out
+
+
+def _exited(proc: subprocess.Popen | None) -> bool:
+    """True when the process is not running (never started, or ended)."""
+    return proc is None or proc.poll() is not None
 
 
 def _disk_full(out: Path, exc: OSError) -> RunFailed:
@@ -657,7 +605,7 @@ def _remove_partial(out: Path, names: tuple[str, ...] = ("summary.json", "plot.p
             pass
 
 
-def run_loop(opts: RunOptions, cfg: Any) -> RunSummary:
+def run_loop(opts: RunOptions, cfg: HilConfig) -> RunSummary:
     """Run the HIL loop and write the run folder (tlog, summary.json, plot.png); returns the summary.
 
     A folder that cannot be written (a full disk) ends the run with one line (RunFailed, exit 1)
@@ -669,32 +617,33 @@ def run_loop(opts: RunOptions, cfg: Any) -> RunSummary:
     except OSError as exc:
         if exc.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO):
             raise
-        _remove_partial(opts.out)
-        raise _disk_full(opts.out, exc) from None
+        _remove_partial(run_folder(opts))
+        raise _disk_full(run_folder(opts), exc) from None
 
 
-def _run_loop(opts: RunOptions, cfg: Any) -> RunSummary:
+def _run_loop(opts: RunOptions, cfg: HilConfig) -> RunSummary:
     from hil.files import write_json_atomic
 
     run = HilRun(opts, cfg)
+    out = run.out
     summary = run.execute()
     if run.tap.write_error is not None:
         raise run.tap.write_error
-    summary = replace(summary, run_folder=str(opts.out))
+    summary = replace(summary, run_folder=str(out))
     if opts.plot:
         try:
             from hil.run_plot import plot_run
 
-            ap_path = opts.out / "autopilot.json"
+            ap_path = out / "autopilot.json"
             ap = read_autopilot_summary(json.loads(ap_path.read_text()), str(ap_path)) if ap_path.exists() else None
-            plot_run(opts.out / "plot.png", run.scen, run.tap.truth, ap, cfg,
+            plot_run(out / "plot.png", run.scen, run.tap.truth, ap, cfg,
                      ships=run.encounter_judge.ships if run.encounter_judge is not None else None,
                      encounters=summary.encounters,
                      outcome="goal reached" if summary.reached_goal else
                      f"{summary.outcome}" + (f" at {summary.collision_time_s:.1f} s"
                                              if summary.collision_time_s is not None else ""))
-            summary = replace(summary, plot=str(opts.out / "plot.png"))
+            summary = replace(summary, plot=str(out / "plot.png"))
         except Exception as exc:  # a plot must never lose the run's data
             summary = replace(summary, plot_error=f"{type(exc).__name__}: {exc}")
-    write_json_atomic(opts.out / "summary.json", to_table(summary), private=bool(cfg.gcs.signing_key_file))
+    write_json_atomic(out / "summary.json", to_table(summary), private=bool(cfg.gcs.signing_key_file))
     return summary

@@ -45,7 +45,7 @@ def _draw_tree(ax, nodes: np.ndarray, parents: np.ndarray, color: str = "#7a9cc6
         return
     child = np.nonzero(parents >= 0)[0]
     segs = np.stack([nodes[parents[child]], nodes[child]], axis=1)
-    ax.add_collection(LineCollection(segs, colors=color, linewidths=lw, alpha=0.7, zorder=2))
+    ax.add_collection(LineCollection(list(segs), colors=color, linewidths=lw, alpha=0.7, zorder=2))
 
 
 def _draw_field(ax, field: Any, width: float, height: float, n: int = 16) -> None:

@@ -51,8 +51,11 @@ def wait_for_marker(proc: subprocess.Popen, marker: bytes, timeout: float = 60.0
 
     from hil.errors import RunFailed
 
+    stderr = proc.stderr
+    if stderr is None:
+        raise ValueError("wait_for_marker: the child needs stderr=subprocess.PIPE")
     sel = selectors.DefaultSelector()
-    sel.register(proc.stderr, selectors.EVENT_READ)
+    sel.register(stderr, selectors.EVENT_READ)
     seen = b""
     deadline = time.monotonic() + timeout
     while marker not in seen:
@@ -60,7 +63,7 @@ def wait_for_marker(proc: subprocess.Popen, marker: bytes, timeout: float = 60.0
         if left <= 0 or proc.poll() is not None:
             raise RunFailed(f"child not ready: {seen.decode(errors='replace').strip()[-300:]}")
         if sel.select(min(left, 0.2)):
-            chunk = os.read(proc.stderr.fileno(), 4096)
+            chunk = os.read(stderr.fileno(), 4096)
             if not chunk:
                 continue
             seen += chunk

@@ -16,9 +16,11 @@ import numpy as np
 
 if TYPE_CHECKING:
     from autopilot_bridge.summary import AutopilotSummary
+    from hil.scenario import Scenario
+    from hil.settings import HilConfig
 
 
-def plot_run(path: Path, scen: Any, truth: dict[int, tuple], autopilot: AutopilotSummary | None, cfg: Any,
+def plot_run(path: Path, scen: Scenario, truth: dict[int, tuple], autopilot: AutopilotSummary | None, cfg: HilConfig,
              ships: dict | None = None, encounters: Sequence[dict] | None = None, outcome: str | None = None) -> dict:
     """``autopilot``: the autopilot's summary (sensed cells, local paths, estimated track), None when
     it left none; ``ships``: MMSI -> ``hil.encounter_report.ShipTrack`` (their truth); ``encounters``: the
@@ -79,7 +81,7 @@ def plot_run(path: Path, scen: Any, truth: dict[int, tuple], autopilot: Autopilo
             "xlabel": ax.get_xlabel(), "ylabel": ax.get_ylabel()}
 
 
-def _plot_ships(ax: Any, ships: dict, encounters: list, truth: dict[int, tuple]) -> None:
+def _plot_ships(ax: Any, ships: dict, encounters: Sequence[dict], truth: dict[int, tuple]) -> None:
     """Each ship's true track, and both vessels where they were at the closest point of approach."""
     by_mmsi = {e.get("mmsi"): e for e in encounters}
     times = np.array(sorted(truth)) if truth else np.zeros(0, dtype=np.int64)

@@ -9,14 +9,17 @@ COLREGs encounters) keep those components' own tables.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from autopilot_bridge.summary import AutopilotSummary, ControlLatency, NavigationCounts
 from common.tables import absent_when_none
 from hil.config import from_table
 from hil.errors import ConfigError, RunFailed
 
-T = TypeVar("T")
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+T = TypeVar("T", bound="DataclassInstance")
 
 
 @dataclass(frozen=True)

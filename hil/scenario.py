@@ -519,8 +519,8 @@ def _instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current:
             wps = ref = np.asarray(spec.reference_path, dtype=float)
         scen = Scenario(spec.name, spec.description, occ, spec.resolution, spec.start, spec.start_heading,
                         spec.goal, ref, current, field_time, dict(spec.planner), dict(spec.online),
-                        tuple(tuple(map(float, d)) for d in spec.uncharted), traffic=spec.traffic, waypoints=wps,
-                        geodesy=geodesy)
+                        tuple((float(x), float(y), float(r)) for x, y, r in spec.uncharted), traffic=spec.traffic,
+                        waypoints=wps, geodesy=geodesy)
         truth = scen.truth_occ()
         for what, p in (("start", spec.start), ("goal", spec.goal)):
             if truth[int(p[1] / spec.resolution), int(p[0] / spec.resolution)]:

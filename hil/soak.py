@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     import numpy as np
 
+    from hil.settings import HilConfig
+
 from common.tables import to_table
 from hil.console import progress
 from hil.errors import RunFailed
@@ -104,7 +106,7 @@ def _can_checks(sides: dict[str, dict | None], problems: list[str]) -> dict[str,
     return out
 
 
-def soak_loop(args: argparse.Namespace, cfg: Any, out: Path) -> dict[str, Any]:
+def soak_loop(args: argparse.Namespace, cfg: HilConfig, out: Path) -> dict[str, Any]:
     from hil.cpu_load import LoadWatch, overruns_allowed
     from hil.hilrun import RunOptions, run_loop
 
@@ -169,7 +171,7 @@ def _latency(sent_path: Path, applied_path: Path) -> dict[str, Any]:
     return stats_ms(pair_latency(st, sa, at, aa))
 
 
-def soak_can_path(args: argparse.Namespace, cfg: Any, out: Path) -> dict[str, Any]:
+def soak_can_path(args: argparse.Namespace, cfg: HilConfig, out: Path) -> dict[str, Any]:
     import numpy as np
 
     from hil import processes

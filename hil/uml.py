@@ -214,8 +214,9 @@ def run_in_uml(jobs: list[Job], mem: str = "1536M", boot_timeout: float = 60.0,
     time; each job is killed at its own time limit (returncode None).
     """
     why = uml_unavailable()
-    if why:
-        raise VcanUnavailable(why)
+    binary = uml_binary()
+    if why or binary is None:
+        raise VcanUnavailable(why or "User-Mode Linux is not installed")
     work = Path(workdir or tempfile.mkdtemp(prefix="hil-uml-"))
     work.mkdir(parents=True, exist_ok=True)
     env_base = {k: os.environ[k] for k in ENV_KEYS if k in os.environ}
@@ -239,7 +240,7 @@ def run_in_uml(jobs: list[Job], mem: str = "1536M", boot_timeout: float = 60.0,
     (work / "guest.json").unlink(missing_ok=True)
     console_path = work / "console.txt"
     limit = boot_timeout + sum(j.timeout + 10.0 for j in jobs)
-    cmd = [uml_binary(), f"mem={mem}", "rootfstype=hostfs", "rw", f"init={init.resolve()}",
+    cmd = [binary, f"mem={mem}", "rootfstype=hostfs", "rw", f"init={init.resolve()}",
            "con=null", "con0=fd:0,fd:1", "quiet"]
     t0 = time.monotonic()
     with open(console_path, "wb") as console, open(os.devnull, "rb") as devnull:

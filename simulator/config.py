@@ -8,8 +8,13 @@ Frozen dataclasses, filled strictly from the TOML sections of the same names by
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
 
 from common.params import param
+
+if TYPE_CHECKING:
+    from common.can_params import CanParams
+    from simulator.traffic import AisParams
 
 
 @dataclass(frozen=True)
@@ -179,7 +184,7 @@ class SimParams:
     lockstep_busy_poll: float = param(
         "lockstep: wait for the command polling the socket this long before sleeping on it (common.udp.BusyPoll; "
         "0 = sleep at once)", "s", ge=0, le=0.1)
-    initial: InitialState
+    initial: InitialState = param("where the vessel starts")
 
 
 @dataclass(frozen=True)
@@ -227,3 +232,51 @@ class GeodesyParams:
     def metres_origin(self) -> tuple[float, float]:
         """(lat, lon) of the frame in which a scenario's positions in metres are given."""
         return (self.positions_origin[0], self.positions_origin[1]) if self.positions_origin else (self.lat0, self.lon0)
+
+
+class PeerIds(Protocol):
+    """The MAVLink ids of the vessel computer, the one peer whose commands the simulator applies."""
+
+    @property
+    def system_id(self) -> int: ...
+
+    @property
+    def component_id(self) -> int: ...
+
+
+class SimulatorSettings(Protocol):
+    """The root of the simulator's configuration: the sections :class:`simulator.core.SimulatorCore`
+    and :class:`simulator.server.SimulatorServer` read. ``hil.settings.HilConfig`` is one, structurally."""
+
+    @property
+    def vessel(self) -> VesselParams: ...
+
+    @property
+    def waves(self) -> WaveParams: ...
+
+    @property
+    def current(self) -> CurrentParams: ...
+
+    @property
+    def sensors(self) -> SensorParams: ...
+
+    @property
+    def sim(self) -> SimParams: ...
+
+    @property
+    def link(self) -> LinkParams: ...
+
+    @property
+    def geodesy(self) -> GeodesyParams: ...
+
+    @property
+    def esc(self) -> EscParams: ...
+
+    @property
+    def can(self) -> CanParams: ...
+
+    @property
+    def traffic(self) -> AisParams: ...
+
+    @property
+    def autopilot(self) -> PeerIds: ...

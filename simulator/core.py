@@ -11,17 +11,21 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from typing import Any
+from typing import TYPE_CHECKING
 
 from common.current_sources import NoCurrent, make_current
 from common.dronecan_layout import RAW_COMMAND_MAX
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE, Codec
 from simulator.battery import BatteryParams, Pack, ThrusterPower
+from simulator.config import SimulatorSettings
 from simulator.rangefinder import Rangefinder, WorldMap
 from simulator.sensors import Compass, Dvl, G, Gps, Imu, sensor_rngs
-from simulator.vessel import Vessel, hull_dynamics, hull_rk4_step
+from simulator.vessel import State, Vessel, hull_dynamics, hull_rk4_step
 from simulator.waves import WaveModel
+
+if TYPE_CHECKING:
+    from simulator.traffic import ShipSpec, Traffic
 
 # Rejections counted by the simulator besides the codec's framing reasons.
 INVALID_CONTROLS = "invalid_controls"      # NaN/inf control: previous command kept
@@ -62,9 +66,10 @@ def frame_layout(dt: float, imu_rate_hz: float) -> tuple[float, int]:
 
 
 class SimulatorCore:
-    """Truth + sensors + MAVLink encoding for one run (``cfg`` is a ``hil.settings.HilConfig``)."""
+    """Truth + sensors + MAVLink encoding for one run."""
 
-    def __init__(self, cfg: Any, world: WorldMap | None = None, traffic: tuple[Any, ...] = ()) -> None:
+    def __init__(self, cfg: SimulatorSettings, world: WorldMap | None = None,
+                 traffic: tuple[ShipSpec, ...] = ()) -> None:
         """``traffic``: the ships (``simulator.traffic.ShipSpec``) reported by AIS on the link."""
         self.cfg = cfg
         self.frame_dt, self.substeps = frame_layout(cfg.sim.dt, cfg.sensors.imu.rate_hz)
@@ -97,7 +102,7 @@ class SimulatorCore:
         # The only peer whose commands count: the vessel computer's ids from the same configuration.
         self.peer_ids = (cfg.autopilot.system_id, cfg.autopilot.component_id)
         i = cfg.sim.initial
-        self.state: tuple[float, ...] = (float(i.x), float(i.y), float(i.psi), float(i.u), float(i.v), float(i.r))
+        self.state: State = (float(i.x), float(i.y), float(i.psi), float(i.u), float(i.v), float(i.r))
         self.n = 0
         self.controls = (0.0, 0.0)
         self.thrust = (0.0, 0.0)  # N, port and starboard thrust applied now (after the ESC lag)
@@ -116,7 +121,7 @@ class SimulatorCore:
         self._env = self._environment(0.0)
         # compile (or load from numba's cache) the hull's kernels now, not in the first timed step
         hull_rk4_step(self.state, self.dt, (0.0, 0.0, 0.0), *self._env, self.vessel.coefficients)
-        self.traffic = None
+        self.traffic: Traffic | None = None
         if traffic:
             from simulator.traffic import AisParams, Traffic
 
@@ -194,7 +199,7 @@ class SimulatorCore:
         s = self.state
         return self.waves.forces(s[2]), self.current.velocity_at(s[0], s[1], t)
 
-    def derivative(self) -> tuple[float, ...]:
+    def derivative(self) -> State:
         """State derivative now (with the thrust currently applied)."""
         tau = self.vessel.propulsion(*self.thrust)
         return hull_dynamics(self.state, tau, *self._env, self.vessel.coefficients)

@@ -22,13 +22,17 @@ import math
 import time
 from collections import Counter
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import can
 
 from common import dronecan_codec as dc
 from common.can_params import CanParams
 from common.transfer_times import TransferTimes
+
+if TYPE_CHECKING:
+    from simulator.config import EscParams
+    from simulator.vessel import Vessel
 
 RAW_COMMAND_OUT_OF_RANGE = "raw_command_out_of_range"
 RAW_COMMAND_MISSING_INDEX = "raw_command_missing_index"
@@ -43,7 +47,7 @@ class EscBank:
     records only). Simulated time ``t`` (s) is passed to :meth:`publish`.
     """
 
-    def __init__(self, bus: can.BusABC, params: CanParams, esc: Any, vessel: Any,
+    def __init__(self, bus: can.BusABC, params: CanParams, esc: EscParams, vessel: Vessel,
                  clock: Callable[[], float] = time.monotonic) -> None:
         self.bus, self.p, self.esc, self.vessel, self.clock = bus, params, esc, vessel, clock
         self.node_ids = tuple(params.esc_node_ids)

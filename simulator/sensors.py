@@ -9,11 +9,14 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from common.geodesy import LocalFrame
+
+if TYPE_CHECKING:
+    from simulator.config import CompassParams, DvlParams, GpsParams, ImuParams
 
 G = 9.80665  # m/s^2, standard gravity
 UINT16_UNKNOWN = 65535
@@ -61,7 +64,7 @@ def wrap_2pi(a: float) -> float:
 class Imu:
     """HIL_SENSOR accelerometer and gyro fields (body FRD axes, boat level)."""
 
-    def __init__(self, p: Any, rng: np.random.Generator, period: float) -> None:
+    def __init__(self, p: ImuParams, rng: np.random.Generator, period: float) -> None:
         self.p, self.period, self.n = p, period, Normals(rng)
         self.gyro_bias = [p.gyro_bias * self.n() for _ in range(3)]
         self.accel_bias = [p.accel_bias * self.n() for _ in range(3)]
@@ -88,7 +91,7 @@ class Compass:
     heading = atan2(-ymag, xmag) + d.
     """
 
-    def __init__(self, p: Any, rng: np.random.Generator) -> None:
+    def __init__(self, p: CompassParams, rng: np.random.Generator) -> None:
         self.p, self.n = p, Normals(rng)
 
     def measure(self, psi: float) -> tuple[float, float, float]:
@@ -124,7 +127,7 @@ class Satellites:
 class Gps:
     """HIL_GPS fields: delayed, noisy position/velocity, dropouts (fix_type 0, no satellites) and glitches."""
 
-    def __init__(self, p: Any, rng: np.random.Generator, events: np.random.Generator,
+    def __init__(self, p: GpsParams, rng: np.random.Generator, events: np.random.Generator,
                  frame: LocalFrame, frame_dt: float, satellites: np.random.Generator | None = None) -> None:
         self.p, self.frame, self.frame_dt = p, frame, frame_dt
         self.n, self.u = Normals(rng), Uniforms(events)
@@ -180,7 +183,7 @@ class Gps:
 class Dvl:
     """Bottom-lock body velocity (m/s, FRD) with white noise."""
 
-    def __init__(self, p: Any, rng: np.random.Generator) -> None:
+    def __init__(self, p: DvlParams, rng: np.random.Generator) -> None:
         self.p, self.n = p, Normals(rng)
 
     def measure(self, u: float, v: float) -> tuple[float, float, float]:

@@ -9,11 +9,14 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from common.percentiles import StreamingPercentiles
 from common.udp import BusyPoll, UdpEndpoint
 from simulator.core import OUT_OF_STEP, Command, SimulatorCore
+
+if TYPE_CHECKING:
+    from simulator.esc import EscBank
 
 POLL_S = 0.05  # longest wait before the stop flag is looked at again (wall seconds)
 MAX_DATAGRAMS_PER_STEP = 64  # real time: command datagrams read per step at most (a flood waits in the socket)
@@ -32,7 +35,7 @@ class SimulatorServer:
     def __init__(self, core: SimulatorCore, endpoint: UdpEndpoint, *, lockstep: bool, duration: float,
                  speedup: float = 1.0, lockstep_resend: float = 1.0,
                  progress: Callable[[str], None] | None = None, progress_every_s: float = 5.0,
-                 esc: Any | None = None, can_lockstep_wait: float = 1.0, command_source: str | None = None,
+                 esc: EscBank | None = None, can_lockstep_wait: float = 1.0, command_source: str | None = None,
                  busy_poll: float = 0.0, pipeline: bool = False) -> None:
         """``command_source``: None takes commands from any address, "HOST:PORT" only from there,
         "learn" only from the address of the first valid command (docs/security.md). ``busy_poll``:
@@ -44,7 +47,7 @@ class SimulatorServer:
         self.learn_source = command_source == LEARN
         if command_source and not self.learn_source:
             endpoint.set_peer(command_source)
-        # CAN actuators (a simulator.esc.EscBank): thrust comes from the ESC nodes' RawCommands;
+        # CAN actuators: thrust comes from the ESC nodes' RawCommands;
         # in lockstep the HIL_ACTUATOR_CONTROLS answer is only the clock (docs/can.md).
         self.esc, self.can_lockstep_wait = esc, can_lockstep_wait
         self.can_commands_missing = 0
@@ -128,7 +131,7 @@ class SimulatorServer:
                     if self.esc is None:
                         core.apply(cmd)
                     else:
-                        self._apply_can(cmd)
+                        self._apply_can(self.esc, cmd)
                     core.step()
                     stepped = True
                     self.last_step_at = time.monotonic()
@@ -213,20 +216,21 @@ class SimulatorServer:
         if self.learn_source and self.ep.peer is None and self.ep.last_sender is not None:
             self.ep.set_peer(self.ep.last_sender)
 
-    def _apply_can(self, token: Command) -> None:
+    def _apply_can(self, esc: EscBank, token: Command) -> None:
         """Lockstep over CAN: apply the ESCs' RawCommand that ``token`` announces (bounded wait)."""
         from common.dronecan_layout import quantize
 
         want = (quantize(token.port), quantize(token.stdb))
         deadline = time.monotonic() + self.can_lockstep_wait
-        self.esc.poll(0.0)
-        while self.esc.raw != want and (left := deadline - time.monotonic()) > 0:
-            self.esc.poll(min(left, POLL_S))
-        if self.esc.raw != want:
+        esc.poll(0.0)
+        while esc.raw != want and (left := deadline - time.monotonic()) > 0:
+            esc.poll(min(left, POLL_S))
+        controls = esc.controls()
+        if esc.raw != want or controls is None:
             self.can_commands_missing += 1  # thrust stays as it was; the stale failsafe still runs
             return
-        self.esc.commands_seen = 0
-        self.core.apply(Command(token.time_usec, *self.esc.controls()))
+        esc.commands_seen = 0
+        self.core.apply(Command(token.time_usec, *controls))
 
     # -- real time -------------------------------------------------------------------------
     def _run_realtime(self, start: float) -> None:
@@ -262,9 +266,10 @@ class SimulatorServer:
                 self.mavlink_commands_ignored += newest is not None
                 newest = None
                 self.esc.poll(0.0)
-                if self.esc.commands_seen:
+                controls = self.esc.controls()
+                if self.esc.commands_seen and controls is not None:
                     self.esc.commands_seen = 0
-                    newest = Command(core.time_usec, *self.esc.controls())
+                    newest = Command(core.time_usec, *controls)
             if newest is not None:
                 core.apply(newest)
             core.step()
@@ -285,13 +290,13 @@ class SimulatorServer:
         return t0 + late
 
     # -- report ----------------------------------------------------------------------------
-    def jitter_ms(self) -> dict[str, float] | None:
+    def jitter_ms(self) -> dict[str, float | None] | None:
         j = self.lateness
         if not j.count:
             return None
         return {"p50": j.percentile(50), "p99": j.percentile(99), "max": j.max}
 
-    def stepping(self) -> dict[str, float] | None:
+    def stepping(self) -> dict[str, float | None] | None:
         """Lockstep: the steps from the first to the last and the wall time between them (s), i.e.
         the loop's speed without start-up and shut-down; None before two steps or in real time."""
         steps = self.core.n - self.first_step_n

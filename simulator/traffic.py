@@ -22,11 +22,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from common.params import param
+
+if TYPE_CHECKING:
+    from common.geodesy import LocalFrame
+    from common.mavlink import Codec
 
 KNOT = 1852.0 / 3600.0  # m/s
 
@@ -155,7 +159,7 @@ class Traffic:
     specs: tuple[ShipSpec, ...]
     params: AisParams
     seed: int
-    geo: Any                                  # common.geodesy.LocalFrame
+    geo: LocalFrame
     ships: list[Ship] = field(init=False)
     next_report: list[float] = field(init=False)
     rngs: list[np.random.Generator] = field(init=False)
@@ -184,7 +188,7 @@ class Traffic:
                 int(round(spec.bow)), int(round(spec.stern)), min(int(round(spec.port)), 255),
                 min(int(round(spec.starboard)), 255), b"", _bytes(spec.name, 20), tslc, flags)
 
-    def ais_messages(self, t: float, codec: Any) -> list[bytes]:
+    def ais_messages(self, t: float, codec: Codec) -> list[bytes]:
         """AIS_VESSEL frames of the reports due at simulated time ``t`` (noisy; some lost)."""
         out = []
         p = self.params
@@ -206,7 +210,7 @@ class Traffic:
             self.reports_sent += 1
         return out
 
-    def truth_messages(self, t: float, codec: Any) -> list[bytes]:
+    def truth_messages(self, t: float, codec: Codec) -> list[bytes]:
         """AIS_VESSEL frames with every ship's exact state at ``t`` (truth component)."""
         out = []
         for ship in self.ships:

@@ -24,9 +24,12 @@ own file, never pairs a changed equation with a stale integrator.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING
 
 from numba import njit
+
+if TYPE_CHECKING:
+    from simulator.config import VesselParams
 
 State = tuple[float, float, float, float, float, float]
 Coefficients = tuple[float, float, float, float, float, float, float, float, float, float, float, float]
@@ -90,7 +93,7 @@ def hull_rk4_step(s: State, dt: float, tau: tuple[float, float, float], tau_w: t
 class Vessel:
     """Parameters of eqs. (4)-(5) and the dynamics; ``params`` has the fields of ``[vessel]``."""
 
-    def __init__(self, params: Any) -> None:
+    def __init__(self, params: VesselParams) -> None:
         p = params
         self.params = p
         # eq. (5): inertia including added mass

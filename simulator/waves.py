@@ -9,11 +9,14 @@ The encounter angle is chi = beta - psi (0: following seas, pi/2: waves pushing 
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from simulator.sensors import Normals
+
+if TYPE_CHECKING:
+    from simulator.config import VesselParams, WaveParams
 
 
 def wave_forces(rho: float, L: float, alpha: float, chi: float,
@@ -46,7 +49,7 @@ class OrnsteinUhlenbeck:
 class WaveModel:
     """Slowly varying sea state; :meth:`forces` gives eq. (6) for a heading."""
 
-    def __init__(self, waves: Any, vessel: Any, rng: np.random.Generator) -> None:
+    def __init__(self, waves: WaveParams, vessel: VesselParams, rng: np.random.Generator) -> None:
         self.p, self.rho, self.L = waves, vessel.rho, vessel.L
         self.enabled = bool(waves.enabled)
         normal = Normals(rng)   # one stream, drawn in turn by both processes as before

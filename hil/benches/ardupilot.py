@@ -24,6 +24,8 @@ from hil.errors import UsageError
 if TYPE_CHECKING:
     import numpy as np
 
+    from hil.settings import HilConfig
+
 METRICS = ("mission_time_s", "time_under_way_s", "cross_track_rms_m", "cross_track_max_m", "min_clearance_m",
            "energy_J", "path_length_m", "collisions")
 
@@ -231,7 +233,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _station(args: argparse.Namespace, cfg: Any, sitl: Any, geo: Any, root: Path, lines: list[str]) -> dict:
+def _station(args: argparse.Namespace, cfg: HilConfig, sitl: Any, geo: Any, root: Path, lines: list[str]) -> dict:
     from hil.ardupilot import run_ardupilot
     from hil.hilrun import RunOptions, run_loop
 

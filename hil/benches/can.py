@@ -135,8 +135,8 @@ def run(args: argparse.Namespace) -> int:
             if acts is not None:
                 acts.close()
         z = np.load(rec)
-        ours = pair_latency(*acts.sent_times.arrays(),
-                            z["tid"], z["at"])
+        sent_tid, sent_at_ours = acts.sent_times.arrays()
+        ours = pair_latency(sent_tid, sent_at_ours, z["tid"], z["at"])
         result["ours_command_to_applied_ms"] = stats_ms(ours)
         result["ours_lost"] = acts.commands_sent - int(esc_summary.get("raw_commands_applied", 0))
         z = np.load(rec2)

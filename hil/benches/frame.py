@@ -102,7 +102,7 @@ class _Loop:
         self.core = SimulatorCore(sim_cfg, WorldMap(scen.truth_occ(), scen.resolution), tuple(scen.traffic))
         ap_cfg = load_settings(argparse.Namespace(config=args.config, overrides=list(args.overrides) + seed + [
             'autopilot.listen="127.0.0.1:0"', f'autopilot.actuators_to=["127.0.0.1:{port}"]']))
-        self.ap = build(ap_cfg, args.scenario, lockstep=True)
+        self.ap, self.link = build(ap_cfg, args.scenario, lockstep=True)
 
     def step(self, prof: cProfile.Profile | None = None) -> float | None:
         from simulator.core import Command
@@ -113,7 +113,7 @@ class _Loop:
         t0 = time.perf_counter()
         if prof is not None:
             prof.enable()
-        frame = ap.link.decode(data)
+        frame = self.link.decode(data)
         if frame is not None:
             ap.on_frame(frame, t0)
         if ap.telemetry is not None:
@@ -128,7 +128,7 @@ class _Loop:
 
     def close(self) -> None:
         self.ap.worker.close()
-        self.ap.link.close()
+        self.link.close()
         if self.ap.telemetry is not None:
             self.ap.telemetry.close()
         self.rx.close()

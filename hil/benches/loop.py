@@ -133,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
     if "pipelined" in result:   # the same goal for the pipelined lockstep (one frame of actuator delay)
         result["pipelined_speed_goal_met"] = \
             (result["pipelined"]["steps_per_wall_s"] or 0.0) >= GOAL_LOCKSTEP_STEPS_PER_S
-    rt = result.get("realtime")
-    result["planning_stalled_control"] = None if rt is None else bool(rt["stale_command_events"])
+    rt_leg = result.get("realtime")
+    result["planning_stalled_control"] = None if rt_leg is None else bool(rt_leg["stale_command_events"])
     emit(args, result)
     return 0

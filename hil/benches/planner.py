@@ -26,7 +26,7 @@ import importlib
 import math
 import statistics
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
@@ -129,7 +129,7 @@ class IslandWorld:
         return GridField.sample(self.map_field(), 60.0, 40.0, 0.5)
 
 
-def _median(values: list[float]) -> float | None:
+def _median(values: Sequence[float | None]) -> float | None:
     vals = [v for v in values if v is not None]
     if not vals:
         return None
@@ -224,7 +224,9 @@ class OmplRunner:
 
 
 def _measure(runner, seeds: list[int], budgets: tuple[float, ...], optimum: float, label: str) -> dict[str, Any]:
-    firsts, ratios, rates = [], {b: [] for b in budgets}, []
+    firsts: list[float | None] = []
+    ratios: dict[float, list[float]] = {b: [] for b in budgets}
+    rates: list[float] = []
     for s in seeds:
         firsts.append(runner.solve(s, FIRST_SOLUTION_CAP_S, first=True)["first"])
         for b in budgets:

@@ -5,11 +5,15 @@ from __future__ import annotations
 import argparse
 import subprocess
 import time
+from typing import TYPE_CHECKING
 
 from hil.console import emit, load_settings, progress
 from hil.errors import RunFailed
 from hil.processes import stop as stop_process
 from hil.sim_client import HilClient, sim_command, start_simulator
+
+if TYPE_CHECKING:
+    from hil.settings import HilConfig
 
 GOAL_LOCKSTEP_STEPS_PER_S = 2000.0
 
@@ -31,7 +35,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.set_defaults(func=run, seed=None, speedup=None)
 
 
-def bench_model(cfg, n: int) -> float:
+def bench_model(cfg: HilConfig, n: int) -> float:
     """RK4 steps per second of the hull (``simulator.vessel.hull_rk4_step``, the simulator's
     integration: thrust, waves and current held); compiled before the clock starts."""
     from simulator.vessel import Vessel, hull_rk4_step
@@ -48,7 +52,7 @@ def bench_model(cfg, n: int) -> float:
     return n / (time.perf_counter() - t0)
 
 
-def bench_core(cfg, n: int) -> float:
+def bench_core(cfg: HilConfig, n: int) -> float:
     """Frames per second of SimulatorCore (step + frame encoding), no sockets."""
     from simulator.core import Command, SimulatorCore
 
@@ -61,7 +65,7 @@ def bench_core(cfg, n: int) -> float:
     return n / (time.perf_counter() - t0)
 
 
-def bench_lockstep(args: argparse.Namespace, cfg, n: int) -> dict:
+def bench_lockstep(args: argparse.Namespace, cfg: HilConfig, n: int) -> dict:
     """Lockstep steps/s measured by the controller between the first and the last frame."""
     args.duration = n * (1.0 / cfg.sensors.imu.rate_hz)
     client = HilClient()
@@ -72,12 +76,13 @@ def bench_lockstep(args: argparse.Namespace, cfg, n: int) -> dict:
         if first is None or first.time_usec is None:
             raise RunFailed("bench sim: no first frame from the simulator")
         t0 = time.perf_counter()
-        steps, frame = 0, first
+        steps, t_usec = 0, first.time_usec
         while steps < n:
-            client.command(frame.time_usec, 0.8, 0.6)
+            client.command(t_usec, 0.8, 0.6)
             frame = client.next_frame(timeout=10.0)
-            if frame is None:
+            if frame is None or frame.time_usec is None:
                 raise RunFailed(f"bench sim: simulator stopped answering after {steps} steps")
+            t_usec = frame.time_usec
             steps += 1
         wall = time.perf_counter() - t0
     finally:

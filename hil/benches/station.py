@@ -77,7 +77,7 @@ def scenario_in_current(speed: float, folder: Path) -> Path:
 
 
 def judge(truth: dict[int, tuple[float, float, float, float]], commands: list[tuple[int, float, float]],
-          goal: tuple[float, float], t_from: float, power: Any, vessel: Any) -> dict[str, float]:
+          goal: tuple[float, float], t_from: float, power: Any, vessel: Any) -> dict[str, float | None]:
     """Distance from ``goal`` (NED m) and electrical energy per minute after ``t_from`` (s)."""
     import numpy as np
 
@@ -102,7 +102,7 @@ def judge(truth: dict[int, tuple[float, float, float, float]], commands: list[tu
             "max_m": round(float(d.max()), 3), "energy_J_per_min": round(joules / minutes, 1), "samples": len(times)}
 
 
-def one(current: float, method: str, args: argparse.Namespace, out: Path) -> dict[str, float]:
+def one(current: float, method: str, args: argparse.Namespace, out: Path) -> dict[str, float | None]:
     from hil import settings
     from hil.hilrun import HilRun, RunOptions
     from simulator.battery import ThrusterPower

@@ -133,7 +133,8 @@ def run(args: argparse.Namespace) -> int:
     check_can(cfg, "hil autopilot (a process of its own)")
     from hil.assembly import build
 
-    autopilot = build(cfg, args.scenario, args.lockstep, args.planner_factory, getattr(args, "sensors_from", None))
+    autopilot, link = build(cfg, args.scenario, args.lockstep, args.planner_factory,
+                            getattr(args, "sensors_from", None))
     stop = {"flag": False}
     if args.can_record and autopilot.can is not None:
         autopilot.can.sent_times.start(spill_to=args.can_record)
@@ -142,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
         stop["flag"] = True
 
     previous = {sig: signal.signal(sig, request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
-    host, port = autopilot.link.address
+    host, port = link.address
     acts = (f"DroneCAN RawCommand on {cfg.can.interface}:{cfg.can.channel}" if cfg.can.actuators == "can"
             else "actuators to " + ", ".join(cfg.autopilot.actuators_to))
     gcs = autopilot.telemetry
@@ -160,8 +161,8 @@ def run(args: argparse.Namespace) -> int:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
         autopilot.worker.close()
-        link_summary = autopilot.link.summary()
-        autopilot.link.close()
+        link_summary = link.summary()
+        link.close()
         if autopilot.can is not None:
             autopilot.can.close()
             if args.can_record:

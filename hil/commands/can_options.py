@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from hil.settings import HilConfig
 
 
 def add_can_arguments(p: argparse.ArgumentParser, actuators: bool = True, default: str = "can.actuators = mavlink"
@@ -39,7 +43,7 @@ def can_overrides(args: argparse.Namespace) -> list[str]:
 IN_PROCESS_ONLY = ("virtual",)
 
 
-def check_can(cfg, what: str) -> None:
+def check_can(cfg: HilConfig, what: str) -> None:
     """Refuse, with the reason, a CAN set-up that cannot work across processes or does not exist here
     (``UsageError``, exit 2), before anything is started. ``what`` names the command for the message."""
     from hil.errors import UsageError

@@ -31,6 +31,7 @@ from planner.params import ALGORITHM_NAMES
 
 if TYPE_CHECKING:
     from hil.run_summary import RunSummary
+    from hil.settings import HilConfig
 
 FRAME_TIMEOUT_S = 15.0  # wall seconds to wait for the simulator's next frame before giving up
 DEMO_CONTROLS = (0.6, 0.5)  # port, starboard: a gentle starboard turn
@@ -206,7 +207,7 @@ def _default_wall_timeout(args: argparse.Namespace, paced: bool = False) -> floa
     return args.duration / args.speedup + 300.0
 
 
-def _run_hil(args: argparse.Namespace, cfg: Any, cpus: Any = "auto") -> int:
+def _run_hil(args: argparse.Namespace, cfg: HilConfig, cpus: Any = "auto") -> int:
     from pathlib import Path
 
     from hil import scenario as scenarios

@@ -6,6 +6,7 @@ import argparse
 import json
 import os
 import signal
+from typing import TYPE_CHECKING
 
 from common import connection
 from common.readiness import wait_for_start
@@ -14,6 +15,9 @@ from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.console import emit, load_settings, progress
 from hil.errors import ConfigError, UsageError
 from hil.processes import freeze_heap
+
+if TYPE_CHECKING:
+    from simulator.traffic import ShipSpec
 
 
 def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:
@@ -102,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
         except ValueError as exc:
             raise UsageError(f"--commands-from: {exc}") from None
     world = None
-    traffic = ()
+    traffic: tuple[ShipSpec, ...] = ()
     if getattr(args, "scenario", None):
         from hil import scenario as scenarios
 
