@@ -84,7 +84,10 @@ def build_parser() -> ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args, extra = parser.parse_known_args(argv)
+    try:
+        args, extra = parser.parse_known_args(argv)
+    except SystemExit as exc:   # --help, or a usage error already printed in one line
+        return exc.code if isinstance(exc.code, int) else 2
     if extra:  # reported by the command's own parser: 'hil COMMAND: error: ...', its --help named
         commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
         command = commands.choices[args.command]
