@@ -134,14 +134,15 @@ def test_count_limits_busy_clear_and_plan_types():
     assert len(ms.items) == 2
     (o,) = ms.handle(msg("mission_count", 1, 1, 3, 7), 0.0)            # no such plan type
     assert o.args[2:] == (M.MAV_MISSION_UNSUPPORTED, 7)
-    (o,) = ms.handle(msg("mission_count", 1, 1, 3, M.MAV_MISSION_TYPE_FENCE), 0.0)   # a fence upload begins
+    # The refused GCS (OTHER) has the next turn for 5 s (gcs/upload_claim.py): later, a fence upload begins.
+    (o,) = ms.handle(msg("mission_count", 1, 1, 3, M.MAV_MISSION_TYPE_FENCE), 6.0)
     assert o.name == "mission_request_int" and o.args[2:] == (0, M.MAV_MISSION_TYPE_FENCE)
-    (o,) = ms.handle(msg("mission_request_list", 1, 1, M.MAV_MISSION_TYPE_RALLY), 0.0)
+    (o,) = ms.handle(msg("mission_request_list", 1, 1, M.MAV_MISSION_TYPE_RALLY), 6.0)
     assert o.name == "mission_count" and o.args[2:] == (0, M.MAV_MISSION_TYPE_RALLY)
-    (o,) = ms.handle(msg("mission_clear_all", 1, 1, 0), 0.0)
+    (o,) = ms.handle(msg("mission_clear_all", 1, 1, 0), 6.0)
     assert o.args[2] == M.MAV_MISSION_ACCEPTED and ms.items == ()
-    assert ms.handle(msg("mission_count", 1, 1, 2, 0, src=OTHER), 0.0)[0].name == "mission_request_int"
-    assert ms.handle(msg("mission_count", 1, 1, 0, 0, src=OTHER), 0.0)[0].args[2] == M.MAV_MISSION_ACCEPTED
+    assert ms.handle(msg("mission_count", 1, 1, 2, 0, src=OTHER), 6.0)[0].name == "mission_request_int"
+    assert ms.handle(msg("mission_count", 1, 1, 0, 0, src=OTHER), 6.0)[0].args[2] == M.MAV_MISSION_ACCEPTED
 
 
 def test_messages_for_another_vehicle_are_ignored_and_a_lost_final_ack_is_repeated():
