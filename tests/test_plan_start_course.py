@@ -36,7 +36,8 @@ class _Recorder:
 def _submitted_heading(s: NavState) -> float:
     params = load().autopilot
     worker = _Recorder()
-    handoff = PlanHandoff(worker, params, lockstep=False, seed=1, stats=AutopilotStats(), event=lambda t, m: None)
+    handoff = PlanHandoff(worker, params, lockstep=False, seed=1, stats=AutopilotStats(), event=lambda t, m: None,
+                          speed=lambda: params.cruise_speed)
     handoff.submit(s, SensedObstacles(np.zeros((10, 10), bool), 1.0), None, None)
     start = worker.requests[-1].problem
     return map_to_ned(start.x, start.y, start.heading)[2]

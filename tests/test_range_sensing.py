@@ -133,7 +133,7 @@ def test_a_scan_is_its_true_ranges_plus_noise_rounded_clipped_and_missed_per_sec
 
 def test_simulator_sends_obstacle_distance_at_its_rate_only_with_a_world():
     cfg = load(None, QUIET + ["sim.initial.x=10.0", "sim.initial.y=50.0"])
-    dec = Codec(255, 0, accept=("HIL_SENSOR", "HIL_GPS", "HIL_STATE_QUATERNION", "OBSTACLE_DISTANCE"))
+    dec = Codec(255, 0, accept=("HIL_SENSOR", "HIL_GPS", "HIL_STATE_QUATERNION", "OBSTACLE_DISTANCE", "BATTERY_STATUS"))
     for world, expected in ((WorldMap(wall_world(), RES), 5), (None, 0)):
         core = SimulatorCore(cfg, world)
         scans = []
