@@ -22,13 +22,11 @@ from __future__ import annotations
 
 import json
 import math
-import threading
-import time
-from collections.abc import Callable
 from typing import Any
 
 import pytest
 from support.gcs_client import HOME_MAP, check_mission_session, qgc_mission, start_run, stop_run
+from support.watch import Watch
 
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE as M
@@ -49,38 +47,6 @@ except (ImportError, OSError) as exc:  # OSError: the bundled libcmavsdk.so does
 GEO = LocalFrame(38.92, 121.65, 0.0)  # [geodesy] of configs/default.toml
 WAYPOINTS_MAP = [(28.3, 47.5), (31.0, 51.0), (30.0, 58.0), (47.3, 70.0), (53.7, 77.5), (60.0, 85.0)]
 ROVER_AUTO, ROVER_HOLD = 10, 4
-
-
-class Watch:
-    """Values a MAVSDK callback delivers (from its own thread), and a bounded wait for one that fits."""
-
-    def __init__(self) -> None:
-        self.cond = threading.Condition()
-        self.values: list[Any] = []
-
-    def __call__(self, value: Any, _user_data: Any = None) -> None:
-        with self.cond:
-            self.values.append(value)
-            self.cond.notify_all()
-
-    def wait(self, pred: Callable[[Any], bool], timeout: float) -> Any:
-        """The first value (already seen or arriving within ``timeout`` s) satisfying ``pred``, or None."""
-        end = time.monotonic() + timeout
-        seen = 0
-        with self.cond:
-            while True:
-                for v in self.values[seen:]:
-                    if pred(v):
-                        return v
-                seen = len(self.values)
-                left = end - time.monotonic()
-                if left <= 0:
-                    return None
-                self.cond.wait(left)
-
-    def last(self) -> Any:
-        with self.cond:
-            return self.values[-1] if self.values else None
 
 
 def _item(seq: int, x: float, y: float, command: int = M.MAV_CMD_NAV_WAYPOINT) -> MissionItem:

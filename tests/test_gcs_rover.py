@@ -18,15 +18,12 @@ from __future__ import annotations
 
 import json
 import math
-import threading
-import time
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
 from support.gcs_client import HOME_MAP, Gcs, start_run, stop_run
+from support.watch import Watch
 
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE as M
@@ -47,33 +44,6 @@ ROVER_HOLD, ROVER_AUTO, ROVER_RTL, ROVER_GUIDED = 4, 10, 11, 15
 # Open water north-east of the harbour's start (map x east, y north, m): legs of 10-12 m.
 A, B, C = (28.0, 50.0), (30.0, 60.0), (26.0, 68.0)
 SPEED_1, SPEED_2 = 1.0, 0.6       # m/s: the plan's first and second DO_CHANGE_SPEED
-
-
-class Watch:
-    """Values a MAVSDK callback delivers (from its own thread), and a bounded wait for one that fits."""
-
-    def __init__(self) -> None:
-        self.cond = threading.Condition()
-        self.values: list[Any] = []
-
-    def __call__(self, value: Any, _user_data: Any = None) -> None:
-        with self.cond:
-            self.values.append(value)
-            self.cond.notify_all()
-
-    def wait(self, pred: Callable[[Any], bool], timeout: float) -> Any:
-        end = time.monotonic() + timeout
-        seen = 0
-        with self.cond:
-            while True:
-                for v in self.values[seen:]:
-                    if pred(v):
-                        return v
-                seen = len(self.values)
-                left = end - time.monotonic()
-                if left <= 0:
-                    return None
-                self.cond.wait(left)
 
 
 def _latlon(p: tuple[float, float]) -> tuple[float, float]:

@@ -213,6 +213,7 @@ def test_system_id_reaches_the_codec_and_the_link():
     s = Session()
     assert s.param_set("SYSID_THISMAV", 7)
     assert s.link.out.codec.mav.srcSystem == 7 and s.link.view.sysid == 7
+    assert s.link.mission is not None and s.link.mission.sysid == 7    # the mission service reads it live too
     frame_bytes = s.link.out.codec.encode("heartbeat", 11, 3, 0, 0, 0)
     assert mavlink2.MAVLink(None).parse_char(bytearray(frame_bytes)).get_srcSystem() == 7
     assert not s.param_set("SYSID_THISMAV", 1, target=1)     # addressed to the old id: not for us any more

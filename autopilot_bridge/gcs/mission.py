@@ -218,7 +218,8 @@ class MissionServer:
         self.mission_check = mission_check
         if mission_check is not None:
             self.plan_checks[MISSION] = mission_check
-        self.sysid, self.compid = system_id, component_id
+        self._sysid, self.compid = system_id, component_id
+        self.system_id: Callable[[], int] = lambda: self._sysid   # the link sets it to read SYSID_THISMAV live
         self.max_items, self.item_timeout, self.retries = max_items, item_timeout, retries
         self.position_check = position_check
         self.upload: _Upload | None = None
@@ -237,11 +238,16 @@ class MissionServer:
     def items(self, items: tuple[MissionItem, ...]) -> None:
         self.plans[MISSION] = tuple(items)
 
+    @property
+    def sysid(self) -> int:
+        return self.system_id()
+
     def _count(self, key: str) -> None:
         self.stats[key] = self.stats.get(key, 0) + 1
 
     def _for_us(self, msg: Any) -> bool:
-        return msg.target_system in (0, self.sysid) and msg.target_component in (0, self.compid, M.MAV_COMP_ID_ALL)
+        return (msg.target_system in (0, self.system_id())
+                and msg.target_component in (0, self.compid, M.MAV_COMP_ID_ALL))
 
     @staticmethod
     def _ack(to: tuple[int, int], code: int, mission_type: int = MISSION) -> Out:

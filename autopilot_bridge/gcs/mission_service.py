@@ -39,6 +39,7 @@ class MissionService:
                                     mission_check=self._check_mission,
                                     home=self._home_item if self.home_item else None,
                                     plan_checks={RALLY: self._check_rally})
+        self.server.system_id = lambda: self.view.sysid   # SYSID_THISMAV read live, never copied
 
     def _home_item(self) -> MissionItem | None:
         """The home in force as mission item 0 (a NAV_WAYPOINT at home, as ArduPilot sends it)."""
