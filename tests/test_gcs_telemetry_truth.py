@@ -130,7 +130,7 @@ def test_low_battery_failsafe_warns_and_leaves_auto(tmp_path):
     def heard(seen: list[Any]) -> bool:
         return any(m.get_type() == "HEARTBEAT" and m.custom_mode in (5, 11) for m in seen)
 
-    seen, out = _session(tmp_path, "--set", "battery.initial_soc=0.05", "--set", "battery_monitor.low_timer=2.0",
+    seen, out = _session(tmp_path, "--set", "battery.initial_soc=0.05", "--set", "battery_monitor.low_timer=10.0",
                          until=40.0, stop=heard)
     texts = [m.text for m in seen if m.get_type() == "STATUSTEXT"]
     low = [x for x in texts if x.startswith("Battery 1 is low")]
