@@ -68,6 +68,10 @@ CLAIMS: tuple[tuple[str, str, int, str], ...] = (
     ("cost", "cost", -1, "mean"),
     ("Σcos α_y", "sum_cos", +1, "mean"),
     ("Σsin α_y", "sum_sin", -1, "mean"),
+    # the same two claims at the waypoints of the local paths (section 4.2's count), beside the
+    # per-2 m sums above; added after the 50-run campaign, same rule
+    ("Σcos α_y (waypoints)", "sum_cos_wp", +1, "mean"),
+    ("Σsin α_y (waypoints)", "sum_sin_wp", -1, "mean"),
     ("cf(π)", "cf", +1, "mean"),
     ("time EVP", "time_s", -1, "std"),
     ("cost EVP", "cost", -1, "std"),
@@ -75,10 +79,14 @@ CLAIMS: tuple[tuple[str, str, int, str], ...] = (
 )
 
 
-def command(cell: Cell, runs: int, out: Path, jobs: int = 2, seed: int = 1) -> list[str]:
-    """The `hil montecarlo` command of one cell."""
+def command(cell: Cell, runs: int, out: Path, jobs: int = 2, seed: int = 1,
+            algorithms: str | None = None) -> list[str]:
+    """The `hil montecarlo` command of one cell (``algorithms``: a comma-separated subset; the
+    verdicts need rrt-star and ddrrt-star only, and each run's seed does not depend on the others)."""
     base = ["hil", "montecarlo", "--scenario", cell.scenario, "--runs", str(runs), "--jobs", str(jobs),
             "--seed", str(seed), "--baseline-objective", "length", "--no-plots", "--out", str(out / cell.name)]
+    if algorithms:
+        base[6:6] = ["--algorithms", algorithms]
     return base + list(PAPER) + list(cell.args)
 
 
@@ -145,12 +153,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=Path("docs/experiments/campaign34"))
     ap.add_argument("--cells", default=",".join(c.name for c in CELLS))
+    ap.add_argument("--algorithms", default=None,
+                    help="comma-separated planners (default: hil montecarlo's three; the verdicts use "
+                         "rrt-star and ddrrt-star)")
     ap.add_argument("--verdicts-only", action="store_true")
     args = ap.parse_args(argv)
     chosen = [c for c in CELLS if c.name in args.cells.split(",")]
     if not args.verdicts_only:
         for cell in chosen:
-            cmd = command(cell, args.runs, args.out, args.jobs)
+            cmd = command(cell, args.runs, args.out, args.jobs, algorithms=args.algorithms)
             print(shlex.join(cmd), file=sys.stderr, flush=True)
             subprocess.run([sys.executable, "-m", *cmd], check=True, stdout=subprocess.DEVNULL)
     result = {}

@@ -29,7 +29,11 @@ LABELS = {e.name: e.label for e in REGISTRY}
 # (with an iteration budget); the time columns are wall-clock measurements.
 DETERMINISTIC = ("run", "algorithm", "planner_seed", "reached", "reason", "cycles", "iterations", "cost", "length",
                  "sum_cos", "sum_sin", "cf", "turns", "total_curvature", "bending_energy", "smoothing_fallbacks",
-                 "start_x", "start_y", "goal_x", "goal_y", "search_iterations", "search_checks")
+                 "start_x", "start_y", "goal_x", "goal_y", "search_iterations", "search_checks",
+                 "sum_cos_wp", "sum_sin_wp", "waypoints")
+# sum_cos / sum_sin are taken on the executed path every 2 m (metric_spacing); sum_cos_wp /
+# sum_sin_wp at the waypoints of the local paths the vessel left, as section 4.2 counts them
+# (planner.metrics.waypoint_alpha_sums; waypoints = how many).
 # Table 3's "time" four ways (issue 34): time_s (wall clock), time_cpu_s (the planning thread's CPU
 # time), search_iterations and search_checks (iterations and collision checks), each summed over the
 # cycles to each cycle's first solution (the whole cycle where it found none).
@@ -146,6 +150,8 @@ def run_task(task: Task) -> dict[str, Any]:
         "smoothing_fallbacks": int(sum(1 for c in res.cycles if len(c.smooth_path) >= 2 and not c.smoothed_ok)),
         "start_x": sc.start[0], "start_y": sc.start[1], "goal_x": sc.goal[0], "goal_y": sc.goal[1],
         "search_iterations": res.search_iterations, "search_checks": res.search_checks,
+        "sum_cos_wp": m.get("sum_cos_wp", math.nan), "sum_sin_wp": m.get("sum_sin_wp", math.nan),
+        "waypoints": int(m.get("waypoints_wp", 0)),
         "time_s": res.search_time_s, "time_cpu_s": res.search_cpu_s, "planning_time_s": res.planning_time_s,
         "wall_s": time.monotonic() - t0,
     }
@@ -246,13 +252,14 @@ def table3(rows: Sequence[dict[str, Any]], algorithms: Sequence[str] = ALGORITHM
         rec["cost"], rec["cost_std"] = _mean_std([r["cost"] for r in ok])
         for k in ("sum_cos", "sum_sin", "cf", "length", "turns", "bending_energy", "cycles"):
             rec[k] = _mean_std([float(r[k]) for r in ok])[0]
-        for k in ("time_cpu_s", "search_iterations", "search_checks"):  # absent from runs.csv before issue 34
+        for k in ("time_cpu_s", "search_iterations", "search_checks",   # absent from runs.csv before issue 34
+                  "sum_cos_wp", "sum_sin_wp"):
             rec[k] = _mean_std([float(r.get(k, math.nan)) for r in ok])[0]
         out.append(rec)
     base = next((r for r in out if r["algorithm"] == "rrt-star"), None)
     for rec in out:
         for k in ("time_s", "cost", "sum_cos", "sum_sin", "cf", "time_std_s", "cost_std", "time_cpu_s",
-                  "search_iterations", "search_checks"):
+                  "search_iterations", "search_checks", "sum_cos_wp", "sum_sin_wp"):
             b = base[k] if base else math.nan
             rec[f"{k}_vs_rrt_pct"] = (rec[k] - b) / abs(b) * 100.0 if base and b and math.isfinite(b) else math.nan
     return out
@@ -262,7 +269,8 @@ TABLE_COLUMNS = ("algorithm", "runs", "reached", "success_rate", "time_s", "time
                  "sum_cos", "sum_sin", "cf", "length", "turns", "bending_energy", "cycles",
                  "time_s_vs_rrt_pct", "cost_vs_rrt_pct", "sum_cos_vs_rrt_pct", "sum_sin_vs_rrt_pct", "cf_vs_rrt_pct",
                  "time_std_s_vs_rrt_pct", "cost_std_vs_rrt_pct", "time_cpu_s", "search_iterations", "search_checks",
-                 "time_cpu_s_vs_rrt_pct", "search_iterations_vs_rrt_pct", "search_checks_vs_rrt_pct")
+                 "time_cpu_s_vs_rrt_pct", "search_iterations_vs_rrt_pct", "search_checks_vs_rrt_pct",
+                 "sum_cos_wp", "sum_sin_wp", "sum_cos_wp_vs_rrt_pct", "sum_sin_wp_vs_rrt_pct")
 
 
 def write_table_csv(path: Path, table: Sequence[dict[str, Any]]) -> Path:
@@ -289,20 +297,24 @@ def table_markdown(table: Sequence[dict[str, Any]], title: str = "") -> str:
     if title:
         lines += [f"**{title}**", ""]
     lines += [
-        "| algorithm | runs | reached | time (s) | time EVP (s) | cost | cost EVP | Σcos α_y | Σsin α_y | cf(π) |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| algorithm | runs | reached | time (s) | time EVP (s) | cost | cost EVP | Σcos α_y | Σsin α_y | cf(π) | "
+        "Σcos α_y (waypoints) | Σsin α_y (waypoints) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in table:
         lines.append(f"| {LABELS.get(r['algorithm'], r['algorithm'])} | {r['runs']} | {r['reached']} | "
                      f"{_n(r['time_s'], 4)} | {_n(r['time_std_s'], 4)} | {_n(r['cost'], 2)} | {_n(r['cost_std'], 2)} | "
-                     f"{_n(r['sum_cos'], 2)} | {_n(r['sum_sin'], 2)} | {_n(r['cf'], 4)} |")
+                     f"{_n(r['sum_cos'], 2)} | {_n(r['sum_sin'], 2)} | {_n(r['cf'], 4)} | "
+                     f"{_n(r.get('sum_cos_wp', math.nan), 2)} | {_n(r.get('sum_sin_wp', math.nan), 2)} |")
+    lines += ["", "Σcos α_y, Σsin α_y: on the executed path every 2 m; (waypoints): at the waypoints of the "
+              "local paths the vessel left, as section 4.2 counts them."]
     lines += [
         "",
         "Relative to RRT* (ours; the paper's in brackets where section 4.2 gives it):",
         "",
         "| algorithm | time | cost | time EVP | cost EVP | Σcos α_y | Σsin α_y | cf(π) | CPU time | iterations | "
-        "collision checks |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "collision checks | Σcos α_y (waypoints) | Σsin α_y (waypoints) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in table:
         if r["algorithm"] == "rrt-star":
@@ -315,7 +327,8 @@ def table_markdown(table: Sequence[dict[str, Any]], title: str = "") -> str:
                      f"{_pct(r['cost_std_vs_rrt_pct'])} | {_pct(r['sum_cos_vs_rrt_pct'])}{pc} | "
                      f"{_pct(r['sum_sin_vs_rrt_pct'])}{ps} | {_pct(r['cf_vs_rrt_pct'])} | "
                      f"{_pct(r['time_cpu_s_vs_rrt_pct'])} | {_pct(r['search_iterations_vs_rrt_pct'])} | "
-                     f"{_pct(r['search_checks_vs_rrt_pct'])} |")
+                     f"{_pct(r['search_checks_vs_rrt_pct'])} | {_pct(r.get('sum_cos_wp_vs_rrt_pct', math.nan))}{pc} | "
+                     f"{_pct(r.get('sum_sin_wp_vs_rrt_pct', math.nan))}{ps} |")
     return "\n".join(lines) + "\n"
 
 

@@ -3,6 +3,9 @@
 * cost: eq. (12) summed (``cost.path_cost``); length in metres;
 * sum_cos, sum_sin: sums of cos(alpha_y) and sin(alpha_y) over the legs, alpha_y taken at each
   leg's midpoint (legs where the current is zero are skipped);
+* sum_cos_wp, sum_sin_wp (:func:`waypoint_alpha_sums`): the same sums "at waypoints", as section
+  4.2 defines them: alpha_y between the current at each waypoint of the planned path and the
+  direction of the leg leaving it (the paper's count; the sums above depend on the 2 m spacing);
 * cf: eq. (14), the product over waypoints of p_c = P(n/2, c_q^2 / 2), the regularised lower
   incomplete gamma function with n = 2 (planar position), c_q = clearance / sigma where the
   clearance is the distance from the waypoint's cell centre to the nearest obstacle cell centre
@@ -31,6 +34,24 @@ def collision_free_probability(clearances: np.ndarray, sigma: float, n: int = 2)
     """Eq. (14): prod P(n/2, (clearance / sigma)^2 / 2)."""
     c = np.asarray(clearances, dtype=np.float64) / sigma
     return float(np.prod(gammainc(n / 2.0, 0.5 * c * c)))
+
+
+def waypoint_alpha_sums(points, directions, field) -> tuple[float, float]:
+    """Σcos alpha_y and Σsin alpha_y at waypoints: alpha_y between the current at each point
+    ((N, 2) map-frame metres) and the direction ((N, 2), any length) the vessel leaves it in.
+    Points where the current or the direction is zero are skipped; (0, 0) without a field."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 2)
+    if field is None or len(p) == 0:
+        return 0.0, 0.0
+    vx, vy = field(p[:, 0], p[:, 1])
+    vx = np.broadcast_to(np.asarray(vx, dtype=np.float64), (len(p),))
+    vy = np.broadcast_to(np.asarray(vy, dtype=np.float64), (len(p),))
+    nv = np.hypot(vx, vy)
+    nd = np.hypot(d[:, 0], d[:, 1])
+    ok = (nv > 1e-9) & (nd > 1e-12)
+    c = np.clip((d[ok, 0] * vx[ok] + d[ok, 1] * vy[ok]) / (nd[ok] * nv[ok]), -1.0, 1.0)
+    return float(np.sum(c)), float(np.sum(np.sqrt(1.0 - c * c)))
 
 
 def path_metrics(path, field, grid: OccupancyGrid | None, params, clearance_sigma: float = 0.5,

@@ -39,7 +39,7 @@ from scipy import ndimage
 from planner import make_planner
 from planner.cost import path_cost_fn, path_length
 from planner.gridmap import OccupancyGrid
-from planner.metrics import path_metrics
+from planner.metrics import path_metrics, waypoint_alpha_sums
 from planner.params import PlannerParams
 from planner.postprocess import check_and_replan, prune
 from planner.problem import PlanningProblem
@@ -142,6 +142,10 @@ class OnlineResult:
     search_cpu_s: float = 0.0      # Table 3 "time" as thread CPU time, iterations and collision checks
     search_iterations: int = 0
     search_checks: int = 0
+    # the waypoints of the local paths the vessel left (each cycle's pruned path, its vertices
+    # before the distance sailed in that cycle) and the direction of the leg leaving each
+    waypoints: np.ndarray = dc_field(default_factory=lambda: np.zeros((0, 2)))
+    waypoint_directions: np.ndarray = dc_field(default_factory=lambda: np.zeros((0, 2)))
 
 
 @dataclass
@@ -595,6 +599,8 @@ def run_online(ctx: OnlineContext, start: VesselState, seed: int,
     state = start
     cycles: list[CycleRecord] = []
     executed = [np.array([[start.x, start.y]])]
+    waypoints: list[np.ndarray] = []
+    directions: list[np.ndarray] = []
     failures = 0
     reached, reason = False, f"gave up after {online.max_cycles} cycles"
     step = params.speed * online.cycle_time
@@ -619,6 +625,9 @@ def run_online(ctx: OnlineContext, start: VesselState, seed: int,
         rec.travelled = travelled
         executed.append(travelled[1:])
         sailed = path_length(travelled)
+        wp, wd = sailed_waypoints(rec.local_path, sailed)
+        waypoints.append(wp)
+        directions.append(wd)
         end = travelled[-1]
         state = VesselState(float(end[0]), float(end[1]),
                             state.heading if math.isnan(heading) else heading,
@@ -633,6 +642,10 @@ def run_online(ctx: OnlineContext, start: VesselState, seed: int,
     # Table 3 measures every path with eq. (12), whatever objective the planner optimised.
     metrics = (path_metrics(sampled, ctx.field, ctx.grid, replace(params, objective="current"), online.clearance_sigma)
                if len(sampled) >= 2 else {})
+    wps = np.concatenate(waypoints) if waypoints else np.zeros((0, 2))
+    wds = np.concatenate(directions) if directions else np.zeros((0, 2))
+    metrics["sum_cos_wp"], metrics["sum_sin_wp"] = waypoint_alpha_sums(wps, wds, ctx.field)
+    metrics["waypoints_wp"] = float(len(wps))
     return OnlineResult(
         reached=reached, reason=reason, cycles=cycles, executed=path, final=state,
         search_time_s=float(sum(c.search_time_s for c in cycles)),
@@ -641,7 +654,22 @@ def run_online(ctx: OnlineContext, start: VesselState, seed: int,
         search_iterations=int(sum(c.search_iterations for c in cycles)),
         search_checks=int(sum(c.search_checks for c in cycles)),
         metrics={k: float(v) for k, v in metrics.items() if np.isscalar(v)},  # type: ignore[arg-type]  # real numbers
+        waypoints=wps, waypoint_directions=wds,
     )
+
+
+def sailed_waypoints(local_path: np.ndarray, sailed: float) -> tuple[np.ndarray, np.ndarray]:
+    """The waypoints of a cycle's pruned local path that the vessel left in that cycle (those
+    before ``sailed`` metres along the path, its last point never: the next cycle starts there
+    or the run ends) and the direction of the leg leaving each (unit vectors)."""
+    p = np.asarray(local_path, dtype=float).reshape(-1, 2)
+    if len(p) < 2:
+        return np.zeros((0, 2)), np.zeros((0, 2))
+    legs = np.diff(p, axis=0)
+    lengths = np.hypot(legs[:, 0], legs[:, 1])
+    arc = np.concatenate([[0.0], np.cumsum(lengths)[:-1]])
+    keep = (arc < sailed) & (lengths > 1e-12)
+    return p[:-1][keep], legs[keep] / lengths[keep, None]
 
 
 def make_context(grid: OccupancyGrid, goal: tuple[float, float], reference_path: np.ndarray,

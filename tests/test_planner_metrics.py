@@ -9,7 +9,8 @@ from scipy.special import gammainc
 from planner import PlannerParams
 from planner.field import GridField
 from planner.gridmap import OccupancyGrid
-from planner.metrics import collision_free_probability, path_metrics
+from planner.metrics import collision_free_probability, path_metrics, waypoint_alpha_sums
+from planner.online import sailed_waypoints
 from planner.postprocess import dubins_path
 from planner.termination import Termination
 
@@ -38,6 +39,33 @@ def test_metrics_of_a_right_angle_path():
     # clearances: 2 m (wall centre at x = 0.25), 12 m, 12 m
     expect = (1 - math.exp(-0.5 * 4.0 ** 2)) * (1 - math.exp(-0.5 * 24.0 ** 2)) ** 2
     assert m["cf"] == pytest.approx(expect)
+
+
+def test_alpha_sums_at_waypoints_count_each_waypoint_once_whatever_the_spacing():
+    # The right angle path: two waypoints leave downstream and across (the last waypoint leaves
+    # nothing); per 2 m the same path gives 5 + 5 legs, at waypoints 1 + 1.
+    east = GridField.uniform(1.0, 0.0)
+    path = np.array([[2.0, 2.0], [12.0, 2.0], [12.0, 12.0]])
+    wp, wd = sailed_waypoints(path, sailed=math.inf)
+    assert wp.tolist() == [[2.0, 2.0], [12.0, 2.0]] and wd.tolist() == [[1.0, 0.0], [0.0, 1.0]]
+    assert waypoint_alpha_sums(wp, wd, east) == pytest.approx((1.0, 1.0))
+    dense = np.column_stack([np.r_[np.arange(2.0, 12.0, 2.0), np.full(6, 12.0)], np.r_[np.full(5, 2.0),
+                                                                                      np.arange(2.0, 13.0, 2.0)]])
+    m = path_metrics(dense, east, None, PlannerParams(objective="current"))
+    assert m["sum_cos"] == pytest.approx(5.0) and m["sum_sin"] == pytest.approx(5.0)
+    # upstream: cos = -1, sin = 0; no field or no current: nothing counted
+    assert waypoint_alpha_sums([[0, 0]], [[-3.0, 0.0]], east) == pytest.approx((-1.0, 0.0))
+    assert waypoint_alpha_sums(wp, wd, None) == (0.0, 0.0)
+    assert waypoint_alpha_sums(wp, wd, GridField.uniform(0.0, 0.0)) == (0.0, 0.0)
+
+
+def test_sailed_waypoints_stop_where_the_vessel_stopped():
+    path = np.array([[0.0, 0.0], [5.0, 0.0], [5.0, 5.0], [10.0, 5.0]])
+    wp, _ = sailed_waypoints(path, 7.0)          # passed the waypoint at 5 m, not the one at 10 m
+    assert wp.tolist() == [[0.0, 0.0], [5.0, 0.0]]
+    wp, _ = sailed_waypoints(path, 0.5)
+    assert wp.tolist() == [[0.0, 0.0]]
+    assert len(sailed_waypoints(path[:1], 10.0)[0]) == 0
 
 
 def test_curvature_of_a_sampled_arc():
