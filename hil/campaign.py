@@ -57,6 +57,10 @@ CELLS: tuple[Cell, ...] = (
     # random maps (Figure 11's generator, straight reference path), added with `whole`
     Cell("random", "random maps", (), "random"),
     Cell("random-fixes", "random maps, issue 34's fixes on", FIXES, "random"),
+    # added after the 200-run campaign of the cells above (same rule): the whole-path model with
+    # the subtree reused (section 3.5, line 3)
+    Cell("whole-reuse", "whole-path execution, the subtree rooted at the new start reused",
+         ("--execution", "whole-path", "--tree-reuse")),
 )
 
 # claim: (column, the paper's direction of DDRRT* - RRT*: -1 lower, +1 higher, statistic)

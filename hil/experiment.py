@@ -30,7 +30,7 @@ LABELS = {e.name: e.label for e in REGISTRY}
 DETERMINISTIC = ("run", "algorithm", "planner_seed", "reached", "reason", "cycles", "iterations", "cost", "length",
                  "sum_cos", "sum_sin", "cf", "turns", "total_curvature", "bending_energy", "smoothing_fallbacks",
                  "start_x", "start_y", "goal_x", "goal_y", "search_iterations", "search_checks",
-                 "sum_cos_wp", "sum_sin_wp", "waypoints")
+                 "sum_cos_wp", "sum_sin_wp", "waypoints", "reused_nodes")
 # sum_cos / sum_sin are taken on the executed path every 2 m (metric_spacing); sum_cos_wp /
 # sum_sin_wp at the waypoints of the local paths the vessel left, as section 4.2 counts them
 # (planner.metrics.waypoint_alpha_sums; waypoints = how many).
@@ -152,6 +152,7 @@ def run_task(task: Task) -> dict[str, Any]:
         "search_iterations": res.search_iterations, "search_checks": res.search_checks,
         "sum_cos_wp": m.get("sum_cos_wp", math.nan), "sum_sin_wp": m.get("sum_sin_wp", math.nan),
         "waypoints": int(m.get("waypoints_wp", 0)),
+        "reused_nodes": int(sum(c.reused_nodes for c in res.cycles)),   # --tree-reuse: nodes kept over the run
         "time_s": res.search_time_s, "time_cpu_s": res.search_cpu_s, "planning_time_s": res.planning_time_s,
         "wall_s": time.monotonic() - t0,
     }
@@ -218,7 +219,7 @@ def read_runs_csv(path: Path) -> list[dict[str, Any]]:
                     row[k] = v
                 elif k == "reached":
                     row[k] = v == "1"
-                elif k in ("run", "cycles", "iterations", "planner_seed", "smoothing_fallbacks"):
+                elif k in ("run", "cycles", "iterations", "planner_seed", "smoothing_fallbacks", "reused_nodes"):
                     row[k] = int(v)
                 elif k in ("search_iterations", "search_checks"):
                     row[k] = int(float(v))

@@ -1115,3 +1115,45 @@ def grow(world, cfg_a, tree, state_a, scratch, max_iter, deadline_ns, stop_on_ex
         if stop_on_exact and state.goal >= 0:
             return DONE_EXACT
     return DONE_ITERATIONS
+
+
+@njit(cache=True)
+def seed_tree(world, cfg_a, tree, state_a, clock, nodes, parents):
+    """Start the search from a reused tree (section 3.5, line 3): append ``nodes[1:]`` (m, 2) to
+    a tree that holds only its root, ``nodes[0]`` being that root's place and ``parents`` (m,)
+    each node's parent index into ``nodes`` (smaller than its own; -1 for the root). A node is
+    kept only if its parent was kept, it lies in the sampling domain, its edge lies in its
+    parent's turning fan and is collision free on this search's map (a collision check each,
+    counted). Costs are recomputed from the root with this search's objective, dynamic domains
+    start unbounded, and each kept node is offered the goal as a grown node is. Returns the
+    number of nodes kept (the root not counted)."""
+    cfg = cfg_a[0]
+    state = state_a[0]
+    m = nodes.shape[0]
+    where = np.full(m, -1, dtype=np.int64)
+    where[0] = 0
+    X = tree.X
+    kept = 0
+    for i in range(1, m):
+        p = parents[i]
+        if p < 0 or p >= i or where[p] < 0:
+            continue
+        if state.n + 2 > cfg.cap:
+            break
+        q = where[p]
+        x = nodes[i, 0]
+        y = nodes[i, 1]
+        if not _in_domain(x, y, cfg):
+            continue
+        dx = x - X[q, 0]
+        dy = y - X[q, 1]
+        if dx * dx + dy * dy < 1e-18 or not _fan_ok(tree.head[q], dx, dy, cfg.max_turn):
+            continue
+        if not _free(world, cfg, state, X[q, 0], X[q, 1], x, y):
+            continue
+        c = tree.cost[q] + _cost(X[q, 0], X[q, 1], x, y, world.fvx, world.fvy, cfg)
+        j = _add_node(x, y, q, c, world, cfg, tree, state)
+        where[i] = j
+        kept += 1
+        _try_goal(j, world, cfg, tree, state, clock)
+    return kept

@@ -217,13 +217,22 @@ class TreePlanner:
         st["closest"] = 0
         st["closest_d"] = math.hypot(gx - sx, gy - sy)
         st["first_ns"] = -1.0
+        scratch = _tree.new_scratch()
+        reused = 0
+        if problem.initial_tree is not None:
+            nodes, parents = problem.initial_tree
+            nodes = np.ascontiguousarray(nodes, dtype=np.float64).reshape(-1, 2)
+            parents = np.ascontiguousarray(parents, dtype=np.int64).reshape(-1)
+            if len(nodes) != len(parents):
+                raise ValueError("initial_tree: nodes and parents differ in length")
+            if len(nodes) > 1:
+                reused = int(_tree.seed_tree(world, cfg, tree, state, scratch.clock, nodes, parents))
 
         bounds = termination.bounds()
         deadline_ns = -1 if bounds.monotonic_deadline is None else int(bounds.monotonic_deadline * 1e9)
         if deadline_ns >= 0 and not compiled_clock_ok():
             deadline_ns = -1
             bounds = dataclasses.replace(bounds, poll_python=True)
-        scratch = _tree.new_scratch()
         _tree.seed_rng(self.seed)
         why = "termination condition met"
         while True:
@@ -245,7 +254,9 @@ class TreePlanner:
                 break
         termination.notify(int(st["iter"]), bool(st["goal"] >= 0))
         cpu_s = (time.thread_time_ns() - cpu0_ns) * 1e-9
-        return self._result(problem, t0, tree, st, why, cpu_s, cpu0_ns, png)
+        res = self._result(problem, t0, tree, st, why, cpu_s, cpu0_ns, png)
+        res.diagnostics["reused_nodes"] = reused
+        return res
 
     def _result(self, problem, t0, tree: _tree.Tree, st, why, cpu_s=0.0, cpu0_ns=0, png=None) -> PlannerResult:
         """The result of a search: the path to the goal (or to the closest node), the tree, the

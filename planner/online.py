@@ -81,11 +81,17 @@ class OnlineParams:
     execution: Literal["receding", "whole-path"] = dc_field(default="receding", metadata=_p(
         "how much of each local path the vessel sails before the next cycle plans: 'receding' (speed * "
         "cycle_time, then replan) or 'whole-path' (the whole local path, the next planned from its end, as "
-        "section 3.5 executes it; the tree is not reused)"))
+        "section 3.5 executes it; the tree is reused only with tree_reuse)"))
+    tree_reuse: bool = dc_field(default=False, metadata=_p(
+        "whole-path execution only: start each cycle's tree from the subtree of the previous tree rooted at "
+        "the node where the vessel now is (section 3.5, line 3), the nodes still valid on the new map kept"))
 
     def __post_init__(self) -> None:
         if self.execution not in EXECUTION_MODELS:
             raise ValueError(f"execution: must be one of {', '.join(EXECUTION_MODELS)} (got {self.execution!r})")
+        if self.tree_reuse and self.execution != "whole-path":
+            raise ValueError("tree_reuse: needs execution = \"whole-path\" (a receding cycle stops between tree "
+                             "nodes, so no subtree starts where the vessel is)")
         if self.local_iterations == 0 and self.local_time == 0:
             raise ValueError("local_iterations: a cycle needs a budget (local_iterations or local_time > 0)")
 
@@ -125,6 +131,7 @@ class CycleRecord:
     search_cpu_s: float = 0.0
     search_iterations: int = 0
     search_checks: int = 0
+    reused_nodes: int = 0          # nodes of the previous cycle's tree this one started with (tree_reuse)
 
 
 @dataclass
@@ -380,7 +387,8 @@ def select_local_subgoal(ctx: OnlineContext, pos: tuple[float, float]) -> tuple[
 
 
 def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
-               clock: Callable[[], float] = time.monotonic, traffic: Any = None) -> CycleRecord:
+               clock: Callable[[], float] = time.monotonic, traffic: Any = None,
+               reuse: tuple[np.ndarray, np.ndarray] | None = None) -> CycleRecord:
     """One planning cycle from ``state`` (see the module docstring); does not move the vessel.
 
     ``traffic`` (a :class:`planner.traffic_map.TrafficSnapshot`): moving ships, painted into the
@@ -388,9 +396,12 @@ def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
     chosen path is then checked with its own arrival times (section 3.3). Arrival times depend
     on the speed, so the cycle tries the speed factors of ``traffic.speed_factors`` in turn (full
     speed first) and keeps the first that reaches the subgoal where it lies without traffic: a
-    give-way ship that cannot turn away in time slows down instead."""
+    give-way ship that cannot turn away in time slows down instead.
+
+    ``reuse``: a tree to start from, (nodes, parents) rooted at the vessel (:func:`reusable_subtree`;
+    without traffic only)."""
     if traffic is None or not traffic.obstacles:
-        return _plan_cycle_once(ctx, state, index, seed, clock, None)
+        return _plan_cycle_once(ctx, state, index, seed, clock, None, reuse)
     fallback: CycleRecord | None = None
     for k, factor in enumerate(traffic.speed_factors):
         snap = replace(traffic, speed=traffic.speed * factor)
@@ -405,7 +416,8 @@ def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
 
 
 def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: int,
-                     clock: Callable[[], float], traffic: Any) -> CycleRecord:
+                     clock: Callable[[], float], traffic: Any,
+                     reuse: tuple[np.ndarray, np.ndarray] | None = None) -> CycleRecord:
     params, online = ctx.params, ctx.online
     pos = (state.x, state.y)
     sub_point, sub_index, rule = select_local_subgoal(ctx, pos)
@@ -451,11 +463,12 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
     problem = PlanningProblem(
         grid=grid, start=pos, goal=goal, start_heading=state.heading, field=ctx.field,
         reference_path=ctx.reference_path, bounds=(xmin, xmax, ymin, ymax),
-        domain_center=pos, domain_radius=r, wave_drift=ctx.wave_drift,
+        domain_center=pos, domain_radius=r, wave_drift=ctx.wave_drift, initial_tree=reuse,
     )
     termination = _termination(online, clock)
     planner = make_planner(params.algorithm, replace(params, seed=int(seed)))
     result: PlannerResult = planner.solve(problem, termination)
+    reused = int((result.diagnostics or {}).get("reused_nodes", 0))
     search = result.time_to_first_solution_s
     if search is None:
         search = result.planning_time_s
@@ -465,7 +478,8 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
         # can turn on the spot, so plan once more without the heading limit at the root.
         termination = _termination(online, clock)
         retry = make_planner(params.algorithm, replace(params, seed=int(seed) ^ 0x5A5A5A5)).solve(
-            replace(problem, start_heading=None), termination)
+            replace(problem, start_heading=None, initial_tree=None), termination)
+        reused = 0
         first = retry.time_to_first_solution_s
         search += first if first is not None else retry.planning_time_s
         measures = tuple(a + b for a, b in zip(measures, _search_measures(retry), strict=True))  # type: ignore[assignment]
@@ -475,7 +489,7 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
     if result.status == "none" or len(result.path) < 2:
         return _measured(CycleRecord(index, state, goal, rule, result.status, float(search), result.planning_time_s,
                                      result.iterations, empty, empty, False, result.tree_nodes, result.tree_parents,
-                                     reason=result.reason or "no local path"), measures)
+                                     reason=result.reason or "no local path"), measures, reused)
 
     local = prune(result.path, grid, path_cost_fn(ctx.field, params))
     radius = params.turn_radius_factor * params.speed
@@ -504,10 +518,10 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
             return _measured(CycleRecord(index, state, goal, rule, "none", float(search), result.planning_time_s,
                                          result.iterations, empty, empty, False, result.tree_nodes,
                                          result.tree_parents, reason=f"traffic conflict {when:.1f} s along the path"),
-                             measures)
+                             measures, reused)
     return _measured(CycleRecord(index, state, goal, rule, result.status, float(search), result.planning_time_s,
                                  result.iterations, local, smoothed, ok, result.tree_nodes, result.tree_parents,
-                                 reason="traffic moved the subgoal" if moved else result.reason), measures)
+                                 reason="traffic moved the subgoal" if moved else result.reason), measures, reused)
 
 
 def _search_measures(result: PlannerResult) -> tuple[float, int, int]:
@@ -520,8 +534,9 @@ def _search_measures(result: PlannerResult) -> tuple[float, int, int]:
     return float(d.get("thread_cpu_s", 0.0)), int(result.iterations), int(d.get("collision_checks", 0))
 
 
-def _measured(rec: CycleRecord, measures: tuple[float, int, int]) -> CycleRecord:
+def _measured(rec: CycleRecord, measures: tuple[float, int, int], reused: int = 0) -> CycleRecord:
     rec.search_cpu_s, rec.search_iterations, rec.search_checks = measures
+    rec.reused_nodes = reused
     return rec
 
 
@@ -602,13 +617,15 @@ def run_online(ctx: OnlineContext, start: VesselState, seed: int,
     waypoints: list[np.ndarray] = []
     directions: list[np.ndarray] = []
     failures = 0
+    reuse: tuple[np.ndarray, np.ndarray] | None = None
     reached, reason = False, f"gave up after {online.max_cycles} cycles"
     step = params.speed * online.cycle_time
     for i in range(online.max_cycles):
         if math.hypot(ctx.goal[0] - state.x, ctx.goal[1] - state.y) <= params.goal_tolerance:
             reached, reason = True, "goal reached"
             break
-        rec = plan_cycle(ctx, state, i, int(seeds[i]), clock)
+        rec = plan_cycle(ctx, state, i, int(seeds[i]), clock, reuse=reuse)
+        reuse = None
         cycles.append(rec)
         if len(rec.smooth_path) < 2:
             failures += 1
@@ -632,6 +649,9 @@ def run_online(ctx: OnlineContext, start: VesselState, seed: int,
         state = VesselState(float(end[0]), float(end[1]),
                             state.heading if math.isnan(heading) else heading,
                             state.t + (sailed / params.speed if params.speed > 0 else online.cycle_time))
+        if online.tree_reuse:
+            reuse = reusable_subtree(rec.tree_nodes, rec.tree_parents, (state.x, state.y),
+                                     REUSE_TOLERANCE * ctx.grid.resolution)
         if on_cycle:
             on_cycle(rec)
     else:
@@ -656,6 +676,40 @@ def run_online(ctx: OnlineContext, start: VesselState, seed: int,
         metrics={k: float(v) for k, v in metrics.items() if np.isscalar(v)},  # type: ignore[arg-type]  # real numbers
         waypoints=wps, waypoint_directions=wds,
     )
+
+
+REUSE_TOLERANCE = 0.5  # of a grid cell: how near the vessel's end of path a tree node must be to root the reused tree
+
+
+def reusable_subtree(nodes: np.ndarray, parents: np.ndarray, position: tuple[float, float],
+                     tolerance: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """Section 3.5, line 3: the part of a cycle's tree "not affected by the present USV motion":
+    the subtree rooted at the node where the vessel now is (the node nearest ``position``, if
+    within ``tolerance`` m; None otherwise). Returned as (nodes, parents) in breadth-first order,
+    root first and moved to ``position`` exactly, parents re-indexed (-1 for the root); the
+    next search keeps what is still valid there (``PlanningProblem.initial_tree``)."""
+    X = np.asarray(nodes, dtype=float).reshape(-1, 2)
+    P = np.asarray(parents, dtype=np.int64).reshape(-1)
+    if len(X) == 0 or len(X) != len(P):
+        return None
+    d = np.hypot(X[:, 0] - position[0], X[:, 1] - position[1])
+    root = int(np.argmin(d))
+    if d[root] > tolerance:
+        return None
+    children: dict[int, list[int]] = {}
+    for i, p in enumerate(P.tolist()):
+        if p >= 0:
+            children.setdefault(p, []).append(i)
+    order = [root]
+    k = 0
+    while k < len(order):
+        order.extend(children.get(order[k], ()))
+        k += 1
+    new_index = {old: new for new, old in enumerate(order)}
+    out_x = X[order].copy()
+    out_x[0] = position
+    out_p = np.array([-1] + [new_index[int(P[i])] for i in order[1:]], dtype=np.int64)
+    return out_x, out_p
 
 
 def sailed_waypoints(local_path: np.ndarray, sailed: float) -> tuple[np.ndarray, np.ndarray]:

@@ -26,6 +26,10 @@ class PlanningProblem:
     # the vessel's steady drift under the wave moment (m/s, map frame), added to the current where
     # alpha_y is measured against their resultant (PlannerParams.alpha_y = "resultant")
     wave_drift: tuple[float, float] | None = None
+    # a tree to start from (section 3.5, line 3): (nodes (m, 2), parents (m,)), nodes[0] at the
+    # start, each parent index smaller than its node's (-1 for the root); the search keeps the
+    # nodes that are still valid on this query's map and domain (planner._tree.seed_tree)
+    initial_tree: tuple[np.ndarray, np.ndarray] | None = None
 
     def sampling_box(self) -> tuple[float, float, float, float]:
         """The sampling box clipped to the map (and to the perceptual domain's bounding box)."""

@@ -272,3 +272,85 @@ def test_whole_path_execution_sails_each_local_path_to_its_end():
     with pytest.raises(ValueError, match="execution"):
         from planner.online import OnlineParams
         OnlineParams(execution="sometimes")
+
+
+def test_reusable_subtree_is_the_subtree_rooted_where_the_vessel_is():
+    from planner.online import reusable_subtree
+
+    # 0 -> 1 -> 2 -> {3, 5}; 0 -> 4; the vessel ends at node 2 (within the tolerance)
+    nodes = np.array([[0, 0], [4, 0], [8, 0], [12, 0], [0, 4], [8, 4]], dtype=float)
+    parents = np.array([-1, 0, 1, 2, 0, 2])
+    x, p = reusable_subtree(nodes, parents, (8.0, 0.1), 0.25)
+    assert x.tolist() == [[8.0, 0.1], [12, 0], [8, 4]] and p.tolist() == [-1, 0, 0]
+    assert reusable_subtree(nodes, parents, (6.0, 0.0), 0.25) is None     # between nodes: nothing to reuse
+    # breadth-first: every parent before its children, whatever the original numbering
+    x, p = reusable_subtree(nodes[[0, 3, 2, 1, 4, 5]], np.array([-1, 2, 3, 0, 0, 2]), (4.0, 0.0), 0.25)
+    assert x[0].tolist() == [4.0, 0.0] and all(p[i] < i for i in range(1, len(p)))
+    assert sorted(map(tuple, x[1:].tolist())) == [(8.0, 0.0), (8.0, 4.0), (12.0, 0.0)]
+
+
+def test_a_search_keeps_the_valid_nodes_of_its_initial_tree(labyrinth):
+    """The seeded tree holds every node of the initial tree that is still valid (in the domain,
+    in its parent's fan, collision free), each at its place, its parent the same node, its cost
+    recomputed from the new root; an empty budget returns it unchanged."""
+    params = PlannerParams(algorithm="rrt-star", objective="current")
+    first = make_planner("rrt-star", params, seed=3).solve(labyrinth, Termination.iterations(600))
+    from planner.online import reusable_subtree
+
+    # the subtree of a node one level below the root: a fresh start there, heading free
+    child = int(np.nonzero(first.tree_parents == 0)[0][0])
+    pos = tuple(first.tree_nodes[child])
+    init = reusable_subtree(first.tree_nodes, first.tree_parents, pos, 1e-9)
+    assert init is not None and len(init[0]) > 10
+    problem = replace(labyrinth, start=pos, start_heading=None, domain_center=pos, initial_tree=init)
+    seeded = make_planner("rrt-star", params, seed=3).solve(problem, Termination.iterations(0))
+    kept = seeded.diagnostics["reused_nodes"]
+    inside = np.hypot(*(init[0][1:] - np.asarray(pos)).T) <= 33.0
+    assert 0 < kept <= int(inside.sum())
+    assert seeded.iterations == 0
+    # each kept node is an initial-tree node with the same parent node
+    where = {tuple(v): i for i, v in enumerate(init[0].tolist())}
+    for j in range(1, 1 + kept):
+        i = where[tuple(seeded.tree_nodes[j].tolist())]
+        assert tuple(seeded.tree_nodes[seeded.tree_parents[j]].tolist()) == tuple(init[0][init[1][i]].tolist())
+    # an obstacle over the whole domain but the root's cell drops every node
+    blocked = labyrinth.grid.occ.copy()
+    blocked[:] = True
+    r, c = labyrinth.grid.cell_of(*pos)
+    blocked[r, c] = False
+    walled = replace(problem, grid=OccupancyGrid(blocked, labyrinth.grid.resolution), goal=pos)
+    assert make_planner("rrt-star", params, seed=3).solve(walled, Termination.iterations(0)).status == "exact"
+    # growing on from the seeded tree is deterministic per seed
+    a = make_planner("rrt-star", params, seed=5).solve(problem, Termination.iterations(300))
+    b = make_planner("rrt-star", params, seed=5).solve(problem, Termination.iterations(300))
+    assert _digest(a) == _digest(b) and a.diagnostics["reused_nodes"] == kept
+
+
+@pytest.mark.parametrize("algorithm", ["rrt-star", "ddrrt-star"])
+def test_whole_path_with_tree_reuse_starts_each_cycle_from_the_last_subtree(algorithm):
+    from hil import experiment
+
+    def run(reuse):
+        task = experiment.Task("labyrinth", 0, algorithm, 1, detail=True,
+                               online_overrides=(("execution", "whole-path"), ("local_iterations", 300),
+                                                 ("max_cycles", 5), ("tree_reuse", reuse)))
+        return experiment.run_task(task)
+
+    row = run(True)
+    res = row["_detail"]
+    sailed = [c for c in res.cycles if len(c.smooth_path) >= 2]
+    assert len(sailed) >= 3
+    assert res.cycles[0].reused_nodes == 0
+    assert sum(c.reused_nodes for c in res.cycles[1:]) > 0
+    for a, b in zip(res.cycles[:-1], res.cycles[1:], strict=False):
+        if b.reused_nodes:   # the new tree's first nodes are the old tree's, rooted at the new start
+            assert tuple(b.tree_nodes[0]) == (b.start.x, b.start.y)
+            old = {tuple(v) for v in a.tree_nodes.tolist()}
+            assert all(tuple(v) in old for v in b.tree_nodes[1:1 + b.reused_nodes].tolist())
+    again = run(True)
+    assert {k: row[k] for k in experiment.DETERMINISTIC} == {k: again[k] for k in experiment.DETERMINISTIC}
+    fresh = run(False)["_detail"]
+    assert all(c.reused_nodes == 0 for c in fresh.cycles)
+    from planner.online import OnlineParams
+    with pytest.raises(ValueError, match="tree_reuse"):
+        OnlineParams(tree_reuse=True)          # receding: no node where the vessel stops

@@ -67,7 +67,10 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                    help="simulated seconds the vessel sails along each local path before replanning")
     g.add_argument("--execution", choices=("receding", "whole-path"), default=None,
                    help="receding: sail speed x cycle time of each local path, then replan (default); whole-path: "
-                        "sail the whole local path and plan the next from its end, as the paper (no tree reuse)")
+                        "sail the whole local path and plan the next from its end, as the paper (see --tree-reuse)")
+    g.add_argument("--tree-reuse", action="store_true", default=None,
+                   help="with --execution whole-path: start each cycle's tree from the subtree of the previous one "
+                        "rooted where the vessel now is (section 3.5, line 3); default: a fresh tree each cycle")
     g.add_argument("--baseline-objective", choices=("current", "length"), default=None,
                    help="objective of RRT* and IRRT* (default: the [planner] objective, as DDRRT*). 'length' "
                         "makes them optimise Euclidean length as in their original papers while DDRRT* keeps "
@@ -216,7 +219,8 @@ def run(args: argparse.Namespace) -> int:
     settings = console.load_settings(args)
     spec = scenarios.load_spec(args.scenario)
     online_ov = {k: v for k, v in (("local_iterations", args.local_iterations), ("local_time", args.local_time),
-                                   ("cycle_time", args.cycle_time), ("execution", args.execution))
+                                   ("cycle_time", args.cycle_time), ("execution", args.execution),
+                                   ("tree_reuse", args.tree_reuse))
                  if v is not None}
     # Validate everything once in this process (one-line errors) before starting workers.
     online = scenarios.online_params({**spec.online, **online_ov}, "command line")
