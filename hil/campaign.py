@@ -61,6 +61,9 @@ CELLS: tuple[Cell, ...] = (
     # the subtree reused (section 3.5, line 3)
     Cell("whole-reuse", "whole-path execution, the subtree rooted at the new start reused",
          ("--execution", "whole-path", "--tree-reuse")),
+    # Figure 11's random maps with the global route as reference path (the same maps, start and
+    # goal per run as `random`); added with `whole-reuse`
+    Cell("random-global", "random maps, the global route on", (), "random-global"),
 )
 
 # claim: (column, the paper's direction of DDRRT* - RRT*: -1 lower, +1 higher, statistic)

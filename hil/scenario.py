@@ -77,6 +77,10 @@ class RandomSpec:
         "range of the number of intermediate route waypoints [min, max]; 0 = the straight start-goal line "
         "(Figure 11), else the global route through them", "", ge=0, default=(0, 0))
     min_leg: float = param("minimum distance between consecutive route waypoints", "m", gt=0, default=35.0)
+    global_route: bool = param(
+        "without intermediate waypoints: the reference path is the global route from start to goal on the chart "
+        "inflated by the safety radius (planner.global_route) instead of the straight line (Figure 11 with the "
+        "global route on); the map, start and goal drawn are the same either way", default=False)
 
     def __post_init__(self) -> None:
         for key in ("discs", "rects", "radius", "waypoints"):
@@ -546,6 +550,10 @@ def _random_instance(spec: ScenarioSpec, rng: np.random.Generator, current: Any,
     canvas.occ = occ
     canvas.clear_disc(start[0], start[1], r.clearance)
     canvas.clear_disc(goal[0], goal[1], r.clearance)
+    if r.waypoints[1] == 0 and r.global_route:
+        routed = _routed_instance(spec, canvas, start, goal, current, field_time, safety_radius)
+        if routed is not None:
+            return routed
     if r.waypoints[1] == 0:
         n = max(int(math.ceil(math.hypot(*(goal - start)) / r.reference_spacing)), 1)
         ref = start + (goal - start) * np.linspace(0.0, 1.0, n + 1)[:, None]
@@ -554,6 +562,26 @@ def _random_instance(spec: ScenarioSpec, rng: np.random.Generator, current: Any,
                         heading, (float(goal[0]), float(goal[1])), ref, current, field_time,
                         dict(spec.planner), dict(spec.online), traffic=spec.traffic)
     return _random_route(spec, rng, canvas, start, goal, current, field_time, safety_radius, source)
+
+
+def _routed_instance(spec: ScenarioSpec, canvas: Any, start: np.ndarray, goal: np.ndarray, current: Any,
+                     field_time: float, safety_radius: float) -> Scenario | None:
+    """A random scenario whose reference path is the global route from start to goal (no draw of
+    its own: the map and end points are those of the straight-line scenario); None where no
+    route exists (the goal walled in on the inflated chart): the straight line is used then."""
+    from planner.global_route import plan_chart_route
+    from planner.gridmap import OccupancyGrid
+
+    r = spec.random
+    assert r is not None
+    wps = np.array([start, goal], dtype=float)
+    route = plan_chart_route(OccupancyGrid(canvas.occ, r.resolution), wps, safety_radius, spec.route_spacing)
+    if not route.ok:
+        return None
+    first = route.path[1] - route.path[0]
+    return Scenario(spec.name, spec.description, canvas.occ, r.resolution, (float(start[0]), float(start[1])),
+                    math.atan2(first[1], first[0]), (float(goal[0]), float(goal[1])), route.path, current,
+                    field_time, dict(spec.planner), dict(spec.online), traffic=spec.traffic, waypoints=wps)
 
 
 def _random_route(spec: ScenarioSpec, rng: np.random.Generator, canvas: Any, start: np.ndarray, goal: np.ndarray,

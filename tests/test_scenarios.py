@@ -65,6 +65,29 @@ def test_map_frame_conversion_matches_ned_field():
     assert vx == pytest.approx(v_east) and vy == pytest.approx(v_north)
 
 
+def test_random_maps_with_the_global_route_keep_the_draw_and_route_round_the_obstacles():
+    """random-global: per seed the map, start and goal of `random`; the reference path is the
+    global route, clear of the chart inflated by the safety radius (2 m), where the straight
+    line of `random` crosses obstacles."""
+    from planner.gridmap import OccupancyGrid
+
+    straight, routed = scenarios.load_spec("random"), scenarios.load_spec("random-global")
+    crossed = 0
+    for seed in range(6):
+        a = scenarios.instance(straight, np.random.default_rng(seed), safety_radius=2.0)
+        b = scenarios.instance(routed, np.random.default_rng(seed), safety_radius=2.0)
+        assert np.array_equal(a.occ, b.occ) and a.start == b.start and a.goal == b.goal
+        safe = OccupancyGrid(b.occ, b.resolution).inflate(2.0)
+        ref = b.reference_path
+        assert np.allclose(ref[0], b.start) and np.allclose(ref[-1], b.goal)
+        assert all(safe.segment_free(*p, *q) for p, q in zip(ref[:-1].tolist(), ref[1:].tolist(), strict=True))
+        line = a.reference_path
+        if not all(safe.segment_free(*p, *q) for p, q in zip(line[:-1].tolist(), line[1:].tolist(), strict=True)):
+            crossed += 1
+            assert not np.array_equal(ref, line)
+    assert crossed >= 2        # the straight line crosses obstacles on most draws
+
+
 def test_random_scenario_is_reproducible_and_valid():
     spec = scenarios.load_spec("random")
     a = scenarios.instance(spec, np.random.default_rng(3))
