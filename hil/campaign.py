@@ -152,6 +152,29 @@ def verdict_markdown(cells: dict[str, list[dict[str, Any]]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+_MARK = {"reproduced": "**R**", "refuted": "✗", "no difference": "="}
+
+
+def summary_markdown(cells: dict[str, list[dict[str, Any]]]) -> str:
+    """The verdicts as one table, a column per cell: the mark (**R** reproduced, ✗ refuted,
+    = no difference) and DDRRT* - RRT* relative to RRT*; the last row the goals reached."""
+    names = list(cells)
+    claims = [c for c, *_ in CLAIMS]
+    lines = ["| claim | " + " | ".join(f"`{n}`" for n in names) + " |", "|---|" + "---:|" * len(names)]
+    for claim in claims:
+        row = []
+        for n in names:
+            v = next((x for x in cells[n] if x["claim"] == claim), None)
+            row.append(f"{_MARK[v['verdict']]} {v['relative_pct']:+.0f} %" if v and "difference" in v else "n/a")
+        lines.append(f"| {claim} | " + " | ".join(row) + " |")
+    row = []
+    for n in names:
+        v = next((x for x in cells[n] if x["claim"] == "success rate"), None)
+        row.append(f"{v['ddrrt'][0]} / {v['rrt'][0]} of {v['rrt'][1]}" if v else "n/a")
+    lines.append("| reached (DDRRT* / RRT*) | " + " | ".join(row) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     from hil import experiment
 
@@ -178,6 +201,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             result[cell.name] = verdicts(experiment.read_runs_csv(path))
     (args.out / "verdicts.md").write_text(verdict_markdown(result))
     (args.out / "verdicts.json").write_text(json.dumps(result, indent=1))
+    (args.out / "summary.md").write_text(summary_markdown(result))
     print(verdict_markdown(result))
     return 0
 

@@ -248,6 +248,13 @@ def test_campaign_decision_rule():
     assert v["cost"]["relative_pct"] == pytest.approx(10.0, abs=2.0)
     cmd = campaign.command(campaign.CELLS[1], 20, Path("out"))
     assert cmd[:2] == ["hil", "montecarlo"] and "planner.png_repair=true" in cmd
+    two = campaign.command(campaign.CELLS[0], 20, Path("out"), algorithms="rrt-star,ddrrt-star")
+    assert two[two.index("--algorithms") + 1] == "rrt-star,ddrrt-star"
+    table = campaign.summary_markdown({"a": campaign.verdicts(rows(-10.0, 0.0)),
+                                       "b": campaign.verdicts(rows(+10.0, -10.0))})
+    cost = next(line for line in table.splitlines() if line.startswith("| cost |"))
+    assert "**R** -10 %" in cost.split("|")[2] and "✗ +10 %" in cost.split("|")[3]
+    assert "| Σcos α_y (waypoints) | n/a | n/a |" in table and "40 / 40 of 40" in table
 
 
 def test_whole_path_execution_sails_each_local_path_to_its_end():
