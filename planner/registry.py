@@ -91,7 +91,10 @@ def warm_up_info() -> WarmUp:
                     continue
                 problem = PlanningProblem(grid, (2.0, 10.0), (18.0, 10.0), start_heading=0.0, field=field,
                                           reference_path=ref, domain_center=(10.0, 10.0), domain_radius=12.0)
-                make_planner(entry.name, params).solve(problem, Termination.iterations(300))
+                r = make_planner(entry.name, params).solve(problem, Termination.iterations(300))
+                if not repair:   # a search from a reused tree (online tree_reuse): seed_tree too
+                    reuse = dataclasses.replace(problem, initial_tree=(r.tree_nodes, r.tree_parents))
+                    make_planner(entry.name, params).solve(reuse, Termination.iterations(10))
     compiled_clock_ok()
     _WARM = WarmUp(seconds=time.monotonic() - t0, compiled=_cache_misses() > misses0)
     return _WARM
