@@ -219,9 +219,9 @@ def read_runs_csv(path: Path) -> list[dict[str, Any]]:
                     row[k] = v
                 elif k == "reached":
                     row[k] = v == "1"
-                elif k in ("run", "cycles", "iterations", "planner_seed", "smoothing_fallbacks", "reused_nodes"):
+                elif k in ("run", "cycles", "iterations", "planner_seed", "smoothing_fallbacks"):
                     row[k] = int(v)
-                elif k in ("search_iterations", "search_checks"):
+                elif k in ("search_iterations", "search_checks", "reused_nodes"):
                     row[k] = int(float(v))
                 else:
                     row[k] = float(v)
