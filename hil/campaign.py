@@ -10,6 +10,10 @@ standard deviations) excluding 0 in the paper's direction: *reproduced*; in the 
 
     python -m hil.campaign --runs 20 --out docs/experiments/campaign34   # every cell, then verdicts
     python -m hil.campaign --verdicts-only --out docs/experiments/campaign34
+    python -m hil.campaign --runs 200 --algorithms rrt-star,ddrrt-star --out docs/experiments/campaign34-full
+
+Besides verdicts.md and verdicts.json, ``summary.md`` gives the verdicts as one table, a column
+per cell. Cells added after the first runs are marked so in :data:`CELLS`.
 """
 
 from __future__ import annotations
