@@ -136,6 +136,8 @@ class HilRun:
         self.opts, self.cfg = opts, cfg
         self.scen = scenarios.load(opts.scenario, cfg.current, cfg.planner.safety_radius, cfg.geodesy)
         self.scen.check_current_time(float(opts.duration))
+        # The global route, planned before any process starts: a waypoint it cannot reach is a one-line error.
+        self.route = self.scen.reference_path
         if opts.traffic is not None:
             self.scen.traffic = tuple(opts.traffic)
         self.out: Path = run_folder(opts)
@@ -147,7 +149,7 @@ class HilRun:
         self.geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
         from hil.encounter_report import EncounterJudge
 
-        self.encounter_judge = (EncounterJudge(cfg.vessel.L, cfg.vessel.W, cfg.colregs, route=self.scen.reference_path)
+        self.encounter_judge = (EncounterJudge(cfg.vessel.L, cfg.vessel.W, cfg.colregs, route=self.route)
                                 if self.scen.traffic else None)
         self.tap = Tap(self.out / "run.tlog", self.geo, self.encounter_judge, cfg.traffic.truth_component_id,
                        cfg.link.component_id, lockstep=opts.lockstep, private=bool(cfg.gcs.signing_key_file))

@@ -33,7 +33,7 @@ are one-line errors). Its optional tables override keys of other sections:
 The global route. ``reference_path`` holds the route's waypoints as a user gives them (start
 first, goal last; only start and goal is fine). With ``global_route = true`` (the default) it is
 turned into the global reference path by ``planner.global_route`` on the chart inflated by the
-planner's safety radius: legs whose straight line is free stay straight, the others are routed
+planner's safety radius, when something first needs it (:mod:`hil.routing`; loading plans nothing): legs whose straight line is free stay straight, the others are routed
 round the obstacles (Lazy Theta*), and the result is densified to points at most
 ``route_spacing`` apart. A waypoint off the chart, inside an obstacle or its safety margin, or
 not reachable by water is a one-line error naming it. ``global_route = false`` keeps the
@@ -54,6 +54,7 @@ from common.params import param
 from hil import charts, config
 from hil.config import CONFIG_DIR
 from hil.errors import ConfigError, UsageError
+from hil.routing import RouteRequest, plan_route, route_waypoints
 from hil.scenario_names import SCENARIO_DIR, available
 from simulator.config import GeodesyParams
 from simulator.traffic import ShipSpec
@@ -162,7 +163,7 @@ class Scenario:
     start: tuple[float, float]      # m, map frame
     start_heading: float            # rad, map frame
     goal: tuple[float, float]
-    reference_path: np.ndarray      # (M, 2) m
+    route: np.ndarray | RouteRequest  # the reference path (M, 2) m, or what to plan it from (hil.routing)
     current: Any                    # simulator.config.CurrentParams (NED)
     field_time: float               # s, instant of the frozen planning field
     planner_overrides: dict[str, Any]
@@ -172,6 +173,15 @@ class Scenario:
     waypoints: np.ndarray | None = None                       # (K, 2) the route as given, m (None: = reference_path)
     geodesy: Any = None                                       # simulator.config.GeodesyParams: the NED origin
     _current_source: Any = field(default=None, init=False, repr=False, compare=False)
+
+    @property
+    def reference_path(self) -> np.ndarray:
+        """The global reference path (M, 2), m, map frame. A fixed scenario's route is planned here,
+        once, the first time it is asked for (:func:`hil.routing.plan_route`; ConfigError naming a
+        waypoint it cannot reach), never while the scenario is loaded."""
+        if isinstance(self.route, RouteRequest):
+            self.route = plan_route(self.route)
+        return self.route
 
     def truth_occ(self) -> np.ndarray:
         """The simulated world's obstacles: the chart (``occ``) plus the uncharted discs."""
@@ -436,31 +446,6 @@ def _safety_radius(spec: ScenarioSpec, base: float | None, source: str) -> float
     return float(value)
 
 
-def route_waypoints(start, goal, given) -> np.ndarray:
-    """start, the given waypoints (their first/last dropped where they repeat start/goal), goal."""
-    pts = [tuple(map(float, p)) for p in given]
-    if pts and math.dist(pts[0], start) < 1e-9:
-        pts = pts[1:]
-    if pts and math.dist(pts[-1], goal) < 1e-9:
-        pts = pts[:-1]
-    return np.array([tuple(map(float, start)), *pts, tuple(map(float, goal))], dtype=float)
-
-
-def global_route(occ: np.ndarray, resolution: float, waypoints: np.ndarray, safety_radius: float,
-                 spacing: float, source: str, names: list[str]) -> np.ndarray:
-    """The global reference path through ``waypoints`` (map frame); ConfigError naming the
-    waypoint (``names[i]``) that is off the chart, in an obstacle or unreachable."""
-    from planner.global_route import plan_chart_route
-    from planner.gridmap import OccupancyGrid
-
-    route = plan_chart_route(OccupancyGrid(occ, resolution), waypoints, safety_radius, spacing)
-    if not route.ok:
-        i = route.failed_index or 0
-        margin = f" (safety radius {safety_radius:g} m)" if route.status.value == "in_obstacle" else ""
-        raise ConfigError(f"{source}: {names[i]}: {route.reason}{margin}")
-    return route.path
-
-
 def _default_current() -> Any:
     from hil import settings
     return settings.load().current
@@ -511,14 +496,15 @@ def _instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current:
             wps = route_waypoints(spec.start, spec.goal, spec.reference_path)
             given = len(spec.reference_path) > 0 and math.dist(spec.reference_path[0], spec.start) < 1e-9
             names = ["start"] + [f"reference_path[{i if given else i - 1}]" for i in range(1, len(wps) - 1)] + ["goal"]
-            ref = global_route(occ, spec.resolution, wps, _safety_radius(spec, safety_radius, source),
-                               spec.route_spacing, source, names)
+            route: np.ndarray | RouteRequest = RouteRequest(
+                occ, spec.resolution, wps, _safety_radius(spec, safety_radius, source), spec.route_spacing,
+                source, tuple(names))
         else:
             if len(spec.reference_path) < 2:
                 raise ConfigError(f"{source}: reference_path: global_route = false needs the path itself (>= 2 points)")
-            wps = ref = np.asarray(spec.reference_path, dtype=float)
+            wps = route = np.asarray(spec.reference_path, dtype=float)
         scen = Scenario(spec.name, spec.description, occ, spec.resolution, spec.start, spec.start_heading,
-                        spec.goal, ref, current, field_time, dict(spec.planner), dict(spec.online),
+                        spec.goal, route, current, field_time, dict(spec.planner), dict(spec.online),
                         tuple((float(x), float(y), float(r)) for x, y, r in spec.uncharted), traffic=spec.traffic,
                         waypoints=wps, geodesy=geodesy)
         truth = scen.truth_occ()
