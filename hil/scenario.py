@@ -33,7 +33,8 @@ are one-line errors). Its optional tables override keys of other sections:
 The global route. ``reference_path`` holds the route's waypoints as a user gives them (start
 first, goal last; only start and goal is fine). With ``global_route = true`` (the default) it is
 turned into the global reference path by ``planner.global_route`` on the chart inflated by the
-planner's safety radius, when something first needs it (:mod:`hil.routing`; loading plans nothing): legs whose straight line is free stay straight, the others are routed
+planner's safety radius, when something first needs it (:mod:`hil.routing`; loading plans
+nothing): legs whose straight line is free stay straight, the others are routed
 round the obstacles (Lazy Theta*), and the result is densified to points at most
 ``route_spacing`` apart. A waypoint off the chart, inside an obstacle or its safety margin, or
 not reachable by water is a one-line error naming it. ``global_route = false`` keeps the
