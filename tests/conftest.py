@@ -62,8 +62,8 @@ UNIT_MODULES = frozenset("""
     planner_algorithms planner_config planner_cost planner_dynamic_domain planner_fence planner_gridmap
     planner_issue34 flow_optimum planner_registry planner_tree_golden
     planner_guidance planner_kgrowth planner_metrics planner_postprocess process_logging reactive route_planning
-    run_plot scenarios sim_sensors sim_vessel sim_waves simulator_assembly summaries tiers tracking_stats traffic_planning
-    vehicle
+    run_judging run_plot scenarios sim_sensors sim_vessel sim_waves simulator_assembly summaries tiers tracking_stats
+    traffic_planning vehicle
 """.split())
 INTEGRATION_MODULES = frozenset("""
     ardupilot_json
