@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from autopilot_bridge.tracking_stats import TrackingSummary
 from common.frames import map_to_ned
 from common.geodesy import LocalFrame
 from hil.errors import RunFailed, UsageError
@@ -512,7 +513,7 @@ class ArduPilotRun:
             actuators="ardupilot", encounters=encounters, traffic=traffic)
 
 
-def route_cross_track(track: np.ndarray, route: np.ndarray) -> dict[str, float] | None:
+def route_cross_track(track: np.ndarray, route: np.ndarray) -> TrackingSummary | None:
     """RMS and largest distance (m) of each track point (N, 2) from the route polyline (M, 2)."""
     if len(track) == 0 or len(route) < 2:
         return None
@@ -522,8 +523,8 @@ def route_cross_track(track: np.ndarray, route: np.ndarray) -> dict[str, float] 
     p = track[:, None, :]
     w = np.clip(np.sum((p - a) * ab, axis=2) / den, 0.0, 1.0)
     d = np.min(np.hypot(*(p - (a + w[..., None] * ab)).transpose(2, 0, 1)), axis=1)
-    return {"cross_track_rms_m": round(float(np.sqrt(np.mean(d * d))), 3),
-            "cross_track_max_m": round(float(d.max()), 3)}
+    return TrackingSummary(frames=len(track), cross_track_rms_m=round(float(np.sqrt(np.mean(d * d))), 3),
+                           cross_track_max_m=round(float(d.max()), 3))
 
 
 def _i16(v: float) -> int:

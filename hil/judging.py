@@ -17,6 +17,7 @@ from scipy import ndimage
 from hil.run_summary import RunSecurity, RunSummary, read_autopilot_summary
 
 if TYPE_CHECKING:
+    from common.udp import BusyPollSummary
     from hil.encounter_report import EncounterJudge
     from hil.settings import HilConfig
     from simulator.config import VesselParams
@@ -79,7 +80,7 @@ def nav_rmse(estimate: Mapping[tuple[int, int], tuple[float, float]],
     return math.sqrt(float(np.mean(errs))) if errs else None
 
 
-def simulator_part(sim: dict, end_s: float, ap_busy_poll: dict | None = None) -> dict[str, Any]:
+def simulator_part(sim: dict[str, Any], end_s: float, ap_busy_poll: BusyPollSummary | None = None) -> dict[str, Any]:
     """The simulator's counters for the run summary. Stale-command failsafes are those up to the
     run's judged end (s of simulated time); those after it, while the processes were being
     stopped, are counted apart (the simulator runs on in real time while the autopilot exits).
@@ -154,7 +155,7 @@ def summarise(run: RunRecord, tap: TapRecords, cfg: HilConfig,
 
         enc = encounter_judge.report({t: tap.truth[t] for t in times})   # up to the deciding sample
         encounters = tuple(enc)
-        traffic = {**totals(enc), "ais": (ap.traffic or {}).get("ais") if ap is not None else None,
+        traffic = {**totals(enc), "ais": ap.traffic["ais"] if ap is not None and ap.traffic is not None else None,
                    "ais_forwarded_to_gcs": tap.ais_forwarded,
                    "ship_collision": None if encounter_judge.collision is None else
                    {"time_s": encounter_judge.collision[0], "mmsi": encounter_judge.collision[1]}}

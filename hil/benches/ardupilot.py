@@ -152,11 +152,12 @@ def moving_from(tlog: Path, until_s: float, speed: float = 0.3) -> float | None:
 
 
 def flight_figures(summary: Any, route_ned: np.ndarray, geo: Any) -> dict[str, Any]:
+    from autopilot_bridge.tracking_stats import TrackingSummary
     from hil.ardupilot import route_cross_track
 
     tlog = Path(summary.tlog)
     track = truth_track(tlog, geo, summary.sim_time_s)
-    xte = route_cross_track(track, route_ned) or {}
+    xte = route_cross_track(track, route_ned) or TrackingSummary(frames=0)
     start = moving_from(tlog, summary.sim_time_s)
     done = summary.reached_goal
     return {"outcome": summary.outcome, "reached_goal": done,
