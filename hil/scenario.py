@@ -47,7 +47,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 import numpy as np
 
@@ -57,8 +57,19 @@ from hil.config import CONFIG_DIR
 from hil.errors import ConfigError, UsageError
 from hil.routing import RouteRequest, plan_route, route_waypoints
 from hil.scenario_names import SCENARIO_DIR, available
-from simulator.config import GeodesyParams
+from simulator.config import CurrentParams, GeodesyParams
 from simulator.traffic import ShipSpec
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+    from common.current_sources import CurrentSource
+    from common.geodesy import LocalFrame
+    from hil.settings import HilConfig
+    from planner.online import OnlineParams
+    from planner.params import PlannerParams
+
+D = TypeVar("D", bound="DataclassInstance")
 
 
 @dataclass(frozen=True)
@@ -165,15 +176,15 @@ class Scenario:
     start_heading: float            # rad, map frame
     goal: tuple[float, float]
     route: np.ndarray | RouteRequest  # the reference path (M, 2) m, or what to plan it from (hil.routing)
-    current: Any                    # simulator.config.CurrentParams (NED)
+    current: CurrentParams          # NED
     field_time: float               # s, instant of the frozen planning field
     planner_overrides: dict[str, Any]
     online_overrides: dict[str, Any]
     uncharted: tuple[tuple[float, float, float], ...] = ()   # discs (x, y, radius), m, map frame
     traffic: tuple[ShipSpec, ...] = ()                        # ships sailed by the simulator ([[traffic]])
     waypoints: np.ndarray | None = None                       # (K, 2) the route as given, m (None: = reference_path)
-    geodesy: Any = None                                       # simulator.config.GeodesyParams: the NED origin
-    _current_source: Any = field(default=None, init=False, repr=False, compare=False)
+    geodesy: GeodesyParams | None = None                      # the NED origin
+    _current_source: CurrentSource | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def reference_path(self) -> np.ndarray:
@@ -293,7 +304,7 @@ def resolve_file(spec: ScenarioSpec, name: str) -> Path:
     return here if here.exists() or not legacy.exists() else legacy
 
 
-def geodesy_frame(geodesy: Any = None):
+def geodesy_frame(geodesy: GeodesyParams | None = None) -> LocalFrame:
     """The ``common.geodesy.LocalFrame`` of a ``[geodesy]`` section (default: the default configuration's)."""
     from common.geodesy import LocalFrame
 
@@ -303,7 +314,7 @@ def geodesy_frame(geodesy: Any = None):
     return LocalFrame(geodesy.lat0, geodesy.lon0, geodesy.alt0)
 
 
-def positions_frame(spec: ScenarioSpec, geodesy: Any = None):
+def positions_frame(spec: ScenarioSpec, geodesy: GeodesyParams | None = None) -> LocalFrame:
     """The ``LocalFrame`` in which a chart scenario's positions in metres count: its ``origin``, else the
     configuration's (``geodesy.positions_origin`` or ``lat0/lon0``; default: the default configuration's)."""
     from common.geodesy import LocalFrame
@@ -315,7 +326,7 @@ def positions_frame(spec: ScenarioSpec, geodesy: Any = None):
     return LocalFrame(lat, lon, geodesy.alt0)
 
 
-def map_frame(spec: ScenarioSpec, geodesy: Any = None):
+def map_frame(spec: ScenarioSpec, geodesy: GeodesyParams | None = None) -> LocalFrame:
     """The ``LocalFrame`` of the scenario's map (x = 0, y = 0 at its south-west corner): a chart's
     grid corner, else the configuration's origin (``geodesy``, default: the default configuration's)."""
     from common.geodesy import LocalFrame
@@ -330,7 +341,8 @@ def map_frame(spec: ScenarioSpec, geodesy: Any = None):
 MAX_LATLON_DISTANCE = 50_000.0   # m from the map's origin: a position farther is a typing mistake
 
 
-def positions_in_metres(spec: ScenarioSpec, frame: Any, source: str, given_in: Any = None) -> ScenarioSpec:
+def positions_in_metres(spec: ScenarioSpec, frame: LocalFrame, source: str,
+                        given_in: LocalFrame | None = None) -> ScenarioSpec:
     """``spec`` with every position (start, goal, route, uncharted centres, traffic) in map metres of
     ``frame`` (x east, y north): from ``[latitude, longitude]`` (``positions = "latlon"``), or from metres
     of another frame ``given_in`` (a chart's grid starts elsewhere than the positions' origin)."""
@@ -360,7 +372,7 @@ def positions_in_metres(spec: ScenarioSpec, frame: Any, source: str, given_in: A
     return out
 
 
-def _current_file(spec: ScenarioSpec, current: Any) -> Any:
+def _current_file(spec: ScenarioSpec, current: CurrentParams) -> CurrentParams:
     """``current`` with its file as an absolute path: relative to the scenario file when the
     scenario names it, else to the working directory (a configuration's or --set's)."""
     if not current.file:
@@ -428,7 +440,8 @@ def _check_point(what: str, p: tuple[float, float], occ: np.ndarray, res: float,
         raise ConfigError(f"{source}: {what}: ({p[0]:g}, {p[1]:g}) m is inside an obstacle")
 
 
-def load(name: str, base_current: Any = None, safety_radius: float | None = None, geodesy: Any = None) -> Scenario:
+def load(name: str, base_current: CurrentParams | None = None, safety_radius: float | None = None,
+         geodesy: GeodesyParams | None = None) -> Scenario:
     """Load a fixed scenario (for a random one, use :func:`instance` with a run's generator).
     ``safety_radius`` (m): the configuration's ``planner.safety_radius`` (default: the default
     configuration's); the scenario's own ``[planner]`` value wins, as for the planner.
@@ -447,13 +460,14 @@ def _safety_radius(spec: ScenarioSpec, base: float | None, source: str) -> float
     return float(value)
 
 
-def _default_current() -> Any:
+def _default_current() -> CurrentParams:
     from hil import settings
     return settings.load().current
 
 
-def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: Any = None,
-             safety_radius: float | None = None, source: str | None = None, geodesy: Any = None) -> Scenario:
+def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: CurrentParams | None = None,
+             safety_radius: float | None = None, source: str | None = None,
+             geodesy: GeodesyParams | None = None) -> Scenario:
     """A concrete :class:`Scenario`; random scenarios draw map and end points from ``rng``.
     ``source`` names the file in error messages (default: the file the spec was read from)."""
     source = source or spec.path or str(scenario_path(spec.name))
@@ -475,7 +489,7 @@ def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: 
 
 
 def _instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: Any,
-              safety_radius: float | None, source: str, positions: Any = None) -> Scenario:
+              safety_radius: float | None, source: str, positions: LocalFrame | None = None) -> Scenario:
     current, field_time = _current_params(base_current if base_current is not None else _default_current(),
                                           spec.current, source)
     current = _current_file(spec, current)
@@ -485,6 +499,7 @@ def _instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current:
             raise ConfigError(f"{source}: map: no such file {map_path}")
         geodesy = None
         if charts.is_chart(map_path):
+            assert positions is not None      # instance() gives a chart scenario its frame
             grid = charts.rasterise(map_path, spec.resolution, positions, spec.extent, spec.chart_buffer)
             occ = grid.occ
             geodesy = GeodesyParams(grid.origin[0], grid.origin[1], positions.alt0,
@@ -581,7 +596,7 @@ def _random_route(spec: ScenarioSpec, rng: np.random.Generator, canvas: Any, sta
     raise ConfigError(f"{source}: random: no route with {k} waypoint(s) found in 200 draws")
 
 
-def planner_params(base: Any, overrides: dict[str, Any], source: str = "scenario") -> Any:
+def planner_params(base: PlannerParams, overrides: dict[str, Any], source: str = "scenario") -> PlannerParams:
     """``base`` PlannerParams with ``overrides`` applied and validated (ConfigError on problems)."""
     table = config.to_table(base)
     for k, v in overrides.items():
@@ -591,7 +606,8 @@ def planner_params(base: Any, overrides: dict[str, Any], source: str = "scenario
     return config.from_table(type(base), table, source, prefix="planner")
 
 
-def online_params(overrides: dict[str, Any], source: str = "scenario", base: Any = None) -> Any:
+def online_params(overrides: dict[str, Any], source: str = "scenario",
+                  base: OnlineParams | None = None) -> OnlineParams:
     """OnlineParams (defaults or ``base``) with ``overrides`` applied and validated."""
     from planner.online import OnlineParams
     table = config.to_table(base if base is not None else OnlineParams())
@@ -602,13 +618,13 @@ def online_params(overrides: dict[str, Any], source: str = "scenario", base: Any
     return config.from_table(OnlineParams, table, source, prefix="online")
 
 
-def base_planner_params(settings_obj: Any) -> Any:
+def base_planner_params(settings_obj: HilConfig | None) -> PlannerParams:
     """The ``[planner]`` section of the loaded configuration, or the library defaults."""
     from planner.params import PlannerParams
     return getattr(settings_obj, "planner", None) or PlannerParams()
 
 
-def with_overrides(obj: Any, **kw: Any) -> Any:
+def with_overrides(obj: D, **kw: Any) -> D:
     """``dataclasses.replace`` that ignores ``None`` values (CLI options not given)."""
     return dataclasses.replace(obj, **{k: v for k, v in kw.items() if v is not None})
 
