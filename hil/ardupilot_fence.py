@@ -49,7 +49,8 @@ def chart_polygons(occ: np.ndarray, resolution: float, tolerance: float = 0.5,
     (the first vertex is not repeated), N >= 3; largest first. Where all of them have more than
     ``max_vertices`` vertices, each polygon's notches are filled (a morphological closing of the
     polygon alone, 1, 2, 3 ... m: a notch narrower than twice that fills; the water between two
-    polygons stays open) until they fit; ValueError if nothing up to 20 m fits."""
+    polygons stays open) until they fit; ValueError if nothing up to 20 m fits. Every obstacle cell
+    lies inside a polygon (they are grown by up to 1 m more where filling shaved an outline)."""
     from shapely import Polygon, box, unary_union
     from shapely.geometry.base import BaseGeometry
 
@@ -73,7 +74,7 @@ def chart_polygons(occ: np.ndarray, resolution: float, tolerance: float = 0.5,
 
     outlines = []
     for p in parts(unary_union(boxes)):
-        filled = Polygon(p.exterior)
+        filled = Polygon(p.exterior).simplify(0.0)    # the cells' outline less its collinear vertices
         if tolerance > 0:
             filled = filled.simplify(tolerance, preserve_topology=True).buffer(tolerance, join_style="mitre",
                                                                                 mitre_limit=2.0)
@@ -88,6 +89,16 @@ def chart_polygons(occ: np.ndarray, resolution: float, tolerance: float = 0.5,
             break
     else:
         raise ValueError(f"the chart needs more than {max_vertices} fence vertices")
+    # Filling notches with mitred corners can shave a sliver off a rounded outline (a few cm on the
+    # harbour's rock): grow the polygons until every obstacle cell is inside.
+    cells = unary_union(boxes)
+    for grow in (0.0, 0.1, 0.25, 0.5, 1.0):
+        grown = polys if grow == 0 else merged([p.buffer(grow, join_style="mitre", mitre_limit=2.0) for p in polys])
+        if unary_union(grown).buffer(1e-6).covers(cells):
+            polys = grown
+            break
+    else:
+        raise ValueError("the fence polygons do not cover the chart")
     out = []
     for p in sorted(polys, key=lambda q: -q.area):
         ring = np.asarray(p.exterior.coords, dtype=float)[:-1]
