@@ -25,6 +25,8 @@ def _cells(occ: np.ndarray, res: float) -> list[Polygon]:
 
 def test_the_harbour_chart_fits_arduRovers_fence_and_dijkstra_and_covers_every_obstacle() -> None:
     scen = scenarios.load("harbour")
+    wps = scen.waypoints
+    assert wps is not None
     polys = chart_polygons(scen.occ, scen.resolution)
     shapes = [Polygon(p) for p in polys]
     assert all(s.is_valid and len(p) >= 3 for s, p in zip(shapes, polys, strict=True))
@@ -34,14 +36,14 @@ def test_the_harbour_chart_fits_arduRovers_fence_and_dijkstra_and_covers_every_o
     fence = unary_union(shapes)
     assert fence.buffer(1e-6).covers(unary_union(_cells(scen.occ, scen.resolution)))   # no obstacle left out
     # The route's waypoints as given lie in open water, outside every polygon...
-    for x, y in scen.waypoints:
+    for x, y in wps:
         assert not fence.contains(Point(x, y)), (x, y)
     # ...and the 7 m channel between the breakwater's end and the outer mole stays open, with room for
     # the Dijkstra's 2 m margin on both sides.
     assert fence.distance(Point(150.0, 116.5)) >= 2.5
     # But the straight legs cross the chart: the route as given needs the fence to be flown.
     assert any(fence.intersects(box(*np.minimum(a, b), *np.maximum(a, b)).boundary)
-               for a, b in zip(scen.waypoints[:-1], scen.waypoints[1:], strict=True))
+               for a, b in zip(wps[:-1], wps[1:], strict=True))
 
 
 def test_a_rectangle_is_four_vertices_grown_by_the_tolerance() -> None:
