@@ -137,7 +137,7 @@ def oa_params(margin: float, fence_margin: float) -> dict[str, float]:
     Dijkstra's" page): the polygon fence on (FENCE_ENABLE 1, FENCE_TYPE 4: polygons only, no circle
     about home), Dijkstra (OA_TYPE 2) keeping ``margin`` m from the fence (OA_MARGIN_MAX), and the
     fence's own margin ``fence_margin`` m (FENCE_MARGIN): ArduRover's simple avoidance stops the boat
-    that close to the fence. Its default, 2 m, held the boat 1.5 m short of the harbour's second
-    waypoint (1.5 m from the fence) for 230 s (docs/ardupilot.md)."""
+    that close to the fence. Its default, 2 m, held the boat short of the harbour's second
+    waypoint (1.5 m from the fence) for 257 s (docs/ardupilot.md)."""
     return {"FENCE_ENABLE": 1.0, "FENCE_TYPE": 4.0, "FENCE_MARGIN": float(fence_margin), "OA_TYPE": 2.0,
             "OA_MARGIN_MAX": float(margin)}
