@@ -233,7 +233,10 @@ class ArduPilotRun:
             from hil.ardupilot_fence import DIJKSTRA_MAX_POINTS, chart_polygons, dijkstra_points
             from hil.ardupilot_fence import fence_items as to_items
 
-            self.fence_polygons = chart_polygons(self.scen.occ, self.scen.resolution)
+            try:
+                self.fence_polygons = chart_polygons(self.scen.occ, self.scen.resolution)
+            except ValueError as exc:   # more vertices than ArduRover stores
+                raise UsageError(f"--ardupilot-fence: scenario {opts.scenario!r}: {exc}") from None
             if dijkstra_points(self.fence_polygons) > DIJKSTRA_MAX_POINTS:
                 raise UsageError(f"scenario {opts.scenario!r}: its chart makes {dijkstra_points(self.fence_polygons)} "
                                  f"fence points, more than ArduRover's Dijkstra takes ({DIJKSTRA_MAX_POINTS})")

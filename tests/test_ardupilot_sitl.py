@@ -81,6 +81,23 @@ def test_lockstep_only(tmp_path: Path) -> None:
     _one_line_error(r, "--speedup")
 
 
+def test_the_fence_is_for_arduRover_only(tmp_path: Path) -> None:
+    r = run_hil("run", "--scenario", "harbour", "--ardupilot-fence", "--out", str(tmp_path / "r"), timeout=120)
+    _one_line_error(r, "--ardupilot-fence", "--autopilot ardupilot")
+
+
+@needs_sitl
+def test_a_chart_arduRover_cannot_store_as_its_fence_is_one_line(tmp_path: Path) -> None:
+    """The labyrinth's walls and islands need more fence vertices than ArduRover stores (84)."""
+    r = run_hil("run", "--scenario", "labyrinth", "--autopilot", "ardupilot", "--ardupilot-fence",
+                "--ardupilot-bin", str(SITL), "--out", str(tmp_path / "r"), timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    errors = [ln for ln in r.stderr.splitlines() if "error" in ln]    # after the run's opening line
+    assert len(errors) == 1 and errors[0] == r.stderr.strip().splitlines()[-1], r.stderr
+    assert "--ardupilot-fence" in errors[0] and "labyrinth" in errors[0] and "84 fence vertices" in errors[0]
+    assert not list(tmp_path.glob("r/ardupilot/ardurover.log"))   # refused before ArduRover started
+
+
 @needs_sitl
 def test_ardurover_flies_the_harbour_route_and_a_rerun_is_byte_identical(tmp_path: Path) -> None:
     """ArduRover (motorboat-skid parameters plus the project's) flies the harbour's global route to the
