@@ -315,7 +315,7 @@ class ArduPilotRun:
             with open(folder / "ardurover.log", "wb") as log:
                 try:
                     proc = subprocess.Popen(cmd, cwd=folder, stdout=log, stderr=subprocess.STDOUT,
-                                            start_new_session=True)
+                                            start_new_session=True, preexec_fn=_die_with_parent)
                 except OSError as exc:
                     raise UsageError(f"ArduRover SITL binary {self.sitl.binary} does not start: {exc}") from None
             opts.on_progress(f"run: ArduRover pid {proc.pid}, instance {instance}: JSON physics on UDP "
@@ -574,6 +574,22 @@ def route_cross_track(track: np.ndarray, route: np.ndarray) -> dict[str, float] 
     d = np.min(np.hypot(*(p - (a + w[..., None] * ab)).transpose(2, 0, 1)), axis=1)
     return {"cross_track_rms_m": round(float(np.sqrt(np.mean(d * d))), 3),
             "cross_track_max_m": round(float(d.max()), 3)}
+
+
+def _die_with_parent() -> None:
+    """In ArduRover's process before it starts (Linux): SIGKILL when this process ends, however it ends.
+    Its own session keeps a terminal's Ctrl-C from it (this process ends it, after the summary), but a
+    `hil` killed outright left it running for good: it waits for the physics' answer in lockstep, so
+    its SIGTERM handler, which exits from its main loop, never runs."""
+    import ctypes
+    import signal
+    import sys
+
+    if sys.platform.startswith("linux"):
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))   # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
 
 
 def _i16(v: float) -> int:

@@ -256,3 +256,41 @@ def test_the_chart_as_arduRovers_fence_takes_it_round_the_pier_the_route_crosses
             east = geo.geodetic_to_sea_level(msg.lat * 1e-7, msg.lon * 1e-7)[1]
             past_pier |= east > 60.0
     assert reached_2 and past_pier, s["outcome"]   # a collision at the pier would have ended the run there
+
+
+@needs_sitl
+def test_arduRover_ends_with_a_hil_killed_outright(tmp_path: Path) -> None:
+    """`hil run` killed with SIGKILL cannot end ArduRover itself; ArduRover, waiting in lockstep for the
+    physics' answer, would wait for good. The kernel ends it (its parent-death signal)."""
+    import signal
+
+    cmd = [sys.executable, "-m", "hil", "run", "--scenario", "harbour", "--autopilot", "ardupilot", "--no-plot",
+           "--out", str(tmp_path / "r")]
+    proc = subprocess.Popen(cmd, cwd=REPO, env={**os.environ, "ARDUPILOT_SITL": str(SITL)}, text=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    assert proc.stderr is not None
+    pid = None
+    try:
+        deadline = time.monotonic() + 120
+        while pid is None and time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            if not line:
+                break
+            if "ArduRover pid" in line:
+                pid = int(line.split("ArduRover pid ", 1)[1].split(",", 1)[0])
+        assert pid is not None, "no ArduRover pid announced"
+        assert Path(f"/proc/{pid}").exists()
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    deadline = time.monotonic() + 20
+    while Path(f"/proc/{pid}").exists() and "Z" not in _state(pid) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not Path(f"/proc/{pid}").exists() or "Z" in _state(pid), f"ArduRover {pid} outlived hil"
+
+
+def _state(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return "Z"

@@ -236,6 +236,8 @@ def run(args: argparse.Namespace) -> int:
             ours = flown[name]
             progress(f"bench ardupilot: {row}: ArduRover")
             ap_summary = run_ardupilot(opts("ardurover"), cfg, sitl, fence=fence)
+            if ap_summary.outcome == "interrupted":   # Ctrl-C ends the bench, not just this flight
+                raise KeyboardInterrupt
             theirs = flight_figures(ap_summary, route, geo)
             ap = (ap_summary.simulator or {}).get("ardupilot", {})
             theirs["setup_to_auto_s"] = ap.get("auto_at_s")   # moored until then: the mission counts from AUTO
