@@ -106,7 +106,8 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                         "the project's")
     p.add_argument("--ardupilot-fence", action="store_true",
                    help="--autopilot ardupilot: upload the chart as ArduRover's exclusion fence (polygons), plan "
-                        "round it with its Dijkstra (OA_TYPE 2, OA_MARGIN_MAX = planner.safety_radius) and give it "
+                        "round it with its Dijkstra (OA_TYPE 2, OA_MARGIN_MAX = planner.safety_radius, FENCE_MARGIN = "
+                        "half the hull's length) and give it "
                         "the scenario's route as given, which may cross the chart, instead of the global route")
     add_can_arguments(p)
     from hil.commands.autopilot import add_gcs_arguments
