@@ -228,7 +228,7 @@ def test_route_cross_track() -> None:
 
     xte = route_cross_track(np.array([[5.0, 1.0], [10.0, 5.0], [12.0, 5.0], [-3.0, 4.0]]), np.array(route))
     assert xte is not None
-    assert {k: xte[k] for k in ("cross_track_rms_m", "cross_track_max_m")} == {  # type: ignore[literal-required]
+    assert {k: xte[k] for k in ("cross_track_rms_m", "cross_track_max_m")} == {
         "cross_track_rms_m": pytest.approx(math.sqrt((1 + 0 + 4 + 25) / 4), abs=1e-3), "cross_track_max_m": 5.0}
     assert route_cross_track(np.zeros((0, 2)), np.array(route)) is None
 
