@@ -105,6 +105,11 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--ardupilot-params", metavar="FILE", default=None,
                    help="--autopilot ardupilot: your own ArduPilot parameter file, laid over ArduPilot's and "
                         "the project's")
+    p.add_argument("--ardupilot-fence", action="store_true",
+                   help="--autopilot ardupilot: upload the chart as ArduRover's exclusion fence (polygons), plan "
+                        "round it with its Dijkstra (OA_TYPE 2, OA_MARGIN_MAX = planner.safety_radius, FENCE_MARGIN = "
+                        "half the hull's length) and give it "
+                        "the scenario's route as given, which may cross the chart, instead of the global route")
     add_can_arguments(p)
     from hil.commands.autopilot import add_gcs_arguments
 
@@ -136,6 +141,8 @@ def run(args: argparse.Namespace) -> int:
         if args.speedup is not None and not args.wait_for_arm:
             raise ConfigError("--pipeline is a lockstep mode; drop --speedup (or add --wait-for-arm)")
         args.overrides.append("sim.lockstep_pipeline=true")
+    if args.ardupilot_fence and args.autopilot != "ardupilot":
+        raise UsageError("--ardupilot-fence is for --autopilot ardupilot (the vessel computer plans its global route)")
     if args.autopilot == "ardupilot":
         _check_ardupilot_options(args)
     from hil import instances, placement
@@ -256,7 +263,7 @@ def _run_hil(args: argparse.Namespace, cfg: HilConfig, cpus: Any = "auto") -> in
         if args.autopilot == "ardupilot":
             from hil.ardupilot import run_ardupilot
 
-            summary = run_ardupilot(opts, cfg, args.sitl, args.ardupilot_params)
+            summary = run_ardupilot(opts, cfg, args.sitl, args.ardupilot_params, args.ardupilot_fence)
         else:
             summary = run_loop(opts, cfg)
     except RunFailed:
