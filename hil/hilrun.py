@@ -33,7 +33,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
@@ -173,7 +173,7 @@ class HilRun:
         self.tap.telemetry_addr = ("127.0.0.1", self.telemetry_port)
         self.tap.sim_ids = (cfg.link.system_id, cfg.link.component_id)
         self.warnings: list[str] = []
-        self._sysid_lock: Any = None
+        self._sysid_lock: TextIO | None = None
         self.sim: subprocess.Popen | None = None
         self.ap: subprocess.Popen | None = None
         self.sim_restarts = 0

@@ -31,6 +31,7 @@ from hil.sim_client import HilClient, sim_command, start_simulator
 from planner.params import ALGORITHM_NAMES
 
 if TYPE_CHECKING:
+    from hil.placement import Placement
     from hil.run_summary import RunSummary
     from hil.settings import HilConfig
 
@@ -215,7 +216,7 @@ def _default_wall_timeout(args: argparse.Namespace, paced: bool = False) -> floa
     return args.duration / args.speedup + 300.0
 
 
-def _run_hil(args: argparse.Namespace, cfg: HilConfig, cpus: Any = "auto") -> int:
+def _run_hil(args: argparse.Namespace, cfg: HilConfig, cpus: str | Placement = "auto") -> int:
     from pathlib import Path
 
     from hil import scenario as scenarios
