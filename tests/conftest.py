@@ -71,7 +71,7 @@ INTEGRATION_MODULES = frozenset("""
     output placement plan_cli planner_warmup
     planning_worker range_sensing
     readme security_gates sim_link sim_pause sim_pipeline sim_udp startup_errors tap_fast_path traffic_ais
-    vehicle_commands vessel_parameters
+    vehicle_commands vessel_parameters warm_up
 """.split())
 E2E_MODULES = frozenset("""
     ardupilot_sitl by_hand can_vcan colregs_loop example_world gcs_chaos gcs_mavproxy gcs_mavsdk gcs_rover

@@ -245,8 +245,15 @@ def _run_hil(args: argparse.Namespace, cfg: HilConfig, cpus: Any = "auto") -> in
     from hil.first_run import compile_notice
 
     notice = compile_notice("run")
+    compiling: list = []
     if notice:
         progress(notice)
+        if args.autopilot != "ardupilot":
+            from hil.warm_up import start as start_compiling
+
+            # The vessel computer's kernels in parallel processes (hil/warm_up.py); its process waits
+            # for them and loads the machine code from the cache.
+            compiling = start_compiling()
     from hil.errors import RunFailed
     from hil.files import tidy_failed_start
 
@@ -261,6 +268,11 @@ def _run_hil(args: argparse.Namespace, cfg: HilConfig, cpus: Any = "auto") -> in
     except RunFailed:
         tidy_failed_start(out, fresh)
         raise
+    finally:
+        for proc in compiling:   # done by now (the vessel computer waited for them), or stopped by Ctrl-C
+            if proc.poll() is None:
+                proc.terminate()
+            proc.wait()
     emit(args, to_table(summary), human_summary(summary))
     if summary.outcome == "interrupted":
         progress(f"run: interrupted; summary in {out}")
