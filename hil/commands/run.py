@@ -244,7 +244,7 @@ def _run_hil(args: argparse.Namespace, cfg: HilConfig, cpus: Any = "auto") -> in
              f"{who}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
     from hil.first_run import compile_notice
 
-    notice = compile_notice("run")
+    notice = compile_notice("run", processes=3 if args.autopilot != "ardupilot" else 1)
     compiling: list = []
     if notice:
         progress(notice)
