@@ -94,14 +94,74 @@ def _cpu_s() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def compile_group(group: str) -> dict[str, float | str]:
-    """Compile (or load) one group's kernels under its lock; its CPU and wall seconds."""
+class KernelTimes:
+    """CPU seconds numba spent compiling each function (``module.name``), exclusive of the functions
+    it compiled on the way (a caller compiles its callees first), and how many specialisations.
+    Listens to numba's ``numba:compile`` events."""
+
+    def __init__(self) -> None:
+        self.exclusive: dict[str, float] = {}
+        self.count: dict[str, int] = {}
+        self._stack: list[list[float]] = []
+        self._listener: object | None = None
+
+    def install(self) -> None:
+        from numba.core import event
+
+        times = self
+
+        class _Listener(event.Listener):
+            def on_start(self, ev: event.Event) -> None:
+                times._stack.append([time.process_time(), 0.0])
+
+            def on_end(self, ev: event.Event) -> None:
+                t0, inner = times._stack.pop()
+                spent = time.process_time() - t0
+                fn = ev.data["dispatcher"].py_func
+                name = f"{fn.__module__}.{fn.__qualname__}"
+                times.exclusive[name] = times.exclusive.get(name, 0.0) + spent - inner
+                times.count[name] = times.count.get(name, 0) + 1
+                if times._stack:
+                    times._stack[-1][1] += spent
+
+        self._listener = _Listener()
+        event.register("numba:compile", self._listener)
+
+    def uninstall(self) -> None:
+        from numba.core import event
+
+        if self._listener is not None:
+            event.unregister("numba:compile", self._listener)
+            self._listener = None
+
+    def top(self, n: int = 12) -> list[dict[str, float | str | int]]:
+        """The ``n`` costliest functions of ours (numba's own helpers are counted in ``numba``)."""
+        ours = {k: v for k, v in self.exclusive.items() if not k.startswith("numba.")}
+        rows: list[dict[str, float | str | int]] = [
+            {"kernel": k, "cpu_s": round(v, 2), "specialisations": self.count[k]}
+            for k, v in sorted(ours.items(), key=lambda kv: -kv[1])[:n]]
+        helpers = sum(v for k, v in self.exclusive.items() if k.startswith("numba."))
+        rows.append({"kernel": "numba (its own helpers: array and builtin implementations)",
+                     "cpu_s": round(helpers, 2), "specialisations": sum(
+                         c for k, c in self.count.items() if k.startswith("numba."))})
+        return rows
+
+
+def compile_group(group: str, kernels: bool = False) -> dict:
+    """Compile (or load) one group's kernels under its lock; its CPU and wall seconds (and with
+    ``kernels`` each function's compile CPU, :class:`KernelTimes`)."""
     t0, c0 = time.monotonic(), _cpu_s()
+    times = KernelTimes()
+    if kernels:
+        times.install()
     with open(lock_path(group), "a") as fh:
         fcntl.flock(fh, fcntl.LOCK_EX)
         print(READY, flush=True)
         GROUPS[group]()
-    return {"group": group, "cpu_s": round(_cpu_s() - c0, 2), "wall_s": round(time.monotonic() - t0, 2)}
+    out: dict = {"group": group, "cpu_s": round(_cpu_s() - c0, 2), "wall_s": round(time.monotonic() - t0, 2)}
+    if kernels:
+        out["kernels"] = times.top()
+    return out
 
 
 def start(groups: tuple[str, ...] = RUN_GROUPS, log_dir: Path | None = None) -> list[subprocess.Popen]:
@@ -142,10 +202,11 @@ def wait_for(group: str, timeout_s: float = 600.0) -> float:
     return time.monotonic() - t0
 
 
-def run_all(groups: tuple[str, ...] | None = None) -> list[dict[str, float | str]]:
+def run_all(groups: tuple[str, ...] | None = None, kernels: bool = False) -> list[dict]:
     """Every group (or ``groups``) in its own process, in parallel; each one's figures."""
     names = tuple(GROUPS) if groups is None else groups
-    procs = [subprocess.Popen([sys.executable, "-m", "hil.warm_up", "--json", g], cwd=REPO, text=True,
+    extra = ["--kernels"] if kernels else []
+    procs = [subprocess.Popen([sys.executable, "-m", "hil.warm_up", "--json", *extra, g], cwd=REPO, text=True,
                               stdout=subprocess.PIPE, stdin=subprocess.DEVNULL) for g in names]
     out = []
     for g, proc in zip(names, procs, strict=True):
@@ -159,11 +220,11 @@ def run_all(groups: tuple[str, ...] | None = None) -> list[dict[str, float | str
 
 def main(argv: list[str]) -> int:
     as_json = "--json" in argv
-    names = [a for a in argv if a != "--json"]
+    names = [a for a in argv if a not in ("--json", "--kernels")]
     if len(names) != 1 or names[0] not in GROUPS:
-        print(f"usage: python -m hil.warm_up [--json] {{{','.join(GROUPS)}}}", file=sys.stderr)
+        print(f"usage: python -m hil.warm_up [--json] [--kernels] {{{','.join(GROUPS)}}}", file=sys.stderr)
         return 2
-    figures = compile_group(names[0])
+    figures = compile_group(names[0], kernels="--kernels" in argv)
     if as_json:
         print(json.dumps(figures), flush=True)
     return 0

@@ -100,3 +100,30 @@ def test_after_the_groups_the_vessel_computer_compiles_nothing(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     compiled = json.loads(r.stdout.splitlines()[-1])
     assert compiled == [], compiled
+
+
+def test_kernel_times_count_each_function_and_its_specialisations():
+    """`hil warm-up --kernels`: numba's compile events, each function's CPU exclusive of its callees."""
+    from numba import njit
+
+    times = warm_up.KernelTimes()
+    times.install()
+    try:
+
+        @njit
+        def inner(x):
+            return x + 1
+
+        @njit
+        def outer(x):
+            return inner(x) * 2
+
+        assert outer(1) == 4 and outer(1.5) == 5.0   # two specialisations of each
+        name = f"{__name__}.test_kernel_times_count_each_function_and_its_specialisations.<locals>"
+        assert times.count[f"{name}.outer"] == 2 and times.count[f"{name}.inner"] == 2
+        assert all(v >= 0.0 for v in times.exclusive.values())
+        top = times.top(50)
+        assert {r["kernel"] for r in top} >= {f"{name}.outer", f"{name}.inner"}
+        assert top[-1]["kernel"].startswith("numba (")
+    finally:
+        times.uninstall()

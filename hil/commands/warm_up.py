@@ -18,6 +18,10 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                     "at a time per process). The machine code is kept in __pycache__ beside the sources, or "
                     "under NUMBA_CACHE_DIR, so a first `hil run` need not compile. Run it at set-up time (a "
                     "container image, CI). Prints each group's CPU and wall seconds.")
+    p.add_argument("--kernels", action="store_true",
+                   help="also measure each compiled function's CPU seconds (exclusive of the functions it "
+                        "compiled on the way) and specialisations; meaningful on a cold cache "
+                        "(NUMBA_CACHE_DIR=$(mktemp -d) hil warm-up --kernels)")
     p.set_defaults(func=run)
 
 
@@ -31,14 +35,18 @@ def run(args: argparse.Namespace) -> int:
              f"({', '.join(GROUPS)})")
     t0 = time.monotonic()
     try:
-        groups = run_all()
+        groups = run_all(kernels=args.kernels)
     except RuntimeError as exc:
         raise RunFailed(f"warm-up: {exc}") from None
     wall = time.monotonic() - t0
     cpu = sum(float(g["cpu_s"]) for g in groups)
     summary = {"cold": cold, "wall_s": round(wall, 2), "cpu_s": round(cpu, 2), "cpus": os.cpu_count(),
                "groups": groups}
-    lines = [f"{g['group']}: {g['cpu_s']} s CPU, {g['wall_s']} s wall" for g in groups]
+    lines = []
+    for g in groups:
+        top = ", ".join(f"{k['kernel'].rsplit('.', 1)[-1]} {k['cpu_s']}" for k in g.get("kernels", [])[:4])
+        costliest = f" (costliest: {top})" if top else ""
+        lines.append(f"{g['group']}: {g['cpu_s']} s CPU, {g['wall_s']} s wall{costliest}")
     lines.append(f"all: {cpu:.1f} s CPU in {wall:.1f} s wall ({os.cpu_count()} CPUs); "
                  + ("compiled and cached" if cold else "already cached"))
     emit(args, summary, lines)
