@@ -41,3 +41,26 @@ def test_the_python_examples_run(doc, monkeypatch):
             result = ns["result"]
             assert result.status == "exact", result  # type: ignore[attr-defined]
             assert len(result.path) >= 2 and result.cost > 0  # type: ignore[attr-defined]
+
+
+def _doc_commands(doc: str, prefix: str) -> list[list[str]]:
+    """The shell commands of ``doc``'s code blocks that start with ``prefix`` (continuation lines
+    joined, comments dropped), split into words."""
+    import shlex
+
+    text = (REPO / doc).read_text().replace("\\\n", " ")
+    return [shlex.split(line.split(" # ")[0]) for line in text.splitlines() if line.startswith(prefix)]
+
+
+def test_the_bench_maze_queries_of_the_docs_find_their_path(hil_main, tmp_path, monkeypatch):
+    """docs/experiments.md's `hil plan --map bench_maze ...` queries and `hil plan --scenario bench_maze`
+    reach the goal (issue 32 point 5: the default 1.5 m safety radius closed the maze's 2.5 m doors)."""
+    monkeypatch.chdir(REPO)
+    commands = [c for c in _doc_commands("docs/experiments.md", "hil plan --map") if "bench_maze.npy" in " ".join(c)]
+    assert len(commands) == 2
+    commands.append(["hil", "plan", "--scenario", "bench_maze", "--algorithm", "rrt-star", "--deadline", "1",
+                     "--seed", "3", "--json"])
+    for words in commands:
+        words = [str(tmp_path / w) if w.endswith(".png") else w for w in words[1:]]
+        r = hil_main(*words)
+        assert r.returncode == 0, (words, r.stderr[-500:])
