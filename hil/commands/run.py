@@ -245,7 +245,7 @@ def _run_hil(args: argparse.Namespace, cfg: HilConfig, cpus: Any = "auto") -> in
     from hil.first_run import compile_notice
 
     notice = compile_notice("run", processes=3 if args.autopilot != "ardupilot" else 1)
-    compiling: list = []
+    compiling: list[subprocess.Popen] = []
     if notice:
         progress(notice)
         if args.autopilot != "ardupilot":
