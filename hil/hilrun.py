@@ -30,7 +30,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
@@ -127,6 +127,15 @@ class RunOptions:
     # hil run: Ctrl-C/SIGTERM end the run with outcome "interrupted" and its folder written (a GCS session
     # with --wait-for-arm ends that way); elsewhere (Monte Carlo, soak) the interrupt propagates.
     summary_on_interrupt: bool = False
+
+
+def gcs_endpoints_in_effect(configured: Sequence[str], autopilot_args: Sequence[str]) -> list[str]:
+    """The ground-station endpoints the vessel computer will open: the ``--gcs`` values among its
+    arguments when there are any (``none`` alone: the link off), else the configured ones."""
+    given = [autopilot_args[i + 1] for i, a in enumerate(autopilot_args[:-1]) if a == "--gcs"]
+    if not given:
+        return list(configured)
+    return [e for e in given if e != "none"]
 
 
 class HilRun:
@@ -341,8 +350,9 @@ class HilRun:
 
     def claim_system_id(self) -> None:
         """Warn when another `hil run` on this machine streams to ground stations with the same
-        system id (they would show one vehicle jumping between two boats)."""
-        if not self.cfg.gcs.endpoints:
+        system id (they would show one vehicle jumping between two boats). A run whose ground-station
+        link is off (``--gcs none``) streams to nobody and claims nothing."""
+        if not gcs_endpoints_in_effect(self.cfg.gcs.endpoints, self.opts.extra_autopilot_args):
             return
         import fcntl
 

@@ -113,8 +113,10 @@ def build(cfg: HilConfig, scenario_name: str, lockstep: bool, planner_factory: s
     import time as _time
 
     from autopilot_bridge.local_planning import CycleInput, LocalPlan, online_cycle_handler
+    from hil.warm_up import wait_for
 
     t0 = _time.monotonic()
+    wait_for("planner")   # a first run compiles the planner in a process of its own (hil/warm_up.py)
     warm_up = CycleInput(scen.start[0], scen.start[1], scen.start_heading, 0.0, 0)
     online_cycle_handler(world, warm_up)
     spent = _time.monotonic() - t0
@@ -134,6 +136,7 @@ def build(cfg: HilConfig, scenario_name: str, lockstep: bool, planner_factory: s
     from autopilot_bridge.traffic_awareness import TrafficAwareness
 
     traffic = TrafficAwareness(cfg.tracking, cfg.colregs, geo)  # AIS targets, COLREGs encounters
+    wait_for("vessel-computer")   # the filter's, guidance's and obstacle map's kernels (hil/warm_up.py)
     autopilot = Autopilot(computer, world,
                           Devices(link, worker, telemetry, traffic=traffic, actuators=actuators),
                           options)

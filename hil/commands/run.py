@@ -253,9 +253,16 @@ def _run_hil(args: argparse.Namespace, cfg: HilConfig, cpus: str | Placement = "
              f"{who}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
     from hil.first_run import compile_notice
 
-    notice = compile_notice("run")
+    notice = compile_notice("run", processes=3 if args.autopilot != "ardupilot" else 1)
+    compiling: list[subprocess.Popen] = []
     if notice:
         progress(notice)
+        if args.autopilot != "ardupilot":
+            from hil.warm_up import start as start_compiling
+
+            # The vessel computer's kernels in parallel processes (hil/warm_up.py); its process waits
+            # for them and loads the machine code from the cache.
+            compiling = start_compiling()
     from hil.errors import RunFailed
     from hil.files import tidy_failed_start
 
@@ -270,6 +277,11 @@ def _run_hil(args: argparse.Namespace, cfg: HilConfig, cpus: str | Placement = "
     except RunFailed:
         tidy_failed_start(out, fresh)
         raise
+    finally:
+        for proc in compiling:   # done by now (the vessel computer waited for them), or stopped by Ctrl-C
+            if proc.poll() is None:
+                proc.terminate()
+            proc.wait()
     emit(args, to_table(summary), human_summary(summary))
     if summary.outcome == "interrupted":
         progress(f"run: interrupted; summary in {out}")
