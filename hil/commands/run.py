@@ -21,7 +21,6 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from autopilot_bridge.tracking_stats import TrackingSummary
 from common.tables import to_table
 from hil import processes
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
@@ -313,6 +312,8 @@ def human_summary(s: RunSummary) -> list[str]:
     lines.append(f"clearance: min {num(s.min_clearance_m, ' m')}; "
                  f"path {num(s.path_length_m, ' m', '.1f')}"
                  f"; energy {'-' if energy is None else f'{energy / 1000:.1f} kJ'}")
+    from autopilot_bridge.tracking_stats import TrackingSummary
+
     tr, lat = s.tracking or TrackingSummary(frames=0), s.control_latency_ms
     lines.append(f"errors: navigation RMSE {num(s.navigation_rmse_m, ' m')}; cross-track RMS "
                  f"{num(tr.get('cross_track_rms_m'), ' m')} (max {num(tr.get('cross_track_max_m'), ' m')}); "
