@@ -9,9 +9,12 @@ Commands are normalised thrusts in [-1, 1] (port, starboard) answering the senso
 
 from __future__ import annotations
 
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from autopilot_bridge.hil_link import SensorLink
+
+if TYPE_CHECKING:
+    from autopilot_bridge.can_actuators import CanPathSummary
 
 
 class Actuators(Protocol):
@@ -25,7 +28,7 @@ class Actuators(Protocol):
         """Per ESC (port, starboard): its newest status, or None; [] where the back-end has none."""
         ...
 
-    def summary(self) -> dict[str, Any] | None:
+    def summary(self) -> CanPathSummary | None:
         """The back-end's counters for the run summary (None: nothing beyond the HIL link's)."""
         ...
 
@@ -45,5 +48,5 @@ class MavlinkActuators:
     def esc_telemetry(self) -> list[dict[str, float] | None]:
         return []
 
-    def summary(self) -> dict[str, Any] | None:
+    def summary(self) -> CanPathSummary | None:
         return None

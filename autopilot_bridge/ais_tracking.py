@@ -29,7 +29,7 @@ import math
 from collections import Counter
 from dataclasses import dataclass
 from functools import cache
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
@@ -137,6 +137,16 @@ def _velocity(r: AisReport) -> tuple[float | None, float | None]:
     return r.speed * math.cos(r.course), r.speed * math.sin(r.course)
 
 
+class AisSummary(TypedDict):
+    """AIS reports: targets tracked at the end, accepted, tracks opened and forgotten, refusals by reason."""
+
+    tracked: int
+    accepted: int
+    new_tracks: int
+    forgotten: int
+    rejected: dict[str, int]
+
+
 class AisTracker:
     """Tracks of every MMSI heard, with rejection counters (see the module docstring)."""
 
@@ -218,6 +228,6 @@ class AisTracker:
                               tr.last_report_t, r.name))
         return out
 
-    def summary(self) -> dict:
-        return {"tracked": len(self.tracks), "accepted": self.accepted, "new_tracks": self.new_tracks,
-                "forgotten": self.forgotten, "rejected": dict(sorted(self.rejected.items()))}
+    def summary(self) -> AisSummary:
+        return AisSummary(tracked=len(self.tracks), accepted=self.accepted, new_tracks=self.new_tracks,
+                          forgotten=self.forgotten, rejected=dict(sorted(self.rejected.items())))

@@ -42,8 +42,6 @@ import math
 import time
 from array import array
 from collections.abc import Callable
-from dataclasses import asdict
-from typing import Any
 
 import numpy as np
 
@@ -65,7 +63,7 @@ from autopilot_bridge.obstacle_map import SensedObstacles, path_blocked
 from autopilot_bridge.onboard_failsafes import OnboardFailsafes
 from autopilot_bridge.onboard_status import OnboardSensors, OnboardStatus
 from autopilot_bridge.parameters import ParamTable, bind
-from autopilot_bridge.plan_acceptance import PlanAcceptance
+from autopilot_bridge.plan_acceptance import AcceptedPath, PlanAcceptance
 from autopilot_bridge.plan_handoff import PlanHandoff
 from autopilot_bridge.planner_tuning import PlannerTuning
 from autopilot_bridge.route_planning import RouteKeeper
@@ -193,9 +191,9 @@ class Autopilot:
         self.onboard.reset()
 
     @property
-    def local_paths(self) -> list[dict[str, Any]]:
+    def local_paths(self) -> tuple[AcceptedPath, ...]:
         """The accepted local paths, for the run's record."""
-        return [asdict(p) for p in self.acceptance.local_paths]
+        return tuple(self.acceptance.local_paths)
 
     # -- the geofence -------------------------------------------------------------------------------
     def _fence_changed(self, fence: Fence | None = None) -> None:

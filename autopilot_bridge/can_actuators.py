@@ -24,10 +24,11 @@ from __future__ import annotations
 import time
 from collections import Counter
 from collections.abc import Callable
-from typing import Any
+from typing import TypedDict
 
 import can
 
+from autopilot_bridge.hil_link import SensorLink
 from common import dronecan_codec as dc
 from common.can_params import CanParams
 from common.transfer_times import TransferTimes
@@ -35,10 +36,32 @@ from common.transfer_times import TransferTimes
 MAX_FRAMES_PER_SERVICE = 256
 
 
+
+class CanPathSummary(TypedDict):
+    """The ``can`` section of the autopilot's summary: the bus, DroneCAN transfers by type (sent,
+    received, lost, duplicated), refusals by reason, each ESC's newest status (by side: rpm, V, A,
+    degC ...) and health by node id."""
+
+    interface: str
+    channel: str
+    node_id: int
+    raw_commands_sent: int
+    transfers_sent: dict[str, int]
+    send_errors: int
+    frames_received: int
+    own_frames_ignored: int
+    transfers_received: dict[str, int]
+    transfers_lost: dict[str, int]
+    transfers_duplicated: dict[str, int]
+    rejects: dict[str, int]
+    esc_status: dict[str, dict[str, float]]
+    esc_health: dict[str, int]
+
+
 class CanActuators:
     """Thruster commands over DroneCAN on ``bus``; ESC Status read back."""
 
-    def __init__(self, bus: can.BusABC, params: CanParams, lockstep_token: Any | None = None,
+    def __init__(self, bus: can.BusABC, params: CanParams, lockstep_token: SensorLink | None = None,
                  clock: Callable[[], float] = time.monotonic) -> None:
         self.bus, self.p, self.token, self.clock = bus, params, lockstep_token, clock
         self.node_id = params.autopilot_node_id
@@ -120,25 +143,25 @@ class CanActuators:
             out.append(None if s is None else {**s, "count": self.tracker.received_from(dc.ESC_STATUS, node)})
         return out if any(r is not None for r in out) else []
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> CanPathSummary:
         """Counters of the CAN path (the ``can`` key of the autopilot summary)."""
         names = ("port", "starboard")
-        return {
-            "interface": self.p.interface,
-            "channel": self.p.channel,
-            "node_id": self.node_id,
-            "raw_commands_sent": self.commands_sent,
-            "transfers_sent": dict(sorted(self.sent.items())),
-            "send_errors": self.send_errors,
-            "frames_received": self.receiver.frames,
-            "own_frames_ignored": self.receiver.own_frames,
-            "transfers_received": dict(sorted(self.tracker.received.items())),
-            "transfers_lost": dict(sorted(self.tracker.lost.items())),
-            "transfers_duplicated": dict(sorted(self.tracker.duplicated.items())),
-            "rejects": dict(sorted((self.receiver.rejects + self.rejects).items())),
-            "esc_status": {names[i]: s for i, s in sorted(self.esc_status.items())},
-            "esc_health": {str(k): v for k, v in sorted(self.esc_health.items())},
-        }
+        return CanPathSummary(
+            interface=self.p.interface,
+            channel=self.p.channel,
+            node_id=self.node_id,
+            raw_commands_sent=self.commands_sent,
+            transfers_sent=dict(sorted(self.sent.items())),
+            send_errors=self.send_errors,
+            frames_received=self.receiver.frames,
+            own_frames_ignored=self.receiver.own_frames,
+            transfers_received=dict(sorted(self.tracker.received.items())),
+            transfers_lost=dict(sorted(self.tracker.lost.items())),
+            transfers_duplicated=dict(sorted(self.tracker.duplicated.items())),
+            rejects=dict(sorted((self.receiver.rejects + self.rejects).items())),
+            esc_status={names[i]: s for i, s in sorted(self.esc_status.items())},
+            esc_health={str(k): v for k, v in sorted(self.esc_health.items())},
+        )
 
     def close(self) -> None:
         self.bus.shutdown()

@@ -28,12 +28,12 @@ import math
 import time
 from collections import Counter
 from dataclasses import dataclass
-from typing import Protocol
+from typing import NotRequired, Protocol, TypedDict
 
 from autopilot_bridge.ais_tracking import AisReport
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE, Codec
-from common.udp import BusyPoll, UdpEndpoint
+from common.udp import BusyPoll, LossCounts, UdpEndpoint
 
 TAKEN = ("HIL_SENSOR", "HIL_GPS", "ODOMETRY", "OBSTACLE_DISTANCE", "HIL_STATE_QUATERNION", "AIS_VESSEL",
          "BATTERY_STATUS")
@@ -129,6 +129,36 @@ class SensorFrame:
     @property
     def t(self) -> float:
         return self.time_usec * 1e-6
+
+
+class StallEvent(TypedDict):
+    """A stall of the sensor stream: when (s of sensor time) and how long (s)."""
+
+    t_s: float
+    length_s: float
+
+
+class StallSummary(TypedDict):
+    count: int
+    stale_frames_skipped: int
+    events: list[StallEvent]
+
+
+class LinkSummary(TypedDict):
+    """The ``link`` section of the autopilot's summary (docs/security.md): refusals by reason, frames,
+    timeline switches, stalls, the peer, the endpoint's counters, and fault injection where on."""
+
+    rejects: dict[str, int]
+    frames: int
+    truth_ignored: int
+    timeline_switches: int
+    late_frames: int
+    stalls: StallSummary
+    sensors_from: str | None
+    wrong_source: int
+    budget_stops: int
+    kernel_drops: int | None
+    loss_injected: NotRequired[LossCounts]
 
 
 class SensorLink(Protocol):
@@ -380,20 +410,22 @@ class HilLink:
         self.ep.send(self.codec.encode("hil_actuator_controls", time_usec, controls, mode, 0))
         self.commands_sent += 1
 
-    def summary(self) -> dict:
+    def summary(self) -> LinkSummary:
         """The link's refusals by reason, its endpoint's (source address, kernel drops) and
         timeline switches (simulator restarts or long gaps accepted); with fault injection on, the
         datagrams it dropped on purpose each way."""
-        out = {"rejects": dict(sorted(self.rejects.items())), "frames": self.frames,
-               "truth_ignored": self.truth_ignored, "timeline_switches": self.timeline_switches,
-               "late_frames": self.late_frames,
-               "stalls": {"count": self.stall_count, "stale_frames_skipped": self.stale_frames_skipped,
-                          "events": [{"t_s": round(t, 3), "length_s": round(d, 3)} for t, d in self.stalls]},
-               "sensors_from": None if self.ep.peer is None else f"{self.ep.peer[0]}:{self.ep.peer[1]}",
-               **self.ep.counters()}
+        counters = self.ep.counters()
+        out = LinkSummary(
+            rejects=dict(sorted(self.rejects.items())), frames=self.frames, truth_ignored=self.truth_ignored,
+            timeline_switches=self.timeline_switches, late_frames=self.late_frames,
+            stalls=StallSummary(count=self.stall_count, stale_frames_skipped=self.stale_frames_skipped,
+                                events=[StallEvent(t_s=round(t, 3), length_s=round(d, 3)) for t, d in self.stalls]),
+            sensors_from=None if self.ep.peer is None else f"{self.ep.peer[0]}:{self.ep.peer[1]}",
+            wrong_source=counters["wrong_source"], budget_stops=counters["budget_stops"],
+            kernel_drops=counters["kernel_drops"])
         if self.ep.send_loss or self.ep.recv_loss:
-            out["loss_injected"] = {"sent": self.ep.sent, "dropped_out": self.ep.dropped_out,
-                                    "received": self.ep.recv_count, "dropped_in": self.ep.dropped_in}
+            out["loss_injected"] = LossCounts(sent=self.ep.sent, dropped_out=self.ep.dropped_out,
+                                              received=self.ep.recv_count, dropped_in=self.ep.dropped_in)
         return out
 
     def send_raw(self, data: bytes) -> None:

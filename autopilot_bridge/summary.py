@@ -3,16 +3,23 @@
 
 A frozen dataclass, serialised with :func:`common.tables.to_table` and read strictly with
 ``hil.config.from_table`` (an unknown or missing key is a one-line error naming it). Sections owned by
-other components (path tracking, sensed obstacles, the CAN path, traffic, the HIL and ground-station
-links) keep those components' own tables.
+other components (path tracking, the CAN path, traffic, the HIL and ground-station links, the busy
+poll, the accepted paths) have the types those components declare (TypedDicts beside the code that
+fills them, read back as strictly as the dataclasses).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
+from autopilot_bridge.can_actuators import CanPathSummary
+from autopilot_bridge.gcs.link import GcsSummary
+from autopilot_bridge.hil_link import LinkSummary
+from autopilot_bridge.plan_acceptance import AcceptedPath
+from autopilot_bridge.tracking_stats import TrackingSummary
+from autopilot_bridge.traffic_awareness import TrafficSummary
 from common.tables import absent_when_none
+from common.udp import BusyPollSummary
 
 
 @dataclass(frozen=True)
@@ -65,7 +72,7 @@ class AutopilotSummary:
     worker_startup_s: WorkerStartup
     plans_skipped_worker_starting: int
     fallback_activations: int
-    tracking: dict[str, Any]             # autopilot_bridge.tracking_stats
+    tracking: TrackingSummary
     simulator_restarts: int
     navigation: NavigationCounts
     sensed_obstacles: dict[str, int]     # autopilot_bridge.obstacle_map, plus "replans"
@@ -76,12 +83,12 @@ class AutopilotSummary:
     lockstep_planner_wait_ms_max: float
     lockstep_planner_wait_ms_total: float   # wall time the loop stood still for the planner
     events: tuple[str, ...]              # "12.34s what happened"
-    can: dict[str, Any] | None = absent_when_none()       # CAN actuators only (can_actuators.py)
-    traffic: dict[str, Any] | None = None                 # traffic_awareness.py; None without traffic
-    link: dict[str, Any] | None = absent_when_none()      # the HIL link's refusals (hil_link.py)
-    busy_poll: dict[str, Any] | None = absent_when_none()  # lockstep waits for frames (common.udp.BusyPoll)
-    gcs: dict[str, Any] | None = absent_when_none()       # the ground-station link's counters
-    local_paths: tuple[dict[str, Any], ...] | None = absent_when_none()
+    can: CanPathSummary | None = absent_when_none()       # CAN actuators only
+    traffic: TrafficSummary | None = None                 # None without traffic
+    link: LinkSummary | None = absent_when_none()         # the HIL link's refusals
+    busy_poll: BusyPollSummary | None = absent_when_none()  # lockstep waits for frames
+    gcs: GcsSummary | None = absent_when_none()           # the ground-station link's counters
+    local_paths: tuple[AcceptedPath, ...] | None = absent_when_none()
     estimated_track: tuple[tuple[float, ...], ...] | None = absent_when_none()   # (t s, north m, east m, psi rad)
     sensed_cells: tuple[tuple[int, ...], ...] | None = absent_when_none()        # map grid [row, col]
 

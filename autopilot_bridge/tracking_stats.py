@@ -7,11 +7,23 @@ tracking problem (large cross-track error) or a planning one (the path itself to
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import NotRequired, TypedDict
 
 import numpy as np
 
 from autopilot_bridge.angles import wrap_angle
+
+
+class TrackingSummary(TypedDict):
+    """The ``tracking`` section of the summaries: errors over the frames that followed a local path
+    (none but ``frames`` when there were none); m and rad."""
+
+    frames: int
+    cross_track_rms_m: NotRequired[float]
+    cross_track_p95_m: NotRequired[float]
+    cross_track_max_m: NotRequired[float]
+    heading_error_rms_rad: NotRequired[float]
+    heading_error_p95_rad: NotRequired[float]
 
 
 class TrackingStats:
@@ -25,7 +37,7 @@ class TrackingStats:
         self.cross_track.append(abs(cross_track))
         self.heading_error.append(abs(wrap_angle(heading_ref - heading)))
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> TrackingSummary:
         if not self.cross_track:
             return {"frames": 0}
         x, h = np.array(self.cross_track), np.array(self.heading_error)

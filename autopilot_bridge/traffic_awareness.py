@@ -24,9 +24,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, TypedDict
 
-from autopilot_bridge.ais_tracking import AisReport, AisTracker, Target, TrackerParams
+from autopilot_bridge.ais_tracking import AisReport, AisSummary, AisTracker, Target, TrackerParams
 from planner import colregs as C
 from planner.collision_cone import assess
 from planner.traffic_map import MovingObstacle, TrafficSnapshot
@@ -54,6 +54,28 @@ class EncounterState:
     act_t: float | None = None
     act_pose: tuple[float, float, float] | None = None   # map x, y, course (rad from east) when it began
     end_t: float | None = None
+
+
+class EncounterRecord(TypedDict):
+    """One COLREGs encounter as the vessel computer saw it: the ship, the rule's type and our role,
+    when it began (s), the bearing then (deg), when a stand-on vessel acted under rule 17 and when
+    it ended (s; None: not)."""
+
+    mmsi: int
+    type: str
+    role: str
+    start_s: float
+    bearing_deg: float
+    rule17_act_s: float | None
+    end_s: float | None
+
+
+class TrafficSummary(TypedDict):
+    """The ``traffic`` section of the autopilot's summary."""
+
+    ais: AisSummary
+    forwarded_to_gcs: int
+    encounters: list[EncounterRecord]
 
 
 class TrafficAwareness:
@@ -156,15 +178,16 @@ class TrafficAwareness:
             return None
         return TrafficSnapshot(tuple(obstacles), speed, heading, (x, y), self.p.time_slack, self.p.time_slack_s)
 
-    def summary(self) -> dict[str, Any]:
-        return {
-            "ais": self.tracker.summary(),
-            "forwarded_to_gcs": self.forwarded,
-            "encounters": [{"mmsi": e.mmsi, "type": e.type, "role": e.role, "start_s": round(e.start_t, 2),
-                            "bearing_deg": round(e.bearing, 1),
-                            "rule17_act_s": None if e.act_t is None else round(e.act_t, 2),
-                            "end_s": None if e.end_t is None else round(e.end_t, 2)} for e in self.history],
-        }
+    def summary(self) -> TrafficSummary:
+        return TrafficSummary(
+            ais=self.tracker.summary(),
+            forwarded_to_gcs=self.forwarded,
+            encounters=[EncounterRecord(mmsi=e.mmsi, type=e.type, role=e.role, start_s=round(e.start_t, 2),
+                                        bearing_deg=round(e.bearing, 1),
+                                        rule17_act_s=None if e.act_t is None else round(e.act_t, 2),
+                                        end_s=None if e.end_t is None else round(e.end_t, 2))
+                        for e in self.history],
+        )
 
 
 def _ais_fields(r: AisReport) -> tuple:

@@ -19,6 +19,7 @@ import os
 import select
 import socket
 import time
+from typing import TypedDict
 
 import numpy as np
 
@@ -37,6 +38,34 @@ def usable_cpus() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
         return os.cpu_count() or 1
+
+
+class BusyPollSummary(TypedDict):
+    """How a lockstep end's waits for frames went: the longest spin (us), frames caught while
+    spinning, missed (slept instead), pauses, and waits held for a peer."""
+
+    max_us: float
+    caught: int
+    missed: int
+    pauses: int
+    held: int
+
+
+class EndpointCounters(TypedDict):
+    """What a UDP endpoint refused or lost (``kernel_drops`` None where the kernel does not say)."""
+
+    wrong_source: int
+    budget_stops: int
+    kernel_drops: int | None
+
+
+class LossCounts(TypedDict):
+    """Datagrams of a fault-injecting endpoint: sent and dropped out, received and dropped in."""
+
+    sent: int
+    dropped_out: int
+    received: int
+    dropped_in: int
 
 
 class BusyPoll:
@@ -104,7 +133,7 @@ class BusyPoll:
             self._paused_for = self._pause
             self._pause = min(2 * self._pause, self.MAX_PAUSE)
 
-    def summary(self) -> dict[str, float | int]:
+    def summary(self) -> BusyPollSummary:
         return {"max_us": round(self.max_s * 1e6, 1), "caught": self.hits, "missed": self.misses,
                 "pauses": self.pauses, "held": self.held_waits}
 
@@ -259,7 +288,7 @@ class UdpEndpoint:
             latest = data
         return latest
 
-    def counters(self) -> dict[str, int | None]:
+    def counters(self) -> EndpointCounters:
         """What this endpoint refused or lost: ``wrong_source`` (not from the peer),
         ``budget_stops`` and ``kernel_drops`` (receive buffer full; None: unknown)."""
         return {"wrong_source": self.wrong_source, "budget_stops": self.budget_stops,

@@ -33,8 +33,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from autopilot_bridge.tracking_stats import TrackingSummary
 from common.frames import map_to_ned
 from common.geodesy import LocalFrame
+from hil.ardupilot_fence import FENCE_VERTEX_EXCLUSION, MISSION_TYPE_FENCE, FenceItem
 from hil.errors import RunFailed, UsageError
 
 if TYPE_CHECKING:
@@ -150,7 +152,10 @@ def project_params(cfg: HilConfig) -> dict[str, float]:
     the harbour route and collided 122.1 s after AUTO (docs/ardupilot.md)."""
     speed = float(cfg.autopilot.cruise_speed)
     rate = TURN_MARGIN * full_turn_rate(cfg.vessel)
-    return {"SYSID_THISMAV": float(cfg.autopilot.system_id), "CRUISE_SPEED": speed, "WP_SPEED": speed,
+    sysid = float(cfg.autopilot.system_id)
+    # The system id under both names: MAV_SYSID since ArduPilot 4.7 (the shipped binary knows only it),
+    # SYSID_THISMAV before; each ignores the other's name in a defaults file.
+    return {"MAV_SYSID": sysid, "SYSID_THISMAV": sysid, "CRUISE_SPEED": speed, "WP_SPEED": speed,
             "CRUISE_THROTTLE": cruise_throttle(cfg.vessel, speed),
             # after the last waypoint: keep station (LOITER) or hold, as the vessel computer's mission_done
             "MIS_DONE_BEHAVE": 1.0 if cfg.autopilot.mission_done == "loiter" else 0.0,
@@ -186,7 +191,8 @@ class Mission:
     """ArduRover's set-up, step by step: upload the mission, arm, AUTO (simulated times in s)."""
 
     items: list[tuple[float, float]]
-    phase: str = "wait_heartbeat"      # -> upload -> arm -> auto -> flying (or failed)
+    fence: list[FenceItem] = field(default_factory=list)    # exclusion polygons' vertices (none: no fence)
+    phase: str = "wait_heartbeat"      # -> fence (with one) -> upload -> arm -> auto -> flying (or failed)
     sent_at: float = -math.inf
     armed: bool = False
     mode: int = -1
@@ -194,12 +200,14 @@ class Mission:
     failure: str | None = None
     statustext: list[str] = field(default_factory=list)
     requests: int = 0
+    fence_requests: int = 0
 
 
 class ArduPilotRun:
     """One run of ArduRover on a scenario; :meth:`execute` returns the summary."""
 
-    def __init__(self, opts: RunOptions, cfg: HilConfig, sitl: SitlFiles, user_params: Path | None = None) -> None:
+    def __init__(self, opts: RunOptions, cfg: HilConfig, sitl: SitlFiles, user_params: Path | None = None,
+                 fence: bool = False) -> None:
         from hil import scenario as scenarios
         from hil import settings
         from hil.hilrun import run_folder
@@ -216,7 +224,24 @@ class ArduPilotRun:
         north, east, psi = map_to_ned(self.scen.start[0], self.scen.start[1], self.scen.start_heading)
         self.home = (north, east)
         self.home_heading_deg = math.degrees(psi) % 360.0
-        self.route = np.asarray(self.scen.reference_path, dtype=float)[:, ::-1]   # NED
+        # The mission: the global route; with the chart as fence, the route as the scenario gives it
+        # (it may cross the chart: ArduRover's Dijkstra plans round its fence).
+        given = self.scen.waypoints if fence and self.scen.waypoints is not None else self.scen.reference_path
+        self.route = np.asarray(given, dtype=float)[:, ::-1]   # NED
+        self.fence_polygons: list[np.ndarray] = []
+        fence_items: list[FenceItem] = []
+        if fence:
+            from hil.ardupilot_fence import DIJKSTRA_MAX_POINTS, chart_polygons, dijkstra_points
+            from hil.ardupilot_fence import fence_items as to_items
+
+            try:
+                self.fence_polygons = chart_polygons(self.scen.occ, self.scen.resolution)
+            except ValueError as exc:   # more vertices than ArduRover stores
+                raise UsageError(f"--ardupilot-fence: scenario {opts.scenario!r}: {exc}") from None
+            if dijkstra_points(self.fence_polygons) > DIJKSTRA_MAX_POINTS:
+                raise UsageError(f"scenario {opts.scenario!r}: its chart makes {dijkstra_points(self.fence_polygons)} "
+                                 f"fence points, more than ArduRover's Dijkstra takes ({DIJKSTRA_MAX_POINTS})")
+            fence_items = to_items(self.fence_polygons, self.geo)
         truth_occ = self.scen.truth_occ()
         self.judge = Judge(truth_occ, self.scen.resolution, cfg.vessel.L / 2.0,
                            (self.scen.goal[1], self.scen.goal[0]), cfg.autopilot.goal_tolerance)
@@ -225,7 +250,7 @@ class ArduPilotRun:
             from hil.encounter_report import EncounterJudge
 
             self.encounter_judge = EncounterJudge(cfg.vessel.L, cfg.vessel.W, cfg.colregs)
-        self.mission = Mission(mission_items(self.route, self.home, self.geo))
+        self.mission = Mission(mission_items(self.route, self.home, self.geo), fence_items)
         self.truth: dict[int, tuple[float, float, float, float]] = {}
         self.energy = 0.0
         self.min_clearance = math.inf
@@ -255,6 +280,10 @@ class ArduPilotRun:
         shutil.rmtree(folder, ignore_errors=True)
         folder.mkdir(parents=True)
         params = project_params(cfg)
+        if self.mission.fence:
+            from hil.ardupilot_fence import oa_params
+
+            params.update(oa_params(float(cfg.planner.safety_radius), float(cfg.vessel.L) / 2.0))
         param_file = folder / "usv-hil.parm"
         write_params(param_file, params)
         try:
@@ -287,7 +316,7 @@ class ArduPilotRun:
             with open(folder / "ardurover.log", "wb") as log:
                 try:
                     proc = subprocess.Popen(cmd, cwd=folder, stdout=log, stderr=subprocess.STDOUT,
-                                            start_new_session=True)
+                                            start_new_session=True, preexec_fn=_die_with_parent)
                 except OSError as exc:
                     raise UsageError(f"ArduRover SITL binary {self.sitl.binary} does not start: {exc}") from None
             opts.on_progress(f"run: ArduRover pid {proc.pid}, instance {instance}: JSON physics on UDP "
@@ -431,8 +460,25 @@ class ArduPilotRun:
             ms.armed = bool(m.base_mode & 128)
             ms.mode = int(m.custom_mode)
             if ms.phase == "wait_heartbeat":
-                ms.phase, ms.sent_at = "upload", -math.inf
-        elif kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST") and ms.phase == "upload":
+                ms.phase, ms.sent_at = "fence" if ms.fence else "upload", -math.inf
+        elif kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST") and ms.phase == "fence" \
+                and int(m.mission_type) == MISSION_TYPE_FENCE:
+            seq = int(m.seq)
+            if 0 <= seq < len(ms.fence):
+                ms.fence_requests += 1
+                f = ms.fence[seq]
+                self._send(self.mav.mission_item_int_encode(
+                    self.ap_sysid, 1, seq, 0, FENCE_VERTEX_EXCLUSION, 0, 1, float(f.vertices), 0.0, 0.0, 0.0,
+                    int(round(f.lat * 1e7)), int(round(f.lon * 1e7)), 0.0, MISSION_TYPE_FENCE))
+                ms.sent_at = t
+        elif kind == "MISSION_ACK" and ms.phase == "fence" and int(m.mission_type) == MISSION_TYPE_FENCE:
+            if int(m.type) == 0:
+                ms.phase, ms.sent_at, ms.failure = "upload", -math.inf, None
+                self.events.append(f"{t:.1f} s: fence of {len(ms.fence)} vertices accepted")
+            else:
+                ms.failure, ms.sent_at = f"ArduRover refused the fence (MAV_MISSION_RESULT {m.type})", t
+        elif kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST") and ms.phase == "upload" \
+                and int(m.mission_type) == 0:
             seq = int(m.seq)
             if 0 <= seq < len(ms.items):
                 ms.requests += 1
@@ -441,7 +487,7 @@ class ArduPilotRun:
                     self.ap_sysid, 1, seq, 3, 16, 0, 1, 0.0, 0.0, 0.0, 0.0,
                     int(round(lat * 1e7)), int(round(lon * 1e7)), 0.0, 0))
                 ms.sent_at = t
-        elif kind == "MISSION_ACK" and ms.phase == "upload":
+        elif kind == "MISSION_ACK" and ms.phase == "upload" and int(m.mission_type) == 0:
             if int(m.type) == 0:
                 ms.phase, ms.sent_at, ms.failure = "arm", -math.inf, None
                 self.events.append(f"{t:.1f} s: mission of {len(ms.items) - 1} waypoints accepted")
@@ -455,7 +501,10 @@ class ArduPilotRun:
 
     def _advance(self, t: float) -> None:
         ms = self.mission
-        if ms.phase == "upload" and t - ms.sent_at > 2.0:
+        if ms.phase == "fence" and t - ms.sent_at > 2.0:
+            self._send(self.mav.mission_count_encode(self.ap_sysid, 1, len(ms.fence), MISSION_TYPE_FENCE))
+            ms.sent_at = t
+        elif ms.phase == "upload" and t - ms.sent_at > 2.0:
             self._send(self.mav.mission_count_encode(self.ap_sysid, 1, len(ms.items), 0))
             ms.sent_at = t
         elif ms.phase in ("arm", "auto") and t - ms.sent_at > 1.0:
@@ -504,6 +553,8 @@ class ArduPilotRun:
                                                   "wrong_peer")},
                        "ardupilot": {"binary": str(self.sitl.binary), "instance": instance, "params": params,
                                      "auto_at_s": ms.auto_at, "mission_items": len(ms.items),
+                                     "fence": {"polygons": len(self.fence_polygons), "vertices": len(ms.fence),
+                                               "requests": ms.fence_requests} if ms.fence else None,
                                      "mission_time_s": None if ms.auto_at is None or not times else
                                      round(times[-1] * 1e-6 - ms.auto_at, 3),
                                      "setup_failure": ms.failure, "statustext": ms.statustext[-20:]}},
@@ -512,7 +563,7 @@ class ArduPilotRun:
             actuators="ardupilot", encounters=encounters, traffic=traffic)
 
 
-def route_cross_track(track: np.ndarray, route: np.ndarray) -> dict[str, float] | None:
+def route_cross_track(track: np.ndarray, route: np.ndarray) -> TrackingSummary | None:
     """RMS and largest distance (m) of each track point (N, 2) from the route polyline (M, 2)."""
     if len(track) == 0 or len(route) < 2:
         return None
@@ -522,8 +573,24 @@ def route_cross_track(track: np.ndarray, route: np.ndarray) -> dict[str, float] 
     p = track[:, None, :]
     w = np.clip(np.sum((p - a) * ab, axis=2) / den, 0.0, 1.0)
     d = np.min(np.hypot(*(p - (a + w[..., None] * ab)).transpose(2, 0, 1)), axis=1)
-    return {"cross_track_rms_m": round(float(np.sqrt(np.mean(d * d))), 3),
-            "cross_track_max_m": round(float(d.max()), 3)}
+    return TrackingSummary(frames=len(track), cross_track_rms_m=round(float(np.sqrt(np.mean(d * d))), 3),
+                           cross_track_max_m=round(float(d.max()), 3))
+
+
+def _die_with_parent() -> None:
+    """In ArduRover's process before it starts (Linux): SIGKILL when this process ends, however it ends.
+    Its own session keeps a terminal's Ctrl-C from it (this process ends it, after the summary), but a
+    `hil` killed outright left it running for good: it waits for the physics' answer in lockstep, so
+    its SIGTERM handler, which exits from its main loop, never runs."""
+    import ctypes
+    import signal
+    import sys
+
+    if sys.platform.startswith("linux"):
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))   # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
 
 
 def _i16(v: float) -> int:
@@ -538,14 +605,17 @@ def _last_line(path: Path) -> str:
     return lines[-1].strip()[:200] if lines else ""
 
 
-def run_ardupilot(opts: RunOptions, cfg: HilConfig, sitl: SitlFiles, user_params: str | None = None) -> RunSummary:
+def run_ardupilot(opts: RunOptions, cfg: HilConfig, sitl: SitlFiles, user_params: str | None = None,
+                  fence: bool = False) -> RunSummary:
     """`hil run --autopilot ardupilot`: the run folder (run.tlog, summary.json, plot.png, ardupilot/).
-    ``user_params``: an ArduPilot parameter file laid over all others (the user's own tuning)."""
+    ``user_params``: an ArduPilot parameter file laid over all others (the user's own tuning).
+    ``fence``: the chart as ArduRover's exclusion fence, planned round by its Dijkstra (OA_TYPE 2),
+    and the scenario's route as given (not the global route) as its mission."""
     from common.tables import to_table
     from hil.files import write_json_atomic
 
     extra = Path(user_params).expanduser().resolve() if user_params else None
-    run = ArduPilotRun(opts, cfg, sitl, extra)
+    run = ArduPilotRun(opts, cfg, sitl, extra, fence)
     out = run.out
     summary = run.execute()
     summary = replace(summary, run_folder=str(out))

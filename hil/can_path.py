@@ -25,6 +25,7 @@ import numpy as np
 from common.dronecan_codec import TRANSFER_ID_MODULO
 
 if TYPE_CHECKING:
+    from autopilot_bridge.can_actuators import CanActuators
     from hil.settings import HilConfig
 
 
@@ -57,7 +58,7 @@ def esc_process_command(args: argparse.Namespace, record: Any) -> list[str]:
     return cmd
 
 
-def recording_actuators(cfg: HilConfig) -> Any:
+def recording_actuators(cfg: HilConfig) -> CanActuators:
     """The autopilot's CAN back-end on the configured bus, recording (transfer ID, time sent) of each
     command; a bus that cannot be opened is a one-line UsageError."""
     from autopilot_bridge.can_actuators import CanActuators

@@ -22,7 +22,7 @@ from hil import config, console
 from hil.errors import HilError
 
 # Subcommand modules under hil/commands/, in the order `hil --help` lists them.
-COMMANDS = ("run", "sim", "autopilot", "plan", "montecarlo", "bench", "soak", "vcan", "geo")
+COMMANDS = ("run", "sim", "autopilot", "plan", "montecarlo", "bench", "soak", "vcan", "geo", "warm-up")
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -78,7 +78,7 @@ def build_parser() -> ArgumentParser:
     sub.required = True
     parents = [common_options()]
     for name in COMMANDS:
-        importlib.import_module(f"hil.commands.{name}").add_parser(sub, parents)
+        importlib.import_module(f"hil.commands.{name.replace('-', '_')}").add_parser(sub, parents)
     return parser
 
 

@@ -54,6 +54,23 @@ def _describe(tp: Any) -> str:
     return getattr(tp, "__name__", str(tp))
 
 
+def _typed_table(value: Any, tp: Any, key: str) -> dict[str, Any]:
+    """A JSON table read as the TypedDict ``tp`` (a summary's section): every required key there,
+    no unknown key, each value of its annotated type."""
+    if not isinstance(value, dict):
+        raise ValueError(f"{key}: expected a table, got {type(value).__name__}")
+    hints = typing.get_type_hints(tp)
+    for k in value:
+        if k not in hints:
+            raise ValueError(f"{key}.{k}: unknown key{suggest(k, list(hints))}")
+    # NotRequired read from the hints: with postponed annotations __required_keys__ holds them all.
+    marked = typing.get_type_hints(tp, include_extras=True)
+    for k in hints:
+        if k not in value and get_origin(marked[k]) is not typing.NotRequired:
+            raise ValueError(f"{key}.{k}: missing key")
+    return {k: _convert(v, hints[k], f"{key}.{k}") for k, v in value.items()}
+
+
 def _convert(value: Any, tp: Any, key: str) -> Any:
     """Convert a TOML value to the annotated type ``tp`` or raise ``ValueError('key: problem')``."""
     origin = get_origin(tp)
@@ -67,6 +84,13 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
         if not isinstance(value, dict):
             raise ValueError(f"{key}: expected a table, got {type(value).__name__}")
         return _build(tp, value, key)
+    if typing.is_typeddict(tp):
+        return _typed_table(value, tp, key)
+    if origin is list:
+        if not isinstance(value, list):
+            raise ValueError(f"{key}: expected an array, got {type(value).__name__}")
+        (item,) = get_args(tp)
+        return [_convert(v, item, f"{key}[{i}]") for i, v in enumerate(value)]
     if origin is Literal:
         choices = get_args(tp)
         if value not in choices:

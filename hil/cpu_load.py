@@ -12,15 +12,27 @@ window:
 
 The CPU time of a process that exited and was not reaped by a watched one between two samples is
 missed, so it counts as foreign: the error goes towards excusing, never towards a false failure.
+
+Inside User-Mode Linux (``hil vcan -- hil soak``) the guest's /proc shows only the guest: the host's
+other processes, which slow the whole guest down, are invisible there (a busy host failed guest
+soaks with "planner deadline overruns 6 > 0 allowed"). So ``hil vcan`` runs a :class:`HostLoadFeed`:
+it writes the host's busy and steal ticks and the UML process tree's ticks to a file on the shared
+file system every half second, named to the guest by ``HIL_HOST_LOAD``; a :class:`LoadWatch` in the
+guest reads it at each sample and judges by the host's foreign load (everything on the host but the
+guest: the guest's own load is the run itself), keeping the guest's own figures under ``guest``.
 """
 
 from __future__ import annotations
 
+import json
 import os
+import threading
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 TICK_S = 1.0 / os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 0.01
+HOST_LOAD_ENV = "HIL_HOST_LOAD"  # the host feed's file, for a watch inside User-Mode Linux
 
 
 def system_ticks() -> tuple[int, int] | None:
@@ -79,15 +91,64 @@ class Sample:
     ours: int     # ticks, the watched process trees
 
 
+class HostLoadFeed:
+    """On the host: write ``{"wall", "busy", "steal", "ours", "cpus"}`` (host monotonic seconds,
+    cumulative ticks, ``ours`` those of ``root`` (the UML process) and its descendants) to ``path``
+    every ``every_s`` seconds, replacing the file atomically, until :meth:`stop`."""
+
+    def __init__(self, path: Path, root: int, every_s: float = 0.5) -> None:
+        self.path, self.root, self.every_s = Path(path), root, every_s
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="host-load-feed", daemon=True)
+
+    def write(self) -> bool:
+        ticks = system_ticks()
+        if ticks is None:
+            return False
+        record = {"wall": time.monotonic(), "busy": ticks[0], "steal": ticks[1], "ours": tree_ticks([self.root]),
+                  "cpus": os.cpu_count() or 1}
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        tmp.write_text(json.dumps(record))
+        os.replace(tmp, self.path)
+        return True
+
+    def _run(self) -> None:
+        while self.write() and not self._stop.wait(self.every_s):
+            pass
+
+    def start(self) -> HostLoadFeed:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+
+
+def read_host_load(path: str | Path) -> dict[str, float] | None:
+    """The host feed's latest record, or None (no file yet, a partial or foreign file)."""
+    try:
+        record = json.loads(Path(path).read_text())
+        return {k: float(record[k]) for k in ("wall", "busy", "steal", "ours", "cpus")}
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
 class LoadWatch:
     """Samples the machine's and our processes' CPU time (at most once per ``every_s``); :meth:`report`
-    gives the load over the window between the first and the last sample."""
+    gives the load over the window between the first and the last sample. With a host feed
+    (``host_load``, default the ``HIL_HOST_LOAD`` file: inside User-Mode Linux) the report is the
+    host's load over the same window, the guest's own under ``guest``."""
 
-    def __init__(self, every_s: float = 1.0) -> None:
+    def __init__(self, every_s: float = 1.0, host_load: str | Path | None = None) -> None:
         self.every_s = every_s
         self.first: Sample | None = None
         self.last: Sample | None = None
         self.available = system_ticks() is not None
+        feed = host_load if host_load is not None else os.environ.get(HOST_LOAD_ENV)
+        self.host_load = Path(feed) if feed else None
+        self.host_first: dict[str, float] | None = None
+        self.host_last: dict[str, float] | None = None
 
     def sample(self, roots: list[int], force: bool = False) -> None:
         now = time.monotonic()
@@ -100,8 +161,33 @@ class LoadWatch:
         if self.first is None:
             self.first = s
         self.last = s
+        if self.host_load is not None:
+            host = read_host_load(self.host_load)
+            if host is not None:
+                if self.host_first is None:
+                    self.host_first = host
+                self.host_last = host
 
-    def report(self) -> dict[str, float] | None:
+    def report(self) -> dict | None:
+        guest = self._own_report()
+        host = self._host_report()
+        if host is None:
+            return guest
+        return {**host, "source": "host", "guest": guest}
+
+    def _host_report(self) -> dict[str, float] | None:
+        a, b = self.host_first, self.host_last
+        if a is None or b is None or b["wall"] <= a["wall"]:
+            return None
+        busy = (b["busy"] - a["busy"]) * TICK_S
+        ours = max(0.0, b["ours"] - a["ours"]) * TICK_S   # the whole guest: the run and its kernel
+        wall, cpus = b["wall"] - a["wall"], int(b["cpus"])
+        foreign = max(0.0, busy - ours)
+        return {"wall_s": round(wall, 2), "cpus": cpus, "busy_cpu_s": round(busy, 2), "ours_cpu_s": round(ours, 2),
+                "foreign_cpu_s": round(foreign, 2), "steal_cpu_s": round((b["steal"] - a["steal"]) * TICK_S, 2),
+                "foreign_fraction": round(foreign / (wall * cpus), 4)}
+
+    def _own_report(self) -> dict[str, float] | None:
         if self.first is None or self.last is None or self.last.wall <= self.first.wall:
             return None
         a, b = self.first, self.last

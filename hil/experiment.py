@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from planner.params import ALGORITHM_NAMES, REGISTRY
+from planner.params import ALGORITHM_NAMES, REGISTRY, Objective
 
 ALGORITHMS = ALGORITHM_NAMES  # the planner's registry; the order fixes the per-algorithm seeds
 LABELS = {e.name: e.label for e in REGISTRY}
@@ -59,7 +59,7 @@ class Task:
     online_overrides: tuple[tuple[str, Any], ...] = ()
     config: str | None = None
     config_overrides: tuple[str, ...] = ()
-    objective: str | None = None  # override of [planner] objective for this algorithm
+    objective: Objective | None = None  # override of [planner] objective for this algorithm
     detail: bool = False          # return cycles (trees, local paths) for Figure 10
     path: bool = False            # return the executed path for Figure 11
 
@@ -351,7 +351,7 @@ class Campaign:
 
 def make_tasks(scenario: str, runs: int, algorithms: Sequence[str], seed: int, online_overrides: dict[str, Any],
                config: str | None, config_overrides: Sequence[str], figure_runs: int,
-               baseline_objective: str | None = None) -> list[Task]:
+               baseline_objective: Objective | None = None) -> list[Task]:
     """All (run, algorithm) tasks; ``baseline_objective`` overrides the objective of RRT* and
     IRRT* (DDRRT* keeps the configured one)."""
     ov = tuple(sorted(online_overrides.items()))

@@ -19,10 +19,12 @@ REPO = Path(__file__).resolve().parent.parent
 # the vessel computer's filter and guidance, the simulator's hull).
 KERNEL_SOURCES = ("planner/_kernels.py", "planner/_tree.py", "autopilot_bridge/nav_kernel.py",
                   "autopilot_bridge/guidance.py", "simulator/vessel.py", "common/geodesy.py")
-# CPU seconds of a cold compile, measured (README "The first run compiles"): `NUMBA_CACHE_DIR=$(mktemp -d)
-# hil run --duration 1`, user CPU 43 s cold against 5.4 s cached; `hil plan --scenario harbour`, 26.0 s
-# against 1.3 s.
-COLD_COMPILE_S = 40
+PLANNER_SOURCES = ("planner/_kernels.py", "planner/_tree.py")
+# CPU seconds of a cold compile, measured on the project's shared 2-core machine (docs/performance.md
+# "The first run compiles"): `NUMBA_CACHE_DIR=$(mktemp -d) hil run --duration 1` 46-50 s of user CPU
+# (5-7 s cached), shared since issue 32 by three processes (hil/warm_up.py: the planner, ~23 s, the rest
+# of the vessel computer, ~15 s, and the run itself); `hil plan --scenario harbour` ~25 s (1.3 s cached).
+COLD_COMPILE_S = 45
 COLD_PLAN_COMPILE_S = 25
 
 
@@ -36,9 +38,10 @@ def _index_files(source: Path) -> list[Path]:
     return list((source.parent / "__pycache__").glob(pattern))
 
 
-def kernels_cold() -> bool:
-    """Whether a run will compile numba kernels (a missing or older cache for a kernel module)."""
-    for rel in KERNEL_SOURCES:
+def kernels_cold(sources: tuple[str, ...] = KERNEL_SOURCES) -> bool:
+    """Whether a run will compile numba kernels (a missing or older cache for one of the kernel
+    modules ``sources``, paths relative to the repository)."""
+    for rel in sources:
         src = REPO / rel
         try:
             stamp = src.stat().st_mtime
@@ -49,9 +52,11 @@ def kernels_cold() -> bool:
     return False
 
 
-def compile_notice(command: str, seconds: int = COLD_COMPILE_S) -> str | None:
+def compile_notice(command: str, seconds: int = COLD_COMPILE_S, sources: tuple[str, ...] = KERNEL_SOURCES,
+                   processes: int = 1) -> str | None:
     """The line to print before a command that will compile, or None when the kernels are cached."""
-    if not kernels_cold():
+    if not kernels_cold(sources):
         return None
-    return (f"{command}: compiling numba kernels, first run only, ~{seconds} s of CPU "
-            "(longer on a busy machine; cached afterwards)")
+    shared = f" shared by {processes} processes" if processes > 1 else ""
+    return (f"{command}: compiling numba kernels, first run only, ~{seconds} s of CPU{shared} "
+            "(longer on a busy machine; cached afterwards; `hil warm-up` does it ahead)")

@@ -30,10 +30,10 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
@@ -44,9 +44,9 @@ from common.tables import to_table
 from hil import config, placement, processes
 from hil import scenario as scenarios
 from hil.errors import RunFailed, UsageError
-from hil.judging import Judge, nav_rmse, simulator_part, thrust_energy
+from hil.judging import Judge, RunRecord, summarise
 from hil.progress_watch import STALL_WINDOW_S, ProgressWatch
-from hil.run_summary import RunSecurity, RunSummary, read_autopilot_summary
+from hil.run_summary import RunSummary, read_autopilot_summary
 from hil.tap import Tap
 
 if TYPE_CHECKING:
@@ -129,6 +129,15 @@ class RunOptions:
     summary_on_interrupt: bool = False
 
 
+def gcs_endpoints_in_effect(configured: Sequence[str], autopilot_args: Sequence[str]) -> list[str]:
+    """The ground-station endpoints the vessel computer will open: the ``--gcs`` values among its
+    arguments when there are any (``none`` alone: the link off), else the configured ones."""
+    given = [autopilot_args[i + 1] for i, a in enumerate(autopilot_args[:-1]) if a == "--gcs"]
+    if not given:
+        return list(configured)
+    return [e for e in given if e != "none"]
+
+
 class HilRun:
     """One run: processes, tap, judge; :meth:`execute` returns the summary."""
 
@@ -136,6 +145,8 @@ class HilRun:
         self.opts, self.cfg = opts, cfg
         self.scen = scenarios.load(opts.scenario, cfg.current, cfg.planner.safety_radius, cfg.geodesy)
         self.scen.check_current_time(float(opts.duration))
+        # The global route, planned before any process starts: a waypoint it cannot reach is a one-line error.
+        self.route = self.scen.reference_path
         if opts.traffic is not None:
             self.scen.traffic = tuple(opts.traffic)
         self.out: Path = run_folder(opts)
@@ -147,7 +158,7 @@ class HilRun:
         self.geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
         from hil.encounter_report import EncounterJudge
 
-        self.encounter_judge = (EncounterJudge(cfg.vessel.L, cfg.vessel.W, cfg.colregs, route=self.scen.reference_path)
+        self.encounter_judge = (EncounterJudge(cfg.vessel.L, cfg.vessel.W, cfg.colregs, route=self.route)
                                 if self.scen.traffic else None)
         self.tap = Tap(self.out / "run.tlog", self.geo, self.encounter_judge, cfg.traffic.truth_component_id,
                        cfg.link.component_id, lockstep=opts.lockstep, private=bool(cfg.gcs.signing_key_file))
@@ -171,7 +182,7 @@ class HilRun:
         self.tap.telemetry_addr = ("127.0.0.1", self.telemetry_port)
         self.tap.sim_ids = (cfg.link.system_id, cfg.link.component_id)
         self.warnings: list[str] = []
-        self._sysid_lock: Any = None
+        self._sysid_lock: TextIO | None = None
         self.sim: subprocess.Popen | None = None
         self.ap: subprocess.Popen | None = None
         self.sim_restarts = 0
@@ -339,8 +350,9 @@ class HilRun:
 
     def claim_system_id(self) -> None:
         """Warn when another `hil run` on this machine streams to ground stations with the same
-        system id (they would show one vehicle jumping between two boats)."""
-        if not self.cfg.gcs.endpoints:
+        system id (they would show one vehicle jumping between two boats). A run whose ground-station
+        link is off (``--gcs none``) streams to nobody and claims nothing."""
+        if not gcs_endpoints_in_effect(self.cfg.gcs.endpoints, self.opts.extra_autopilot_args):
             return
         import fcntl
 
@@ -494,82 +506,12 @@ class HilRun:
             if self.can_recorder is not None:
                 self.can_log = self.can_recorder.close()
         wall = time.monotonic() - wall0
-        return self._summary(outcome, collision_at, min_clearance, wall, ap_summary, sim_summary, decided)
-
-    def _summary(self, outcome: str, collision_at: float | None, min_clearance: float, wall: float,
-                 ap_table: dict | None, sim: dict | None, decided: int | None = None) -> RunSummary:
-        # The run is judged up to the deciding sample: what arrived while the processes were being
-        # stopped depends on the wall clock.
-        times = [t for t in sorted(self.tap.truth) if decided is None or t <= decided]
-        track = np.array([self.tap.truth[t][:2] for t in times]) if times else np.zeros((0, 2))
-        speeds = np.array([math.hypot(*self.tap.truth[t][2:]) for t in times]) if times else np.zeros(0)
-        length = float(np.sum(np.hypot(*np.diff(track, axis=0).T))) if len(track) > 1 else 0.0
-        energy = thrust_energy(times, speeds, self.tap.commands, self.cfg.vessel)
-        rmse = nav_rmse(self.tap.estimate, self.tap.truth_raw, decided)
-        ap = None if ap_table is None else read_autopilot_summary(ap_table)
-        reached = outcome == "goal" and collision_at is None
-        encounters = traffic = None
-        if self.encounter_judge is not None:
-            from hil.encounter_report import totals
-
-            enc = self.encounter_judge.report({t: self.tap.truth[t] for t in times})   # up to the deciding sample
-            encounters = tuple(enc)
-            traffic = {**totals(enc), "ais": (ap.traffic or {}).get("ais") if ap is not None else None,
-                       "ais_forwarded_to_gcs": self.tap.ais_forwarded,
-                       "ship_collision": None if self.encounter_judge.collision is None else
-                       {"time_s": self.encounter_judge.collision[0], "mmsi": self.encounter_judge.collision[1]}}
-        can = None
-        if self.cfg.can.actuators == "can":
-            # The CAN path's counters: transport, ESC status, rejects (wall-clock dependent).
-            can = {"autopilot": None if ap is None else ap.can, "simulator": None if sim is None else sim.get("can"),
-                   **self.can_log}
-        return RunSummary(
-            scenario=self.opts.scenario,
-            seed=self.opts.seed,
-            mode="lockstep" if self.opts.lockstep else f"realtime x{self.opts.speedup:g}",
-            outcome=outcome,
-            reached_goal=reached,
-            collisions=0 if collision_at is None else 1,
-            collision_time_s=collision_at,
-            min_clearance_m=None if not math.isfinite(min_clearance) else round(min_clearance, 3),
-            sim_time_s=round(times[-1] * 1e-6, 3) if times else 0.0,
-            wall_time_s=round(wall, 2),
-            path_length_m=round(length, 2),
-            # With CAN in real time the commands travel only on CAN: the tap cannot see them.
-            energy_J=None if can is not None and not self.opts.lockstep else round(energy, 1),
-            planning_cycles=None if ap is None else ap.planning_cycles,
-            plans_accepted=None if ap is None else ap.plans_accepted,
-            deadline_overruns=None if ap is None else ap.deadline_overruns,
-            worker_restarts=None if ap is None else ap.worker_restarts,
-            fallback_activations=None if ap is None else ap.fallback_activations,
-            tracking=None if ap is None else ap.tracking,     # cross-track and heading errors on local paths
-            navigation_rmse_m=None if rmse is None else round(rmse, 3),
-            control_latency_ms=None if ap is None else ap.control_latency_ms,
-            simulator_restarts=self.sim_restarts,
-            navigation=None if ap is None else ap.navigation,
-            sensed_obstacles=None if ap is None else ap.sensed_obstacles,
-            simulator=None if sim is None else {**simulator_part(sim, times[-1] * 1e-6 if times else 0.0,
-                                                                       None if ap is None else ap.busy_poll),
-                                                "cpus": self.pinned or None},
-            security=RunSecurity(
-                simulator=None if sim is None else {"rejects": sim.get("rejects"), **(sim.get("command_port") or {})},
-                autopilot=None if ap is None else ap.link,
-                autopilot_navigation_numeric={} if ap is None else
-                {k: v for k, v in ap.navigation.rejected.items() if k.startswith("numeric_")},
-                tap=self.tap.counters_at_close,
-            ),
-            tlog=str(self.out / "run.tlog"),
-            tlog_messages=self.tap.frames,
-            events=() if ap is None else ap.events,
-            actuators=self.cfg.can.actuators,
-            warnings=tuple(self.warnings) if self.warnings else None,
-            # The ground-station link's counters (datagrams, rejects, missions, command acks, signing,
-            # failsafe): what a GCS did during the run. Wall-clock dependent (heartbeats per wall second).
-            gcs=None if ap is None else ap.gcs,
-            encounters=encounters,
-            traffic=traffic,
-            can=can,
-        )
+        run = RunRecord(
+            scenario=self.opts.scenario, seed=self.opts.seed, lockstep=self.opts.lockstep, speedup=self.opts.speedup,
+            outcome=outcome, collision_at=collision_at, min_clearance=min_clearance, wall_s=wall, decided=decided,
+            autopilot=ap_summary, simulator=sim_summary, simulator_restarts=self.sim_restarts, pinned=self.pinned,
+            warnings=tuple(self.warnings), can_log=self.can_log, tlog=self.out / "run.tlog")
+        return summarise(run, self.tap, self.cfg, self.encounter_judge)
 
 class _NotReady(RunFailed):
     """The autopilot did not start listening in time."""

@@ -7,12 +7,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from scipy import ndimage
 
+from hil.run_summary import RunSecurity, RunSummary, read_autopilot_summary
+
 if TYPE_CHECKING:
+    from common.udp import BusyPollSummary
+    from hil.encounter_report import EncounterJudge
+    from hil.settings import HilConfig
     from simulator.config import VesselParams
 
 
@@ -73,7 +80,7 @@ def nav_rmse(estimate: Mapping[tuple[int, int], tuple[float, float]],
     return math.sqrt(float(np.mean(errs))) if errs else None
 
 
-def simulator_part(sim: dict, end_s: float, ap_busy_poll: dict | None = None) -> dict[str, Any]:
+def simulator_part(sim: dict[str, Any], end_s: float, ap_busy_poll: BusyPollSummary | None = None) -> dict[str, Any]:
     """The simulator's counters for the run summary. Stale-command failsafes are those up to the
     run's judged end (s of simulated time); those after it, while the processes were being
     stopped, are counted apart (the simulator runs on in real time while the autopilot exits).
@@ -89,3 +96,118 @@ def simulator_part(sim: dict, end_s: float, ap_busy_poll: dict | None = None) ->
         out["stale_command_events"] = (sim.get("stale_command_events") or 0) - after
         out["stale_command_events_after_end"] = after
     return out
+
+
+class TapRecords(Protocol):
+    """What the tap (:class:`hil.tap.Tap`) recorded of a run, as the judge reads it."""
+
+    truth: dict[int, tuple[float, float, float, float]]           # time_usec -> (north m, east m, vn, ve m/s)
+    truth_raw: dict[tuple[int, int], tuple[float, float, int]]    # (segment, time_usec) -> (n, e, run time usec)
+    estimate: dict[tuple[int, int], tuple[float, float]]          # (segment, ms) -> (north, east) m
+    commands: list[tuple[int, float, float]]                      # (time_usec, port, stdb) in [-1, 1]
+    ais_forwarded: int
+    counters_at_close: dict[str, Any] | None
+    frames: int
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """What supervision (:class:`hil.hilrun.HilRun`) knows of a run at its end, besides the tap's
+    records: how it ended (``outcome``; ``decided``: the truth time in us of the deciding sample),
+    and the processes' own summaries as they printed them."""
+
+    scenario: str
+    seed: int
+    lockstep: bool
+    speedup: float
+    outcome: str
+    collision_at: float | None        # s of simulated time
+    min_clearance: float              # m
+    wall_s: float
+    decided: int | None
+    autopilot: dict[str, Any] | None
+    simulator: dict[str, Any] | None
+    simulator_restarts: int
+    pinned: dict[str, int]
+    warnings: tuple[str, ...]
+    can_log: dict[str, Any]
+    tlog: Path
+
+
+def summarise(run: RunRecord, tap: TapRecords, cfg: HilConfig,
+              encounter_judge: EncounterJudge | None = None) -> RunSummary:
+    """The run's summary, judged up to the deciding sample (what arrived while the processes were
+    being stopped depends on the wall clock): path length, energy, navigation error, encounters, and
+    the processes' counters."""
+    decided = run.decided
+    times = [t for t in sorted(tap.truth) if decided is None or t <= decided]
+    track = np.array([tap.truth[t][:2] for t in times]) if times else np.zeros((0, 2))
+    speeds = np.array([math.hypot(*tap.truth[t][2:]) for t in times]) if times else np.zeros(0)
+    length = float(np.sum(np.hypot(*np.diff(track, axis=0).T))) if len(track) > 1 else 0.0
+    energy = thrust_energy(times, speeds, tap.commands, cfg.vessel)
+    rmse = nav_rmse(tap.estimate, tap.truth_raw, decided)
+    ap = None if run.autopilot is None else read_autopilot_summary(run.autopilot)
+    sim = run.simulator
+    reached = run.outcome == "goal" and run.collision_at is None
+    encounters = traffic = None
+    if encounter_judge is not None:
+        from hil.encounter_report import totals
+
+        enc = encounter_judge.report({t: tap.truth[t] for t in times})   # up to the deciding sample
+        encounters = tuple(enc)
+        traffic = {**totals(enc), "ais": ap.traffic["ais"] if ap is not None and ap.traffic is not None else None,
+                   "ais_forwarded_to_gcs": tap.ais_forwarded,
+                   "ship_collision": None if encounter_judge.collision is None else
+                   {"time_s": encounter_judge.collision[0], "mmsi": encounter_judge.collision[1]}}
+    can = None
+    if cfg.can.actuators == "can":
+        # The CAN path's counters: transport, ESC status, rejects (wall-clock dependent).
+        can = {"autopilot": None if ap is None else ap.can, "simulator": None if sim is None else sim.get("can"),
+               **run.can_log}
+    end_s = times[-1] * 1e-6 if times else 0.0
+    return RunSummary(
+        scenario=run.scenario,
+        seed=run.seed,
+        mode="lockstep" if run.lockstep else f"realtime x{run.speedup:g}",
+        outcome=run.outcome,
+        reached_goal=reached,
+        collisions=0 if run.collision_at is None else 1,
+        collision_time_s=run.collision_at,
+        min_clearance_m=None if not math.isfinite(run.min_clearance) else round(run.min_clearance, 3),
+        sim_time_s=round(end_s, 3),
+        wall_time_s=round(run.wall_s, 2),
+        path_length_m=round(length, 2),
+        # With CAN in real time the commands travel only on CAN: the tap cannot see them.
+        energy_J=None if can is not None and not run.lockstep else round(energy, 1),
+        planning_cycles=None if ap is None else ap.planning_cycles,
+        plans_accepted=None if ap is None else ap.plans_accepted,
+        deadline_overruns=None if ap is None else ap.deadline_overruns,
+        worker_restarts=None if ap is None else ap.worker_restarts,
+        fallback_activations=None if ap is None else ap.fallback_activations,
+        tracking=None if ap is None else ap.tracking,     # cross-track and heading errors on local paths
+        navigation_rmse_m=None if rmse is None else round(rmse, 3),
+        control_latency_ms=None if ap is None else ap.control_latency_ms,
+        simulator_restarts=run.simulator_restarts,
+        navigation=None if ap is None else ap.navigation,
+        sensed_obstacles=None if ap is None else ap.sensed_obstacles,
+        simulator=None if sim is None else {**simulator_part(sim, end_s, None if ap is None else ap.busy_poll),
+                                            "cpus": run.pinned or None},
+        security=RunSecurity(
+            simulator=None if sim is None else {"rejects": sim.get("rejects"), **(sim.get("command_port") or {})},
+            autopilot=None if ap is None else ap.link,
+            autopilot_navigation_numeric={} if ap is None else
+            {k: v for k, v in ap.navigation.rejected.items() if k.startswith("numeric_")},
+            tap=tap.counters_at_close,
+        ),
+        tlog=str(run.tlog),
+        tlog_messages=tap.frames,
+        events=() if ap is None else ap.events,
+        actuators=cfg.can.actuators,
+        warnings=run.warnings or None,
+        # The ground-station link's counters (datagrams, rejects, missions, command acks, signing,
+        # failsafe): what a GCS did during the run. Wall-clock dependent (heartbeats per wall second).
+        gcs=None if ap is None else ap.gcs,
+        encounters=encounters,
+        traffic=traffic,
+        can=can,
+    )

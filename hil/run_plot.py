@@ -49,7 +49,7 @@ def plot_run(path: Path, scen: Scenario, truth: dict[int, tuple], autopilot: Aut
     ref = np.asarray(scen.reference_path)
     ax.plot(ref[:, 0], ref[:, 1], ":", color="green", lw=1.5, label="global reference path")
     for i, lp in enumerate((autopilot and autopilot.local_paths) or []):
-        p = np.asarray(lp["path_ned"])
+        p = np.asarray(lp.path_ned)
         if len(p):
             ax.plot(p[:, 1], p[:, 0], "-", color="tab:orange", lw=0.7, alpha=0.6,
                     label="planned local paths" if i == 0 else None)

@@ -11,7 +11,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from autopilot_bridge.gcs.link import GcsSummary
+from autopilot_bridge.hil_link import LinkSummary
 from autopilot_bridge.summary import AutopilotSummary, ControlLatency, NavigationCounts
+from autopilot_bridge.tracking_stats import TrackingSummary
 from common.tables import absent_when_none
 from hil.config import from_table
 from hil.errors import ConfigError, RunFailed
@@ -27,7 +30,7 @@ class RunSecurity:
     """Every refused frame by reason, per endpoint, with the kernel's drops (docs/security.md)."""
 
     simulator: dict[str, Any] | None
-    autopilot: dict[str, Any] | None                 # the autopilot's HIL link (AutopilotSummary.link)
+    autopilot: LinkSummary | None                    # the autopilot's HIL link (AutopilotSummary.link)
     autopilot_navigation_numeric: dict[str, int]
     tap: dict[str, Any] | None
 
@@ -54,7 +57,7 @@ class RunSummary:
     deadline_overruns: int | None
     worker_restarts: int | None
     fallback_activations: int | None
-    tracking: dict[str, Any] | None                  # cross-track and heading errors on local paths
+    tracking: TrackingSummary | None                 # cross-track and heading errors on local paths
     navigation_rmse_m: float | None
     control_latency_ms: ControlLatency | None
     simulator_restarts: int
@@ -67,7 +70,7 @@ class RunSummary:
     events: tuple[str, ...]
     actuators: str                                   # "mavlink" or "can"
     warnings: tuple[str, ...] | None = absent_when_none()
-    gcs: dict[str, Any] | None = absent_when_none()              # the ground-station link's counters
+    gcs: GcsSummary | None = absent_when_none()                  # the ground-station link's counters
     encounters: tuple[dict[str, Any], ...] | None = absent_when_none()   # scenarios with traffic
     traffic: dict[str, Any] | None = absent_when_none()
     can: dict[str, Any] | None = absent_when_none()              # --actuators can

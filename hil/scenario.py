@@ -33,7 +33,8 @@ are one-line errors). Its optional tables override keys of other sections:
 The global route. ``reference_path`` holds the route's waypoints as a user gives them (start
 first, goal last; only start and goal is fine). With ``global_route = true`` (the default) it is
 turned into the global reference path by ``planner.global_route`` on the chart inflated by the
-planner's safety radius: legs whose straight line is free stay straight, the others are routed
+planner's safety radius, when something first needs it (:mod:`hil.routing`; loading plans
+nothing): legs whose straight line is free stay straight, the others are routed
 round the obstacles (Lazy Theta*), and the result is densified to points at most
 ``route_spacing`` apart. A waypoint off the chart, inside an obstacle or its safety margin, or
 not reachable by water is a one-line error naming it. ``global_route = false`` keeps the
@@ -46,7 +47,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 import numpy as np
 
@@ -54,9 +55,21 @@ from common.params import param
 from hil import charts, config
 from hil.config import CONFIG_DIR
 from hil.errors import ConfigError, UsageError
+from hil.routing import RouteRequest, plan_route, route_waypoints
 from hil.scenario_names import SCENARIO_DIR, available
-from simulator.config import GeodesyParams
+from simulator.config import CurrentParams, GeodesyParams
 from simulator.traffic import ShipSpec
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+    from common.current_sources import CurrentSource
+    from common.geodesy import LocalFrame
+    from hil.settings import HilConfig
+    from planner.online import OnlineParams
+    from planner.params import PlannerParams
+
+D = TypeVar("D", bound="DataclassInstance")
 
 
 @dataclass(frozen=True)
@@ -166,16 +179,25 @@ class Scenario:
     start: tuple[float, float]      # m, map frame
     start_heading: float            # rad, map frame
     goal: tuple[float, float]
-    reference_path: np.ndarray      # (M, 2) m
-    current: Any                    # simulator.config.CurrentParams (NED)
+    route: np.ndarray | RouteRequest  # the reference path (M, 2) m, or what to plan it from (hil.routing)
+    current: CurrentParams          # NED
     field_time: float               # s, instant of the frozen planning field
     planner_overrides: dict[str, Any]
     online_overrides: dict[str, Any]
     uncharted: tuple[tuple[float, float, float], ...] = ()   # discs (x, y, radius), m, map frame
     traffic: tuple[ShipSpec, ...] = ()                        # ships sailed by the simulator ([[traffic]])
     waypoints: np.ndarray | None = None                       # (K, 2) the route as given, m (None: = reference_path)
-    geodesy: Any = None                                       # simulator.config.GeodesyParams: the NED origin
-    _current_source: Any = field(default=None, init=False, repr=False, compare=False)
+    geodesy: GeodesyParams | None = None                      # the NED origin
+    _current_source: CurrentSource | None = field(default=None, init=False, repr=False, compare=False)
+
+    @property
+    def reference_path(self) -> np.ndarray:
+        """The global reference path (M, 2), m, map frame. A fixed scenario's route is planned here,
+        once, the first time it is asked for (:func:`hil.routing.plan_route`; ConfigError naming a
+        waypoint it cannot reach), never while the scenario is loaded."""
+        if isinstance(self.route, RouteRequest):
+            self.route = plan_route(self.route)
+        return self.route
 
     def truth_occ(self) -> np.ndarray:
         """The simulated world's obstacles: the chart (``occ``) plus the uncharted discs."""
@@ -286,7 +308,7 @@ def resolve_file(spec: ScenarioSpec, name: str) -> Path:
     return here if here.exists() or not legacy.exists() else legacy
 
 
-def geodesy_frame(geodesy: Any = None):
+def geodesy_frame(geodesy: GeodesyParams | None = None) -> LocalFrame:
     """The ``common.geodesy.LocalFrame`` of a ``[geodesy]`` section (default: the default configuration's)."""
     from common.geodesy import LocalFrame
 
@@ -296,7 +318,7 @@ def geodesy_frame(geodesy: Any = None):
     return LocalFrame(geodesy.lat0, geodesy.lon0, geodesy.alt0)
 
 
-def positions_frame(spec: ScenarioSpec, geodesy: Any = None):
+def positions_frame(spec: ScenarioSpec, geodesy: GeodesyParams | None = None) -> LocalFrame:
     """The ``LocalFrame`` in which a chart scenario's positions in metres count: its ``origin``, else the
     configuration's (``geodesy.positions_origin`` or ``lat0/lon0``; default: the default configuration's)."""
     from common.geodesy import LocalFrame
@@ -308,7 +330,7 @@ def positions_frame(spec: ScenarioSpec, geodesy: Any = None):
     return LocalFrame(lat, lon, geodesy.alt0)
 
 
-def map_frame(spec: ScenarioSpec, geodesy: Any = None):
+def map_frame(spec: ScenarioSpec, geodesy: GeodesyParams | None = None) -> LocalFrame:
     """The ``LocalFrame`` of the scenario's map (x = 0, y = 0 at its south-west corner): a chart's
     grid corner, else the configuration's origin (``geodesy``, default: the default configuration's)."""
     from common.geodesy import LocalFrame
@@ -323,7 +345,8 @@ def map_frame(spec: ScenarioSpec, geodesy: Any = None):
 MAX_LATLON_DISTANCE = 50_000.0   # m from the map's origin: a position farther is a typing mistake
 
 
-def positions_in_metres(spec: ScenarioSpec, frame: Any, source: str, given_in: Any = None) -> ScenarioSpec:
+def positions_in_metres(spec: ScenarioSpec, frame: LocalFrame, source: str,
+                        given_in: LocalFrame | None = None) -> ScenarioSpec:
     """``spec`` with every position (start, goal, route, uncharted centres, traffic) in map metres of
     ``frame`` (x east, y north): from ``[latitude, longitude]`` (``positions = "latlon"``), or from metres
     of another frame ``given_in`` (a chart's grid starts elsewhere than the positions' origin)."""
@@ -353,7 +376,7 @@ def positions_in_metres(spec: ScenarioSpec, frame: Any, source: str, given_in: A
     return out
 
 
-def _current_file(spec: ScenarioSpec, current: Any) -> Any:
+def _current_file(spec: ScenarioSpec, current: CurrentParams) -> CurrentParams:
     """``current`` with its file as an absolute path: relative to the scenario file when the
     scenario names it, else to the working directory (a configuration's or --set's)."""
     if not current.file:
@@ -421,7 +444,8 @@ def _check_point(what: str, p: tuple[float, float], occ: np.ndarray, res: float,
         raise ConfigError(f"{source}: {what}: ({p[0]:g}, {p[1]:g}) m is inside an obstacle")
 
 
-def load(name: str, base_current: Any = None, safety_radius: float | None = None, geodesy: Any = None) -> Scenario:
+def load(name: str, base_current: CurrentParams | None = None, safety_radius: float | None = None,
+         geodesy: GeodesyParams | None = None) -> Scenario:
     """Load a fixed scenario (for a random one, use :func:`instance` with a run's generator).
     ``safety_radius`` (m): the configuration's ``planner.safety_radius`` (default: the default
     configuration's); the scenario's own ``[planner]`` value wins, as for the planner.
@@ -440,38 +464,14 @@ def _safety_radius(spec: ScenarioSpec, base: float | None, source: str) -> float
     return float(value)
 
 
-def route_waypoints(start, goal, given) -> np.ndarray:
-    """start, the given waypoints (their first/last dropped where they repeat start/goal), goal."""
-    pts = [tuple(map(float, p)) for p in given]
-    if pts and math.dist(pts[0], start) < 1e-9:
-        pts = pts[1:]
-    if pts and math.dist(pts[-1], goal) < 1e-9:
-        pts = pts[:-1]
-    return np.array([tuple(map(float, start)), *pts, tuple(map(float, goal))], dtype=float)
-
-
-def global_route(occ: np.ndarray, resolution: float, waypoints: np.ndarray, safety_radius: float,
-                 spacing: float, source: str, names: list[str]) -> np.ndarray:
-    """The global reference path through ``waypoints`` (map frame); ConfigError naming the
-    waypoint (``names[i]``) that is off the chart, in an obstacle or unreachable."""
-    from planner.global_route import plan_chart_route
-    from planner.gridmap import OccupancyGrid
-
-    route = plan_chart_route(OccupancyGrid(occ, resolution), waypoints, safety_radius, spacing)
-    if not route.ok:
-        i = route.failed_index or 0
-        margin = f" (safety radius {safety_radius:g} m)" if route.status.value == "in_obstacle" else ""
-        raise ConfigError(f"{source}: {names[i]}: {route.reason}{margin}")
-    return route.path
-
-
-def _default_current() -> Any:
+def _default_current() -> CurrentParams:
     from hil import settings
     return settings.load().current
 
 
-def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: Any = None,
-             safety_radius: float | None = None, source: str | None = None, geodesy: Any = None) -> Scenario:
+def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: CurrentParams | None = None,
+             safety_radius: float | None = None, source: str | None = None,
+             geodesy: GeodesyParams | None = None) -> Scenario:
     """A concrete :class:`Scenario`; random scenarios draw map and end points from ``rng``.
     ``source`` names the file in error messages (default: the file the spec was read from)."""
     source = source or spec.path or str(scenario_path(spec.name))
@@ -493,7 +493,7 @@ def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: 
 
 
 def _instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: Any,
-              safety_radius: float | None, source: str, positions: Any = None) -> Scenario:
+              safety_radius: float | None, source: str, positions: LocalFrame | None = None) -> Scenario:
     current, field_time = _current_params(base_current if base_current is not None else _default_current(),
                                           spec.current, source)
     current = _current_file(spec, current)
@@ -503,6 +503,7 @@ def _instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current:
             raise ConfigError(f"{source}: map: no such file {map_path}")
         geodesy = None
         if charts.is_chart(map_path):
+            assert positions is not None      # instance() gives a chart scenario its frame
             grid = charts.rasterise(map_path, spec.resolution, positions, spec.extent, spec.chart_buffer)
             occ = grid.occ
             geodesy = GeodesyParams(grid.origin[0], grid.origin[1], positions.alt0,
@@ -515,14 +516,15 @@ def _instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current:
             wps = route_waypoints(spec.start, spec.goal, spec.reference_path)
             given = len(spec.reference_path) > 0 and math.dist(spec.reference_path[0], spec.start) < 1e-9
             names = ["start"] + [f"reference_path[{i if given else i - 1}]" for i in range(1, len(wps) - 1)] + ["goal"]
-            ref = global_route(occ, spec.resolution, wps, _safety_radius(spec, safety_radius, source),
-                               spec.route_spacing, source, names)
+            route: np.ndarray | RouteRequest = RouteRequest(
+                occ, spec.resolution, wps, _safety_radius(spec, safety_radius, source), spec.route_spacing,
+                source, tuple(names))
         else:
             if len(spec.reference_path) < 2:
                 raise ConfigError(f"{source}: reference_path: global_route = false needs the path itself (>= 2 points)")
-            wps = ref = np.asarray(spec.reference_path, dtype=float)
+            wps = route = np.asarray(spec.reference_path, dtype=float)
         scen = Scenario(spec.name, spec.description, occ, spec.resolution, spec.start, spec.start_heading,
-                        spec.goal, ref, current, field_time, dict(spec.planner), dict(spec.online),
+                        spec.goal, route, current, field_time, dict(spec.planner), dict(spec.online),
                         tuple((float(x), float(y), float(r)) for x, y, r in spec.uncharted), traffic=spec.traffic,
                         waypoints=wps, geodesy=geodesy)
         truth = scen.truth_occ()
@@ -622,7 +624,7 @@ def _random_route(spec: ScenarioSpec, rng: np.random.Generator, canvas: Any, sta
     raise ConfigError(f"{source}: random: no route with {k} waypoint(s) found in 200 draws")
 
 
-def planner_params(base: Any, overrides: dict[str, Any], source: str = "scenario") -> Any:
+def planner_params(base: PlannerParams, overrides: dict[str, Any], source: str = "scenario") -> PlannerParams:
     """``base`` PlannerParams with ``overrides`` applied and validated (ConfigError on problems)."""
     table = config.to_table(base)
     for k, v in overrides.items():
@@ -632,7 +634,8 @@ def planner_params(base: Any, overrides: dict[str, Any], source: str = "scenario
     return config.from_table(type(base), table, source, prefix="planner")
 
 
-def online_params(overrides: dict[str, Any], source: str = "scenario", base: Any = None) -> Any:
+def online_params(overrides: dict[str, Any], source: str = "scenario",
+                  base: OnlineParams | None = None) -> OnlineParams:
     """OnlineParams (defaults or ``base``) with ``overrides`` applied and validated."""
     from planner.online import OnlineParams
     table = config.to_table(base if base is not None else OnlineParams())
@@ -643,13 +646,13 @@ def online_params(overrides: dict[str, Any], source: str = "scenario", base: Any
     return config.from_table(OnlineParams, table, source, prefix="online")
 
 
-def base_planner_params(settings_obj: Any) -> Any:
+def base_planner_params(settings_obj: HilConfig | None) -> PlannerParams:
     """The ``[planner]`` section of the loaded configuration, or the library defaults."""
     from planner.params import PlannerParams
     return getattr(settings_obj, "planner", None) or PlannerParams()
 
 
-def with_overrides(obj: Any, **kw: Any) -> Any:
+def with_overrides(obj: D, **kw: Any) -> D:
     """``dataclasses.replace`` that ignores ``None`` values (CLI options not given)."""
     return dataclasses.replace(obj, **{k: v for k, v in kw.items() if v is not None})
 

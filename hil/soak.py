@@ -216,7 +216,7 @@ def soak_can_path(args: argparse.Namespace, cfg: HilConfig, out: Path) -> dict[s
     result: dict[str, Any] = {"mode": "can_path", "rate_hz": args.rate, "duration_s": args.duration,
                               "commands_sent": acts.commands_sent,
                               "commands_behind_schedule": -behind if behind < 0 else 0}
-    result["can"] = _can_checks({"autopilot": acts.summary(), "esc_nodes": esc_summary}, problems)
+    result["can"] = _can_checks({"autopilot": to_table(acts.summary()), "esc_nodes": esc_summary}, problems)
     st, sa = acts.sent_times.arrays()
     at, aa = _load_record(rec)
     result["command_to_applied_ms"] = stats_ms(pair_latency(st, sa, at, aa))

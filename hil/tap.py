@@ -12,11 +12,14 @@ import os
 import struct
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from common.geodesy import LocalFrame
 from common.mavlink import Codec, clean_frames, frame_ids, leading_uint64, mavlink2, message_at
 from common.udp import UdpEndpoint
+
+if TYPE_CHECKING:
+    from hil.encounter_report import EncounterJudge
 
 # The kinds the tap reads (Tap._take); every other frame of a clean datagram is written as it came.
 _READ = frozenset(getattr(mavlink2, f"MAVLINK_MSG_ID_{k}") for k in (
@@ -32,8 +35,9 @@ assert mavlink2.MAVLink_hil_sensor_message.fieldtypes[0] == "uint64_t"
 class Tap:
     """Receives everything both processes send to it; writes the .tlog; keeps the evaluation data."""
 
-    def __init__(self, tlog_path: Path, geo: LocalFrame, encounters: Any = None, truth_component_id: int = 52,
-                 sim_component_id: int = 51, lockstep: bool = False, private: bool = False) -> None:
+    def __init__(self, tlog_path: Path, geo: LocalFrame, encounters: EncounterJudge | None = None,
+                 truth_component_id: int = 52, sim_component_id: int = 51, lockstep: bool = False,
+                 private: bool = False) -> None:
         self.ep = UdpEndpoint("127.0.0.1:0", [], recv_buffer=8 << 20)
         # Every message of the dialect: the autopilot copies all ground-station traffic here too.
         self.codec = Codec(255, 190, accept=[c.msgname for c in mavlink2.mavlink_map.values()])

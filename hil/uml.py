@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+from hil.cpu_load import HOST_LOAD_ENV, HostLoadFeed
+
 UML_CANDIDATES = ("/usr/bin/linux.uml", "/usr/bin/linux")
 UML_MODULES = Path("/usr/lib/uml/modules")
 CAN_MODULES = ("net/can/can.ko", "net/can/can-raw.ko", "drivers/net/can/dev/can-dev.ko", "drivers/net/can/vcan.ko")
@@ -223,6 +225,9 @@ def run_in_uml(jobs: list[Job], mem: str = "1536M", boot_timeout: float = 60.0,
     env_base.setdefault("PATH", "/usr/local/bin:/usr/bin:/bin:/usr/sbin:/sbin")
     env_base.setdefault("HOME", "/root")
     env_base["PYTHONUNBUFFERED"] = "1"
+    # The host's load, which the guest's /proc cannot show (hil/cpu_load.py: a soak in the guest judges by it).
+    host_load = work.resolve() / "host_load.json"
+    env_base[HOST_LOAD_ENV] = str(host_load)
     (work / "jobs.json").write_text(json.dumps([
         {"name": j.name, "argv": j.argv, "cwd": str(Path(j.cwd).resolve()), "env": {**env_base, **j.env},
          "timeout": j.timeout} for j in jobs]))
@@ -247,6 +252,7 @@ def run_in_uml(jobs: list[Job], mem: str = "1536M", boot_timeout: float = 60.0,
         # UML runs in its own temporary directory (its memory file lives in TMPDIR).
         proc = subprocess.Popen(cmd, stdin=devnull, stdout=console, stderr=subprocess.STDOUT,
                                 start_new_session=True, cwd=work)
+        feed = HostLoadFeed(host_load, proc.pid).start()
         try:
             if follow is None:
                 proc.wait(timeout=limit)
@@ -257,6 +263,7 @@ def run_in_uml(jobs: list[Job], mem: str = "1536M", boot_timeout: float = 60.0,
             raise RuntimeError(f"User-Mode Linux did not finish within {limit:.0f} s; console:\n"
                                + _tail(console_path)) from None
         finally:
+            feed.stop()
             if proc.poll() is None:
                 _kill_group(proc)
     wall = time.monotonic() - t0

@@ -613,6 +613,10 @@ def _min_key(near_c, left):
     return m
 
 
+# Callers pass np.int64(...) and np.bool_(...), not bare literals or counters: numba compiles a
+# function once per argument type, and a literal (1, True) or a counter still typed as its initial
+# literal 0 while grow is being typed is a type of its own: _first_valid_parent was compiled three
+# times, _knn and _sort_by twice (issue 32 point 4: the cold compile).
 @njit(cache=True)
 def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, world, cfg, tree, state, track_failed, lower_bounds):
     """RRT*'s choose-parent: the first candidate, in ascending cost order, whose edge to (nx, ny)
@@ -972,7 +976,7 @@ def _dd_choose_parent(nx, ny, ne, world, cfg, tree, state, buf, dv):
             rw_i[ns] = i
             keys[ns] = ext_k[a]
             ns += 1
-    _sort_by(keys, rw_i, ns)
+    _sort_by(keys, rw_i, np.int64(ns))
     for a in range(ns):
         i = rw_i[a]
         near_i[a] = i
@@ -985,7 +989,8 @@ def _dd_choose_parent(nx, ny, ne, world, cfg, tree, state, buf, dv):
             near_x[a] = False
         else:
             near_c[a], near_x[a] = _parent_key(i, nx, ny, world, cfg, tree)
-    p, pc = _first_valid_parent(near_i, near_c, near_x, ns, nx, ny, world, cfg, tree, state, True, lower_bounds)
+    p, pc = _first_valid_parent(near_i, near_c, near_x, np.int64(ns), nx, ny, world, cfg, tree, state, np.bool_(True),
+                                lower_bounds)
     return p, pc, ns
 
 
@@ -1053,7 +1058,8 @@ def _rrt_choose_parent(nx, ny, q0, nn, world, cfg, tree, state, buf, dv):
         near_i[nc] = q0
         near_c[nc], near_x[nc] = _parent_key(q0, nx, ny, world, cfg, tree)
         nc += 1
-    return _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, world, cfg, tree, state, False, lower_bounds)
+    return _first_valid_parent(near_i, near_c, near_x, np.int64(nc), nx, ny, world, cfg, tree, state, np.bool_(False),
+                               lower_bounds)
 
 
 @njit(cache=True, inline="always")
@@ -1062,7 +1068,7 @@ def _rrt_extend(sx, sy, world, cfg, tree, state, buf, dv):
     q_new's index or -1."""
     X = tree.X
     n = state.n
-    _knn(sx, sy, 1, cfg, tree, buf.kn_i, buf.kn_d)
+    _knn(sx, sy, np.int64(1), cfg, tree, buf.kn_i, buf.kn_d)
     q0 = buf.kn_i[0]
     d0 = buf.kn_d[0]
     if d0 < 1e-9:

@@ -312,7 +312,7 @@ def _lazy_theta_star(occ, sr, sc, gr, gc):
     goal = gr * cols + gc
     g[start] = 0.0
     parent[start] = start
-    size = _heap_push(keys, items, size, math.hypot(gr - sr, gc - sc), start)
+    size = _heap_push(keys, items, np.int64(size), math.hypot(gr - sr, gc - sc), start)
     dr = np.array([-1, -1, -1, 0, 0, 1, 1, 1])
     dc = np.array([-1, 0, 1, -1, 1, -1, 0, 1])
     found = False

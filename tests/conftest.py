@@ -56,13 +56,14 @@ def hil_main(capsys):
 # A new test module must be listed here: collection fails otherwise, so no test falls through.
 UNIT_MODULES = frozenset("""
     can_codec can_esc charts collision_cone colregs colregs_oracle config config_layers control current_field
-    current_sources geodesy
+    current_sources docs_examples geodesy ardupilot_fence
     global_route guidance_kernel mavlink_crc mavlink_fast_path mission_executor modes navigation navigation_fast
     battery_monitor config_ranges encounter_route online percentiles plan_commitment plan_start_course readiness
     planner_algorithms planner_config planner_cost planner_dynamic_domain planner_fence planner_gridmap
     planner_issue34 flow_optimum planner_registry planner_tree_golden
     planner_guidance planner_kgrowth planner_metrics planner_postprocess process_logging reactive route_planning
-    run_plot scenarios sim_sensors sim_vessel sim_waves summaries tiers tracking_stats traffic_planning vehicle
+    run_judging run_plot scenarios sim_sensors sim_vessel sim_waves simulator_assembly summaries tiers tracking_stats
+    traffic_planning vehicle
 """.split())
 INTEGRATION_MODULES = frozenset("""
     ardupilot_json
@@ -71,7 +72,7 @@ INTEGRATION_MODULES = frozenset("""
     output placement plan_cli planner_warmup
     planning_worker range_sensing
     readme security_gates sim_link sim_pause sim_pipeline sim_udp startup_errors tap_fast_path traffic_ais
-    vehicle_commands vessel_parameters
+    vehicle_commands vessel_parameters warm_up
 """.split())
 E2E_MODULES = frozenset("""
     ardupilot_sitl by_hand can_vcan colregs_loop example_world gcs_chaos gcs_mavproxy gcs_mavsdk gcs_rover

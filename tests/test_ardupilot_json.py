@@ -227,8 +227,9 @@ def test_route_cross_track() -> None:
     import numpy as np
 
     xte = route_cross_track(np.array([[5.0, 1.0], [10.0, 5.0], [12.0, 5.0], [-3.0, 4.0]]), np.array(route))
-    assert xte == {"cross_track_rms_m": pytest.approx(math.sqrt((1 + 0 + 4 + 25) / 4), abs=1e-3),
-                   "cross_track_max_m": 5.0}
+    assert xte is not None
+    assert {k: xte[k] for k in ("cross_track_rms_m", "cross_track_max_m")} == {
+        "cross_track_rms_m": pytest.approx(math.sqrt((1 + 0 + 4 + 25) / 4), abs=1e-3), "cross_track_max_m": 5.0}
     assert route_cross_track(np.zeros((0, 2)), np.array(route)) is None
 
 
@@ -289,3 +290,14 @@ def test_station_keeping_figures_from_a_tlog(tmp_path: Path) -> None:
     assert fig["within_tolerance"] == pytest.approx(6 / 16, abs=1e-3)
     never = station_figures(summary, (500.0, 0.0), 3.0, geo)
     assert never["arrived_s"] is None and never["within_tolerance"] == 0.0
+
+
+def test_the_system_id_goes_to_arduRover_under_both_names() -> None:
+    """ArduPilot 4.7 renamed SYSID_THISMAV to MAV_SYSID, and the shipped binary ignores the old name in
+    a defaults file: with a system id other than 1 (`hil run` beside another run takes instance N and
+    system id 1 + N) it kept 1, and this process, listening for the id it had set, never heard it."""
+    from hil import settings
+    from hil.ardupilot import project_params
+
+    params = project_params(settings.load(None, ["autopilot.system_id=7"]))
+    assert params["MAV_SYSID"] == params["SYSID_THISMAV"] == 7.0

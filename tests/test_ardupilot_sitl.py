@@ -81,6 +81,23 @@ def test_lockstep_only(tmp_path: Path) -> None:
     _one_line_error(r, "--speedup")
 
 
+def test_the_fence_is_for_arduRover_only(tmp_path: Path) -> None:
+    r = run_hil("run", "--scenario", "harbour", "--ardupilot-fence", "--out", str(tmp_path / "r"), timeout=120)
+    _one_line_error(r, "--ardupilot-fence", "--autopilot ardupilot")
+
+
+@needs_sitl
+def test_a_chart_arduRover_cannot_store_as_its_fence_is_one_line(tmp_path: Path) -> None:
+    """The labyrinth's walls and islands need more fence vertices than ArduRover stores (84)."""
+    r = run_hil("run", "--scenario", "labyrinth", "--autopilot", "ardupilot", "--ardupilot-fence",
+                "--ardupilot-bin", str(SITL), "--out", str(tmp_path / "r"), timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    errors = [ln for ln in r.stderr.splitlines() if "error" in ln]    # after the run's opening line
+    assert len(errors) == 1 and errors[0] == r.stderr.strip().splitlines()[-1], r.stderr
+    assert "--ardupilot-fence" in errors[0] and "labyrinth" in errors[0] and "84 fence vertices" in errors[0]
+    assert not list(tmp_path.glob("r/ardupilot/ardurover.log"))   # refused before ArduRover started
+
+
 @needs_sitl
 def test_ardurover_flies_the_harbour_route_and_a_rerun_is_byte_identical(tmp_path: Path) -> None:
     """ArduRover (motorboat-skid parameters plus the project's) flies the harbour's global route to the
@@ -139,3 +156,141 @@ def test_ardurover_flies_the_harbour_route_and_a_rerun_is_byte_identical(tmp_pat
     while (msg := m.recv_msg()) is not None:
         types.add(msg.get_type())
     assert {"HIL_STATE_QUATERNION", "HEARTBEAT", "MISSION_ITEM_INT", "MISSION_ACK", "COMMAND_LONG"} <= types
+
+
+def _download_fence(port: int, expected: int, timeout: float = 240.0) -> list:
+    """A ground station on ArduRover's SERIAL1 asks for its fence (MISSION_REQUEST_LIST, mission_type
+    FENCE) until it holds ``expected`` items, then reads each one; the MISSION_ITEM_INTs in order."""
+    from pymavlink import mavutil
+
+    fence = mavutil.mavlink.MAV_MISSION_TYPE_FENCE
+    gcs = mavutil.mavlink_connection(f"tcp:127.0.0.1:{port}", source_system=250, retries=20)
+    try:
+        hb = gcs.wait_heartbeat(timeout=60)
+        assert hb is not None
+        target = hb.get_srcSystem()
+        deadline = time.monotonic() + timeout
+        count = 0
+        while count != expected and time.monotonic() < deadline:
+            gcs.mav.mission_request_list_send(target, 1, fence)
+            msg = gcs.recv_match(type="MISSION_COUNT", blocking=True, timeout=2)
+            if msg is not None and msg.mission_type == fence:
+                count = msg.count
+            if count != expected:
+                time.sleep(0.5)
+        assert count == expected, f"ArduRover holds {count} fence items, not {expected}"
+        items = []
+        for seq in range(count):
+            got = None
+            for _ in range(5):   # lockstep: ArduRover answers between physics steps
+                gcs.mav.mission_request_int_send(target, 1, seq, fence)
+                got = gcs.recv_match(type="MISSION_ITEM_INT", blocking=True, timeout=3)
+                if got is not None and got.seq == seq and got.mission_type == fence:
+                    break
+            assert got is not None and got.seq == seq, f"fence item {seq} not sent"
+            items.append(got)
+        gcs.mav.mission_ack_send(target, 1, mavutil.mavlink.MAV_MISSION_ACCEPTED, fence)
+        return items
+    finally:
+        gcs.close()
+
+
+@needs_sitl
+def test_the_chart_as_arduRovers_fence_takes_it_round_the_pier_the_route_crosses(tmp_path: Path) -> None:
+    """`--ardupilot-fence`: the harbour's chart goes to ArduRover as exclusion polygons, and ArduRover
+    reports back, to a ground station on its SERIAL1, each vertex we sent (MAV_CMD_NAV_FENCE_POLYGON_
+    VERTEX_EXCLUSION, the polygon's vertex count, lat/lon to 1e-7 deg). Its mission is the route as
+    given, whose second leg crosses pier 1; with its Dijkstra (OA_TYPE 2) ArduRover goes round the pier
+    (reaching the waypoint beyond it) and is past it (x > 60 m) before anything ends the run. Where it
+    ends (docs/ardupilot.md: a collision at the breakwater's end at this commit) is the bench's figure,
+    not asserted here."""
+    from pymavlink import mavutil
+
+    from common.geodesy import LocalFrame
+    from hil import scenario as scenarios
+    from hil import settings
+    from hil.ardupilot_fence import FENCE_VERTEX_EXCLUSION, chart_polygons, fence_items
+
+    cfg = settings.load(None, [])
+    geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
+    scen = scenarios.load("harbour")
+    assert scen.waypoints is not None
+    expected = fence_items(chart_polygons(scen.occ, scen.resolution), geo)
+    out = tmp_path / "fence"
+    cmd = [sys.executable, "-m", "hil", "run", "--scenario", "harbour", "--autopilot", "ardupilot", "--ardupilot-fence",
+           "--duration", "300", "--json", "--no-plot", "--out", str(out)]
+    proc = subprocess.Popen(cmd, cwd=REPO, env={**os.environ, "ARDUPILOT_SITL": str(SITL)}, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert proc.stderr is not None
+    try:
+        port = None
+        deadline = time.monotonic() + 120
+        while port is None and time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            if not line:
+                break
+            if "ground stations on TCP" in line:
+                port = int(line.rsplit(" ", 1)[1])
+        assert port is not None, "no ground-station port announced"
+        items = _download_fence(port, len(expected))
+        stdout, stderr = proc.communicate(timeout=600)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    s = json.loads(stdout)
+    assert proc.returncode == (0 if s["reached_goal"] else 1), stderr[-2000:]   # `hil run`: 1 without the goal
+    for got, want in zip(items, expected, strict=True):
+        assert got.command == FENCE_VERTEX_EXCLUSION and got.param1 == want.vertices
+        assert (got.x, got.y) == (round(want.lat * 1e7), round(want.lon * 1e7))
+    ap = s["simulator"]["ardupilot"]
+    assert ap["params"]["OA_TYPE"] == 2 and ap["params"]["FENCE_ENABLE"] == 1
+    assert ap["fence"]["vertices"] == len(expected) and ap["mission_items"] == len(scen.waypoints)
+    assert any("fence of" in e and "accepted" in e for e in s["events"])
+    log = mavutil.mavlink_connection(str(out / "run.tlog"))
+    reached_2 = past_pier = False
+    while (msg := log.recv_match(type=["STATUSTEXT", "HIL_STATE_QUATERNION"])) is not None:
+        if msg.get_type() == "STATUSTEXT":
+            reached_2 |= "Reached waypoint #2" in msg.text
+        else:
+            east = geo.geodetic_to_sea_level(msg.lat * 1e-7, msg.lon * 1e-7)[1]
+            past_pier |= east > 60.0
+    assert reached_2 and past_pier, s["outcome"]   # a collision at the pier would have ended the run there
+
+
+@needs_sitl
+def test_arduRover_ends_with_a_hil_killed_outright(tmp_path: Path) -> None:
+    """`hil run` killed with SIGKILL cannot end ArduRover itself; ArduRover, waiting in lockstep for the
+    physics' answer, would wait for good. The kernel ends it (its parent-death signal)."""
+    import signal
+
+    cmd = [sys.executable, "-m", "hil", "run", "--scenario", "harbour", "--autopilot", "ardupilot", "--no-plot",
+           "--out", str(tmp_path / "r")]
+    proc = subprocess.Popen(cmd, cwd=REPO, env={**os.environ, "ARDUPILOT_SITL": str(SITL)}, text=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    assert proc.stderr is not None
+    pid = None
+    try:
+        deadline = time.monotonic() + 120
+        while pid is None and time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            if not line:
+                break
+            if "ArduRover pid" in line:
+                pid = int(line.split("ArduRover pid ", 1)[1].split(",", 1)[0])
+        assert pid is not None, "no ArduRover pid announced"
+        assert Path(f"/proc/{pid}").exists()
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    deadline = time.monotonic() + 20
+    while Path(f"/proc/{pid}").exists() and "Z" not in _state(pid) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not Path(f"/proc/{pid}").exists() or "Z" in _state(pid), f"ArduRover {pid} outlived hil"
+
+
+def _state(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return "Z"

@@ -13,7 +13,9 @@ from hil import first_run
 def test_an_empty_cache_is_cold_and_the_notice_says_so(tmp_path, monkeypatch):
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
     assert first_run.kernels_cold()
-    assert "compiling numba kernels, first run only, ~40 s" in first_run.compile_notice("run")
+    assert "compiling numba kernels, first run only, ~45 s of CPU" in first_run.compile_notice("run")
+    assert "shared by 3 processes" in first_run.compile_notice("run", processes=3)
+    assert first_run.kernels_cold(first_run.PLANNER_SOURCES)
 
 
 def _fake_cache(root, newer: bool) -> None:
@@ -52,3 +54,15 @@ def test_the_index_file_names_are_numbas(tmp_path, monkeypatch):
     subprocess.run([sys.executable, "-c", "import kern; kern.twice(2)"], check=True, env=env, timeout=120)
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
     assert first_run._index_files(src)
+
+
+def test_hil_plan_asks_only_about_the_planner_kernels(tmp_path, monkeypatch):
+    """The planner's cache alone decides `hil plan`'s notice (a run's other kernels may be cold)."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    _fake_cache(tmp_path, newer=True)
+    for rel in first_run.KERNEL_SOURCES:
+        if rel not in first_run.PLANNER_SOURCES:
+            for p in first_run._index_files(first_run.REPO / rel):
+                p.unlink()
+    assert first_run.kernels_cold()
+    assert not first_run.kernels_cold(first_run.PLANNER_SOURCES)

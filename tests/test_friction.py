@@ -61,3 +61,34 @@ def test_a_failed_start_leaves_no_empty_files(tmp_path):
     kept.mkdir()
     tidy_failed_start(kept, fresh=False)                                  # a folder the user gave stays
     assert kept.is_dir()
+
+
+def test_no_system_id_warning_when_the_ground_station_link_is_off(tmp_path):
+    """A second run with ``--gcs none`` streams to no ground station: no "another run streams as
+    system N" warning (issue 32 point 5); with its link on, the same clash warns."""
+    import fcntl
+    import tempfile
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    from hil.hilrun import HilRun, gcs_endpoints_in_effect
+
+    assert gcs_endpoints_in_effect(["udpout:127.0.0.1:14550"], ["--gcs", "none"]) == []
+    assert gcs_endpoints_in_effect(["udpout:127.0.0.1:14550"], ["--wait-for-arm"]) == ["udpout:127.0.0.1:14550"]
+    assert gcs_endpoints_in_effect([], ["--gcs", "udpin:0.0.0.0:14551", "--gcs", "none"]) == ["udpin:0.0.0.0:14551"]
+    sysid = 237  # a private id: the lock of a real run (system id 1) is not touched
+    holder = open(Path(tempfile.gettempdir()) / f"usv-hil-sysid-{sysid}.lock", "a")
+    fcntl.flock(holder, fcntl.LOCK_EX | fcntl.LOCK_NB)  # "another run" streaming as system 237
+    try:
+        for args, warned in ((["--gcs", "none"], False), ([], True)):
+            said: list[str] = []
+            run = SimpleNamespace(
+                cfg=SimpleNamespace(gcs=SimpleNamespace(endpoints=["udpout:127.0.0.1:14550"]),
+                                    autopilot=SimpleNamespace(system_id=sysid)),
+                opts=SimpleNamespace(extra_autopilot_args=args, on_progress=said.append),
+                warnings=[], _sysid_lock=None)
+            HilRun.claim_system_id(run)  # type: ignore[arg-type]
+            assert bool(run.warnings) == warned and bool(said) == warned, (args, said)
+            assert run._sysid_lock is None
+    finally:
+        holder.close()

@@ -130,3 +130,23 @@ def test_start_and_goal_alone_are_routed_round_the_wall(tmp_path):
     grid = OccupancyGrid(scen.occ, scen.resolution).inflate(2.0)
     assert all(grid.segment_free(*a, *b) for a, b in zip(ref[:-1], ref[1:], strict=True))
     assert np.max(np.hypot(*np.diff(ref, axis=0).T)) <= 10.0 + 1e-9
+
+
+def test_loading_a_scenario_plans_no_route_its_first_use_plans_it_once(tmp_path, monkeypatch):
+    """Configuration loading does no planning (issue 30): the route is planned where it is first
+    needed, once; a bad waypoint is found then, as the same one-line ConfigError."""
+    import planner.global_route as global_route
+    from hil import scenario as scenarios
+    from hil.errors import ConfigError
+
+    calls: list[int] = []
+    real = global_route.plan_chart_route
+    monkeypatch.setattr(global_route, "plan_chart_route", lambda *a, **k: calls.append(1) or real(*a, **k))
+    scen = scenarios.load(str(pond_scenario(tmp_path, [])))
+    assert calls == []
+    first = scen.reference_path
+    assert calls == [1] and scen.reference_path is first and calls == [1]
+
+    bad = scenarios.load(str(pond_scenario(tmp_path, [[10.0, 20.0], [51.0, 30.0], [90.0, 20.0]])))
+    with pytest.raises(ConfigError, match=r"reference_path\[1\]: \(51\.0, 30\.0\) m is inside an obstacle"):
+        _ = bad.reference_path

@@ -8,7 +8,7 @@ import dataclasses
 import json
 
 import pytest
-from support.summaries import autopilot_summary, run_summary
+from support.summaries import CAN, GCS, TRAFFIC, autopilot_summary, run_summary
 
 from common.tables import to_table
 from hil.errors import ConfigError, RunFailed
@@ -22,7 +22,7 @@ def _through_json(summary):
 @pytest.mark.parametrize("summary", [
     run_summary(),
     run_summary(outcome="collision", reached_goal=False, collisions=1, collision_time_s=45.25, energy_J=None,
-                warnings=("another hil run streams with system id 1",), gcs={"rejects": {}},
+                warnings=("another hil run streams with system id 1",), gcs=GCS,
                 encounters=({"mmsi": 412000103, "type": "crossing-give-way", "cpa_m": 10.5},),
                 traffic={"encounters": 1, "ais": None}, can={"autopilot": None}, plot=None, plot_error="OSError: x"),
     run_summary(planning_cycles=None, plans_accepted=None, deadline_overruns=None, worker_restarts=None,
@@ -36,9 +36,10 @@ def test_a_run_summary_round_trips_through_json(summary):
 @pytest.mark.parametrize("summary", [
     autopilot_summary(),
     autopilot_summary(complete_time_s=None, mission_complete=False, worker_startup_s=dataclasses.replace(
-        autopilot_summary().worker_startup_s, count=0, max=None), can={"raw_commands_sent": 3},
-        traffic={"ais": {"tracked": 1}}, gcs={"rejects": {}}),
-    autopilot_summary(link=None, local_paths=None, estimated_track=None, sensed_cells=None),  # Autopilot.summary()
+        autopilot_summary().worker_startup_s, count=0, max=None), can=CAN,
+        traffic=TRAFFIC, gcs=GCS),
+    autopilot_summary(link=None, busy_poll=None, local_paths=None, estimated_track=None,
+                      sensed_cells=None),  # Autopilot.summary()
 ])
 def test_an_autopilot_summary_round_trips_through_json(summary):
     assert read_autopilot_summary(_through_json(summary)) == summary
@@ -55,7 +56,7 @@ def test_the_files_keep_their_keys_and_optional_sections_stay_absent():
     assert table["collision_time_s"] is None      # None where the key always appears
     ap = to_table(autopilot_summary(can=None, gcs=None))
     assert "can" not in ap and "gcs" not in ap and ap["traffic"] is None
-    assert list(ap)[-5:] == ["traffic", "link", "local_paths", "estimated_track", "sensed_cells"]
+    assert list(ap)[-6:] == ["traffic", "link", "busy_poll", "local_paths", "estimated_track", "sensed_cells"]
 
 
 def test_an_unknown_or_missing_key_is_one_line_naming_it():
@@ -78,4 +79,29 @@ def test_an_unknown_or_missing_key_is_one_line_naming_it():
         read_autopilot_summary(ap)
     assert str(exc.value) == "the autopilot's summary: control_latency_ms.p99: expected a number, got 'fast'"
     assert "\n" not in str(exc.value)
+
+
+def test_a_section_is_read_as_its_owner_typed_it():
+    """The sections (tracking, link, gcs, can, traffic, busy_poll, local_paths) have their owners'
+    types: a key they do not have, a missing one or a value of the wrong type is one line naming it;
+    an optional key may be absent."""
+    ap = to_table(autopilot_summary(gcs=GCS, can=CAN, traffic=TRAFFIC))
+    ap["gcs"]["frames_inn"] = 3
+    with pytest.raises(RunFailed, match=r"^the autopilot's summary: gcs.frames_inn: unknown key \(did you mean "
+                                        r"'frames_in'\?\)$"):
+        read_autopilot_summary(ap)
+    ap = to_table(autopilot_summary(can=CAN))
+    del ap["can"]["node_id"]
+    with pytest.raises(RunFailed, match=r"^the autopilot's summary: can.node_id: missing key$"):
+        read_autopilot_summary(ap)
+    ap = to_table(autopilot_summary(traffic=TRAFFIC))
+    ap["traffic"]["encounters"][0]["start_s"] = "soon"
+    with pytest.raises(RunFailed, match=r"traffic.encounters\[0\].start_s: expected a number, got 'soon'$"):
+        read_autopilot_summary(ap)
+    ap = to_table(autopilot_summary())
+    ap["local_paths"][0]["path_ned"] = "none"
+    with pytest.raises(RunFailed, match=r"local_paths\[0\].path_ned: expected an array"):
+        read_autopilot_summary(ap)
+    no_frames = to_table(autopilot_summary(tracking={"frames": 0}))     # TrackingStats with nothing to say
+    assert read_autopilot_summary(no_frames).tracking == {"frames": 0}
 

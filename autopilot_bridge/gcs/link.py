@@ -23,7 +23,7 @@ from __future__ import annotations
 import time
 from collections import Counter
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypedDict
 
 from autopilot_bridge.gcs.command import CommandService
 from autopilot_bridge.gcs.config import GcsParams
@@ -54,6 +54,42 @@ from common.udp import UdpEndpoint
 __all__ = ["GcsLink", "load_signing_key"]
 
 Handler = Callable[[Any, float], None]
+
+
+class ServiceTimes(TypedDict):
+    """Wall time of the link's service() calls, ms (None before any)."""
+
+    p50: float | None
+    p99: float | None
+    max: float | None
+    calls: int
+
+
+class GcsSummary(TypedDict):
+    """The ``gcs`` section of the summaries: what crossed the ground-station link and what it refused
+    (counts by message type, reason or result)."""
+
+    endpoints: list[str]
+    datagrams_in: int
+    datagrams_out: int
+    frames_in: int
+    frames_sent: int
+    received: dict[str, int]
+    rejects: dict[str, int]
+    security_rejects: dict[str, int]
+    signing: bool
+    signature_failures: dict[str, int]
+    missions_accepted: int
+    missions_rejected: int
+    mission_acks: dict[str, int]
+    mission: dict[str, int]
+    command_acks: dict[str, int]
+    commands: dict[str, int]
+    param_rejects: int
+    encode_errors: dict[str, int]
+    failsafe_events: int
+    failsafe_active: bool
+    service_ms: ServiceTimes
 
 
 class GcsLink:
@@ -282,7 +318,7 @@ class GcsLink:
             handler(m, now)
 
     # -- end ------------------------------------------------------------------------------------
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> GcsSummary:
         """The link's counters (the autopilot's summary and the run's summary.json carry them as "gcs").
 
         Datagrams count what crossed the sockets (out: one per peer a frame went to); frames count MAVLink
@@ -291,31 +327,31 @@ class GcsLink:
         """
         out, server = self.out, self.mission_service.server
         acks = out.mission_acks
-        return {
-            "endpoints": [f"{h}:{p}" for h, p in self.addresses],
-            "datagrams_in": self.datagrams_in,
-            "datagrams_out": self._datagrams_out_closed + sum(tr.sent for tr in self.transports),
-            "frames_in": sum(self.received.values()),
-            "frames_sent": out.sent,
-            "received": dict(self.received),
-            "rejects": dict(self.rejects),
-            "security_rejects": dict(self.security),
-            "signing": self.key is not None,
-            "signature_failures": dict(self.guard.refused) if self.guard is not None else {},
-            "missions_accepted": server.stats.get("uploads_accepted", 0) if server is not None else 0,
-            "missions_rejected": sum(n for r, n in acks.items() if r != "MAV_MISSION_ACCEPTED"),
-            "mission_acks": dict(acks),
-            "mission": dict(server.stats) if server is not None else {},
-            "command_acks": dict(out.command_acks),
-            "commands": dict(out.commands),
-            "param_rejects": self.parameter.table.rejected if self.parameter.table is not None else 0,
-            "encode_errors": dict(out.encode_errors),
-            "failsafe_events": self.failsafe.events,
-            "failsafe_active": self.failsafe.active,
-            "service_ms": {"p50": self.service_ms.percentile(50), "p99": self.service_ms.percentile(99),
-                           "max": self.service_ms.max if self.service_ms.count else None,
-                           "calls": self.service_ms.count},
-        }
+        return GcsSummary(
+            endpoints=[f"{h}:{p}" for h, p in self.addresses],
+            datagrams_in=self.datagrams_in,
+            datagrams_out=self._datagrams_out_closed + sum(tr.sent for tr in self.transports),
+            frames_in=sum(self.received.values()),
+            frames_sent=out.sent,
+            received=dict(self.received),
+            rejects=dict(self.rejects),
+            security_rejects=dict(self.security),
+            signing=self.key is not None,
+            signature_failures=dict(self.guard.refused) if self.guard is not None else {},
+            missions_accepted=server.stats.get("uploads_accepted", 0) if server is not None else 0,
+            missions_rejected=sum(n for r, n in acks.items() if r != "MAV_MISSION_ACCEPTED"),
+            mission_acks=dict(acks),
+            mission=dict(server.stats) if server is not None else {},
+            command_acks=dict(out.command_acks),
+            commands=dict(out.commands),
+            param_rejects=self.parameter.table.rejected if self.parameter.table is not None else 0,
+            encode_errors=dict(out.encode_errors),
+            failsafe_events=self.failsafe.events,
+            failsafe_active=self.failsafe.active,
+            service_ms=ServiceTimes(p50=self.service_ms.percentile(50), p99=self.service_ms.percentile(99),
+                                    max=self.service_ms.max if self.service_ms.count else None,
+                                    calls=self.service_ms.count),
+        )
 
     def close(self) -> None:
         for tr in self.transports:

@@ -7,6 +7,11 @@ global route as an ArduPilot mission. Both are judged from the simulator's truth
 takes its mission, and its time counts from AUTO, the set-up reported apart), the truth's
 cross-track distance from the global route (RMS and largest, m), the minimum clearance from the chart
 (m), energy (J, eq. of `hil run`), collisions. Ratios are ArduRover / vessel computer.
+
+A fence row ("NAME (fence)") flies the scenario's route as given, which crosses the chart (the
+harbour's crosses pier 1, the breakwater and the outer mole), with the chart uploaded as ArduRover's
+exclusion fence and its Dijkstra planner on (`hil run --autopilot ardupilot --ardupilot-fence`),
+against the vessel computer with its global route (the same flight as the scenario's own row).
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ if TYPE_CHECKING:
 
     from hil.settings import HilConfig
 
+ENCOUNTERS = ("colregs-head-on", "colregs-crossing-right", "colregs-crossing-left", "colregs-overtaking")
 METRICS = ("mission_time_s", "time_under_way_s", "cross_track_rms_m", "cross_track_max_m", "min_clearance_m",
            "energy_J", "path_length_m", "collisions")
 
@@ -39,10 +45,17 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                     "scenario's global route as its mission), and prints, per scenario, mission time, time under "
                     "way (from the start of motion), cross-track distance from the global route (RMS, max), "
                     "minimum clearance, energy, path length and collisions for both, with the ratio ArduRover / "
-                    "vessel computer (docs/ardupilot.md).",
+                    "vessel computer (docs/ardupilot.md). A fence row flies the scenario's route as given, "
+                    "which crosses the chart, with the chart as ArduRover's exclusion fence and its Dijkstra "
+                    "path planner on, against the vessel computer's global route.",
     )
-    p.add_argument("--scenarios", nargs="+", default=["harbour"], metavar="NAME",
-                   help="fixed scenarios to fly (default: harbour)")
+    p.add_argument("--scenarios", nargs="*", default=["harbour", *ENCOUNTERS], metavar="NAME",
+                   help="fixed scenarios to fly (default: harbour and the four COLREGs encounters, "
+                        f"{', '.join(ENCOUNTERS)})")
+    p.add_argument("--fence-scenarios", nargs="*", default=["harbour"], metavar="NAME",
+                   help="fixed scenarios whose route as given crosses the chart: ArduRover flies that route with "
+                        "the chart as its exclusion fence (Dijkstra, OA_TYPE 2), the vessel computer its global "
+                        "route (default: harbour; none: no fence row)")
     p.add_argument("--duration", type=float, default=300.0, metavar="S",
                    help="simulated seconds at most per flight (default: 300)")
     p.add_argument("--seed", type=int, default=1, help="seed of both flights (default: 1)")
@@ -152,11 +165,12 @@ def moving_from(tlog: Path, until_s: float, speed: float = 0.3) -> float | None:
 
 
 def flight_figures(summary: Any, route_ned: np.ndarray, geo: Any) -> dict[str, Any]:
+    from autopilot_bridge.tracking_stats import TrackingSummary
     from hil.ardupilot import route_cross_track
 
     tlog = Path(summary.tlog)
     track = truth_track(tlog, geo, summary.sim_time_s)
-    xte = route_cross_track(track, route_ned) or {}
+    xte = route_cross_track(track, route_ned) or TrackingSummary(frames=0)
     start = moving_from(tlog, summary.sim_time_s)
     done = summary.reached_goal
     return {"outcome": summary.outcome, "reached_goal": done,
@@ -195,7 +209,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--duration: must be a finite number > 0 of seconds")
     sitl = find_sitl(args.ardupilot_bin)
     cfg = load_settings(args)
-    for name in args.scenarios:
+    for name in (*args.scenarios, *args.fence_scenarios):
         if scenarios.load_spec(name).kind != "fixed":
             raise UsageError(f"scenario {name!r} draws a new map per run; the bench needs fixed scenarios")
     geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
@@ -205,27 +219,38 @@ def run(args: argparse.Namespace) -> int:
              " ".join(f"{c:<15}" if i == 0 else f"{c:>8}" for i, c in enumerate(HEAD))]
     with tempfile.TemporaryDirectory(prefix="hil-bench-ardupilot-") as tmp:
         root = Path(args.out) if args.out else Path(tmp)
-        for name in args.scenarios:
+        flown: dict[str, dict[str, Any]] = {}     # the vessel computer's figures per scenario, flown once
+        rows = [(name, False) for name in args.scenarios] + [(name, True) for name in args.fence_scenarios]
+        for name, fence in rows:
             scen = scenarios.load(name, cfg.current, cfg.planner.safety_radius)
             route = np.asarray(scen.reference_path, dtype=float)[:, ::-1]
+            row = f"{name} (fence)" if fence else name
 
-            def opts(who: str, name: str = name) -> RunOptions:
+            def opts(who: str, name: str = name, folder: str = row.replace(" (fence)", "-fence")) -> RunOptions:
                 return RunOptions(scenario=name, lockstep=True, duration=args.duration, seed=args.seed,
-                                  config=args.config, overrides=list(args.overrides), out=root / name / who,
+                                  config=args.config, overrides=list(args.overrides), out=root / folder / who,
                                   plot=False, on_progress=progress, cpus="off")
 
-            progress(f"bench ardupilot: {name}: the vessel computer")
-            ours = flight_figures(run_loop(opts("vessel-computer"), cfg), route, geo)
-            progress(f"bench ardupilot: {name}: ArduRover")
-            ap_summary = run_ardupilot(opts("ardurover"), cfg, sitl)
+            if name not in flown:
+                progress(f"bench ardupilot: {name}: the vessel computer")
+                flown[name] = flight_figures(run_loop(opts("vessel-computer"), cfg), route, geo)
+            ours = flown[name]
+            progress(f"bench ardupilot: {row}: ArduRover")
+            ap_summary = run_ardupilot(opts("ardurover"), cfg, sitl, fence=fence)
+            if ap_summary.outcome == "interrupted":   # Ctrl-C ends the bench, not just this flight
+                raise KeyboardInterrupt
             theirs = flight_figures(ap_summary, route, geo)
             ap = (ap_summary.simulator or {}).get("ardupilot", {})
             theirs["setup_to_auto_s"] = ap.get("auto_at_s")   # moored until then: the mission counts from AUTO
+            theirs["collision_time_s"] = ap_summary.collision_time_s
+            if fence:
+                theirs["fence"] = ap.get("fence")
+                theirs["mission_waypoints"] = ap.get("mission_items")
             if theirs["reached_goal"]:
                 theirs["mission_time_s"] = ap.get("mission_time_s")
             ratios = {k: ratio(theirs[k], ours[k]) for k in METRICS if k != "collisions"}
-            result["scenarios"][name] = {"ardurover": theirs, "vessel_computer": ours, "ratio": ratios}
-            lines += [_row(name, "ArduRover", theirs), _row("", "ours", ours),
+            result["scenarios"][row] = {"ardurover": theirs, "vessel_computer": ours, "ratio": ratios}
+            lines += [_row(row, "ArduRover", theirs), _row("", "ours", ours),
                       _row("", "ratio", {**ratios, "outcome": "", "collisions": None})]
         if args.station_duration > 0:
             result["station_keeping"] = _station(args, cfg, sitl, geo, root, lines)

@@ -191,10 +191,10 @@ def _ddrrt_hint(params, result, grid) -> str | None:
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from hil.first_run import COLD_PLAN_COMPILE_S, compile_notice
+    from hil.first_run import COLD_PLAN_COMPILE_S, PLANNER_SOURCES, compile_notice
 
     # before the planner's import, which compiles on a cold cache
-    notice = compile_notice("hil plan", COLD_PLAN_COMPILE_S)
+    notice = compile_notice("hil plan", COLD_PLAN_COMPILE_S, PLANNER_SOURCES)
     if notice:
         console.progress(notice)
 

@@ -30,6 +30,7 @@ from hil.sim_client import HilClient, sim_command, start_simulator
 from planner.params import ALGORITHM_NAMES
 
 if TYPE_CHECKING:
+    from hil.placement import Placement
     from hil.run_summary import RunSummary
     from hil.settings import HilConfig
 
@@ -104,6 +105,11 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--ardupilot-params", metavar="FILE", default=None,
                    help="--autopilot ardupilot: your own ArduPilot parameter file, laid over ArduPilot's and "
                         "the project's")
+    p.add_argument("--ardupilot-fence", action="store_true",
+                   help="--autopilot ardupilot: upload the chart as ArduRover's exclusion fence (polygons), plan "
+                        "round it with its Dijkstra (OA_TYPE 2, OA_MARGIN_MAX = planner.safety_radius, FENCE_MARGIN = "
+                        "half the hull's length) and give it "
+                        "the scenario's route as given, which may cross the chart, instead of the global route")
     add_can_arguments(p)
     from hil.commands.autopilot import add_gcs_arguments
 
@@ -135,6 +141,8 @@ def run(args: argparse.Namespace) -> int:
         if args.speedup is not None and not args.wait_for_arm:
             raise ConfigError("--pipeline is a lockstep mode; drop --speedup (or add --wait-for-arm)")
         args.overrides.append("sim.lockstep_pipeline=true")
+    if args.ardupilot_fence and args.autopilot != "ardupilot":
+        raise UsageError("--ardupilot-fence is for --autopilot ardupilot (the vessel computer plans its global route)")
     if args.autopilot == "ardupilot":
         _check_ardupilot_options(args)
     from hil import instances, placement
@@ -207,7 +215,7 @@ def _default_wall_timeout(args: argparse.Namespace, paced: bool = False) -> floa
     return args.duration / args.speedup + 300.0
 
 
-def _run_hil(args: argparse.Namespace, cfg: HilConfig, cpus: Any = "auto") -> int:
+def _run_hil(args: argparse.Namespace, cfg: HilConfig, cpus: str | Placement = "auto") -> int:
     from pathlib import Path
 
     from hil import scenario as scenarios
@@ -244,9 +252,16 @@ def _run_hil(args: argparse.Namespace, cfg: HilConfig, cpus: Any = "auto") -> in
              f"{who}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
     from hil.first_run import compile_notice
 
-    notice = compile_notice("run")
+    notice = compile_notice("run", processes=3 if args.autopilot != "ardupilot" else 1)
+    compiling: list[subprocess.Popen] = []
     if notice:
         progress(notice)
+        if args.autopilot != "ardupilot":
+            from hil.warm_up import start as start_compiling
+
+            # The vessel computer's kernels in parallel processes (hil/warm_up.py); its process waits
+            # for them and loads the machine code from the cache.
+            compiling = start_compiling()
     from hil.errors import RunFailed
     from hil.files import tidy_failed_start
 
@@ -255,12 +270,17 @@ def _run_hil(args: argparse.Namespace, cfg: HilConfig, cpus: Any = "auto") -> in
         if args.autopilot == "ardupilot":
             from hil.ardupilot import run_ardupilot
 
-            summary = run_ardupilot(opts, cfg, args.sitl, args.ardupilot_params)
+            summary = run_ardupilot(opts, cfg, args.sitl, args.ardupilot_params, args.ardupilot_fence)
         else:
             summary = run_loop(opts, cfg)
     except RunFailed:
         tidy_failed_start(out, fresh)
         raise
+    finally:
+        for proc in compiling:   # done by now (the vessel computer waited for them), or stopped by Ctrl-C
+            if proc.poll() is None:
+                proc.terminate()
+            proc.wait()
     emit(args, to_table(summary), human_summary(summary))
     if summary.outcome == "interrupted":
         progress(f"run: interrupted; summary in {out}")
@@ -292,7 +312,9 @@ def human_summary(s: RunSummary) -> list[str]:
     lines.append(f"clearance: min {num(s.min_clearance_m, ' m')}; "
                  f"path {num(s.path_length_m, ' m', '.1f')}"
                  f"; energy {'-' if energy is None else f'{energy / 1000:.1f} kJ'}")
-    tr, lat = s.tracking or {}, s.control_latency_ms
+    from autopilot_bridge.tracking_stats import TrackingSummary
+
+    tr, lat = s.tracking or TrackingSummary(frames=0), s.control_latency_ms
     lines.append(f"errors: navigation RMSE {num(s.navigation_rmse_m, ' m')}; cross-track RMS "
                  f"{num(tr.get('cross_track_rms_m'), ' m')} (max {num(tr.get('cross_track_max_m'), ' m')}); "
                  f"control latency p99 {num(None if lat is None else lat.p99, ' ms')}")

@@ -13,7 +13,7 @@ from common.readiness import wait_for_start
 from hil.commands.arg_types import receiving, sending
 from hil.commands.can_options import add_can_arguments, can_overrides, check_can
 from hil.console import emit, load_settings, progress
-from hil.errors import ConfigError, UsageError
+from hil.errors import UsageError
 from hil.processes import freeze_heap
 
 if TYPE_CHECKING:
@@ -94,10 +94,8 @@ def config_overrides(args: argparse.Namespace) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from common.udp import UdpEndpoint
-    from simulator.core import SimulatorCore
+    from hil.assembly.simulator import build_simulator, scenario_world
     from simulator.rangefinder import WorldMap
-    from simulator.server import SimulatorServer
 
     source = getattr(args, "commands_from", None)
     if source not in (None, "learn"):
@@ -108,16 +106,10 @@ def run(args: argparse.Namespace) -> int:
     world = None
     traffic: tuple[ShipSpec, ...] = ()
     if getattr(args, "scenario", None):
-        from hil import scenario as scenarios
-
-        base = load_settings(args)  # the user's configuration, validated before the scenario is read
-        spec = scenarios.load_spec(args.scenario)
-        if spec.kind != "fixed":
-            raise UsageError(f"--scenario {args.scenario}: draws a new map per run; hil sim needs a fixed scenario")
-        scen = scenarios.instance(spec, None, base.current, geodesy=base.geodesy)
-        args.overrides = scenarios.simulator_overrides(scen, base.current) + list(args.overrides)
-        world = WorldMap(scen.truth_occ(), scen.resolution)
-        traffic = tuple(scen.traffic)
+        # the user's configuration, validated before the scenario is read
+        given = scenario_world(args.scenario, load_settings(args))
+        args.overrides = given.overrides + list(args.overrides)
+        world, traffic = given.world, given.traffic
     start_fd = getattr(args, "start_fd", None)
     if start_fd is not None:
         try:
@@ -136,42 +128,10 @@ def run(args: argparse.Namespace) -> int:
         from hil.scenario import load_traffic
 
         traffic = load_traffic(args.traffic)
-    try:
-        core = SimulatorCore(cfg, world, traffic)
-        check_covers = getattr(core.current, "check_covers", None)   # a current file: its time span
-        if check_covers is not None and cfg.sim.duration > 0:
-            check_covers(t=(0.0, cfg.sim.duration))
-    except ValueError as exc:
-        raise ConfigError(str(exc)) from None
-    try:
-        endpoint = UdpEndpoint(cfg.link.commands_on, cfg.link.state_to)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
-    esc = None
-    if cfg.can.actuators == "can":
-        from common.can_params import open_bus
-        from simulator.esc import EscBank
-
-        try:
-            esc = EscBank(open_bus(cfg.can), cfg.can, cfg.esc, core.vessel)
-            if args.can_record:
-                esc.applied_times.start(spill_to=args.can_record)
-        except ValueError as exc:
-            endpoint.close()
-            raise UsageError(str(exc)) from None
-    try:
-        server = SimulatorServer(core, endpoint, lockstep=cfg.sim.lockstep, duration=cfg.sim.duration,
-                                 speedup=cfg.sim.speedup, lockstep_resend=cfg.sim.lockstep_resend,
-                                 progress=progress, esc=esc, can_lockstep_wait=cfg.can.lockstep_wait,
-                                 command_source=source, busy_poll=cfg.sim.lockstep_busy_poll,
-                                 pipeline=cfg.sim.lockstep_pipeline)
-    except ValueError as exc:
-        endpoint.close()
-        if esc is not None:
-            esc.bus.shutdown()
-        raise UsageError(str(exc)) from None
+    parts = build_simulator(cfg, world, traffic, source, args.can_record, progress)
+    server = parts.server
     previous = {sig: signal.signal(sig, lambda *_: server.stop()) for sig in (signal.SIGINT, signal.SIGTERM)}
-    host, port = endpoint.address
+    host, port = parts.endpoint.address
     mode = ("lockstep, pipelined" if server.pipeline else "lockstep") if cfg.sim.lockstep else \
         f"real time x{cfg.sim.speedup:g}"
     progress(f"sim: commands on {host}:{port}, state to {', '.join(cfg.link.state_to)}, {mode}, "
@@ -185,11 +145,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-        endpoint.close()
-        if esc is not None:
-            esc.bus.shutdown()
-            if args.can_record:
-                esc.applied_times.save(args.can_record)
+        parts.close(args.can_record)
     summary["commands_on"] = f"{host}:{port}"
     try:
         emit(args, summary)

@@ -5,11 +5,41 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any
 
+from autopilot_bridge.ais_tracking import AisSummary
+from autopilot_bridge.can_actuators import CanPathSummary
+from autopilot_bridge.gcs.link import GcsSummary, ServiceTimes
+from autopilot_bridge.hil_link import LinkSummary, StallEvent, StallSummary
+from autopilot_bridge.plan_acceptance import AcceptedPath
 from autopilot_bridge.summary import AutopilotSummary, ControlLatency, NavigationCounts, WorkerStartup
+from autopilot_bridge.tracking_stats import TrackingSummary
+from autopilot_bridge.traffic_awareness import EncounterRecord, TrafficSummary
+from common.udp import BusyPollSummary
 from hil.run_summary import RunSecurity, RunSummary
 
 LATENCY = ControlLatency(p50=0.4, p99=6.0, max=80.0, frames=100)
 NAVIGATION = NavigationCounts(updates={"gps_pos": 450}, rejected={"gps_pos": 4, "numeric_gps": 1}, position_resets=0)
+TRACKING = TrackingSummary(frames=100, cross_track_rms_m=0.2, cross_track_p95_m=0.5, cross_track_max_m=0.9,
+                           heading_error_rms_rad=0.05, heading_error_p95_rad=0.1)
+LINK = LinkSummary(rejects={"wrong_system": 2}, frames=1903, truth_ignored=0, timeline_switches=0, late_frames=1,
+                   stalls=StallSummary(count=1, stale_frames_skipped=3,
+                                       events=[StallEvent(t_s=12.5, length_s=0.75)]),
+                   sensors_from="127.0.0.1:40001", wrong_source=0, budget_stops=0, kernel_drops=None)
+GCS = GcsSummary(endpoints=["127.0.0.1:14551"], datagrams_in=20, datagrams_out=400, frames_in=20, frames_sent=380,
+                 received={"HEARTBEAT": 20}, rejects={}, security_rejects={}, signing=False, signature_failures={},
+                 missions_accepted=1, missions_rejected=0, mission_acks={"MAV_MISSION_ACCEPTED": 1},
+                 mission={"uploads_accepted": 1}, command_acks={"MAV_RESULT_ACCEPTED": 2},
+                 commands={"MAV_CMD_COMPONENT_ARM_DISARM:MAV_RESULT_ACCEPTED": 1}, param_rejects=0, encode_errors={},
+                 failsafe_events=0, failsafe_active=False,
+                 service_ms=ServiceTimes(p50=0.02, p99=0.4, max=1.5, calls=1903))
+CAN = CanPathSummary(interface="virtual", channel="vcan0", node_id=10, raw_commands_sent=3,
+                     transfers_sent={"RawCommand": 3}, send_errors=0, frames_received=6, own_frames_ignored=0,
+                     transfers_received={"Status@20": 2}, transfers_lost={}, transfers_duplicated={}, rejects={},
+                     esc_status={"port": {"node_id": 20.0, "rpm": 900.0, "voltage": 24.1}}, esc_health={"20": 0})
+TRAFFIC = TrafficSummary(ais=AisSummary(tracked=1, accepted=40, new_tracks=1, forgotten=0, rejected={}),
+                         forwarded_to_gcs=40,
+                         encounters=[EncounterRecord(mmsi=412000103, type="crossing-give-way", role="give-way",
+                                                     start_s=30.5, bearing_deg=45.0, rule17_act_s=None, end_s=80.25)])
+BUSY = BusyPollSummary(max_us=950.0, caught=1800, missed=100, pauses=2, held=0)
 
 
 def autopilot_summary(**changes: Any) -> AutopilotSummary:
@@ -19,14 +49,14 @@ def autopilot_summary(**changes: Any) -> AutopilotSummary:
         duplicate_frames=0, commands_sent=1903, planning_cycles=45, plans_accepted=40,
         plans_rejected={"collision": 5}, deadline_overruns=0, worker_kills=0, worker_restarts=0,
         worker_startup_s=WorkerStartup(count=1, max=0.412), plans_skipped_worker_starting=0,
-        fallback_activations=2, tracking={"frames": 100, "cross_track_rms_m": 0.2, "cross_track_max_m": 0.9},
+        fallback_activations=2, tracking=TRACKING,
         simulator_restarts=0, navigation=NAVIGATION,
         sensed_obstacles={"scans": 10, "returns": 3, "cells": 2, "replans": 1}, link_rejects={},
         truth_messages_ignored=0, control_latency_ms=LATENCY, lockstep_planner_waits=3,
         lockstep_planner_wait_ms_max=12.5, lockstep_planner_wait_ms_total=40.0,
         events=("12.00s fallback: reactive avoidance", "190.25s mission complete"),
-        traffic=None, link={"rejects": {}, "frames": 1903},
-        local_paths=({"t": 1.0, "status": "exact", "path_ned": [[0.0, 0.0], [5.0, 1.0]]},),
+        traffic=None, link=LINK, busy_poll=BUSY,
+        local_paths=(AcceptedPath(t=1.0, cycle=1, status="exact", path_ned=[[0.0, 0.0], [5.0, 1.0]]),),
         estimated_track=((0.0, 60.0, 20.0, 1.571), (0.1, 60.0, 20.1, 1.571)),
         sensed_cells=((100, 200),),
     )
@@ -39,10 +69,10 @@ def run_summary(**changes: Any) -> RunSummary:
         scenario="harbour", seed=1, mode="lockstep", outcome="goal", reached_goal=True, collisions=0,
         collision_time_s=None, min_clearance_m=2.5, sim_time_s=190.3, wall_time_s=40.0, path_length_m=250.1,
         energy_J=40000.0, planning_cycles=45, plans_accepted=40, deadline_overruns=0, worker_restarts=0,
-        fallback_activations=2, tracking={"frames": 100, "cross_track_rms_m": 0.2, "cross_track_max_m": 0.9},
+        fallback_activations=2, tracking=TRACKING,
         navigation_rmse_m=0.1, control_latency_ms=LATENCY, simulator_restarts=0, navigation=NAVIGATION,
         sensed_obstacles={"cells": 0}, simulator={"steps": 4530, "malformed_dropped": 0, "jitter_ms": None},
-        security=RunSecurity(simulator={"rejects": {}}, autopilot={"rejects": {}}, autopilot_navigation_numeric={},
+        security=RunSecurity(simulator={"rejects": {}}, autopilot=LINK, autopilot_navigation_numeric={},
                              tap={"rejects": {}}),
         tlog="/tmp/run/run.tlog", tlog_messages=9000, events=("190.25s mission complete",), actuators="mavlink",
         run_folder="/tmp/run", plot="/tmp/run/plot.png",

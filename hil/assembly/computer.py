@@ -72,6 +72,8 @@ def build(cfg: HilConfig, scenario_name: str, lockstep: bool, planner_factory: s
 
     scen = scenarios.load(scenario_name, cfg.current, cfg.planner.safety_radius, cfg.geodesy)
     world = planning_world(cfg, scen)
+    # What the parts take, derived here first: the configuration then only goes down.
+    computer, options, time_step = computer_config(cfg), run_options(cfg, lockstep), max_time_step(cfg, lockstep)
     ap = cfg.autopilot
     geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
     try:
@@ -80,7 +82,7 @@ def build(cfg: HilConfig, scenario_name: str, lockstep: bool, planner_factory: s
                        recv_loss=ap.recv_loss, loss_seed=cfg.sim.seed + 7,
                        truth_component_id=cfg.traffic.truth_component_id,
                        sim_ids=(cfg.link.system_id, cfg.link.component_id), sensors_from=sensors_from,
-                       max_time_step=max_time_step(cfg, lockstep),
+                       max_time_step=time_step,
                        busy_poll=ap.lockstep_busy_poll if lockstep else 0.0, late_window=ap.sim_restart_gap,
                        realtime=not lockstep)
     except ValueError as exc:
@@ -111,8 +113,10 @@ def build(cfg: HilConfig, scenario_name: str, lockstep: bool, planner_factory: s
     import time as _time
 
     from autopilot_bridge.local_planning import CycleInput, LocalPlan, online_cycle_handler
+    from hil.warm_up import wait_for
 
     t0 = _time.monotonic()
+    wait_for("planner")   # a first run compiles the planner in a process of its own (hil/warm_up.py)
     warm_up = CycleInput(scen.start[0], scen.start[1], scen.start_heading, 0.0, 0)
     online_cycle_handler(world, warm_up)
     spent = _time.monotonic() - t0
@@ -132,9 +136,10 @@ def build(cfg: HilConfig, scenario_name: str, lockstep: bool, planner_factory: s
     from autopilot_bridge.traffic_awareness import TrafficAwareness
 
     traffic = TrafficAwareness(cfg.tracking, cfg.colregs, geo)  # AIS targets, COLREGs encounters
-    autopilot = Autopilot(computer_config(cfg), world,
+    wait_for("vessel-computer")   # the filter's, guidance's and obstacle map's kernels (hil/warm_up.py)
+    autopilot = Autopilot(computer, world,
                           Devices(link, worker, telemetry, traffic=traffic, actuators=actuators),
-                          run_options(cfg, lockstep))
+                          options)
     telemetry.attach(autopilot.commands)
     return autopilot, link
 

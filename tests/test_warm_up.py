@@ -1,0 +1,129 @@
+"""The first run's compile in parallel processes (hil/warm_up.py, issue 32 point 4)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from hil import warm_up
+from hil.hilrun import free_udp_port
+
+REPO = Path(__file__).resolve().parent.parent
+
+HOLD = textwrap.dedent("""
+    import fcntl, sys
+    fh = open(sys.argv[1], "a")
+    fcntl.flock(fh, fcntl.LOCK_EX)
+    print("held", flush=True)
+    sys.stdin.readline()
+""")
+
+
+def test_wait_for_waits_while_a_group_is_being_compiled(tmp_path, monkeypatch):
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))   # a lock file of this test's own
+    path = warm_up.lock_path("planner")
+    path.unlink(missing_ok=True)
+    assert warm_up.wait_for("planner") == 0.0               # nobody ever compiled: no wait
+    holder = subprocess.Popen([sys.executable, "-c", HOLD, str(path)], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+        assert warm_up.wait_for("planner", timeout_s=0.3) >= 0.3   # still held: gives up at the limit
+        assert holder.stdin is not None
+        holder.stdin.write("\n")
+        holder.stdin.flush()
+        assert holder.wait(timeout=30) == 0
+        assert warm_up.wait_for("planner", timeout_s=30.0) < 30.0  # released: returns
+    finally:
+        if holder.poll() is None:
+            holder.kill()
+        holder.wait()
+        path.unlink(missing_ok=True)
+
+
+def test_lock_files_are_per_numba_cache(monkeypatch, tmp_path):
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "a"))
+    a = warm_up.lock_path("planner")
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "b"))
+    assert warm_up.lock_path("planner") != a != warm_up.lock_path("vessel-computer")
+
+
+def test_an_unknown_group_is_a_usage_error():
+    r = subprocess.run([sys.executable, "-m", "hil.warm_up", "planer"], cwd=REPO, capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 2 and "usage" in r.stderr
+
+
+BUILD = textwrap.dedent("""
+    import json, sys
+    from numba.core import event
+    compiled = []
+    class Count(event.Listener):
+        def on_start(self, ev):
+            d = ev.data["dispatcher"]
+            compiled.append(f"{d.py_func.__module__}.{d.py_func.__name__}")
+        def on_end(self, ev):
+            pass
+    event.register("numba:compile", Count())
+    from hil import settings
+    from hil.assembly import build
+    cfg = settings.load(None, sys.argv[1:])
+    autopilot, link = build(cfg, "harbour", lockstep=True)
+    link.close()
+    autopilot.worker.close()
+    print(json.dumps(compiled))
+""")
+
+
+@pytest.mark.slow
+def test_after_the_groups_the_vessel_computer_compiles_nothing(tmp_path):
+    """A cold cache filled by the run's groups: building the vessel computer as `hil run` does
+    (planner warm-up, navigation filter, guidance, obstacle map, plan check, global route) loads
+    every kernel from the cache, none is compiled again. Several minutes of CPU on a cold cache."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    for group in ("simulator", *warm_up.RUN_GROUPS):   # the simulator's group holds the geodesy
+        r = subprocess.run([sys.executable, "-m", "hil.warm_up", "--json", group], cwd=REPO, env=env,
+                           capture_output=True, text=True, timeout=900)
+        assert r.returncode == 0, r.stderr[-2000:]
+        figures = json.loads(r.stdout.splitlines()[-1])
+        assert figures["group"] == group and figures["cpu_s"] > 0
+    sets = [f'autopilot.listen="127.0.0.1:{free_udp_port()}"',
+            f'autopilot.actuators_to=["127.0.0.1:{free_udp_port()}"]', "gcs.endpoints=[]"]
+    r = subprocess.run([sys.executable, "-c", BUILD, *sets], cwd=REPO, env=env, capture_output=True, text=True,
+                       timeout=900)
+    assert r.returncode == 0, r.stderr[-3000:]
+    compiled = json.loads(r.stdout.splitlines()[-1])
+    assert compiled == [], compiled
+
+
+def test_kernel_times_count_each_function_and_its_specialisations():
+    """`hil warm-up --kernels`: numba's compile events, each function's CPU exclusive of its callees."""
+    from numba import njit
+
+    times = warm_up.KernelTimes()
+    times.install()
+    try:
+
+        @njit
+        def inner(x):
+            return x + 1
+
+        @njit
+        def outer(x):
+            return inner(x) * 2
+
+        assert outer(1) == 4 and outer(1.5) == 5.0   # two specialisations of each
+        name = f"{__name__}.test_kernel_times_count_each_function_and_its_specialisations.<locals>"
+        assert times.count[f"{name}.outer"] == 2 and times.count[f"{name}.inner"] == 2
+        assert all(v >= 0.0 for v in times.exclusive.values())
+        top = times.top(50)
+        assert {r["kernel"] for r in top} >= {f"{name}.outer", f"{name}.inner"}
+        assert top[-1]["kernel"].startswith("numba (")
+    finally:
+        times.uninstall()
