@@ -29,6 +29,20 @@ def _one_line_error(r: subprocess.CompletedProcess, *words: str) -> str:
     return lines[0]
 
 
+
+def announced_gcs_port(proc: subprocess.Popen, timeout_s: float = 120.0) -> int:
+    """The TCP port `hil run --autopilot ardupilot` announces for ground stations (ArduRover's SERIAL1),
+    read from its stderr; fails the test when none is announced in ``timeout_s``."""
+    assert proc.stderr is not None
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        line = proc.stderr.readline()
+        if not line:
+            break
+        if "ground stations on TCP" in line:
+            return int(line.rsplit(" ", 1)[1])
+    raise AssertionError("no ground-station port announced")
+
 def test_without_a_binary_the_user_is_told_how_in_one_line(tmp_path: Path) -> None:
     r = run_hil("run", "--scenario", "harbour", "--autopilot", "ardupilot", "--out", str(tmp_path / "r"),
                 env=NO_ENV, timeout=120)
@@ -116,15 +130,7 @@ def test_ardurover_flies_the_harbour_route_and_a_rerun_is_byte_identical(tmp_pat
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         try:
             if out.name == "gcs":   # a ground station on ArduRover's SERIAL1, as on any SITL
-                port = None
-                deadline = time.monotonic() + 120
-                while port is None and time.monotonic() < deadline:
-                    line = proc.stderr.readline()
-                    if not line:
-                        break
-                    if "ground stations on TCP" in line:
-                        port = int(line.rsplit(" ", 1)[1])
-                assert port is not None, "no ground-station port announced"
+                port = announced_gcs_port(proc)
                 gcs = mavutil.mavlink_connection(f"tcp:127.0.0.1:{port}", source_system=250, retries=20)
                 try:
                     hb = gcs.wait_heartbeat(timeout=60)
@@ -223,15 +229,7 @@ def test_the_chart_as_arduRovers_fence_takes_it_round_the_pier_the_route_crosses
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     assert proc.stderr is not None
     try:
-        port = None
-        deadline = time.monotonic() + 120
-        while port is None and time.monotonic() < deadline:
-            line = proc.stderr.readline()
-            if not line:
-                break
-            if "ground stations on TCP" in line:
-                port = int(line.rsplit(" ", 1)[1])
-        assert port is not None, "no ground-station port announced"
+        port = announced_gcs_port(proc)
         items = _download_fence(port, len(expected))
         stdout, stderr = proc.communicate(timeout=600)
     finally:
