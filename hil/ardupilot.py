@@ -532,11 +532,12 @@ class ArduPilotRun:
         encounters = traffic = None
         if self.encounter_judge is not None:
             from hil.encounter_report import totals
+            from hil.judging import ship_collision
+            from hil.run_summary import RunTraffic
 
             enc = self.encounter_judge.report(self.truth)
             encounters = tuple(enc)
-            traffic = {**totals(enc), "ship_collision": None if self.encounter_judge.collision is None else
-                       {"time_s": self.encounter_judge.collision[0], "mmsi": self.encounter_judge.collision[1]}}
+            traffic = RunTraffic(**totals(enc), ship_collision=ship_collision(self.encounter_judge))
         ms = self.mission
         xte = route_cross_track(track, self.route)
         return RunSummary(

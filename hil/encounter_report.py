@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import NotRequired, TypedDict
 
 import numpy as np
 
@@ -63,6 +63,44 @@ def hulls_overlap(a: np.ndarray, b: np.ndarray) -> bool:
             if pa.max() < pb.min() or pb.max() < pa.min():
                 return False
     return True
+
+
+class EncounterVerdict(TypedDict):
+    """The judge's verdict on one ship (``encounters`` of summary.json). Every ship has its MMSI and
+    name; one never met has ``type`` "not met"; one met has its CPA (m, s), and, when there was a risk
+    of collision, the COLREGs type, our role and required action, what we did and when (s), how far
+    we turned (deg) and slowed, whether it complied and why."""
+
+    mmsi: int
+    name: str
+    type: NotRequired[str]
+    compliant: NotRequired[bool | None]
+    cpa_m: NotRequired[float]
+    cpa_time_s: NotRequired[float]
+    safety_radius_m: NotRequired[float]
+    collision: NotRequired[bool]
+    action: NotRequired[str]
+    role: NotRequired[str]
+    required: NotRequired[str]
+    risk_time_s: NotRequired[float]
+    bearing_deg: NotRequired[float]
+    action_time_s: NotRequired[float | None]
+    max_starboard_deg: NotRequired[float]
+    max_port_deg: NotRequired[float]
+    min_speed_ratio: NotRequired[float]
+    rule17_time_s: NotRequired[float | None]
+    note: NotRequired[str]
+
+
+class EncounterTotals(TypedDict):
+    """Over a run's ships: how many, how many encounters with a risk of collision, collisions, the
+    mean CPA (m) and the share of risky encounters that complied (None without any)."""
+
+    ships: int
+    encounters: int
+    collisions: int
+    mean_cpa_m: float | None
+    compliance_rate: float | None
 
 
 @dataclass
@@ -117,16 +155,18 @@ class EncounterJudge:
         leg = np.argmin(gap, axis=1)
         return np.arctan2(d[leg, 1], d[leg, 0])
 
-    def report(self, own_truth: dict[int, tuple[float, float, float, float]]) -> list[dict[str, Any]]:
+    def report(self, own_truth: dict[int, tuple[float, float, float, float]]) -> list[EncounterVerdict]:
         """One entry per ship; ``own_truth``: time_usec -> (north, east, vn, ve)."""
         return [self._one(tr, own_truth) for tr in sorted(self.ships.values(), key=lambda s: s.mmsi)]
 
-    def _one(self, tr: ShipTrack, own: dict[int, tuple[float, float, float, float]]) -> dict[str, Any]:
+    def _one(self, tr: ShipTrack, own: dict[int, tuple[float, float, float, float]]) -> EncounterVerdict:
         p = self.p
         rows = [(t, *own[t], n, e, c, s) for t, n, e, c, s in tr.samples if t in own]
-        out: dict[str, Any] = {"mmsi": tr.mmsi, "name": tr.name}
+        out = EncounterVerdict(mmsi=tr.mmsi, name=tr.name)
         if not rows:
-            return {**out, "type": "not met", "compliant": None}
+            out["type"] = "not met"
+            out["compliant"] = None
+            return out
         a = np.array(rows, dtype=float)
         t = a[:, 0] * 1e-6
         on, oe, ovn, ove, sn, se, sc, ss = a[:, 1:].T
@@ -134,7 +174,9 @@ class EncounterJudge:
         k = int(np.argmin(dist))
         R = p.own_radius + tr.hull_radius + p.margin
         safety = p.own_radius + tr.hull_radius
-        out.update(cpa_m=round(float(dist[k]), 2), cpa_time_s=round(float(t[k]), 2), safety_radius_m=round(safety, 2))
+        out["cpa_m"] = round(float(dist[k]), 2)
+        out["cpa_time_s"] = round(float(t[k]), 2)
+        out["safety_radius_m"] = round(safety, 2)
         svn, sve = ss * np.cos(sc), ss * np.sin(sc)
         risk = None
         rule17 = None
@@ -156,7 +198,9 @@ class EncounterJudge:
         collided = self.collision is not None and self.collision[1] == tr.mmsi
         out["collision"] = collided
         if risk is None:
-            out.update(type="no risk", action="none", compliant=bool(not collided and dist[k] >= safety))
+            out["type"] = "no risk"
+            out["action"] = "none"
+            out["compliant"] = bool(not collided and dist[k] >= safety)
             return out
         i0 = risk
         own_speed = math.hypot(ovn[i0], ove[i0])
@@ -210,21 +254,28 @@ class EncounterJudge:
                        (f"stood on until {limit:.1f} s" if limit is not None else "stood on"))
         if dist[k] < safety:
             why.append(f"CPA below {safety:.1f} m")
-        out.update(type=enc.type, role=enc.role, required=enc.required, risk_time_s=round(float(t[i0]), 2),
-                   bearing_deg=round(enc.bearing_deg, 1), action=action,
-                   action_time_s=None if act_t is None else round(act_t, 2),
-                   max_starboard_deg=round(stbd, 1), max_port_deg=round(port, 1),
-                   min_speed_ratio=round(float(speed.min() / max(own_speed, 1e-6)), 2),
-                   rule17_time_s=None if rule17 is None or enc.role != O.STAND_ON else round(float(t[rule17]), 2),
-                   compliant=bool(ok), note="; ".join(why))
+        out["type"] = enc.type
+        out["role"] = enc.role
+        out["required"] = enc.required
+        out["risk_time_s"] = round(float(t[i0]), 2)
+        out["bearing_deg"] = round(enc.bearing_deg, 1)
+        out["action"] = action
+        out["action_time_s"] = None if act_t is None else round(act_t, 2)
+        out["max_starboard_deg"] = round(stbd, 1)
+        out["max_port_deg"] = round(port, 1)
+        out["min_speed_ratio"] = round(float(speed.min() / max(own_speed, 1e-6)), 2)
+        out["rule17_time_s"] = None if rule17 is None or enc.role != O.STAND_ON else round(float(t[rule17]), 2)
+        out["compliant"] = bool(ok)
+        out["note"] = "; ".join(why)
         return out
 
 
-def totals(encounters: list[dict[str, Any]]) -> dict[str, Any]:
+def totals(encounters: list[EncounterVerdict]) -> EncounterTotals:
     """Collision count, mean CPA and compliance rate over the encounters with a risk of collision."""
     risky = [e for e in encounters if e.get("type") not in (None, "no risk", "not met")]
     cpas = [e["cpa_m"] for e in encounters if "cpa_m" in e]
-    return {"ships": len(encounters), "encounters": len(risky),
-            "collisions": sum(1 for e in encounters if e.get("collision")),
-            "mean_cpa_m": round(float(np.mean(cpas)), 2) if cpas else None,
-            "compliance_rate": round(sum(1 for e in risky if e["compliant"]) / len(risky), 3) if risky else None}
+    return EncounterTotals(ships=len(encounters), encounters=len(risky),
+                           collisions=sum(1 for e in encounters if e.get("collision")),
+                           mean_cpa_m=round(float(np.mean(cpas)), 2) if cpas else None,
+                           compliance_rate=round(sum(1 for e in risky if e.get("compliant")) / len(risky), 3)
+                           if risky else None)

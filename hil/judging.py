@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 from scipy import ndimage
 
-from hil.run_summary import RunSecurity, RunSummary, read_autopilot_summary
+from hil.run_summary import RunSecurity, RunSummary, RunTraffic, ShipCollision, TapCounters, read_autopilot_summary
 
 if TYPE_CHECKING:
     from common.udp import BusyPollSummary
@@ -106,7 +106,7 @@ class TapRecords(Protocol):
     estimate: dict[tuple[int, int], tuple[float, float]]          # (segment, ms) -> (north, east) m
     commands: list[tuple[int, float, float]]                      # (time_usec, port, stdb) in [-1, 1]
     ais_forwarded: int
-    counters_at_close: dict[str, Any] | None
+    counters_at_close: TapCounters | None
     frames: int
 
 
@@ -155,10 +155,9 @@ def summarise(run: RunRecord, tap: TapRecords, cfg: HilConfig,
 
         enc = encounter_judge.report({t: tap.truth[t] for t in times})   # up to the deciding sample
         encounters = tuple(enc)
-        traffic = {**totals(enc), "ais": ap.traffic["ais"] if ap is not None and ap.traffic is not None else None,
-                   "ais_forwarded_to_gcs": tap.ais_forwarded,
-                   "ship_collision": None if encounter_judge.collision is None else
-                   {"time_s": encounter_judge.collision[0], "mmsi": encounter_judge.collision[1]}}
+        traffic = RunTraffic(**totals(enc), ship_collision=ship_collision(encounter_judge),
+                             ais=ap.traffic["ais"] if ap is not None and ap.traffic is not None else None,
+                             ais_forwarded_to_gcs=tap.ais_forwarded)
     can = None
     if cfg.can.actuators == "can":
         # The CAN path's counters: transport, ESC status, rejects (wall-clock dependent).
@@ -211,3 +210,8 @@ def summarise(run: RunRecord, tap: TapRecords, cfg: HilConfig,
         traffic=traffic,
         can=can,
     )
+
+
+def ship_collision(judge: EncounterJudge) -> ShipCollision | None:
+    """The ship the vessel collided with, and when (None: none)."""
+    return None if judge.collision is None else ShipCollision(time_s=judge.collision[0], mmsi=judge.collision[1])

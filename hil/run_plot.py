@@ -16,12 +16,14 @@ import numpy as np
 
 if TYPE_CHECKING:
     from autopilot_bridge.summary import AutopilotSummary
+    from hil.encounter_report import EncounterVerdict
     from hil.scenario import Scenario
     from hil.settings import HilConfig
 
 
 def plot_run(path: Path, scen: Scenario, truth: dict[int, tuple], autopilot: AutopilotSummary | None, cfg: HilConfig,
-             ships: dict | None = None, encounters: Sequence[dict] | None = None, outcome: str | None = None) -> dict:
+             ships: dict | None = None, encounters: Sequence[EncounterVerdict] | None = None,
+             outcome: str | None = None) -> dict:
     """``autopilot``: the autopilot's summary (sensed cells, local paths, estimated track), None when
     it left none; ``ships``: MMSI -> ``hil.encounter_report.ShipTrack`` (their truth); ``encounters``: the
     summary's per-ship report (CPA time and distance, type, compliance); ``outcome``: the run's
@@ -81,7 +83,7 @@ def plot_run(path: Path, scen: Scenario, truth: dict[int, tuple], autopilot: Aut
             "xlabel": ax.get_xlabel(), "ylabel": ax.get_ylabel()}
 
 
-def _plot_ships(ax: Any, ships: dict, encounters: Sequence[dict], truth: dict[int, tuple]) -> None:
+def _plot_ships(ax: Any, ships: dict, encounters: Sequence[EncounterVerdict], truth: dict[int, tuple]) -> None:
     """Each ship's true track, and both vessels where they were at the closest point of approach."""
     by_mmsi = {e.get("mmsi"): e for e in encounters}
     times = np.array(sorted(truth)) if truth else np.zeros(0, dtype=np.int64)
@@ -93,9 +95,9 @@ def _plot_ships(ax: Any, ships: dict, encounters: Sequence[dict], truth: dict[in
         if len(smp) > 1:   # where she was heading at the end
             ax.annotate("", xy=(smp[-1, 2], smp[-1, 1]), xytext=(smp[-2, 2], smp[-2, 1]),
                         arrowprops=dict(arrowstyle="->", color="tab:blue"))
-        enc = by_mmsi.get(mmsi, {})
-        t_cpa = enc.get("cpa_time_s")
-        if t_cpa is None or len(times) == 0:
+        enc = by_mmsi.get(mmsi)
+        t_cpa = None if enc is None else enc.get("cpa_time_s")
+        if enc is None or t_cpa is None or len(times) == 0:
             continue
         k = int(np.argmin(np.abs(smp[:, 0] * 1e-6 - t_cpa)))
         j = int(np.argmin(np.abs(times * 1e-6 - t_cpa)))

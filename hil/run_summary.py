@@ -9,20 +9,45 @@ COLREGs encounters) keep those components' own tables.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, NotRequired, TypedDict, TypeVar
 
+from autopilot_bridge.ais_tracking import AisSummary
 from autopilot_bridge.gcs.link import GcsSummary
 from autopilot_bridge.hil_link import LinkSummary
 from autopilot_bridge.summary import AutopilotSummary, ControlLatency, NavigationCounts
 from autopilot_bridge.tracking_stats import TrackingSummary
 from common.tables import absent_when_none
 from hil.config import from_table
+from hil.encounter_report import EncounterTotals, EncounterVerdict
 from hil.errors import ConfigError, RunFailed
 
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance
 
 T = TypeVar("T", bound="DataclassInstance")
+
+
+class ShipCollision(TypedDict):
+    time_s: float      # s of simulated time
+    mmsi: int
+
+
+class RunTraffic(EncounterTotals):
+    """The ``traffic`` section: the encounters' totals, the ship we collided with (None: none), and
+    what the vessel computer made of the AIS reports (absent where ArduRover flew)."""
+
+    ship_collision: ShipCollision | None
+    ais: NotRequired[AisSummary | None]
+    ais_forwarded_to_gcs: NotRequired[int]
+
+
+class TapCounters(TypedDict):
+    """What the run's tap refused, by reason, and its socket's counters."""
+
+    refused: dict[str, int]
+    wrong_source: int
+    budget_stops: int
+    kernel_drops: int | None
 
 
 @dataclass(frozen=True)
@@ -32,7 +57,7 @@ class RunSecurity:
     simulator: dict[str, Any] | None
     autopilot: LinkSummary | None                    # the autopilot's HIL link (AutopilotSummary.link)
     autopilot_navigation_numeric: dict[str, int]
-    tap: dict[str, Any] | None
+    tap: TapCounters | None
 
 
 @dataclass(frozen=True)
@@ -71,8 +96,8 @@ class RunSummary:
     actuators: str                                   # "mavlink" or "can"
     warnings: tuple[str, ...] | None = absent_when_none()
     gcs: GcsSummary | None = absent_when_none()                  # the ground-station link's counters
-    encounters: tuple[dict[str, Any], ...] | None = absent_when_none()   # scenarios with traffic
-    traffic: dict[str, Any] | None = absent_when_none()
+    encounters: tuple[EncounterVerdict, ...] | None = absent_when_none()   # scenarios with traffic
+    traffic: RunTraffic | None = absent_when_none()
     can: dict[str, Any] | None = absent_when_none()              # --actuators can
     run_folder: str | None = absent_when_none()
     plot: str | None = absent_when_none()

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 from common.geodesy import LocalFrame
 from common.mavlink import Codec, clean_frames, frame_ids, leading_uint64, mavlink2, message_at
 from common.udp import UdpEndpoint
+from hil.run_summary import TapCounters
 
 if TYPE_CHECKING:
     from hil.encounter_report import EncounterJudge
@@ -83,7 +84,7 @@ class Tap:
         self.sim_ids: tuple[int, int] | None = None
         self.refused: dict[str, int] = {}
         self.write_error: OSError | None = None   # the .tlog could not be written (a full disk)
-        self.counters_at_close: dict[str, Any] | None = None
+        self.counters_at_close: TapCounters | None = None
         # The truth sample (time, north, east, heading) of the datagram being read: the ship truth
         # (AIS_VESSEL) after it in the same datagram is of the same instant.
         self._own: tuple[int, float, float, float] | None = None
@@ -229,9 +230,11 @@ class Tap:
             self._sim_usec = max(self._sim_usec, t)
         return _STAMP.pack(min(self._t0_usec + self._sim_usec, _STAMP_MAX))
 
-    def counters(self) -> dict[str, Any]:
+    def counters(self) -> TapCounters:
         """What the tap refused, by reason, and its socket's counters (kernel drops)."""
-        return {"refused": dict(sorted(self.refused.items())), **self.ep.counters()}
+        ep = self.ep.counters()
+        return TapCounters(refused=dict(sorted(self.refused.items())), wrong_source=ep["wrong_source"],
+                           budget_stops=ep["budget_stops"], kernel_drops=ep["kernel_drops"])
 
     def close(self) -> None:
         try:

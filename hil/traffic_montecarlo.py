@@ -123,7 +123,7 @@ def run_campaign(scenario: str, runs: int, seed: int, draw: TrafficDraw, out: Pa
         progress(len(results), s)
 
     interrupted = collect(executor, run_one, plans, take)
-    rows = []
+    rows: list[dict[str, Any]] = []
     for i in sorted(results):       # the same rows in the same order whatever the executor
         s, ships = results[i], plans[i][1]
         for e in s.encounters or ():

@@ -8,7 +8,7 @@ import dataclasses
 import json
 
 import pytest
-from support.summaries import CAN, GCS, TRAFFIC, autopilot_summary, run_summary
+from support.summaries import CAN, ENCOUNTER, GCS, RUN_TRAFFIC, TRAFFIC, autopilot_summary, run_summary
 
 from common.tables import to_table
 from hil.errors import ConfigError, RunFailed
@@ -23,8 +23,8 @@ def _through_json(summary):
     run_summary(),
     run_summary(outcome="collision", reached_goal=False, collisions=1, collision_time_s=45.25, energy_J=None,
                 warnings=("another hil run streams with system id 1",), gcs=GCS,
-                encounters=({"mmsi": 412000103, "type": "crossing-give-way", "cpa_m": 10.5},),
-                traffic={"encounters": 1, "ais": None}, can={"autopilot": None}, plot=None, plot_error="OSError: x"),
+                encounters=(ENCOUNTER, {"mmsi": 412000104, "name": "", "type": "not met", "compliant": None}),
+                traffic=RUN_TRAFFIC, can={"autopilot": None}, plot=None, plot_error="OSError: x"),
     run_summary(planning_cycles=None, plans_accepted=None, deadline_overruns=None, worker_restarts=None,
                 fallback_activations=None, tracking=None, control_latency_ms=None, navigation=None,
                 sensed_obstacles=None, simulator=None, run_folder=None, plot=None),   # the autopilot was killed

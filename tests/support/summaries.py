@@ -14,7 +14,8 @@ from autopilot_bridge.summary import AutopilotSummary, ControlLatency, Navigatio
 from autopilot_bridge.tracking_stats import TrackingSummary
 from autopilot_bridge.traffic_awareness import EncounterRecord, TrafficSummary
 from common.udp import BusyPollSummary
-from hil.run_summary import RunSecurity, RunSummary
+from hil.encounter_report import EncounterVerdict
+from hil.run_summary import RunSecurity, RunSummary, RunTraffic, TapCounters
 
 LATENCY = ControlLatency(p50=0.4, p99=6.0, max=80.0, frames=100)
 NAVIGATION = NavigationCounts(updates={"gps_pos": 450}, rejected={"gps_pos": 4, "numeric_gps": 1}, position_resets=0)
@@ -39,6 +40,14 @@ TRAFFIC = TrafficSummary(ais=AisSummary(tracked=1, accepted=40, new_tracks=1, fo
                          forwarded_to_gcs=40,
                          encounters=[EncounterRecord(mmsi=412000103, type="crossing-give-way", role="give-way",
                                                      start_s=30.5, bearing_deg=45.0, rule17_act_s=None, end_s=80.25)])
+TAP = TapCounters(refused={"wrong_source": 1}, wrong_source=1, budget_stops=0, kernel_drops=0)
+ENCOUNTER = EncounterVerdict(mmsi=412000103, name="FERRY", type="crossing-give-way", compliant=True, cpa_m=10.5,
+                             cpa_time_s=55.0, safety_radius_m=4.0, collision=False, action="starboard turn",
+                             role="give-way", required="starboard turn", risk_time_s=31.0, bearing_deg=40.0,
+                             action_time_s=33.5, max_starboard_deg=35.0, max_port_deg=0.0, min_speed_ratio=0.9,
+                             rule17_time_s=None, note="passed astern of her")
+RUN_TRAFFIC = RunTraffic(ships=1, encounters=1, collisions=0, mean_cpa_m=10.5, compliance_rate=1.0,
+                         ship_collision=None, ais=None, ais_forwarded_to_gcs=0)
 BUSY = BusyPollSummary(max_us=950.0, caught=1800, missed=100, pauses=2, held=0)
 
 
@@ -73,7 +82,7 @@ def run_summary(**changes: Any) -> RunSummary:
         navigation_rmse_m=0.1, control_latency_ms=LATENCY, simulator_restarts=0, navigation=NAVIGATION,
         sensed_obstacles={"cells": 0}, simulator={"steps": 4530, "malformed_dropped": 0, "jitter_ms": None},
         security=RunSecurity(simulator={"rejects": {}}, autopilot=LINK, autopilot_navigation_numeric={},
-                             tap={"rejects": {}}),
+                             tap=TAP),
         tlog="/tmp/run/run.tlog", tlog_messages=9000, events=("190.25s mission complete",), actuators="mavlink",
         run_folder="/tmp/run", plot="/tmp/run/plot.png",
     )
