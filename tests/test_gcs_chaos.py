@@ -115,16 +115,19 @@ def test_a_chaos_ground_station_crashes_nothing_and_every_refusal_is_counted(tmp
         chaos.wait_for(("HEARTBEAT",), 120.0)
         rss0, fd0 = _usage(ap)
         sim_rss0, sim_fd0 = _usage(sim)
-        stats = chaos.run(CHAOS_S)
-        rss1, fd1 = _usage(ap)
-        sim_rss1, sim_fd1 = _usage(sim)
-        assert proc.poll() is None, "the run ended under the chaos"
+        stats = chaos.run(CHAOS_S, alive=lambda: proc.poll() is None)
+        ended = proc.poll() is not None
+        if not ended:
+            rss1, fd1 = _usage(ap)
+            sim_rss1, sim_fd1 = _usage(sim)
     finally:
         if chaos is not None:
             chaos.close()
         err = _stop_run(proc, tmp_path / "run")
         print("hil run stderr (tail):\n" + err[-3000:])
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert not ended, (f"the run ended under the chaos after {stats.wall_s:.0f} s: {summary['outcome']} at "
+                       f"t = {summary['sim_time_s']:.1f} s", err[-2000:])
     print(f"\nchaos {'signed' if signing else 'unsigned'} {stats.wall_s:.0f} s: actions {dict(stats.actions)}; "
           f"mission acks {dict(stats.mission_acks)}; command acks {dict(stats.command_acks)}; "
           f"connections {stats.connections}; frames {stats.frames_sent}; RSS {rss0:.1f} -> {rss1:.1f} MB; "
