@@ -50,6 +50,18 @@ POLL_BUDGET_S = 0.002
 CLOCK_EVERY = 16           # frames between clock reads (inside UML a clock read is a system call)
 
 
+def kernel_filters(params: CanParams) -> list[dict[str, int | bool]] | None:
+    """The ESC nodes' receive filter on SocketCAN: messages (service bit 0) from the autopilot's node only,
+    applied by the kernel, so a flood from other nodes never reaches the simulator's socket: it costs no
+    step any work and waits in no queue ahead of the autopilot's commands (issue 31). Frames dropped there
+    are not counted (``unknown_node`` then counts nothing on SocketCAN). None on other interfaces: python-can
+    filters those in software inside ``recv``, which with a timeout of 0 returns None at the first frame it
+    filters out and would cut a poll short."""
+    if params.interface != "socketcan":
+        return None
+    return [{"can_id": params.autopilot_node_id, "can_mask": 0xFF, "extended": True}]
+
+
 class EscBank:
     """Both ESC nodes: receive RawCommand, publish Status and NodeStatus.
 

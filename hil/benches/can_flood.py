@@ -9,7 +9,8 @@ is applied, the core steps and encodes its frame. Each step the autopilot's CAN 
 share of the flood: single-frame full-astern RawCommands from node 99, which the ESCs must never apply.
 
 The flood is put on the bus in the same thread, and the time that takes is taken off the step clock, so
-the step's lateness (jitter) and the poll's time are the simulator's own work. The autopilot's command
+the step's lateness (jitter) and the poll's time are the simulator's own work; the poll's CPU time
+(``poll_cpu_ms``) is what a busy machine's scheduling does not inflate. The autopilot's command
 carries its step number (in the port value), so the age of each applied command is known. The virtual
 bus queues without bound (SocketCAN drops what its receive buffer cannot hold), so a flood faster than
 the drain shows how the autopilot's commands age behind it: the core's stale-command failsafe (0.5 s
@@ -43,10 +44,14 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                     "of a flood of foreign full-astern RawCommands. Legs: quiet, 8,000 frames/s (a saturated "
                     "1 Mbit/s bus), --rate frames/s; each flood leg with the poll bounded by 256 frames and "
                     "2 ms and by the 256 frames alone. Reports step lateness (jitter) and poll time "
-                    "(p50/p99/max, ms), stale-command events, commands applied, frames read and left queued, "
+                    "(p50/p99/max, ms; the poll also in CPU time), stale-command events, commands applied, frames read "
+                    "and left queued, "
                     "polls cut by cause, and the last RawCommand applied (the autopilot's, never the flood's).",
     )
     p.add_argument("--duration", type=float, default=10.0, metavar="S", help="wall seconds per leg (default: 10)")
+    p.add_argument("--interface", default="virtual", choices=("virtual", "socketcan"),
+                   help="python-can interface (default: virtual, in-process; socketcan: e.g. inside `hil vcan`)")
+    p.add_argument("--channel", default="vcan0", help="SocketCAN channel (default: vcan0)")
     p.add_argument("--rate", type=float, default=50_000.0, metavar="PER_S",
                    help="the fast flood's foreign frames per second (default: 50000)")
     p.set_defaults(func=run)
@@ -60,22 +65,29 @@ def _pct(xs: list[float]) -> dict[str, float] | None:
             "max": round(s[-1], 3)}
 
 
-def _queued(bus: Any) -> int:
-    """Frames waiting in a python-can virtual bus's receive queue."""
-    return int(bus.queue.qsize())
+def _queued(bus: Any) -> int | None:
+    """Frames waiting in a python-can virtual bus's receive queue (None: a SocketCAN socket's is not known)."""
+    queue = getattr(bus, "queue", None)
+    return None if queue is None else int(queue.qsize())
 
 
-def leg(cfg: Any, duration_s: float, rate: float, time_budget: bool) -> dict[str, Any]:
-    """One real-time run of ``duration_s`` wall seconds under ``rate`` foreign frames/s."""
+def leg(cfg: Any, duration_s: float, rate: float, time_budget: bool, filtered: bool = False) -> dict[str, Any]:
+    """One real-time run of ``duration_s`` wall seconds under ``rate`` foreign frames/s; ``filtered``: the
+    ESC socket with the simulator's kernel filter (SocketCAN only)."""
     import can
 
     from autopilot_bridge.can_actuators import CanActuators
     from common import dronecan_codec as dc
+    from common.can_params import open_bus
     from simulator.core import Command, SimulatorCore
-    from simulator.esc import EscBank
+    from simulator.esc import EscBank, kernel_filters
 
-    channel = f"can-flood-{next(_channels)}"
-    esc_bus, ap_bus, flood_bus = (can.Bus(interface="virtual", channel=channel) for _ in range(3))
+    if cfg.can.interface == "socketcan":
+        esc_bus = open_bus(cfg.can, can_filters=kernel_filters(cfg.can) if filtered else None)
+        ap_bus, flood_bus = open_bus(cfg.can), open_bus(cfg.can)
+    else:
+        channel = f"can-flood-{next(_channels)}"
+        esc_bus, ap_bus, flood_bus = (can.Bus(interface="virtual", channel=channel) for _ in range(3))
     try:
         core = SimulatorCore(cfg)
         esc = EscBank(esc_bus, cfg.can, cfg.esc, core.vessel)
@@ -89,6 +101,7 @@ def leg(cfg: Any, duration_s: float, rate: float, time_budget: bool) -> dict[str
         payload = dc.raw_command([-dc.RAW_COMMAND_MAX, -dc.RAW_COMMAND_MAX])
         late_ms: list[float] = []
         poll_ms: list[float] = []
+        poll_cpu_ms: list[float] = []      # the same, CPU time of this thread: what a busy machine does not inflate
         age_ms: list[float] = []           # applied command's age: steps since the autopilot sent it
         excluded = 0.0                     # wall time spent putting the flood on the bus
 
@@ -114,9 +127,10 @@ def leg(cfg: Any, duration_s: float, rate: float, time_budget: bool) -> dict[str
                         flood_bus.send(f)
                     tid = (tid + 1) % 32
             excluded += time.perf_counter() - a
-            p0 = time.perf_counter()
+            p0, c0 = time.perf_counter(), time.thread_time()
             esc.poll(0.0)
             poll_ms.append((time.perf_counter() - p0) * 1e3)
+            poll_cpu_ms.append((time.thread_time() - c0) * 1e3)
             controls = esc.controls()
             if esc.commands_seen and controls is not None and esc.raw is not None:
                 esc.commands_seen = 0
@@ -127,7 +141,9 @@ def leg(cfg: Any, duration_s: float, rate: float, time_budget: bool) -> dict[str
         s = esc.summary()
         return {
             "flood_frames_per_s": rate, "bound": "256 frames + 2 ms" if time_budget else "256 frames",
+            "kernel_filter": filtered,
             "steps": steps, "step_lateness_ms": _pct(late_ms), "poll_ms": _pct(poll_ms),
+            "poll_cpu_ms": _pct(poll_cpu_ms),
             "stale_command_events": core.stale_command_events, "command_age_ms": _pct(age_ms),
             "commands_sent": acts.commands_sent, "commands_applied": esc.commands,
             "frames_read": s["frames_received"], "frames_left_queued": _queued(esc_bus),
@@ -142,15 +158,21 @@ def leg(cfg: Any, duration_s: float, rate: float, time_budget: bool) -> dict[str
 def run(args: argparse.Namespace) -> int:
     from hil import settings
 
-    cfg = settings.load(args.config, [*args.overrides, 'can.interface="virtual"', 'can.actuators="can"'])
-    legs = [(0.0, True), (REAL_BUS_RATE, True), (REAL_BUS_RATE, False), (args.rate, True), (args.rate, False)]
+    cfg = settings.load(args.config, [*args.overrides, f'can.interface="{args.interface}"',
+                                      f'can.channel="{args.channel}"', 'can.actuators="can"'])
+    legs = [(0.0, True, False), (REAL_BUS_RATE, True, False), (REAL_BUS_RATE, False, False),
+            (args.rate, True, False), (args.rate, False, False)]
+    if args.interface == "socketcan":
+        legs += [(REAL_BUS_RATE, True, True), (args.rate, True, True)]
     out = []
-    for rate, budget in legs:
-        progress(f"can-flood: {rate:.0f} frames/s, {'frames + time' if budget else 'frames'} bound, "
-                 f"{args.duration:g} s")
-        out.append(leg(cfg, args.duration, rate, budget))
-    summary = {"bench": "can-flood", "bus": "python-can virtual (in-process)", "legs": out}
-    human = [f"{r['flood_frames_per_s']:>7.0f}/s {r['bound']:<17} lateness p99 {r['step_lateness_ms']['p99']:.2f} "
+    for rate, budget, filtered in legs:
+        progress(f"can-flood: {rate:.0f} frames/s, {'frames + time' if budget else 'frames'} bound"
+                 f"{', kernel filter' if filtered else ''}, {args.duration:g} s")
+        out.append(leg(cfg, args.duration, rate, budget, filtered))
+    bus = "python-can virtual (in-process)" if args.interface == "virtual" else f"socketcan {args.channel}"
+    summary = {"bench": "can-flood", "bus": bus, "legs": out}
+    human = [f"{r['flood_frames_per_s']:>7.0f}/s {r['bound']:<17}{' kernel filter' if r['kernel_filter'] else ''}, "
+             f"lateness p99 {r['step_lateness_ms']['p99']:.2f} "
              f"max {r['step_lateness_ms']['max']:.2f} ms, poll p99 {r['poll_ms']['p99']:.2f} ms, stale "
              f"{r['stale_command_events']}, command age max {r['command_age_ms']['max']:.0f} ms, "
              f"applied {r['commands_applied']}/{r['commands_sent']}" for r in out]

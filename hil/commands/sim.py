@@ -150,10 +150,10 @@ def run(args: argparse.Namespace) -> int:
     esc = None
     if cfg.can.actuators == "can":
         from common.can_params import open_bus
-        from simulator.esc import EscBank
+        from simulator.esc import EscBank, kernel_filters
 
         try:
-            esc = EscBank(open_bus(cfg.can), cfg.can, cfg.esc, core.vessel)
+            esc = EscBank(open_bus(cfg.can, can_filters=kernel_filters(cfg.can)), cfg.can, cfg.esc, core.vessel)
             if args.can_record:
                 esc.applied_times.start(spill_to=args.can_record)
         except ValueError as exc:
