@@ -45,9 +45,9 @@ DUPLICATE_TRANSFER = "duplicate_transfer_id"  # a transfer repeating its source'
 MAX_FRAMES_PER_POLL = 256  # CAN frames one poll() reads at most (a flood waits in the socket)
 # A 1 Mbit/s bus carries at most ~8,000 extended frames/s (~130 bits each), ~80 per 10 ms HIL frame, so the
 # frame cap only bites on a bus without a bit rate (vcan, virtual). The time budget bounds the work where
-# each frame costs more (User-Mode Linux: ~100 us a frame): a fifth of the 10 ms frame.
+# each frame costs more (inside User-Mode Linux ~0.4 ms a frame): a fifth of the 10 ms frame.
 POLL_BUDGET_S = 0.002
-CLOCK_EVERY = 16           # frames between clock reads (inside UML a clock read is a system call)
+CLOCK_EVERY = 4            # frames between clock reads (inside UML a clock read is a 33 us system call)
 
 
 def kernel_filters(params: CanParams) -> list[dict[str, int | bool]] | None:

@@ -32,6 +32,7 @@ from hil import instances
 from hil.hilrun import free_udp_port
 
 CHAOS_S = float(os.environ.get("CHAOS_S", "40"))
+CHAOS_SEED = int(os.environ.get("CHAOS_SEED", "31"))
 RSS_GROWTH_MB = 64.0
 FD_GROWTH = 8
 KEY = bytes(range(100, 132))
@@ -111,7 +112,7 @@ def test_a_chaos_ground_station_crashes_nothing_and_every_refusal_is_counted(tmp
     try:
         ap, sim = _child_pid(proc.pid, b"autopilot"), _child_pid(proc.pid, b"sim")
         assert ap is not None and sim is not None, "no autopilot or simulator process"
-        chaos = ChaosGcs(seed=31, udp=("127.0.0.1", udp), tcp=("127.0.0.1", tcp), key=KEY if signing else None)
+        chaos = ChaosGcs(seed=CHAOS_SEED, udp=("127.0.0.1", udp), tcp=("127.0.0.1", tcp), key=KEY if signing else None)
         chaos.wait_for(("HEARTBEAT",), 120.0)
         rss0, fd0 = _usage(ap)
         sim_rss0, sim_fd0 = _usage(sim)
