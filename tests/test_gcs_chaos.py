@@ -118,23 +118,22 @@ def test_a_chaos_ground_station_crashes_nothing_and_every_refusal_is_counted(tmp
         sim_rss0, sim_fd0 = _usage(sim)
         stats = chaos.run(CHAOS_S, alive=lambda: proc.poll() is None)
         ended = proc.poll() is not None
-        if not ended:
-            rss1, fd1 = _usage(ap)
-            sim_rss1, sim_fd1 = _usage(sim)
+        rss1, fd1 = _usage(ap) if not ended else (float("nan"), -1)
+        sim_rss1, sim_fd1 = _usage(sim) if not ended else (float("nan"), -1)
     finally:
         if chaos is not None:
             chaos.close()
         err = _stop_run(proc, tmp_path / "run")
         print("hil run stderr (tail):\n" + err[-3000:])
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
-    assert not ended, (f"the run ended under the chaos after {stats.wall_s:.0f} s: {summary['outcome']} at "
-                       f"t = {summary['sim_time_s']:.1f} s", err[-2000:])
     print(f"\nchaos {'signed' if signing else 'unsigned'} {stats.wall_s:.0f} s: actions {dict(stats.actions)}; "
           f"mission acks {dict(stats.mission_acks)}; command acks {dict(stats.command_acks)}; "
           f"connections {stats.connections}; frames {stats.frames_sent}; RSS {rss0:.1f} -> {rss1:.1f} MB; "
           f"fds {fd0} -> {fd1}; simulator RSS {sim_rss0:.1f} -> {sim_rss1:.1f} MB, fds {sim_fd0} -> {sim_fd1}; "
           f"gcs security_rejects {summary['gcs']['security_rejects']}; "
           f"signature_failures {summary['gcs']['signature_failures']}; attacks {dict(stats.attacks)}")
+    assert not ended, (f"the run ended under the chaos after {stats.wall_s:.0f} s: {summary['outcome']} at "
+                       f"t = {summary['sim_time_s']:.1f} s", err[-2000:])
     assert summary["outcome"] == "interrupted", (summary["outcome"], err[-2000:])
     assert summary["collision_time_s"] is None
     assert rss1 - rss0 <= RSS_GROWTH_MB and fd1 - fd0 <= FD_GROWTH, (rss0, rss1, fd0, fd1)
