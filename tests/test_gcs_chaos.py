@@ -116,10 +116,27 @@ def test_a_chaos_ground_station_crashes_nothing_and_every_refusal_is_counted(tmp
         chaos.wait_for(("HEARTBEAT",), 120.0)
         rss0, fd0 = _usage(ap)
         sim_rss0, sim_fd0 = _usage(sim)
-        stats = chaos.run(CHAOS_S, alive=lambda: proc.poll() is None)
+        sampled_at = [time.monotonic()]
+        last: dict[str, tuple[float, int]] = {"ap": (rss0, fd0), "sim": (sim_rss0, sim_fd0)}
+
+        def alive() -> bool:
+            """The run is up; its children's usage is sampled every 30 s (the last sample stands in for the
+            end's when the run ends under the chaos)."""
+            if proc.poll() is not None:
+                return False
+            if time.monotonic() - sampled_at[0] >= 30.0:
+                sampled_at[0] = time.monotonic()
+                try:
+                    last.update(ap=_usage(ap), sim=_usage(sim))
+                except (OSError, StopIteration):
+                    return proc.poll() is None
+            return True
+
+        stats = chaos.run(CHAOS_S, alive=alive)
         ended = proc.poll() is not None
-        rss1, fd1 = _usage(ap) if not ended else (float("nan"), -1)
-        sim_rss1, sim_fd1 = _usage(sim) if not ended else (float("nan"), -1)
+        if not ended:
+            last.update(ap=_usage(ap), sim=_usage(sim))
+        (rss1, fd1), (sim_rss1, sim_fd1) = last["ap"], last["sim"]
     finally:
         if chaos is not None:
             chaos.close()
