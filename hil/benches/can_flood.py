@@ -28,6 +28,7 @@ import time
 from typing import Any
 
 from hil.console import emit, progress
+from hil.errors import UsageError
 
 REAL_BUS_RATE = 8000.0     # frames/s: a 1 Mbit/s bus full of ~130-bit extended frames
 FOREIGN_NODE = 99
@@ -48,12 +49,13 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
                     "and left queued, "
                     "polls cut by cause, and the last RawCommand applied (the autopilot's, never the flood's).",
     )
-    p.add_argument("--duration", type=float, default=10.0, metavar="S", help="wall seconds per leg (default: 10)")
+    p.add_argument("--duration", type=float, default=10.0, metavar="S",
+                   help="wall seconds per leg, 0.05-3600 (default: 10)")
     p.add_argument("--interface", default="virtual", choices=("virtual", "socketcan"),
                    help="python-can interface (default: virtual, in-process; socketcan: e.g. inside `hil vcan`)")
     p.add_argument("--channel", default="vcan0", help="SocketCAN channel (default: vcan0)")
     p.add_argument("--rate", type=float, default=50_000.0, metavar="PER_S",
-                   help="the fast flood's foreign frames per second (default: 50000)")
+                   help="the fast flood's foreign frames per second, 0-1e6 (default: 50000)")
     p.set_defaults(func=run)
 
 
@@ -155,8 +157,17 @@ def leg(cfg: Any, duration_s: float, rate: float, time_budget: bool, filtered: b
             b.shutdown()
 
 
+MAX_DURATION_S = 3600.0
+MAX_RATE = 1e6             # frames/s: 125x what a 1 Mbit/s bus carries
+
+
 def run(args: argparse.Namespace) -> int:
     from hil import settings
+
+    if not 0.05 <= args.duration <= MAX_DURATION_S:
+        raise UsageError(f"--duration {args.duration:g}: between 0.05 and {MAX_DURATION_S:g} s")
+    if not 0.0 <= args.rate <= MAX_RATE:
+        raise UsageError(f"--rate {args.rate:g}: between 0 and {MAX_RATE:g} frames/s")
 
     cfg = settings.load(args.config, [*args.overrides, f'can.interface="{args.interface}"',
                                       f'can.channel="{args.channel}"', 'can.actuators="can"'])
