@@ -40,8 +40,10 @@ from __future__ import annotations
 import logging
 import math
 import time
+import traceback
 from array import array
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -480,8 +482,11 @@ class Autopilot:
         count it, and restart navigation, which re-initialises on the next GPS fix."""
         self._submit_deferred_plan()   # if the fault came after the helm decided to plan
         self.link.rejects["control_numeric_fault"] += 1
-        self._event(f.t if math.isfinite(f.t) else 0.0, f"numeric fault ({type(exc).__name__}): stopped, "
-                    "navigation restarts")
+        frames = [fr for fr in traceback.extract_tb(exc.__traceback__) if "site-packages" not in fr.filename]
+        where = frames[-1] if frames else None        # the deepest line of ours: where to look
+        at = f" at {Path(where.filename).name}:{where.lineno}" if where is not None else ""
+        self._event(f.t if math.isfinite(f.t) else 0.0, f"numeric fault ({type(exc).__name__}{at}: "
+                    f"{str(exc)[:80]}): stopped, navigation restarts")
         self.nav = NavigationFilter(self.nav_params)
         self.last_frame_usec = f.time_usec
         self._send(f.time_usec, self.helm.zero_thrust, received_at)

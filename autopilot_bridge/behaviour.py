@@ -37,8 +37,8 @@ TRANSITIONS: dict[Behaviour, frozenset[Behaviour]] = {
 class BehaviourMachine:
     """The current :class:`Behaviour`; ``pause()``/``resume()`` go to IDLE and back to where it was."""
 
-    def __init__(self) -> None:
-        self.state = B.WAITING
+    def __init__(self, start: Behaviour = B.WAITING) -> None:
+        self.state = start
         self._resume = B.FALLBACK
 
     def to(self, new: Behaviour) -> bool:

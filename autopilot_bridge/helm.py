@@ -53,7 +53,10 @@ class Helm:
         self.fence_depth: Callable[[float, float], float] = lambda _n, _e: math.inf
         self.last_safe: tuple[float, float] | None = None
         self.holding = False
-        self._hold_behaviour = BehaviourMachine()    # the station keeper's state in HOLD (not the route's)
+        # The station keeper's state in HOLD (not the route's). From IDLE, since it goes to COMPLETE or RETURNING
+        # at once: from WAITING that raised, every frame, and a HOLD near the quay drifted onto it (issue 31's
+        # chaos GCS found it).
+        self._hold_behaviour = BehaviourMachine(start=Behaviour.IDLE)
         self.reactive = ReactiveAvoidance(grid, params.fallback_range, params.min_clearance, params.fallback_speed)
         self.tracking = TrackingStats()
         self.zero_thrust = allocate(0.0, 0.0, propulsion.B_u, propulsion.T_max, propulsion.T_min)

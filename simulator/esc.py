@@ -13,7 +13,12 @@ counted by :class:`common.dronecan_codec.TransferReceiver`, and RawCommands that
 index or hold a value outside [-8191, 8191] are rejected whole and counted here. RawCommand
 counts only from the autopilot's node (``[can] autopilot_node_id``; others are counted as
 ``unknown_node``), and a transfer that repeats its source's previous transfer ID is a replay:
-dropped and counted (``duplicate_transfer_id``). A poll reads at most MAX_FRAMES_PER_POLL frames.
+dropped and counted (``duplicate_transfer_id``).
+
+A poll's work is bounded (issue 31): it reads at most ``max_frames`` frames (MAX_FRAMES_PER_POLL) and
+stops early once it has spent ``budget_s`` (POLL_BUDGET_S) of wall time, so a flood on the bus cannot
+take the real-time step's 10 ms; what it leaves waits in the bus's queue (the kernel drops what does
+not fit). Each cut is counted by cause (``budget_stops``: ``frames`` or ``time``).
 """
 
 from __future__ import annotations
@@ -38,6 +43,23 @@ RAW_COMMAND_OUT_OF_RANGE = "raw_command_out_of_range"
 RAW_COMMAND_MISSING_INDEX = "raw_command_missing_index"
 DUPLICATE_TRANSFER = "duplicate_transfer_id"  # a transfer repeating its source's previous transfer ID (a replay)
 MAX_FRAMES_PER_POLL = 256  # CAN frames one poll() reads at most (a flood waits in the socket)
+# A 1 Mbit/s bus carries at most ~8,000 extended frames/s (~130 bits each), ~80 per 10 ms HIL frame, so the
+# frame cap only bites on a bus without a bit rate (vcan, virtual). The time budget bounds the work where
+# each frame costs more (inside User-Mode Linux ~0.4 ms a frame): a fifth of the 10 ms frame.
+POLL_BUDGET_S = 0.002
+CLOCK_EVERY = 4            # frames between clock reads (inside UML a clock read is a 33 us system call)
+
+
+def kernel_filters(params: CanParams) -> list[dict[str, int | bool]] | None:
+    """The ESC nodes' receive filter on SocketCAN: messages (service bit 0) from the autopilot's node only,
+    applied by the kernel, so a flood from other nodes never reaches the simulator's socket: it costs no
+    step any work and waits in no queue ahead of the autopilot's commands (issue 31). Frames dropped there
+    are not counted (``unknown_node`` then counts nothing on SocketCAN). None on other interfaces: python-can
+    filters those in software inside ``recv``, which with a timeout of 0 returns None at the first frame it
+    filters out and would cut a poll short."""
+    if params.interface != "socketcan":
+        return None
+    return [{"can_id": params.autopilot_node_id, "can_mask": 0xFF, "extended": True}]
 
 
 class EscBank:
@@ -65,26 +87,32 @@ class EscBank:
         self.next_status_t = 0.0
         self.next_node_status_t = 0.0
         self.applied_times = TransferTimes()        # latency records: transfer ID and wall time applied
-        self.budget_stops = 0
+        self.budget_stops: Counter[str] = Counter()     # polls cut short, by cause: "frames" or "time"
+        self.max_frames, self.budget_s = MAX_FRAMES_PER_POLL, POLL_BUDGET_S
 
     # -- receive ---------------------------------------------------------------------------
     def poll(self, timeout: float = 0.0) -> int:
-        """Take every frame queued now (waiting up to ``timeout`` s for the first); returns the
-        number of valid RawCommands applied."""
+        """Take the frames queued now (waiting up to ``timeout`` s for the first), at most ``max_frames``
+        of them and for at most ``budget_s`` of wall time after the first; returns the number of valid
+        RawCommands applied."""
         applied = 0
         msg = self.bus.recv(timeout)
-        for _ in range(MAX_FRAMES_PER_POLL):
-            if msg is None:
-                return applied
+        if msg is None:
+            return 0
+        deadline = time.perf_counter() + self.budget_s
+        for n in range(1, self.max_frames + 1):
             tr = self.receiver.feed(msg)
             if tr is not None:
                 applied += self._on_transfer(tr)
+            if n == self.max_frames:
+                self.budget_stops["frames"] += 1
+                break
+            if n % CLOCK_EVERY == 0 and time.perf_counter() >= deadline:
+                self.budget_stops["time"] += 1
+                break
             msg = self.bus.recv(0.0)
-        if msg is not None:  # over budget: the frame read last still counts
-            tr = self.receiver.feed(msg)
-            if tr is not None:
-                applied += self._on_transfer(tr)
-            self.budget_stops += 1
+            if msg is None:
+                break
         return applied
 
     def _on_transfer(self, tr: dc.Transfer) -> int:
@@ -168,5 +196,5 @@ class EscBank:
             "send_errors": self.send_errors,
             "rejects": dict(sorted((self.receiver.rejects + self.rejects).items())),
             "autopilot_health": self.autopilot_health,
-            "budget_stops": self.budget_stops,
+            "budget_stops": dict(sorted(self.budget_stops.items())),
         }

@@ -12,7 +12,7 @@ from autopilot_bridge.can_actuators import CanActuators
 from common import dronecan_codec as dc
 from hil import settings
 from simulator.core import SimulatorCore
-from simulator.esc import RAW_COMMAND_MISSING_INDEX, RAW_COMMAND_OUT_OF_RANGE, EscBank
+from simulator.esc import CLOCK_EVERY, MAX_FRAMES_PER_POLL, RAW_COMMAND_MISSING_INDEX, RAW_COMMAND_OUT_OF_RANGE, EscBank
 
 _channels = itertools.count()
 
@@ -97,6 +97,42 @@ def test_bad_raw_commands_are_counted_and_never_applied(rig):
     rejects = esc.summary()["rejects"]
     assert rejects[RAW_COMMAND_OUT_OF_RANGE] == 1 and rejects[RAW_COMMAND_MISSING_INDEX] == 1
     assert rejects[dc.UNKNOWN_NODE] == 1 and rejects[dc.UNKNOWN_DATA_TYPE] == 1 and rejects[dc.WRONG_DLC] == 1
+
+
+def _foreign_flood(bus: can.BusABC, n: int, node: int = 99) -> None:
+    """``n`` single-frame full-astern RawCommands from a node that is not the autopilot."""
+    for k in range(n):
+        for f in dc.to_frames(dc.RAW_COMMAND, dc.raw_command([-8191, -8191]), node, k % 32):
+            bus.send(f)
+
+
+def test_a_flood_of_foreign_frames_is_drained_up_to_the_cap_per_step_and_counted(rig):
+    """Issue 31: one poll (one real-time step) reads at most MAX_FRAMES_PER_POLL frames; the rest waits
+    for later steps, the cut is counted, and no foreign command is applied."""
+    cfg, core, esc, acts, intruder = rig
+    n = 3 * MAX_FRAMES_PER_POLL + 100
+    esc.budget_s = 1e9                           # the frame cap alone (the time budget is checked below)
+    _foreign_flood(intruder, n)
+    acts.send_controls(0, 0.5, 0.5)              # the autopilot's command, queued behind the flood
+    assert esc.poll(0.0) == 0
+    assert esc.receiver.frames == MAX_FRAMES_PER_POLL
+    assert esc.summary()["rejects"] == {dc.UNKNOWN_NODE: MAX_FRAMES_PER_POLL}
+    assert esc.budget_stops == {"frames": 1} and esc.raw is None
+    polls = 1
+    while esc.raw is None and polls < 10:
+        esc.poll(0.0)
+        polls += 1
+    assert polls == 4 and esc.raw == (4096, 4096) and esc.commands == 1
+    assert esc.summary()["rejects"] == {dc.UNKNOWN_NODE: n}
+    assert esc.summary()["budget_stops"] == {"frames": 3}
+
+
+def test_a_poll_stops_when_its_time_budget_is_spent(rig):
+    cfg, core, esc, acts, intruder = rig
+    esc.budget_s = 0.0                           # spent at once: the first clock read stops the poll
+    _foreign_flood(intruder, 100)
+    esc.poll(0.0)
+    assert esc.receiver.frames == CLOCK_EVERY and esc.budget_stops == {"time": 1}
 
 
 def test_autopilot_ignores_its_own_node_id_and_counts_lost_status(rig):

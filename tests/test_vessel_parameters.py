@@ -299,3 +299,18 @@ def test_the_docs_table_is_the_declarations():
     doc = (Path(__file__).resolve().parents[1] / "docs" / "gcs.md").read_text()
     table = re.search(r"<!-- parameters: generated -->\n(.*?)\n<!-- /parameters -->", doc, re.S)
     assert table is not None and table.group(1) == markdown_table()
+
+
+def test_hold_near_an_obstacle_keeps_station_at_the_last_safe_point():
+    """HOLD where the fence (here: everywhere) is nearer than the hold clearance steers back to the last safe
+    point. Its station keeper's state machine started in WAITING, from which COMPLETE and RETURNING are no
+    transitions: every such frame raised ValueError (a numeric fault, thrusters off), and the boat drifted
+    onto the quay (issue 31's hour of chaos, seed 31)."""
+    s = Session()
+    helm = s.ap.helm
+    here = _far(s, 0.0)
+    helm.last_safe = (here.x + 10.0, here.y)
+    helm.fence_depth = lambda _n, _e: 0.0
+    thrust = helm.hold(here, 0.01)
+    assert helm.holding and thrust != helm.zero_thrust
+    assert helm._hold_behaviour.state is Behaviour.RETURNING

@@ -88,9 +88,9 @@ def build_simulator(cfg: HilConfig, world: WorldMap | None, traffic: tuple[ShipS
     try:
         if cfg.can.actuators == "can":
             from common.can_params import open_bus
-            from simulator.esc import EscBank
+            from simulator.esc import EscBank, kernel_filters
 
-            esc = EscBank(open_bus(cfg.can), cfg.can, cfg.esc, core.vessel)
+            esc = EscBank(open_bus(cfg.can, can_filters=kernel_filters(cfg.can)), cfg.can, cfg.esc, core.vessel)
             if can_record:
                 esc.applied_times.start(spill_to=can_record)
         server = SimulatorServer(core, endpoint, lockstep=cfg.sim.lockstep, duration=cfg.sim.duration,

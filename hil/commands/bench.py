@@ -6,7 +6,7 @@ import argparse
 import importlib
 
 # Targets: modules under hil/benches/.
-TARGETS = ("sim", "planner", "loop", "can", "gcs", "frame", "ardupilot", "station")
+TARGETS = ("sim", "planner", "loop", "can", "can_flood", "gcs", "frame", "ardupilot", "station")
 
 
 def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentParser]) -> None:

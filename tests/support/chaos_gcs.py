@@ -24,6 +24,7 @@ import select
 import socket
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -301,8 +302,10 @@ class ChaosGcs:
                 ahead.signing.timestamp = signing_now() + 86400 * 100_000
                 self.send("command_long", t, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1.0, 0, 0, 0, 0, 0, 0, mav=ahead)
 
-    def run(self, duration_s: float, connect_timeout: float = 120.0) -> ChaosStats:
-        """Wait for the vessel's first HEARTBEAT (and learn its parameter names), then act for ``duration_s``."""
+    def run(self, duration_s: float, connect_timeout: float = 120.0,
+            alive: Callable[[], bool] | None = None) -> ChaosStats:
+        """Wait for the vessel's first HEARTBEAT (and learn its parameter names), then act for ``duration_s``,
+        or until ``alive()`` says the vessel is gone (an hour is not spent talking to a run that ended)."""
         start = time.monotonic()
         if self.wait_for(("HEARTBEAT",), connect_timeout) is None:
             raise TimeoutError("chaos GCS: no HEARTBEAT from the vessel")
@@ -312,7 +315,7 @@ class ChaosGcs:
         weights = np.array([ACTIONS.get(n, SIGNED_ONLY.get(n, 0.0)) for n in names], dtype=float)
         weights /= weights.sum()
         end = time.monotonic() + duration_s
-        while time.monotonic() < end:
+        while time.monotonic() < end and (alive is None or alive()):
             self.act(str(self.rng.choice(names, p=weights)))
             self.wait_for(("NONE",), float(self.rng.uniform(0.02, 0.3)))   # hear the answers, keep beating
         self.stats.wall_s = time.monotonic() - start
