@@ -37,6 +37,8 @@ from autopilot_bridge.tracking_stats import TrackingStats
 from autopilot_bridge.vehicle import MIS_DONE_LOITER, Vehicle
 from planner.gridmap import OccupancyGrid
 
+MANUAL_STICK_TIMEOUT_S = 1.0   # wall s: an older MANUAL_CONTROL is no stick (MANUAL then holds)
+
 
 class Helm:
     def __init__(self, params: AutopilotParams, propulsion: Propulsion, course: Course, vehicle: Vehicle,
@@ -85,8 +87,9 @@ class Helm:
             return self.zero_thrust
         if not self.holding:
             self.holding = True
-            self._event(s.t, f"HOLD: {min(clearance, self.fence_depth(s.x, s.y)):.1f} m from an obstacle or the "
-                        "fence: keeping station at the last safe point")
+            depth = min(clearance, self.fence_depth(s.x, s.y))
+            self._event(s.t, f"{self.vehicle.mode.name}: {depth:.1f} m from an obstacle or the fence: keeping "
+                        "station at the last safe point")
             self.station.reset()
         point = self.last_safe if self.last_safe is not None else (s.x, s.y)
         return self.station.command(s, dt, point, True, self._hold_behaviour,
@@ -94,11 +97,15 @@ class Helm:
                                                                           yaw_limit=self.turn_on_the_spot),
                                     self.current.velocity, lambda: self.reset_controllers(s))
 
-    def manual(self, stick: tuple[float, float, float] | None) -> Thrust:
-        """MANUAL_CONTROL x (surge) and r (yaw), each -1..1, given at wall time stick[2]; zero when older than 1 s."""
+    def manual(self, stick: tuple[float, float, float] | None, s: NavState, dt: float) -> Thrust:
+        """MANUAL_CONTROL x (surge) and r (yaw), each -1..1, given at wall time stick[2]. Without a stick
+        newer than ``MANUAL_STICK_TIMEOUT_S`` it is HOLD, as ArduRover's radio failsafe puts the boat in
+        HOLD: here that drifts only while clear of obstacles and the fence, and keeps station nearer, so
+        a ground station that selects MANUAL and sends nothing never leaves the boat to the current."""
         self.course.behaviour.pause()
-        if stick is None or time.monotonic() - stick[2] > 1.0:
-            return self.zero_thrust
+        if stick is None or time.monotonic() - stick[2] > MANUAL_STICK_TIMEOUT_S:
+            return self.hold(s, dt)
+        self.holding = False
         x, r = stick[0], stick[1]
         prop = self.prop
         tau_u = x * 2.0 * (prop.T_max if x >= 0 else -prop.T_min)

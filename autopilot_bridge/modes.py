@@ -5,7 +5,8 @@ Mission Planner) show their names. Each mode says what it needs to be entered (:
 what it does per frame with the mission or its target (:meth:`RoverMode.update`) and where the thrust
 comes from (:meth:`RoverMode.output`):
 
-* MANUAL (0): thrusters from MANUAL_CONTROL (x: surge, r: yaw, each -1000..1000); zero without input.
+* MANUAL (0): thrusters from MANUAL_CONTROL (x: surge, r: yaw, each -1000..1000); without input for 1 s,
+  HOLD's behaviour (ArduRover's radio failsafe: HOLD), which keeps station near obstacles.
 * HOLD (4): both thrusters at zero, the boat drifts with wind and current (as Rover's HOLD does for
   boats) - but never onto an obstacle or across the fence: near them it keeps station
   (:meth:`autopilot_bridge.helm.Helm.hold`).
@@ -49,7 +50,8 @@ class Driver(Protocol):
 
     def idle(self) -> Thrust: ...                    # both thrusters at zero
 
-    def manual(self, stick: tuple[float, float, float] | None) -> Thrust: ...  # (x, r, wall time) or None
+    # (x, r, wall time) or None; without a fresh stick: hold
+    def manual(self, stick: tuple[float, float, float] | None, s: NavState, dt: float) -> Thrust: ...
 
     def navigate(self, s: NavState, dt: float) -> Thrust: ...  # follow vehicle.route (planned/fallback, station)
 
@@ -90,7 +92,7 @@ class ModeManual(RoverMode):
     number, flags = Mode.MANUAL, M.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
 
     def output(self, driver: Driver, v: Vehicle, s: NavState, dt: float) -> Thrust:
-        return driver.manual(v.manual)
+        return driver.manual(v.manual, s, dt)
 
 
 class ModeHold(RoverMode):

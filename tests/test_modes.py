@@ -18,7 +18,7 @@ class Driver:
     def idle(self):
         return "idle"
 
-    def manual(self, stick):
+    def manual(self, stick, s, dt):
         return ("manual", stick)
 
     def navigate(self, s, dt):

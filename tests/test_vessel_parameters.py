@@ -314,3 +314,21 @@ def test_hold_near_an_obstacle_keeps_station_at_the_last_safe_point():
     thrust = helm.hold(here, 0.01)
     assert helm.holding and thrust != helm.zero_thrust
     assert helm._hold_behaviour.state is Behaviour.RETURNING
+
+
+def test_manual_without_a_stick_is_hold_and_keeps_station_near_an_obstacle():
+    """MANUAL with no MANUAL_CONTROL newer than 1 s is HOLD (ArduRover's radio failsafe): clear of obstacles
+    the thrusters are off, near one it keeps station at the last safe point (issue 31's chaos: a GCS's
+    MANUAL left the boat to the current beside the quay); a fresh stick drives the thrusters again."""
+    import time
+
+    s = Session()
+    helm = s.ap.helm
+    here = _far(s, 0.0)
+    assert helm.manual(None, here, 0.01) == helm.zero_thrust and not helm.holding   # open water: drift
+    helm.last_safe = (here.x + 10.0, here.y)
+    helm.fence_depth = lambda _n, _e: 0.0
+    stale = (0.0, 0.0, time.monotonic() - 5.0)
+    assert helm.manual(stale, here, 0.01) != helm.zero_thrust and helm.holding
+    fresh = (0.0, 0.0, time.monotonic())                     # the stick centred: the person stops the boat
+    assert helm.manual(fresh, here, 0.01) == helm.zero_thrust and not helm.holding
