@@ -121,8 +121,11 @@ def test_ardurover_flies_the_harbour_route_and_a_rerun_is_byte_identical(tmp_pat
     from pymavlink import mavutil
 
     outs = [tmp_path / "a", tmp_path / "b", tmp_path / "gcs"]
+    # One instance for all three: with another hil run on the machine the lowest free instance, and with it
+    # the system id in every frame, would differ between the runs.
+    instance = str(60 + os.getpid() % 30)
     cmd = [sys.executable, "-m", "hil", "run", "--scenario", "harbour", "--autopilot", "ardupilot",
-           "--duration", "260", "--json", "--no-plot"]
+           "--duration", "260", "--json", "--no-plot", "--instance", instance]
     env = {**os.environ, "ARDUPILOT_SITL": str(SITL)}
     summaries = []
     for out in outs:

@@ -41,7 +41,7 @@ def test_bench_targets_have_help(hil):
     bench = sub.choices["bench"]
     targets = next(a for a in bench._actions if a.dest == "target")
     for name in targets.choices:
-        assert name in TARGETS
+        assert name.replace("-", "_") in TARGETS      # the user types can-flood; the module is can_flood
         r = hil("bench", name, "--help")
         assert r.returncode == 0 and "--json" in r.stdout
 
