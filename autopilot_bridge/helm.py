@@ -38,6 +38,8 @@ from autopilot_bridge.tracking_stats import TrackingStats
 from autopilot_bridge.vehicle import MIS_DONE_LOITER, Vehicle
 from planner.gridmap import OccupancyGrid
 
+AVOID_DECELERATION = 0.25     # m/s^2: as ARRIVAL_DECELERATION
+AVOID_LOOKAHEAD = 24.0        # m: 3 m/s, the hull's top speed, stops within it (18 m + 2 s of lag)
 ARRIVAL_DECELERATION = 0.25   # m/s^2: half the speed reference model's limit (max_acceleration 0.5)
 MANUAL_STICK_TIMEOUT_S = 1.0   # wall s: an older MANUAL_CONTROL is no stick (MANUAL then holds)
 
@@ -54,6 +56,7 @@ class Helm:
         self.heading_pid, self.speed_ctl, self.station = heading_pid, speed_ctl, station
         self.current = current
         self.hold_clearance = 2.0 * safety_radius      # m: HOLD drifts no nearer to an obstacle or the fence
+        self.avoid_clearance = 0.75 * safety_radius    # m: no speed that cannot stop before this clearance
         self.fence_depth: Callable[[float, float], float] = lambda _n, _e: math.inf
         self.last_safe: tuple[float, float] | None = None
         self.holding = False
@@ -204,8 +207,32 @@ class Helm:
                r_ref: float = 0.0, yaw_limit: float = math.inf) -> Thrust:
         tau_r = self.heading_pid.update(psi_ref, s.psi, s.r, dt, r_ref)
         tau_r = min(max(tau_r, -yaw_limit), yaw_limit)
-        tau_u = self.speed_ctl.update(u_ref, s.u, s.v, s.r, dt, u_current)
+        tau_u = self.speed_ctl.update(self.avoidance_cap(s, u_ref), s.u, s.v, s.r, dt, u_current)
         return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
+
+    def avoidance_cap(self, s: NavState, u_ref: float) -> float:
+        """The surge set-point (m/s, negative astern) limited so the boat can stop, braking at
+        ``AVOID_DECELERATION``, before the clearance along its bow (or stern, astern) falls below
+        ``avoid_clearance`` - in every mode that drives, whatever the route or the target asked, as
+        ArduPilot's simple avoidance limits the velocity towards a fence by its stopping distance. Chaotic
+        mode changes beside a quay (issue 31) left a boat heading for it at 0.8 m/s with each new route's
+        controllers starting afresh. Only a ray that goes nearer to an obstacle than the boat is now counts,
+        so a boat already inside the clearance can still sail away from it."""
+        if abs(u_ref) < 1e-3:
+            return u_ref
+        heading = s.psi if u_ref > 0.0 else s.psi + math.pi
+        c, sn = math.cos(heading), math.sin(heading)
+        here = self.grid.clearance_at(s.y, s.x)
+        limit = min(self.avoid_clearance, here)
+        step = self.grid.resolution
+        lag = self.speed_ctl.p.speed_reference_time_constant
+        reach = min(u_ref * u_ref / (2.0 * AVOID_DECELERATION) + abs(s.u) * lag + step, AVOID_LOOKAHEAD)  # cap >= u_ref
+        for k in range(1, int(reach / step) + 1):
+            d = k * step
+            if self.grid.clearance_at(s.y + d * sn, s.x + d * c) < limit:
+                cap = stopping_speed_cap(d - step, abs(s.u), 0.0, AVOID_DECELERATION, lag)
+                return max(min(u_ref, cap), -cap)
+        return u_ref
 
     @property
     def turn_on_the_spot(self) -> float:
