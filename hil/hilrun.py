@@ -50,7 +50,7 @@ from hil.run_summary import RunSummary, read_autopilot_summary
 from hil.tap import Tap
 
 if TYPE_CHECKING:
-    from hil.can_log import CanRecorder
+    from hil.can_log import CanLogSummary, CanRecorder
     from hil.settings import HilConfig
 
 REPO = Path(__file__).resolve().parent.parent
@@ -187,7 +187,7 @@ class HilRun:
         self.ap: subprocess.Popen | None = None
         self.sim_restarts = 0
         self.can_recorder: CanRecorder | None = None  # when the thrusters are on CAN
-        self.can_log: dict[str, Any] = {}
+        self.can_log: CanLogSummary | None = None
         self.placement: placement.Placement | None = None
         self._cpu_claim: placement.Claim | None = None
         self.pinned: dict[str, int] = {}          # role -> CPU, what the placement pinned

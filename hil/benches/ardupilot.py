@@ -240,14 +240,15 @@ def run(args: argparse.Namespace) -> int:
             if ap_summary.outcome == "interrupted":   # Ctrl-C ends the bench, not just this flight
                 raise KeyboardInterrupt
             theirs = flight_figures(ap_summary, route, geo)
-            ap = (ap_summary.simulator or {}).get("ardupilot", {})
-            theirs["setup_to_auto_s"] = ap.get("auto_at_s")   # moored until then: the mission counts from AUTO
+            ap = ap_summary.ardurover()
+            # moored until AUTO: the mission counts from there
+            theirs["setup_to_auto_s"] = None if ap is None else ap["auto_at_s"]
             theirs["collision_time_s"] = ap_summary.collision_time_s
             if fence:
-                theirs["fence"] = ap.get("fence")
-                theirs["mission_waypoints"] = ap.get("mission_items")
+                theirs["fence"] = None if ap is None else ap["fence"]
+                theirs["mission_waypoints"] = None if ap is None else ap["mission_items"]
             if theirs["reached_goal"]:
-                theirs["mission_time_s"] = ap.get("mission_time_s")
+                theirs["mission_time_s"] = None if ap is None else ap["mission_time_s"]
             ratios = {k: ratio(theirs[k], ours[k]) for k in METRICS if k != "collisions"}
             result["scenarios"][row] = {"ardurover": theirs, "vessel_computer": ours, "ratio": ratios}
             lines += [_row(row, "ArduRover", theirs), _row("", "ours", ours),
@@ -281,7 +282,8 @@ def _station(args: argparse.Namespace, cfg: HilConfig, sitl: Any, geo: Any, root
     progress("bench ardupilot: station keeping: ArduRover (LOITER)")
     ap = run_ardupilot(opts("ardurover"), cfg, sitl)
     theirs = station_figures(ap, (gy, gx), tol, geo, args.station_hold)
-    auto = (ap.simulator or {}).get("ardupilot", {}).get("auto_at_s")
+    setup = ap.ardurover()
+    auto = None if setup is None else setup["auto_at_s"]
     if theirs["arrived_s"] is not None and auto is not None:
         theirs["arrived_s"] = round(theirs["arrived_s"] - auto, 2)   # from AUTO, as ours from the start
     keys = ("station_rms_m", "station_max_m", "within_tolerance", "arrived_s")

@@ -97,10 +97,11 @@ def flood(port: int, rate: float, stop: Any, result: Any) -> None:
 
 
 def _leg(summary: RunSummary) -> dict:
-    sim = summary.simulator or {}
+    sim = summary.simulator_counters()
     gcs = summary.gcs
-    return {"control_latency_ms": to_table(summary.control_latency_ms), "step_jitter_ms": sim.get("jitter_ms"),
-            "stale_command_events": sim.get("stale_command_events"),
+    return {"control_latency_ms": to_table(summary.control_latency_ms),
+            "step_jitter_ms": None if sim is None else sim["jitter_ms"],
+            "stale_command_events": None if sim is None else sim["stale_command_events"],
             "gcs_frames_in": None if gcs is None else gcs["frames_in"],
             "gcs_service_ms": None if gcs is None else gcs["service_ms"],
             "gcs_security_rejects": None if gcs is None else gcs["security_rejects"], "outcome": summary.outcome}
