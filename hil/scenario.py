@@ -55,7 +55,7 @@ from common.params import param
 from hil import charts, config
 from hil.config import CONFIG_DIR
 from hil.errors import ConfigError, UsageError
-from hil.routing import RouteRequest, plan_route, route_waypoints
+from hil.routing import PlannedRoute, RouteRequest, plan_route, route_waypoints, take_route
 from hil.scenario_names import SCENARIO_DIR, available
 from simulator.config import CurrentParams, GeodesyParams
 from simulator.traffic import ShipSpec
@@ -198,6 +198,14 @@ class Scenario:
         if isinstance(self.route, RouteRequest):
             self.route = plan_route(self.route)
         return self.route
+
+    def take_planned_route(self, route: PlannedRoute, source: str) -> None:
+        """Follow ``route``, planned by another process from this scenario's own request (`hil run`'s
+        route.json): nothing plans it again. UsageError (one line) where it was planned from another."""
+        if not isinstance(self.route, RouteRequest):
+            raise UsageError(f"{source}: scenario {self.name} gives its route as is (global_route = false): "
+                             f"there is no route to take")
+        self.route = take_route(self.route, route, source)
 
     def truth_occ(self) -> np.ndarray:
         """The simulated world's obstacles: the chart (``occ``) plus the uncharted discs."""
