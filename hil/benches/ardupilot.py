@@ -29,6 +29,9 @@ from hil.errors import UsageError
 if TYPE_CHECKING:
     import numpy as np
 
+    from common.geodesy import LocalFrame
+    from hil.ardupilot import SitlFiles
+    from hil.run_summary import RunSummary
     from hil.settings import HilConfig
 
 ENCOUNTERS = ("colregs-head-on", "colregs-crossing-right", "colregs-crossing-left", "colregs-overtaking")
@@ -75,12 +78,12 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.set_defaults(func=run)
 
 
-def truth_track(tlog: Path, geo: Any, until_s: float) -> np.ndarray:
+def truth_track(tlog: Path, geo: LocalFrame, until_s: float) -> np.ndarray:
     """The truth (north, east) in m from a run's .tlog, up to ``until_s`` of simulated time."""
     return timed_track(tlog, geo, until_s)[1]
 
 
-def timed_track(tlog: Path, geo: Any, until_s: float) -> tuple[np.ndarray, np.ndarray]:
+def timed_track(tlog: Path, geo: LocalFrame, until_s: float) -> tuple[np.ndarray, np.ndarray]:
     """(times s, (north, east) m) of the truth in a run's .tlog, up to ``until_s`` of simulated time."""
     import numpy as np
     from pymavlink import mavutil
@@ -99,7 +102,7 @@ def timed_track(tlog: Path, geo: Any, until_s: float) -> tuple[np.ndarray, np.nd
     return np.array(times, dtype=float), np.array(pts, dtype=float).reshape(-1, 2)
 
 
-def station_figures(summary: Any, goal_ned: tuple[float, float], tolerance: float, geo: Any,
+def station_figures(summary: RunSummary, goal_ned: tuple[float, float], tolerance: float, geo: LocalFrame,
                     hold_s: float = 60.0) -> dict[str, Any]:
     """Station keeping over the last ``hold_s`` simulated seconds of a run: RMS and largest distance
     (m) from ``goal_ned``, the share of that time within ``tolerance`` (m); and when the boat first came
@@ -164,7 +167,7 @@ def moving_from(tlog: Path, until_s: float, speed: float = 0.3) -> float | None:
     return None
 
 
-def flight_figures(summary: Any, route_ned: np.ndarray, geo: Any) -> dict[str, Any]:
+def flight_figures(summary: RunSummary, route_ned: np.ndarray, geo: LocalFrame) -> dict[str, Any]:
     from autopilot_bridge.tracking_stats import TrackingSummary
     from hil.ardupilot import route_cross_track
 
@@ -259,7 +262,8 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _station(args: argparse.Namespace, cfg: HilConfig, sitl: Any, geo: Any, root: Path, lines: list[str]) -> dict:
+def _station(args: argparse.Namespace, cfg: HilConfig, sitl: SitlFiles, geo: LocalFrame, root: Path,
+             lines: list[str]) -> dict:
     from hil.ardupilot import run_ardupilot
     from hil.hilrun import RunOptions, run_loop
 
