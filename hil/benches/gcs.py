@@ -6,13 +6,16 @@ import argparse
 import json
 import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from common.tables import to_table
 from hil.console import emit, load_settings, progress
 from hil.errors import UsageError
 
 if TYPE_CHECKING:
+    from multiprocessing.queues import Queue
+    from multiprocessing.synchronize import Event
+
     from hil.run_summary import RunSummary
 
 GOAL_P99_MS = 2.0
@@ -58,7 +61,7 @@ def _requests() -> list[bytes]:
     )]
 
 
-def flood(port: int, rate: float, stop: Any, result: Any) -> None:
+def flood(port: int, rate: float, stop: Event, result: Queue[str]) -> None:
     """Send read requests to 127.0.0.1:port at ``rate`` per second in 10 ms batches until ``stop`` is set;
     count the bytes sent and the bytes the boat sent back (put on ``result`` as a JSON line)."""
     import socket
