@@ -160,7 +160,8 @@ class Autopilot:
                                            self.onboard.battery))
         self.commands = VehicleCommands(self.vehicle, self.grid, safety, self.param_table, self.actuators,
                                         lambda: self._status, self._record_event, self.geofence,
-                                        self._fence_changed, onboard=self.onboard_status)
+                                        self._fence_changed, onboard=self.onboard_status,
+                                        current=lambda: self.current.velocity)
 
     @staticmethod
     def _field_prior(world: World) -> Callable[[float, float], tuple[float, float]] | None:

@@ -165,6 +165,14 @@ def clearance_speed_cap(clearance: float, inner: float, outer: float, v_min: flo
     return v_min + f * (v_max - v_min)
 
 
+def stopping_speed_cap(distance: float, speed: float, arrival: float, deceleration: float, lag: float) -> float:
+    """Speed cap (m/s) ``distance`` m before the point where the boat must be down to ``arrival`` m/s,
+    braking at ``deceleration`` m/s^2: ``sqrt(arrival^2 + 2 a d)``, with ``d`` the distance less what the
+    present ``speed`` covers in the speed loop's ``lag`` s (its reference model follows a set-point that late)."""
+    d = max(distance - max(speed, 0.0) * lag, 0.0)
+    return math.sqrt(arrival * arrival + 2.0 * deceleration * d)
+
+
 def heading_error_speed_cap(error: float, angle: float, v_min: float, v_max: float) -> float:
     """Speed cap (m/s) for a heading error of ``error`` rad (any multiple of 2 pi): ``v_max`` within
     ``angle`` rad, ``v_min`` beyond it, where the boat must turn sharply and the turning circle

@@ -23,6 +23,7 @@ from autopilot_bridge.control import (
     allocate,
     clearance_speed_cap,
     heading_error_speed_cap,
+    stopping_speed_cap,
 )
 from autopilot_bridge.course import Course
 from autopilot_bridge.current_estimate import CurrentObserver
@@ -37,6 +38,7 @@ from autopilot_bridge.tracking_stats import TrackingStats
 from autopilot_bridge.vehicle import MIS_DONE_LOITER, Vehicle
 from planner.gridmap import OccupancyGrid
 
+ARRIVAL_DECELERATION = 0.25   # m/s^2: half the speed reference model's limit (max_acceleration 0.5)
 MANUAL_STICK_TIMEOUT_S = 1.0   # wall s: an older MANUAL_CONTROL is no stick (MANUAL then holds)
 
 
@@ -189,7 +191,7 @@ class Helm:
         else:
             a = self.reactive.command(s.x, s.y, s.psi, c.target)
             psi_ref, u_ref, r_ref = a.heading, a.speed, 0.0
-        return self.drive(s, dt, psi_ref, u_ref, r_ref)
+        return self.drive(s, dt, psi_ref, min(u_ref, self._arrival_speed(s)), r_ref)
 
     def drive(self, s: NavState, dt: float, psi_ref: float, u_ref: float, r_ref: float = 0.0) -> Thrust:
         """Heading (rad, with yaw-rate feed-forward r_ref rad/s) and speed over ground (m/s) set-points to
@@ -220,6 +222,15 @@ class Helm:
         inflation's edge leaves the hull only safety radius - L/2 of it."""
         return clearance_speed_cap(self.grid.clearance_at(s.y, s.x), self.safety_radius,
                                    self.p.slow_clearance, self.p.min_turn_speed, self.speed_setpoint())
+
+    def _arrival_speed(self, s: NavState) -> float:
+        """Speed cap (m/s) that brings the boat to the route's end within its stopping distance: at the goal
+        radius it is down to the station keeper's approach speed there, so station keeping starts from a
+        speed it can take up, not from WP_SPEED (a GUIDED target 2 m off a quay was overrun by 1.2 m)."""
+        c = self.course
+        beyond = math.hypot(c.goal_ned[0] - s.x, c.goal_ned[1] - s.y) - c.goal_radius
+        return stopping_speed_cap(beyond, s.u, self.station.approach_speed(c.goal_radius), ARRIVAL_DECELERATION,
+                                  self.speed_ctl.p.speed_reference_time_constant)
 
     def _station_keep(self, s: NavState, dt: float) -> Thrust:
         """After the route's end: loiter when the route says so or MIS_DONE_BEHAVE is loiter, else hold."""

@@ -32,6 +32,8 @@ Drive = Callable[[NavState, float, float, float, float], Thrust]
 
 POSITION_GAIN = 0.2      # 1/s: ground speed asked per metre off the point
 STILL_WATER = 0.02       # m/s: below this the current is noise
+ASTERN_HYSTERESIS = 0.34  # cos 70 deg: the end of the hull nearer to w by 20 deg either side of abeam
+MAX_ASTERN = 1.0         # m/s: water speed held stern first at most (reverse 2 x 66.7 N; drag at 1 m/s 32 N)
 TURN_HOLD = 0.08         # m/s: below this water speed the heading is kept (its direction is noise)
 
 
@@ -47,9 +49,15 @@ class StationKeeper:
         self.zero_thrust = zero_thrust
         self._heading: float | None = None  # rad, the last heading asked
         self.resting = True                 # thrusters off last frame (the controllers' state is stale)
+        self._astern = False                # holding stern first to the water velocity
+
+    def approach_speed(self, distance: float) -> float:
+        """m/s over ground asked towards the point from ``distance`` m off."""
+        return min(POSITION_GAIN * distance, self.max_speed)
 
     def reset(self) -> None:
         self._heading = None
+        self._astern = False
         self.resting = True
 
     def command(self, s: NavState, dt: float, point: tuple[float, float], loiter: bool, behaviour: BehaviourMachine,
@@ -74,8 +82,15 @@ class StationKeeper:
         k = min(POSITION_GAIN, self.max_speed / d) if d > 1e-9 else 0.0
         vn, ve = k * en, k * ee                       # ground velocity wanted
         wn, we = vn - cn, ve - ce                     # water velocity that gives it
-        if math.hypot(wn, we) >= TURN_HOLD or self._heading is None:
-            self._heading = math.atan2(we, wn) if math.hypot(wn, we) > 1e-9 else s.psi
+        w = math.hypot(wn, we)
+        if w >= TURN_HOLD or self._heading is None:
+            axis = math.atan2(we, wn) if w > 1e-9 else s.psi
+            ahead = math.cos(axis - s.psi)           # > 0: the bow is the nearer end to point along w
+            if w > MAX_ASTERN or ahead > ASTERN_HYSTERESIS:
+                self._astern = False
+            elif ahead < -ASTERN_HYSTERESIS:
+                self._astern = True
+            self._heading = axis + math.pi if self._astern else axis
         psi = self._heading
         bow = (math.cos(s.psi), math.sin(s.psi))
         u_ref = vn * bow[0] + ve * bow[1]

@@ -61,7 +61,7 @@ class VehicleStatus:
 class VehicleApi(Protocol):
     """What a ground station may do to the vessel."""
 
-    def arm(self, on: bool) -> Result: ...
+    def arm(self, on: bool, force: bool = False) -> Result: ...   # force: param2 21196 (disarm anywhere)
 
     def set_mode(self, mode: Mode) -> Result: ...
 

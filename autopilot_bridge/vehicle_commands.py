@@ -29,15 +29,21 @@ if TYPE_CHECKING:
     from autopilot_bridge.gcs.mission import MissionItem
 
 
+DISARM_DRIFT_S = 30.0   # s of drift with the current that a disarm may leave the boat clear of obstacles and fence
+
+
 class VehicleCommands:
     """What a ground station may do to the vessel, checked against the chart and the parameters."""
 
     def __init__(self, vehicle: Vehicle, grid: OccupancyGrid, safety_radius: float, params: ParamTable,
                  actuators: Actuators, status: Callable[[], VehicleStatus | None],
                  record: Callable[[str], None], geofence: GeoFence, fence_changed: Callable[[Fence], None],
-                 onboard: Callable[[], OnboardStatus] | None = None) -> None:
-        """``onboard``: the sensors' and the pack's state (autopilot_bridge.onboard_status; None: nothing known)."""
+                 onboard: Callable[[], OnboardStatus] | None = None,
+                 current: Callable[[], tuple[float, float]] = lambda: (0.0, 0.0)) -> None:
+        """``onboard``: the sensors' and the pack's state (autopilot_bridge.onboard_status; None: nothing known);
+        ``current``: the current's estimate (NED m/s) a disarmed boat would drift with."""
         self.vehicle, self.grid, self.safety_radius = vehicle, grid, safety_radius
+        self._current = current
         self.param_table, self.actuators = params, actuators
         self._status, self._record = status, record
         self.geofence, self._fence_changed = geofence, fence_changed
@@ -61,10 +67,40 @@ class VehicleCommands:
         """The newest frame's status (None before the first navigation fix)."""
         return self._status()
 
-    def arm(self, on: bool) -> Result:
+    def arm(self, on: bool, force: bool = False) -> Result:
+        """Arm or disarm. A disarm that would leave the boat to drift onto an obstacle or across the fence
+        within ``DISARM_DRIFT_S`` is refused unless forced (MAV_CMD_COMPONENT_ARM_DISARM param2 = 21196,
+        as ArduPilot's vehicles refuse a disarm in flight): disarmed, nothing holds the boat off a quay."""
         if on and self.vehicle.arming_check and self._position() is None:
             return Result(False, "arm: no navigation fix yet (ARMING_CHECK)", temporary=True)
+        if not on and not force and self.vehicle.armed:
+            why = self._drift_hazard()
+            if why is not None:
+                return Result(False, f"disarm refused: {why}; force with param2 = 21196", temporary=True)
         return Result(*self.vehicle.arm(on))
+
+    def _drift_hazard(self) -> str | None:
+        """Why drifting from here with the current's estimate reaches within the safety radius of an obstacle
+        or the fence's edge within ``DISARM_DRIFT_S`` (sampled every second); None if it does not."""
+        here = self._position()
+        if here is None:
+            return None
+        cn, ce = self._current()
+        if not (math.isfinite(cn) and math.isfinite(ce)):
+            cn = ce = 0.0
+        for k in range(int(DISARM_DRIFT_S) + 1):
+            n, e = here[0] + cn * k, here[1] + ce * k
+            if self.grid.clearance_at(e, n) < self.safety_radius:
+                what = "an obstacle"
+            elif self.geofence.depth(n, e) < self.safety_radius:
+                what = "the fence"
+            else:
+                continue
+            if k == 0:
+                return f"within {self.safety_radius:g} m of {what}"
+            return (f"the current ({math.hypot(cn, ce):.2f} m/s) would set the boat within {self.safety_radius:g} m "
+                    f"of {what} in {k} s")
+        return None
 
     def set_mode(self, mode: Mode) -> Result:
         return Result(*self.vehicle.set_mode(mode, self._position()))

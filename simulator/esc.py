@@ -13,7 +13,12 @@ counted by :class:`common.dronecan_codec.TransferReceiver`, and RawCommands that
 index or hold a value outside [-8191, 8191] are rejected whole and counted here. RawCommand
 counts only from the autopilot's node (``[can] autopilot_node_id``; others are counted as
 ``unknown_node``), and a transfer that repeats its source's previous transfer ID is a replay:
-dropped and counted (``duplicate_transfer_id``).
+dropped and counted (``duplicate_transfer_id``). A second sender that claims the autopilot's node ID
+(DroneCAN has no authentication) breaks the sequence of its transfer IDs: while CONFLICT_IRREGULAR of the
+last CONFLICT_WINDOW RawCommands are out of sequence, no RawCommand is applied (counted as
+``node_id_conflict``; each episode in ``node_id_conflicts``), so the simulator's stale-command failsafe
+stops the thrusters within 0.5 s instead of obeying whoever sends faster; the conflict ends after
+CONFLICT_WINDOW RawCommands in sequence.
 
 A poll's work is bounded (issue 31): it reads at most ``max_frames`` frames (MAX_FRAMES_PER_POLL) and
 stops early once it has spent ``budget_s`` (POLL_BUDGET_S) of wall time, so a flood on the bus cannot
@@ -25,7 +30,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING, TypedDict
 
@@ -55,11 +60,18 @@ class EscBankSummary(TypedDict):
     rejects: dict[str, int]
     autopilot_health: int | None                 # the autopilot node's NodeStatus health (None: none heard)
     budget_stops: dict[str, int]
+    node_id_conflicts: int                       # episodes of a second sender with the autopilot's node ID
 
 
 RAW_COMMAND_OUT_OF_RANGE = "raw_command_out_of_range"
 RAW_COMMAND_MISSING_INDEX = "raw_command_missing_index"
 DUPLICATE_TRANSFER = "duplicate_transfer_id"  # a transfer repeating its source's previous transfer ID (a replay)
+NODE_ID_CONFLICT = "node_id_conflict"       # a RawCommand refused while a second sender claims the autopilot's ID
+# One sender's RawCommand transfer IDs step by one (mod 32); a second sender with the autopilot's node ID (CAN has
+# no authentication) interleaves its own sequence. Among the last CONFLICT_WINDOW RawCommands, CONFLICT_IRREGULAR
+# out of sequence (a gap or a repeat) is a conflict: a lost frame on a healthy bus is far rarer than one in eight.
+CONFLICT_WINDOW = 32
+CONFLICT_IRREGULAR = 4
 MAX_FRAMES_PER_POLL = 256  # CAN frames one poll() reads at most (a flood waits in the socket)
 # A 1 Mbit/s bus carries at most ~8,000 extended frames/s (~130 bits each), ~80 per 10 ms HIL frame, so the
 # frame cap only bites on a bus without a bit rate (vcan, virtual). The time budget bounds the work where
@@ -106,6 +118,9 @@ class EscBank:
         self.next_node_status_t = 0.0
         self.applied_times = TransferTimes()        # latency records: transfer ID and wall time applied
         self.budget_stops: Counter[str] = Counter()     # polls cut short, by cause: "frames" or "time"
+        self._in_sequence: deque[bool] = deque(maxlen=CONFLICT_WINDOW)   # the last RawCommands' transfer IDs
+        self.conflict = False                       # a second sender claims the autopilot's node ID now
+        self.conflicts = 0                          # conflict episodes
         self.max_frames, self.budget_s = MAX_FRAMES_PER_POLL, POLL_BUDGET_S
 
     # -- receive ---------------------------------------------------------------------------
@@ -134,11 +149,16 @@ class EscBank:
         return applied
 
     def _on_transfer(self, tr: dc.Transfer) -> int:
+        if tr.full_name == dc.RAW_COMMAND:
+            self._sequence(tr)
         if not self.tracker.observe(tr):
             self.rejects[DUPLICATE_TRANSFER] += 1
             return 0
         if tr.full_name == dc.NODE_STATUS:
             self.autopilot_health = int(tr.msg.health)
+            return 0
+        if self.conflict:
+            self.rejects[NODE_ID_CONFLICT] += 1
             return 0
         cmd = [int(v) for v in tr.msg.cmd]
         if len(cmd) < 2:
@@ -153,6 +173,17 @@ class EscBank:
         if self.applied_times.enabled:
             self.applied_times.add(tr.transfer_id, self.clock())
         return 1
+
+    def _sequence(self, tr: dc.Transfer) -> None:
+        """Judge a RawCommand's transfer ID against its source's previous one (before the tracker records it)."""
+        last = self.tracker.last.get((tr.full_name, tr.source_node))
+        self._in_sequence.append(last is None or (tr.transfer_id - last) % dc.TRANSFER_ID_MODULO == 1)
+        irregular = self._in_sequence.count(False)
+        if not self.conflict and irregular >= CONFLICT_IRREGULAR:
+            self.conflict = True
+            self.conflicts += 1
+        elif self.conflict and irregular == 0 and len(self._in_sequence) == CONFLICT_WINDOW:
+            self.conflict = False
 
     def controls(self) -> tuple[float, float] | None:
         """The newest command as normalised (port, starboard) in [-1, 1], or None before any."""
@@ -215,4 +246,5 @@ class EscBank:
             rejects=dict(sorted((self.receiver.rejects + self.rejects).items())),
             autopilot_health=self.autopilot_health,
             budget_stops=dict(sorted(self.budget_stops.items())),
+            node_id_conflicts=self.conflicts,
         )

@@ -12,7 +12,16 @@ from autopilot_bridge.can_actuators import CanActuators
 from common import dronecan_codec as dc
 from hil import settings
 from simulator.core import SimulatorCore
-from simulator.esc import CLOCK_EVERY, MAX_FRAMES_PER_POLL, RAW_COMMAND_MISSING_INDEX, RAW_COMMAND_OUT_OF_RANGE, EscBank
+from simulator.esc import (
+    CLOCK_EVERY,
+    CONFLICT_IRREGULAR,
+    CONFLICT_WINDOW,
+    MAX_FRAMES_PER_POLL,
+    NODE_ID_CONFLICT,
+    RAW_COMMAND_MISSING_INDEX,
+    RAW_COMMAND_OUT_OF_RANGE,
+    EscBank,
+)
 
 _channels = itertools.count()
 
@@ -133,6 +142,35 @@ def test_a_poll_stops_when_its_time_budget_is_spent(rig):
     _foreign_flood(intruder, 100)
     esc.poll(0.0)
     assert esc.receiver.frames == CLOCK_EVERY and esc.budget_stops == {"time": 1}
+
+
+def test_a_second_sender_claiming_the_autopilots_node_id_is_a_conflict_and_steers_nothing(rig):
+    """Issue 31: a node that sends full-astern RawCommands with the autopilot's own node ID (CAN has no
+    authentication), interleaved with the autopilot's: the broken transfer-ID sequence is a conflict after
+    at most CONFLICT_IRREGULAR of its commands, from then on no RawCommand is applied (the stale-command
+    failsafe stops the thrusters), and once the intruder stops, CONFLICT_WINDOW commands in sequence give
+    the autopilot the thrusters back. One sender alone is never a conflict."""
+    cfg, core, esc, acts, intruder = rig
+    node = cfg.can.autopilot_node_id
+    for k in range(100):
+        acts.send_controls(k, 0.5, 0.5)
+        esc.poll(0.0)
+    assert esc.conflicts == 0 and not esc.conflict and esc.raw == (4096, 4096) and esc.commands == 100
+    astern = 0
+    for k in range(100):
+        for f in dc.to_frames(dc.RAW_COMMAND, dc.raw_command([-8191, -8191]), node, (17 + 3 * k) % 32):
+            intruder.send(f)
+        astern += esc.poll(0.0)                  # the intruder's commands applied
+        acts.send_controls(100 + k, 0.5, 0.5)
+        esc.poll(0.0)
+    assert esc.conflict and esc.conflicts == 1
+    assert astern <= CONFLICT_IRREGULAR, astern
+    refused = esc.summary()["rejects"][NODE_ID_CONFLICT]
+    assert refused >= 190, refused               # both senders' commands, from the conflict on
+    for k in range(CONFLICT_WINDOW + 1):
+        acts.send_controls(200 + k, 0.25, 0.25)
+        esc.poll(0.0)
+    assert not esc.conflict and esc.raw == (2048, 2048) and esc.summary()["node_id_conflicts"] == 1
 
 
 def test_autopilot_ignores_its_own_node_id_and_counts_lost_status(rig):

@@ -51,9 +51,11 @@ class Api:
         self.v = Vehicle([Waypoint(10.0, 10.0, 3.0)], armed=False, mode=Mode.HOLD)
         self.gain = 1.0
         self.arms = 0
+        self.forced = False
 
-    def arm(self, on: bool) -> Result:
+    def arm(self, on: bool, force: bool = False) -> Result:
         self.arms += 1
+        self.forced = force
         return Result(*self.v.arm(on))
 
     def set_mode(self, mode: Mode) -> Result:
@@ -416,3 +418,20 @@ def test_a_second_tcp_ground_station_is_not_cut_when_the_first_spends_the_budget
         link.service()
     assert link.received["HEARTBEAT"] == 2 * n and link.rejects == {}
     assert "frame_budget" not in link.summary()["security_rejects"]
+
+
+def test_a_disarm_with_param2_21196_reaches_the_vehicle_as_forced_and_any_other_as_not(closing):
+    """MAV_CMD_COMPONENT_ARM_DISARM's param2 = 21196 (MAVLink: force) is a forced disarm, which the vessel
+    takes even where a disarm would leave the boat to drift onto the quay; any other param2 is not."""
+    udp_port = free_udp_port()
+    link = GcsLink(gcs_params(f"udpin:127.0.0.1:{udp_port}"), 1, 1, GEO)
+    closing(link)
+    api = Api()
+    link.attach(api)
+    gcs = udp_client(closing)
+    mav = mavlink2.MAVLink(None, 255, 190)
+    for param2, forced in ((0.0, False), (21196.0, True), (2989.0, False)):
+        gcs.sendto(frame(mav, "command_long", 1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0.0, param2, 0, 0, 0, 0, 0),
+                   ("127.0.0.1", udp_port))
+        assert acks(collect(gcs, link, lambda ms: acks(ms))) == [M.MAV_RESULT_ACCEPTED]
+        assert api.forced is forced, param2

@@ -25,6 +25,7 @@ import pytest
 from scipy.ndimage import distance_transform_edt
 from support.gcs_client import Gcs, M, start_run, stop_run
 
+from autopilot_bridge.modes import Mode
 from common.geodesy import LocalFrame
 from hil.hilrun import free_udp_port
 
@@ -293,9 +294,6 @@ def test_a_square_in_a_strong_cross_current_finishes_every_leg_then_loiter_holds
     assert len(after) > 1000 and math.dist(after[-1], pos1) <= 10.0, (after[-1], pos1)
 
 
-@pytest.mark.xfail(strict=True, reason="open (issue 31, point 7): the boat reaches a GUIDED target near the "
-                   "quay at speed and station keeping overshoots towards it (hull centre 1.80 m off at "
-                   "WP_SPEED, 1.12 m at 3 m/s); a strict xfail, so the fix shows as XPASS")
 @pytest.mark.parametrize("speed", [None, 3.0], ids=["wp_speed", "3m_s"])
 def test_arrival_at_a_guided_target_near_the_quay_keeps_the_hull_off_it(speed):
     """In-process, no sockets (tests/support/closed_loop.py): the harbour's truth and its current, the vessel
@@ -315,3 +313,30 @@ def test_arrival_at_a_guided_target_near_the_quay_keeps_the_hull_off_it(speed):
     worst = loop.run(25.0)
     assert math.dist(loop.core.state[:2], target) <= 3.0
     assert worst >= 2.0, worst
+
+
+def test_a_disarm_that_leaves_the_boat_to_drift_onto_the_quay_is_refused_unless_forced():
+    """In-process (tests/support/closed_loop.py): the boat keeps station at a GUIDED target 2-3 m from the
+    quay, the harbour's current setting onto it. A disarm there would leave it to drift onto the quay (the
+    chaos ground station's collisions after a disarm): refused, with the reason, and the boat keeps station;
+    a forced disarm (MAVLink param2 = 21196) is taken. In open water, 14 m from anything, a disarm is taken."""
+    from support.closed_loop import ClosedLoop, clearance
+
+    open_water = ClosedLoop((83.1, 115.1))
+    open_water.run(2.0)
+    cmd = open_water.ap.commands
+    assert cmd.arm(True).ok and cmd.set_mode(Mode.LOITER).ok
+    open_water.run(10.0)
+    assert cmd.arm(False).ok and not open_water.ap.vehicle.armed
+
+    loop = ClosedLoop((83.1, 115.1))
+    loop.run(2.0)
+    cmd = loop.ap.commands
+    assert cmd.arm(True).ok and cmd.goto(94.0, 120.0).ok
+    loop.run(25.0)
+    refused = cmd.arm(False)
+    assert not refused.ok and "disarm refused" in refused.text and "force" in refused.text, refused
+    assert loop.ap.vehicle.armed
+    assert loop.run(10.0) >= 2.0
+    assert cmd.arm(False, force=True).ok and not loop.ap.vehicle.armed
+    assert clearance(*loop.core.state[:2]) >= 2.0

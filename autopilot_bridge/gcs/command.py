@@ -19,6 +19,7 @@ from common.mavlink import MAV_TYPE as M
 
 CommandResult = tuple[int, str]   # (MAV_RESULT, why)
 CommandHandler = Callable[[list[float], float, float], CommandResult]   # (param1-4, x/param5, y/param6)
+FORCE_ARM_DISARM = 21196.0   # MAV_CMD_COMPONENT_ARM_DISARM param2: disarm even where the vehicle refuses (MAVLink)
 POSITION_IGNORED = 0b111  # SET_POSITION_TARGET_GLOBAL_INT type_mask bits: position ignored (x, y, z)
 
 
@@ -135,7 +136,7 @@ class CommandService:
     def _arm(self, p: list[float], x5: float, y6: float) -> CommandResult:
         if not finite(p[0]) or p[0] not in (0.0, 1.0):
             return M.MAV_RESULT_DENIED, "arm: param1 must be 0 or 1"
-        r = self._api().arm(p[0] == 1.0)
+        r = self._api().arm(p[0] == 1.0, force=p[1] == FORCE_ARM_DISARM)
         if r.ok:
             self.out.statustext(r.text)
         return ack_of(r)

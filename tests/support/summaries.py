@@ -78,7 +78,7 @@ ARDUPILOT = ArduPilotSimulatorSection(
 ESC_BANK = EscBankSummary(node_ids=[20, 21], raw_commands_applied=3, last_raw_command=[4000, 4000], frames_received=6,
                           transfers_received={"RawCommand@10": 3}, transfers_lost={}, transfers_duplicated={},
                           transfers_sent={"Status@20": 2}, send_errors=0, rejects={}, autopilot_health=0,
-                          budget_stops={})
+                          budget_stops={}, node_id_conflicts=0)
 RUN_CAN = RunCan(autopilot=CAN, simulator=SimulatorCanSummary(**ESC_BANK, lockstep_commands_missing=0,
                                                               mavlink_commands_ignored=0),
                  can_log="/tmp/run/can.log", can_log_frames=12)
