@@ -64,7 +64,7 @@ class RouteJob:
 
     seed: int
     duration: float            # s of simulated time at most
-    config: Any                # --config file(s), as hil.settings.load takes them
+    config: str | tuple[str, ...] | None   # --config file(s), as hil.settings.load takes them
     overrides: tuple[str, ...]
 
     def __call__(self, item: tuple[int, str, str]) -> RunSummary:
