@@ -20,22 +20,24 @@ derivatives are analytic. The jet flows north along its axis Y = B cos(k X).
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
+import numpy.typing as npt
+
+from common.current_params import CurrentParams
 
 
 class CurrentField:
-    """Analytic current of eq. (13). ``params`` has the fields of ``[current]`` (duck-typed)."""
+    """Analytic current of eq. (13) with the constants of ``[current]``."""
 
-    def __init__(self, params: Any) -> None:
+    def __init__(self, params: CurrentParams) -> None:
         self.enabled = bool(params.enabled)
         self.b, self.c, self.k = params.b, params.c, params.k_u
         self.omega, self.e, self.theta_u = params.omega, params.e, params.theta_u
         self.sc, self.time_scale, self.speed_scale = params.sc, params.time_scale, params.speed_scale
         self.origin_x, self.origin_y = params.origin_x, params.origin_y
 
-    def stream_function(self, x: Any, y: Any, t: Any) -> Any:
+    def stream_function(self, x: npt.ArrayLike, y: npt.ArrayLike, t: npt.ArrayLike) -> np.ndarray:
         """Non-dimensional stream function psi of eq. (13) at NED metres x, y and time t (s)."""
         X = self.sc * (np.asarray(x, float) - self.origin_x)
         Y = self.sc * (np.asarray(y, float) - self.origin_y)
@@ -67,7 +69,7 @@ class CurrentField:
         # dpsi/d. = -sech^2(phi) dphi/d.
         return self.speed_scale * sech2 * dphi_dY, -self.speed_scale * sech2 * dphi_dX
 
-    def velocity(self, x: Any, y: Any, t: Any) -> tuple[np.ndarray, np.ndarray]:
+    def velocity(self, x: npt.ArrayLike, y: npt.ArrayLike, t: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Vectorised current (north, east) in m/s for numpy arrays x, y (m) and t (s)."""
         x, y, t = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float), np.asarray(t, float))
         if not self.enabled:

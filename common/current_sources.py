@@ -36,7 +36,9 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
+import numpy.typing as npt
 
+from common.current_params import CurrentParams
 from common.geodesy import LocalFrame
 
 EAST_NAMES = ("eastward_sea_water_velocity", "surface_eastward_sea_water_velocity",
@@ -61,7 +63,8 @@ class CurrentSource(Protocol):
 
     def velocity_at(self, north: float, east: float, t: float) -> tuple[float, float]: ...
 
-    def velocity(self, north: Any, east: Any, t: Any) -> tuple[np.ndarray, np.ndarray]: ...
+    def velocity(self, north: npt.ArrayLike, east: npt.ArrayLike,
+                 t: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]: ...
 
 
 class UniformCurrent:
@@ -76,7 +79,7 @@ class UniformCurrent:
     def velocity_at(self, north: float, east: float, t: float) -> tuple[float, float]:
         return self.north, self.east
 
-    def velocity(self, north: Any, east: Any, t: Any) -> tuple[np.ndarray, np.ndarray]:
+    def velocity(self, north: npt.ArrayLike, east: npt.ArrayLike, t: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         shape = np.broadcast_shapes(np.shape(north), np.shape(east), np.shape(t))
         return np.full(shape, self.north), np.full(shape, self.east)
 
@@ -350,7 +353,7 @@ class GriddedCurrent:
             out.append(vals[0] if len(vals) == 1 else vals[0] * (1 - ft) + vals[1] * ft)
         return out[0], out[1]
 
-    def velocity(self, north: Any, east: Any, t: Any) -> tuple[np.ndarray, np.ndarray]:
+    def velocity(self, north: npt.ArrayLike, east: npt.ArrayLike, t: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Vectorised (v_north, v_east) m/s; ``t`` a scalar or an array broadcast with the points."""
         n, e, tt = np.broadcast_arrays(np.asarray(north, float), np.asarray(east, float), np.asarray(t, float))
         n, e = np.nan_to_num(n), np.nan_to_num(e)
@@ -385,13 +388,12 @@ def load_file(path: str, frame: LocalFrame, east_variable: str = "", north_varia
     return _FILE_CACHE[key]
 
 
-def make_current(params: Any, frame: LocalFrame | None = None) -> CurrentSource | None:
-    """The current a ``[current]`` table describes (duck-typed ``CurrentParams``), or None when
-    disabled. ``frame``: the geodesy origin, needed for a file."""
+def make_current(params: CurrentParams, frame: LocalFrame | None = None) -> CurrentSource | None:
+    """The current a ``[current]`` table describes, or None when disabled. ``frame``: the geodesy
+    origin, needed for a file."""
     if not params.enabled:
         return None
-    file = getattr(params, "file", "")
-    uniform = tuple(getattr(params, "uniform", ()))
+    file, uniform = params.file, tuple(params.uniform)
     if file:
         if frame is None:
             raise CurrentSourceError("current.file: needs the geodesy origin")
@@ -409,6 +411,6 @@ class NoCurrent:
     def velocity_at(self, north: float, east: float, t: float) -> tuple[float, float]:
         return 0.0, 0.0
 
-    def velocity(self, north: Any, east: Any, t: Any) -> tuple[np.ndarray, np.ndarray]:
+    def velocity(self, north: npt.ArrayLike, east: npt.ArrayLike, t: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         shape = np.broadcast_shapes(np.shape(north), np.shape(east), np.shape(t))
         return np.zeros(shape), np.zeros(shape)

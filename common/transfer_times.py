@@ -10,7 +10,10 @@ from __future__ import annotations
 
 import os
 from array import array
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 class TransferTimes:
@@ -49,7 +52,7 @@ class TransferTimes:
         del self.tid[:]
         del self.at[:]
 
-    def arrays(self) -> tuple[Any, Any]:
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """All pairs so far as numpy arrays (int8 transfer IDs, float64 times)."""
         import numpy as np
 

@@ -29,7 +29,7 @@ import subprocess
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypedDict, final
 
 import numpy as np
 
@@ -38,11 +38,15 @@ from common.frames import map_to_ned
 from common.geodesy import LocalFrame
 from hil.ardupilot_fence import FENCE_VERTEX_EXCLUSION, MISSION_TYPE_FENCE, FenceItem
 from hil.errors import RunFailed, UsageError
+from simulator.json_backend import JsonLinkCounters
 
 if TYPE_CHECKING:
     from hil.hilrun import RunOptions
     from hil.run_summary import RunSummary
     from hil.settings import HilConfig
+    from simulator.config import VesselParams
+    from simulator.core import SimulatorCore
+    from simulator.json_backend import JsonPhysics, JsonServer
 
 ENV_BINARY = "ARDUPILOT_SITL"
 PARAM_FILES = ("rover.parm", "motorboat.parm", "rover-skid.parm")   # ArduPilot's motorboat-skid frame
@@ -56,6 +60,37 @@ SITL_START_TIME = 1735689600
 POLL_EVERY = 10                               # physics steps between looks at ArduRover's MAVLink
 SETUP_TIMEOUT_S = 120.0                       # simulated s for mission upload, arming and AUTO
 IDLE_TIMEOUT_S = 20.0                         # wall s without a servo packet: ArduRover is gone
+
+
+class FenceUpload(TypedDict):
+    """The chart sent as ArduRover's exclusion fence: polygons, vertices, and ArduRover's item requests."""
+
+    polygons: int
+    vertices: int
+    requests: int
+
+
+class ArduRoverSetup(TypedDict):
+    """How ArduRover was set up and flew: the binary, its instance, the parameters written for it,
+    when it went AUTO (s of simulated time), the mission and fence uploaded, and its last messages."""
+
+    binary: str
+    instance: int
+    params: dict[str, float]
+    auto_at_s: float | None
+    mission_items: int
+    fence: FenceUpload | None
+    mission_time_s: float | None        # from AUTO to the end of the run
+    setup_failure: str | None
+    statustext: list[str]
+
+
+@final
+class ArduPilotSimulatorSection(JsonLinkCounters):
+    """The run summary's ``simulator`` section where ArduRover flew: the JSON physics' counters and
+    ArduRover's setup."""
+
+    ardupilot: ArduRoverSetup
 
 
 @dataclass(frozen=True)
@@ -108,7 +143,7 @@ def read_params(paths: tuple[Path, ...]) -> dict[str, float]:
     return out
 
 
-def cruise_throttle(vessel: Any, speed: float) -> float:
+def cruise_throttle(vessel: VesselParams, speed: float) -> float:
     """Percent throttle (both thrusters) that holds ``speed`` (m/s) in calm water on ``vessel``'s hull:
     ArduRover's CRUISE_THROTTLE for CRUISE_SPEED, from eq. (4)'s surge balance."""
     from simulator.vessel import Vessel, hull_dynamics
@@ -124,7 +159,7 @@ def cruise_throttle(vessel: Any, speed: float) -> float:
     return round(100.0 * 0.5 * (lo + hi), 1)
 
 
-def full_turn_rate(vessel: Any) -> float:
+def full_turn_rate(vessel: VesselParams) -> float:
     """Steady yaw rate (rad/s) of ``vessel``'s hull at full differential thrust (one thruster full
     ahead, the other full astern), from eq. (4)'s yaw balance."""
     from simulator.vessel import Vessel, hull_dynamics
@@ -269,7 +304,7 @@ class ArduPilotRun:
                 "--home", f"{lat:.9f},{lon:.9f},{self.cfg.geodesy.alt0:g},{self.home_heading_deg:.3f}",
                 "--serial0", f"udpclient:127.0.0.1:{mav_port}", "--defaults", defaults]
 
-    def execute(self) -> Any:
+    def execute(self) -> RunSummary:
         from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
         from simulator.core import SimulatorCore
@@ -305,7 +340,6 @@ class ArduPilotRun:
         self.tlog = open(self.out / "run.tlog", "wb")
         self.mav_sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         proc: subprocess.Popen | None = None
-        sim_summary: dict[str, Any] = {}
         wall0 = time.monotonic()
         self.deadline = wall0 + opts.wall_timeout
         try:
@@ -321,7 +355,7 @@ class ArduPilotRun:
                     raise UsageError(f"ArduRover SITL binary {self.sitl.binary} does not start: {exc}") from None
             opts.on_progress(f"run: ArduRover pid {proc.pid}, instance {instance}: JSON physics on UDP "
                              f"{JSON_PORT + 10 * instance}, ground stations on TCP {SERIAL0_PORT + 10 * instance + 2}")
-            sim_summary = server.run()
+            server.run()
         except KeyboardInterrupt:
             self.outcome = "interrupted"
         finally:
@@ -342,9 +376,9 @@ class ArduPilotRun:
                 raise RunFailed(f"ArduRover sent no servo packet for {IDLE_TIMEOUT_S:g} s (exit code "
                                 f"{code}){': ' + cause if cause else ''} (see {folder / 'ardurover.log'})")
             self.outcome = "timeout"
-        return self._summary(time.monotonic() - wall0, sim_summary, params, instance)
+        return self._summary(time.monotonic() - wall0, params, instance)
 
-    def _open_instance(self, physics: Any) -> tuple[int, Any]:
+    def _open_instance(self, physics: JsonPhysics) -> tuple[int, JsonServer]:
         """The first SITL instance whose MAVLink TCP ports are free, with its JSON port bound here (a
         run beside this one then takes the next)."""
         from simulator.json_backend import JsonServer
@@ -361,7 +395,7 @@ class ArduPilotRun:
         raise RunFailed(f"no free ArduPilot SITL instance (instances {INSTANCES.start}-{INSTANCES.stop - 1})")
 
     # -- between two physics steps ----------------------------------------------------------------
-    def _after_step(self, core: Any) -> None:
+    def _after_step(self, core: SimulatorCore) -> None:
         t = core.t
         x, y, psi, u, v, r = core.state
         speed = math.hypot(u, v)
@@ -376,7 +410,7 @@ class ArduPilotRun:
             if self.outcome is not None:
                 self.server.stop()
 
-    def _judge(self, core: Any, t: float, n: float, e: float, psi: float, u: float, v: float) -> None:
+    def _judge(self, core: SimulatorCore, t: float, n: float, e: float, psi: float, u: float, v: float) -> None:
         c, s = math.cos(psi), math.sin(psi)
         vn, ve = u * c - v * s, u * s + v * c
         tu = core.time_usec
@@ -522,7 +556,7 @@ class ArduPilotRun:
             self._send(self.mav.heartbeat_encode(6, 8, 0, 0, 4))
 
     # -- the summary -------------------------------------------------------------------------------
-    def _summary(self, wall: float, sim: dict[str, Any], params: dict[str, float], instance: int) -> Any:
+    def _summary(self, wall: float, params: dict[str, float], instance: int) -> RunSummary:
         from hil.run_summary import RunSecurity, RunSummary
 
         times = sorted(self.truth)
@@ -538,7 +572,7 @@ class ArduPilotRun:
             enc = self.encounter_judge.report(self.truth)
             encounters = tuple(enc)
             traffic = RunTraffic(**totals(enc), ship_collision=ship_collision(self.encounter_judge))
-        ms = self.mission
+        ms, physics = self.mission, self.physics
         xte = route_cross_track(track, self.route)
         return RunSummary(
             scenario=self.opts.scenario, seed=self.opts.seed, mode="lockstep", outcome=self.outcome or "timeout",
@@ -550,15 +584,16 @@ class ArduPilotRun:
             planning_cycles=None, plans_accepted=None, deadline_overruns=None, worker_restarts=None,
             fallback_activations=None, tracking=xte, navigation_rmse_m=None, control_latency_ms=None,
             simulator_restarts=0, navigation=None, sensed_obstacles=None,
-            simulator={**{k: sim.get(k) for k in ("packets", "repeats", "malformed", "steps", "frame_rate_hz",
-                                                  "wrong_peer")},
-                       "ardupilot": {"binary": str(self.sitl.binary), "instance": instance, "params": params,
-                                     "auto_at_s": ms.auto_at, "mission_items": len(ms.items),
-                                     "fence": {"polygons": len(self.fence_polygons), "vertices": len(ms.fence),
-                                               "requests": ms.fence_requests} if ms.fence else None,
-                                     "mission_time_s": None if ms.auto_at is None or not times else
-                                     round(times[-1] * 1e-6 - ms.auto_at, 3),
-                                     "setup_failure": ms.failure, "statustext": ms.statustext[-20:]}},
+            simulator=ArduPilotSimulatorSection(
+                packets=physics.packets, repeats=physics.repeats, malformed=physics.malformed, steps=physics.core.n,
+                frame_rate_hz=physics.frame_rate, wrong_peer=self.server.wrong_peer,
+                ardupilot=ArduRoverSetup(
+                    binary=str(self.sitl.binary), instance=instance, params=params, auto_at_s=ms.auto_at,
+                    mission_items=len(ms.items),
+                    fence=FenceUpload(polygons=len(self.fence_polygons), vertices=len(ms.fence),
+                                      requests=ms.fence_requests) if ms.fence else None,
+                    mission_time_s=None if ms.auto_at is None or not times else round(times[-1] * 1e-6 - ms.auto_at, 3),
+                    setup_failure=ms.failure, statustext=ms.statustext[-20:])),
             security=RunSecurity(simulator=None, autopilot=None, autopilot_navigation_numeric={}, tap=None),
             tlog=str(self.out / "run.tlog"), tlog_messages=self.tlog_frames, events=tuple(self.events),
             actuators="ardupilot", encounters=encounters, traffic=traffic)

@@ -8,11 +8,16 @@ to every socket on the interface) and records with python-can's own writer, so t
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 import can
 
 from common.can_params import CanParams, open_bus
+
+
+class CanLogSummary(TypedDict):
+    can_log: str              # the file
+    can_log_frames: int       # frames recorded
 
 
 class CanRecorder:
@@ -28,8 +33,8 @@ class CanRecorder:
     def _count(self, _msg: can.Message) -> None:
         self.frames += 1
 
-    def close(self) -> dict[str, Any]:
+    def close(self) -> CanLogSummary:
         self.notifier.stop(timeout=2.0)
         self.writer.stop()
         self.bus.shutdown()
-        return {"can_log": str(self.path), "can_log_frames": self.frames}
+        return CanLogSummary(can_log=str(self.path), can_log_frames=self.frames)

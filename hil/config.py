@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     from _typeshed import DataclassInstance
 
 T = TypeVar("T", bound="DataclassInstance")
+D = TypeVar("D")   # a TypedDict
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = REPO_ROOT / "configs"
@@ -60,15 +61,36 @@ def _typed_table(value: Any, tp: Any, key: str) -> dict[str, Any]:
     if not isinstance(value, dict):
         raise ValueError(f"{key}: expected a table, got {type(value).__name__}")
     hints = typing.get_type_hints(tp)
+    where = f"{key}." if key else ""
     for k in value:
         if k not in hints:
-            raise ValueError(f"{key}.{k}: unknown key{suggest(k, list(hints))}")
+            raise ValueError(f"{where}{k}: unknown key{suggest(k, list(hints))}")
     # NotRequired read from the hints: with postponed annotations __required_keys__ holds them all.
     marked = typing.get_type_hints(tp, include_extras=True)
     for k in hints:
         if k not in value and get_origin(marked[k]) is not typing.NotRequired:
-            raise ValueError(f"{key}.{k}: missing key")
-    return {k: _convert(v, hints[k], f"{key}.{k}") for k, v in value.items()}
+            raise ValueError(f"{where}{k}: missing key")
+    return {k: _convert(v, hints[k], f"{where}{k}") for k, v in value.items()}
+
+
+def _fit(value: Any, tp: Any) -> int:
+    """How well a table fits the TypedDict ``tp``: its keys that ``tp`` has less those it has not (a
+    union of sections reports the error of the one the table was meant to be)."""
+    if not (isinstance(value, dict) and typing.is_typeddict(tp)):
+        return -(1 << 30)
+    keys = set(typing.get_type_hints(tp))
+    return sum(1 if k in keys else -1 for k in value)
+
+
+def from_typed_table(tp: type[D], table: Any, source: str) -> D:
+    """A parsed JSON table read strictly as the TypedDict ``tp`` (a process's summary): every required
+    key, no unknown key, each value of its type; ConfigError ``SOURCE: key: problem`` otherwise."""
+    if not isinstance(table, dict):
+        raise ConfigError(f"{source}: expected a JSON object, got {type(table).__name__}")
+    try:
+        return typing.cast(D, _typed_table(table, tp, ""))
+    except ValueError as exc:
+        raise ConfigError(f"{source}: {exc}") from None
 
 
 def _convert(value: Any, tp: Any, key: str) -> Any:
@@ -98,12 +120,14 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
         return value
     if origin in (typing.Union, types.UnionType):
         errors = []
-        for alt in get_args(tp):
+        alts = get_args(tp)
+        for alt in alts:
             try:
                 return _convert(value, alt, key)
             except ValueError as exc:
                 errors.append(str(exc))
-        raise ValueError(errors[0])
+        best = max(range(len(alts)), key=lambda i: (_fit(value, alts[i]), -i))
+        raise ValueError(errors[best])
     if origin is tuple:
         args = get_args(tp)
         if not isinstance(value, list):

@@ -46,11 +46,12 @@ from hil import scenario as scenarios
 from hil.errors import RunFailed, UsageError
 from hil.judging import Judge, RunRecord, summarise
 from hil.progress_watch import STALL_WINDOW_S, ProgressWatch
+from hil.routing import RouteRequest, planned_route, write_route
 from hil.run_summary import RunSummary, read_autopilot_summary
 from hil.tap import Tap
 
 if TYPE_CHECKING:
-    from hil.can_log import CanRecorder
+    from hil.can_log import CanLogSummary, CanRecorder
     from hil.settings import HilConfig
 
 REPO = Path(__file__).resolve().parent.parent
@@ -146,11 +147,19 @@ class HilRun:
         self.scen = scenarios.load(opts.scenario, cfg.current, cfg.planner.safety_radius, cfg.geodesy)
         self.scen.check_current_time(float(opts.duration))
         # The global route, planned before any process starts: a waypoint it cannot reach is a one-line error.
+        # Planned once per run: the vessel computer takes it from route.json (hil.routing.PlannedRoute).
+        request = self.scen.route if isinstance(self.scen.route, RouteRequest) else None
         self.route = self.scen.reference_path
         if opts.traffic is not None:
             self.scen.traffic = tuple(opts.traffic)
         self.out: Path = run_folder(opts)
         self.out.mkdir(parents=True, exist_ok=True)
+        self.route_file: Path | None = None
+        if request is not None:
+            self.route_file = self.out / "route.json"
+            write_route(self.route_file, planned_route(request, self.route))
+            opts.on_progress(f"run: planned the global route through {len(request.waypoints)} waypoints "
+                             f"({len(self.route)} points); the vessel computer takes it from {self.route_file}")
         # A reused run folder: the processes' logs of this run start empty (_spawn), and the logs
         # of an earlier run's simulator restarts, which this run may not have, go.
         for stale in self.out.glob("sim-restart*.log"):
@@ -187,7 +196,7 @@ class HilRun:
         self.ap: subprocess.Popen | None = None
         self.sim_restarts = 0
         self.can_recorder: CanRecorder | None = None  # when the thrusters are on CAN
-        self.can_log: dict[str, Any] = {}
+        self.can_log: CanLogSummary | None = None
         self.placement: placement.Placement | None = None
         self._cpu_claim: placement.Claim | None = None
         self.pinned: dict[str, int] = {}          # role -> CPU, what the placement pinned
@@ -233,6 +242,7 @@ class HilRun:
                 "--actuators-to", f"127.0.0.1:{self.sim_port}", "--actuators-to", f"127.0.0.1:{self.tap.port}",
                 "--telemetry-to", f"127.0.0.1:{self.tap.port}", "--telemetry-from", f"127.0.0.1:{self.telemetry_port}",
                 "--seed", str(self.opts.seed), "--summary-out", str(self.out / "autopilot.json"), "--json",
+                *(["--route", str(self.route_file)] if self.route_file is not None else []),
                 *self.opts.extra_autopilot_args]
         if self.opts.lockstep:
             args.append("--lockstep")

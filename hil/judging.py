@@ -14,13 +14,27 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 from scipy import ndimage
 
-from hil.run_summary import RunSecurity, RunSummary, RunTraffic, ShipCollision, TapCounters, read_autopilot_summary
+from hil.run_summary import (
+    BusyPollEnds,
+    HilSimulatorSection,
+    RunCan,
+    RunSecurity,
+    RunSummary,
+    RunTraffic,
+    ShipCollision,
+    SimulatorSecurity,
+    TapCounters,
+    read_autopilot_summary,
+    read_simulator_summary,
+)
 
 if TYPE_CHECKING:
     from common.udp import BusyPollSummary
+    from hil.can_log import CanLogSummary
     from hil.encounter_report import EncounterJudge
     from hil.settings import HilConfig
     from simulator.config import VesselParams
+    from simulator.server import SimulatorSummary
 
 
 class Judge:
@@ -80,21 +94,22 @@ def nav_rmse(estimate: Mapping[tuple[int, int], tuple[float, float]],
     return math.sqrt(float(np.mean(errs))) if errs else None
 
 
-def simulator_part(sim: dict[str, Any], end_s: float, ap_busy_poll: BusyPollSummary | None = None) -> dict[str, Any]:
+def simulator_part(sim: SimulatorSummary, end_s: float, ap_busy_poll: BusyPollSummary | None = None,
+                   cpus: dict[str, int] | None = None) -> HilSimulatorSection:
     """The simulator's counters for the run summary. Stale-command failsafes are those up to the
     run's judged end (s of simulated time); those after it, while the processes were being
     stopped, are counted apart (the simulator runs on in real time while the autopilot exits).
-    ``busy_poll``: how each end's lockstep waits went (common.udp.BusyPoll; None where off)."""
-    out = {k: sim.get(k) for k in ("steps", "commands_received", "malformed_dropped", "stale_command_events",
-                                   "lockstep_resends", "jitter_ms", "stepping", "stalls", "battery")}
-    out["busy_poll"] = {"simulator": sim.get("busy_poll"), "autopilot": ap_busy_poll}
+    ``busy_poll``: how each end's lockstep waits went (common.udp.BusyPoll; None where off);
+    ``cpus``: where each end was pinned (None: not placed)."""
+    after = sum(1 for t in sim["stale_command_times_s"] if t > end_s + 1e-9)
+    out = HilSimulatorSection(
+        steps=sim["steps"], commands_received=sim["commands_received"], malformed_dropped=sim["malformed_dropped"],
+        stale_command_events=sim["stale_command_events"] - after, lockstep_resends=sim["lockstep_resends"],
+        jitter_ms=sim["jitter_ms"], stepping=sim["stepping"], stalls=sim["stalls"], battery=sim["battery"],
+        busy_poll=BusyPollEnds(simulator=sim["busy_poll"], autopilot=ap_busy_poll),
+        stale_command_events_after_end=after, cpus=cpus)
     if "pipeline_skips" in sim:   # the pipelined lockstep (sim.lockstep_pipeline)
         out["pipeline_skips"] = sim["pipeline_skips"]
-    times = sim.get("stale_command_times_s")
-    if times is not None:
-        after = sum(1 for t in times if t > end_s + 1e-9)
-        out["stale_command_events"] = (sim.get("stale_command_events") or 0) - after
-        out["stale_command_events_after_end"] = after
     return out
 
 
@@ -125,12 +140,12 @@ class RunRecord:
     min_clearance: float              # m
     wall_s: float
     decided: int | None
-    autopilot: dict[str, Any] | None
+    autopilot: dict[str, Any] | None      # the processes' summaries as parsed JSON, read strictly here
     simulator: dict[str, Any] | None
     simulator_restarts: int
     pinned: dict[str, int]
     warnings: tuple[str, ...]
-    can_log: dict[str, Any]
+    can_log: CanLogSummary | None
     tlog: Path
 
 
@@ -147,7 +162,7 @@ def summarise(run: RunRecord, tap: TapRecords, cfg: HilConfig,
     energy = thrust_energy(times, speeds, tap.commands, cfg.vessel)
     rmse = nav_rmse(tap.estimate, tap.truth_raw, decided)
     ap = None if run.autopilot is None else read_autopilot_summary(run.autopilot)
-    sim = run.simulator
+    sim = None if run.simulator is None else read_simulator_summary(run.simulator)
     reached = run.outcome == "goal" and run.collision_at is None
     encounters = traffic = None
     if encounter_judge is not None:
@@ -161,8 +176,9 @@ def summarise(run: RunRecord, tap: TapRecords, cfg: HilConfig,
     can = None
     if cfg.can.actuators == "can":
         # The CAN path's counters: transport, ESC status, rejects (wall-clock dependent).
-        can = {"autopilot": None if ap is None else ap.can, "simulator": None if sim is None else sim.get("can"),
-               **run.can_log}
+        can = RunCan(autopilot=None if ap is None else ap.can, simulator=None if sim is None else sim.get("can"))
+        if run.can_log is not None:
+            can["can_log"], can["can_log_frames"] = run.can_log["can_log"], run.can_log["can_log_frames"]
     end_s = times[-1] * 1e-6 if times else 0.0
     return RunSummary(
         scenario=run.scenario,
@@ -189,10 +205,10 @@ def summarise(run: RunRecord, tap: TapRecords, cfg: HilConfig,
         simulator_restarts=run.simulator_restarts,
         navigation=None if ap is None else ap.navigation,
         sensed_obstacles=None if ap is None else ap.sensed_obstacles,
-        simulator=None if sim is None else {**simulator_part(sim, end_s, None if ap is None else ap.busy_poll),
-                                            "cpus": run.pinned or None},
+        simulator=None if sim is None else simulator_part(sim, end_s, None if ap is None else ap.busy_poll,
+                                                          run.pinned or None),
         security=RunSecurity(
-            simulator=None if sim is None else {"rejects": sim.get("rejects"), **(sim.get("command_port") or {})},
+            simulator=None if sim is None else SimulatorSecurity(rejects=sim["rejects"], **sim["command_port"]),
             autopilot=None if ap is None else ap.link,
             autopilot_navigation_numeric={} if ap is None else
             {k: v for k, v in ap.navigation.rejected.items() if k.startswith("numeric_")},

@@ -9,9 +9,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import matplotlib
 
@@ -22,6 +22,13 @@ from matplotlib.collections import LineCollection
 from matplotlib.colors import ListedColormap
 
 from planner.params import REGISTRY
+
+if TYPE_CHECKING:
+    from planner.online import OnlineResult
+    from planner.result import PlannerResult
+
+# A current in the map frame: (x east, y north) m -> (v_east, v_north) m/s (hil.scenario.MapFrameCurrent)
+MapField = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
 def _draw_map(ax, occ: np.ndarray, resolution: float, inflated: np.ndarray | None = None) -> None:
@@ -48,7 +55,7 @@ def _draw_tree(ax, nodes: np.ndarray, parents: np.ndarray, color: str = "#7a9cc6
     ax.add_collection(LineCollection(list(segs), colors=color, linewidths=lw, alpha=0.7, zorder=2))
 
 
-def _draw_field(ax, field: Any, width: float, height: float, n: int = 16) -> None:
+def _draw_field(ax, field: MapField | None, width: float, height: float, n: int = 16) -> None:
     if field is None:
         return
     xs = np.linspace(width / (2 * n), width - width / (2 * n), n)
@@ -67,8 +74,8 @@ def _path(ax, path: np.ndarray, **kw) -> None:
         ax.plot(path[:, 0], path[:, 1], **kw)
 
 
-def plot_plan(out: str | Path, occ: np.ndarray, resolution: float, start, goal, result: Any,
-              inflated: np.ndarray | None = None, field: Any = None, title: str = "") -> Path:
+def plot_plan(out: str | Path, occ: np.ndarray, resolution: float, start, goal, result: PlannerResult,
+              inflated: np.ndarray | None = None, field: MapField | None = None, title: str = "") -> Path:
     """One planning query: map, tree, path, start and goal."""
     fig, ax = plt.subplots(figsize=(7, 7 * occ.shape[0] / occ.shape[1] + 0.5))
     _draw_map(ax, occ, resolution, inflated)
@@ -82,9 +89,9 @@ def plot_plan(out: str | Path, occ: np.ndarray, resolution: float, start, goal, 
     return _save(fig, out)
 
 
-def plot_online(out: str | Path, occ: np.ndarray, resolution: float, runs: Sequence[tuple[str, Any]],
+def plot_online(out: str | Path, occ: np.ndarray, resolution: float, runs: Sequence[tuple[str, OnlineResult]],
                 reference_path: np.ndarray, start, goal, perceptual_radius: float,
-                inflated: np.ndarray | None = None, field: Any = None, title: str = "") -> Path:
+                inflated: np.ndarray | None = None, field: MapField | None = None, title: str = "") -> Path:
     """Figure 10 style, one panel per (label, OnlineResult) in ``runs``."""
     n = max(len(runs), 1)
     aspect = occ.shape[0] / occ.shape[1]

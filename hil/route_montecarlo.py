@@ -19,7 +19,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
+    from hil.executors import Executor
     from hil.run_summary import RunSummary
+    from hil.scenario import Scenario, ScenarioSpec
+    from simulator.config import CurrentParams
 
 
 def _toml_value(v: Any) -> str:
@@ -34,7 +37,7 @@ def _toml_value(v: Any) -> str:
     raise TypeError(f"cannot write {type(v).__name__} to TOML")
 
 
-def write_instance(scen: Any, spec: Any, folder: Path, name: str) -> Path:
+def write_instance(scen: Scenario, spec: ScenarioSpec, folder: Path, name: str) -> Path:
     """``scen`` (a random instance) as a fixed scenario file in ``folder``; returns its path."""
     folder.mkdir(parents=True, exist_ok=True)
     np.save(folder / "map.npy", scen.occ)
@@ -61,7 +64,7 @@ class RouteJob:
 
     seed: int
     duration: float            # s of simulated time at most
-    config: Any                # --config file(s), as hil.settings.load takes them
+    config: str | tuple[str, ...] | None   # --config file(s), as hil.settings.load takes them
     overrides: tuple[str, ...]
 
     def __call__(self, item: tuple[int, str, str]) -> RunSummary:
@@ -75,8 +78,8 @@ class RouteJob:
         return run_loop(opts, settings.load(self.config, list(self.overrides) + NO_GCS))
 
 
-def run_campaign(scenario: str, runs: int, seed: int, out: Path, executor: Any, safety_radius: float,
-                 base_current: Any, run_one: Callable[[tuple[int, str, str]], RunSummary],
+def run_campaign(scenario: str, runs: int, seed: int, out: Path, executor: Executor, safety_radius: float,
+                 base_current: CurrentParams | None, run_one: Callable[[tuple[int, str, str]], RunSummary],
                  progress: Callable[[int, RunSummary], None] = lambda _i, _s: None) -> dict[str, Any]:
     """``runs`` HIL runs of ``run_one((run, scenario_file, folder))`` on instances of the random
     ``scenario``, on ``executor``; writes ``runs.csv`` and ``summary.json``. Ctrl-C or SIGTERM keeps

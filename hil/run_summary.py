@@ -9,17 +9,22 @@ COLREGs encounters) keep those components' own tables.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, NotRequired, TypedDict, TypeVar
+from typing import TYPE_CHECKING, Any, NotRequired, TypedDict, TypeVar, final
 
 from autopilot_bridge.ais_tracking import AisSummary
+from autopilot_bridge.can_actuators import CanPathSummary
 from autopilot_bridge.gcs.link import GcsSummary
 from autopilot_bridge.hil_link import LinkSummary
 from autopilot_bridge.summary import AutopilotSummary, ControlLatency, NavigationCounts
 from autopilot_bridge.tracking_stats import TrackingSummary
 from common.tables import absent_when_none
-from hil.config import from_table
+from common.udp import BusyPollSummary
+from hil.ardupilot import ArduPilotSimulatorSection, ArduRoverSetup
+from hil.config import from_table, from_typed_table
 from hil.encounter_report import EncounterTotals, EncounterVerdict
 from hil.errors import ConfigError, RunFailed
+from simulator.core import BatterySummary
+from simulator.server import CommandPort, JitterMs, SimulatorCanSummary, SimulatorSummary, Stalls, Stepping
 
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance
@@ -50,11 +55,56 @@ class TapCounters(TypedDict):
     kernel_drops: int | None
 
 
+class BusyPollEnds(TypedDict):
+    """How each end's lockstep waits went (common.udp.BusyPoll; None where off)."""
+
+    simulator: BusyPollSummary | None
+    autopilot: BusyPollSummary | None
+
+
+@final
+class HilSimulatorSection(TypedDict):
+    """The run summary's ``simulator`` section where the vessel computer flew: the simulator's counters
+    (:class:`simulator.server.SimulatorSummary`) as the judge reads them. Stale-command failsafes are
+    those up to the run's judged end; those after it, while the processes were being stopped, apart.
+    ``cpus``: the CPUs each end was pinned on (None: not placed)."""
+
+    steps: int
+    commands_received: int
+    malformed_dropped: int
+    stale_command_events: int
+    lockstep_resends: int
+    jitter_ms: JitterMs | None
+    stepping: Stepping | None
+    stalls: Stalls
+    battery: BatterySummary
+    busy_poll: BusyPollEnds
+    pipeline_skips: NotRequired[int]          # the pipelined lockstep only
+    stale_command_events_after_end: int
+    cpus: dict[str, int] | None
+
+
+class SimulatorSecurity(CommandPort):
+    """What the simulator refused, by reason, and its command port's counters."""
+
+    rejects: dict[str, int]
+
+
+class RunCan(TypedDict):
+    """``--actuators can``: the CAN path's counters at both ends (transport, ESC status, rejects; wall-clock
+    dependent) and the run folder's CAN log where one was recorded."""
+
+    autopilot: CanPathSummary | None
+    simulator: SimulatorCanSummary | None
+    can_log: NotRequired[str]
+    can_log_frames: NotRequired[int]
+
+
 @dataclass(frozen=True)
 class RunSecurity:
     """Every refused frame by reason, per endpoint, with the kernel's drops (docs/security.md)."""
 
-    simulator: dict[str, Any] | None
+    simulator: SimulatorSecurity | None
     autopilot: LinkSummary | None                    # the autopilot's HIL link (AutopilotSummary.link)
     autopilot_navigation_numeric: dict[str, int]
     tap: TapCounters | None
@@ -88,7 +138,7 @@ class RunSummary:
     simulator_restarts: int
     navigation: NavigationCounts | None
     sensed_obstacles: dict[str, int] | None
-    simulator: dict[str, Any] | None
+    simulator: HilSimulatorSection | ArduPilotSimulatorSection | None   # by back-end: `hil run --autopilot`
     security: RunSecurity
     tlog: str
     tlog_messages: int
@@ -98,10 +148,20 @@ class RunSummary:
     gcs: GcsSummary | None = absent_when_none()                  # the ground-station link's counters
     encounters: tuple[EncounterVerdict, ...] | None = absent_when_none()   # scenarios with traffic
     traffic: RunTraffic | None = absent_when_none()
-    can: dict[str, Any] | None = absent_when_none()              # --actuators can
+    can: RunCan | None = absent_when_none()                      # --actuators can
     run_folder: str | None = absent_when_none()
     plot: str | None = absent_when_none()
     plot_error: str | None = absent_when_none()
+
+    def simulator_counters(self) -> HilSimulatorSection | None:
+        """The ``simulator`` section where the vessel computer flew (None: ArduRover flew, or no summary)."""
+        sim = self.simulator
+        return None if sim is None or "ardupilot" in sim else sim
+
+    def ardurover(self) -> ArduRoverSetup | None:
+        """ArduRover's setup where it flew (None: the vessel computer flew)."""
+        sim = self.simulator
+        return sim["ardupilot"] if sim is not None and "ardupilot" in sim else None
 
 
 def _read(cls: type[T], table: Any, source: str) -> T:
@@ -113,6 +173,15 @@ def _read(cls: type[T], table: Any, source: str) -> T:
 def read_summary(table: Any, source: str = "summary.json") -> RunSummary:
     """A run summary from its table (parsed JSON); ConfigError names the key that does not fit."""
     return _read(RunSummary, table, source)
+
+
+def read_simulator_summary(table: Any, source: str = "the simulator's summary") -> SimulatorSummary:
+    """The simulator's summary (what `hil sim` prints) from its table; RunFailed names the key that does
+    not fit (the two processes disagree on the contract: a bug, not a user mistake)."""
+    try:
+        return from_typed_table(SimulatorSummary, table, source)
+    except ConfigError as exc:
+        raise RunFailed(str(exc)) from None
 
 
 def read_autopilot_summary(table: Any, source: str = "the autopilot's summary") -> AutopilotSummary:

@@ -55,7 +55,7 @@ from common.params import param
 from hil import charts, config
 from hil.config import CONFIG_DIR
 from hil.errors import ConfigError, UsageError
-from hil.routing import RouteRequest, plan_route, route_waypoints
+from hil.routing import PlannedRoute, RouteRequest, plan_route, route_waypoints, take_route
 from hil.scenario_names import SCENARIO_DIR, available
 from simulator.config import CurrentParams, GeodesyParams
 from simulator.traffic import ShipSpec
@@ -65,6 +65,7 @@ if TYPE_CHECKING:
 
     from common.current_sources import CurrentSource
     from common.geodesy import LocalFrame
+    from hil.maps import Canvas
     from hil.settings import HilConfig
     from planner.online import OnlineParams
     from planner.params import PlannerParams
@@ -198,6 +199,14 @@ class Scenario:
         if isinstance(self.route, RouteRequest):
             self.route = plan_route(self.route)
         return self.route
+
+    def take_planned_route(self, route: PlannedRoute, source: str) -> None:
+        """Follow ``route``, planned by another process from this scenario's own request (`hil run`'s
+        route.json): nothing plans it again. UsageError (one line) where it was planned from another."""
+        if not isinstance(self.route, RouteRequest):
+            raise UsageError(f"{source}: scenario {self.name} gives its route as is (global_route = false): "
+                             f"there is no route to take")
+        self.route = take_route(self.route, route, source)
 
     def truth_occ(self) -> np.ndarray:
         """The simulated world's obstacles: the chart (``occ``) plus the uncharted discs."""
@@ -399,7 +408,7 @@ def _check_current(scen: Scenario, source: str) -> None:
         raise ConfigError(f"{source}: current: {exc}") from None
 
 
-def _current_params(base_current: Any, overrides: dict[str, Any], source: str) -> tuple[Any, float]:
+def _current_params(base_current: CurrentParams, overrides: dict[str, Any], source: str) -> tuple[CurrentParams, float]:
     table = config.to_table(base_current)
     ov = dict(overrides)
     field_time = ov.pop("field_time", 0.0)
@@ -492,7 +501,7 @@ def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: 
     return scen
 
 
-def _instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: Any,
+def _instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: CurrentParams | None,
               safety_radius: float | None, source: str, positions: LocalFrame | None = None) -> Scenario:
     current, field_time = _current_params(base_current if base_current is not None else _default_current(),
                                           spec.current, source)
@@ -537,7 +546,7 @@ def _instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current:
     return _random_instance(spec, rng, current, field_time, _safety_radius(spec, safety_radius, source), source)
 
 
-def _random_instance(spec: ScenarioSpec, rng: np.random.Generator, current: Any, field_time: float,
+def _random_instance(spec: ScenarioSpec, rng: np.random.Generator, current: CurrentParams, field_time: float,
                      safety_radius: float = 2.0, source: str = "random scenario") -> Scenario:
     from hil.maps import Canvas, random_map
     r = spec.random
@@ -566,7 +575,7 @@ def _random_instance(spec: ScenarioSpec, rng: np.random.Generator, current: Any,
     return _random_route(spec, rng, canvas, start, goal, current, field_time, safety_radius, source)
 
 
-def _routed_instance(spec: ScenarioSpec, canvas: Any, start: np.ndarray, goal: np.ndarray, current: Any,
+def _routed_instance(spec: ScenarioSpec, canvas: Canvas, start: np.ndarray, goal: np.ndarray, current: CurrentParams,
                      field_time: float, safety_radius: float) -> Scenario | None:
     """A random scenario whose reference path is the global route from start to goal (no draw of
     its own: the map and end points are those of the straight-line scenario); None where no
@@ -586,8 +595,9 @@ def _routed_instance(spec: ScenarioSpec, canvas: Any, start: np.ndarray, goal: n
                     field_time, dict(spec.planner), dict(spec.online), traffic=spec.traffic, waypoints=wps)
 
 
-def _random_route(spec: ScenarioSpec, rng: np.random.Generator, canvas: Any, start: np.ndarray, goal: np.ndarray,
-                  current: Any, field_time: float, safety_radius: float, source: str) -> Scenario:
+def _random_route(spec: ScenarioSpec, rng: np.random.Generator, canvas: Canvas, start: np.ndarray,
+                  goal: np.ndarray, current: CurrentParams, field_time: float, safety_radius: float,
+                  source: str) -> Scenario:
     """A random scenario with intermediate waypoints: each drawn in the usable area at least
     ``min_leg`` from the previous one (the goal too), cleared like start and goal, and the route
     through them planned; a draw whose route fails (a waypoint walled in) is drawn again."""

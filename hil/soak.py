@@ -133,11 +133,11 @@ def soak_loop(args: argparse.Namespace, cfg: HilConfig, out: Path) -> dict[str, 
     problems: list[str] = []
     if summary.outcome not in ("timeout", "goal"):
         problems.append(f"run ended early: {summary.outcome}")
-    sim = summary.simulator or {}
+    sim = summary.simulator_counters()
     result: dict[str, Any] = {
         "mode": "hil_loop", "actuators": cfg.can.actuators, "duration_s": args.duration,
         "outcome": summary.outcome, "sim_time_s": summary.sim_time_s,
-        "stale_failsafe_events": sim.get("stale_command_events"),
+        "stale_failsafe_events": None if sim is None else sim["stale_command_events"],
         "deadline_overruns": summary.deadline_overruns,
         "events": list(summary.events),
     }
@@ -150,9 +150,11 @@ def soak_loop(args: argparse.Namespace, cfg: HilConfig, out: Path) -> dict[str, 
                f"{seen_load['wall_s'] * seen_load['cpus']:.0f} in {seen_load['wall_s']:.0f} s)")
         problems.append(f"planner deadline overruns {summary.deadline_overruns} > {allowed} allowed{why}")
     if on_can:
-        can = summary.can or {}
-        result["can"] = _can_checks({"autopilot": can.get("autopilot"), "simulator": can.get("simulator")}, problems)
-        result["can_log"] = can.get("can_log")
+        can = summary.can
+        result["can"] = _can_checks({"autopilot": None if can is None else to_table(can["autopilot"]),
+                                     "simulator": None if can is None else to_table(can["simulator"])},
+                                    problems)
+        result["can_log"] = None if can is None else can.get("can_log")
         lat = _latency(ap_rec, sim_rec)
         result["command_to_applied_ms"] = lat
     else:

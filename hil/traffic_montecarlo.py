@@ -31,6 +31,7 @@ import numpy as np
 from simulator.traffic import ShipSpec
 
 if TYPE_CHECKING:
+    from hil.executors import Executor
     from hil.run_summary import RunSummary
 
 
@@ -104,7 +105,7 @@ class TrafficJob:
         return run_loop(opts, settings.load(self.config, list(self.overrides) + NO_GCS))
 
 
-def run_campaign(scenario: str, runs: int, seed: int, draw: TrafficDraw, out: Path, executor: Any,
+def run_campaign(scenario: str, runs: int, seed: int, draw: TrafficDraw, out: Path, executor: Executor,
                  run_one: Callable[[tuple[int, tuple[ShipSpec, ...]]], RunSummary],
                  progress: Callable[[int, RunSummary], None] = lambda _i, _s: None) -> dict[str, Any]:
     """``runs`` HIL runs of ``run_one((run, ships))`` on ``executor`` (:mod:`hil.executors`);

@@ -30,10 +30,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 from common.mavlink import MAV_TYPE as M
 from common.params import param
+
+if TYPE_CHECKING:
+    from simulator.config import EscParams, VesselParams
 
 # A typical NMC Li-ion cell's open-circuit voltage (V) at state of charge 0, 0.05, 0.1, ..., 1.0.
 OCV_STEPS = 20
@@ -75,9 +78,9 @@ def cell_ocv(soc: float) -> float:
 
 class ThrusterPower:
     """Electrical power (W) one thruster draws at a thrust (N): [esc] max_power at full thrust either
-    way, power ~ rpm^3, thrust ~ rpm^2 (``esc``: EscParams; ``vessel``: VesselParams)."""
+    way, power ~ rpm^3, thrust ~ rpm^2."""
 
-    def __init__(self, esc: Any, vessel: Any) -> None:
+    def __init__(self, esc: EscParams, vessel: VesselParams) -> None:
         self.p_max, self.t_max, self.t_min = float(esc.max_power), float(vessel.T_max), float(vessel.T_min)
 
     def __call__(self, thrust: float) -> float:
@@ -88,7 +91,7 @@ class ThrusterPower:
         return self.p_max * (ratio * math.sqrt(ratio) if ratio < 1.0 else 1.0)
 
 
-def thruster_power(thrust: float, esc: Any, vessel: Any) -> float:
+def thruster_power(thrust: float, esc: EscParams, vessel: VesselParams) -> float:
     """:class:`ThrusterPower` once."""
     return ThrusterPower(esc, vessel)(thrust)
 
@@ -147,7 +150,7 @@ class Pack:
         if self.soc <= 0.0:
             self.depleted = True
 
-    def battery_status(self) -> dict[str, Any]:
+    def battery_status(self) -> dict[str, int | list[int]]:
         """Keyword arguments of pymavlink's battery_status_encode: MAVLink units (mV per cell, cA,
         mAh, hJ, %), cells balanced; cells beyond the pack UINT16_MAX as the message asks."""
         n = self.series

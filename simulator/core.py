@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypedDict
 
 from common.current_sources import NoCurrent, make_current
 from common.dronecan_layout import RAW_COMMAND_MAX
@@ -34,6 +34,31 @@ OUT_OF_STEP = "out_of_step_command"        # lockstep: time_usec is not the curr
 WRONG_SOURCE_ID = "wrong_source_id"        # a command not from the autopilot's system/component id
 
 HIL_SENSOR_FIELDS = 0x1FF  # bits 0-8: x/y/z acc, x/y/z gyro, x/y/z mag
+
+
+class BatterySummary(TypedDict):
+    """The pack at the end of a run."""
+
+    state_of_charge: float     # 0-1
+    voltage_v: float           # V at the terminals
+    consumed_mah: float        # mAh
+    energy_wh: float           # Wh
+    depleted: bool
+
+
+class TruthState(TypedDict):
+    """The truth at one instant: time (s), NED position (m), heading (rad), body velocities (m/s,
+    rad/s), latitude and longitude (degrees)."""
+
+    t: float
+    x: float
+    y: float
+    psi: float
+    u: float
+    v: float
+    r: float
+    lat: float
+    lon: float
 
 
 class Command:
@@ -286,18 +311,18 @@ class SimulatorCore:
             pack.draw(self._energy_due / self._frames_due + pack.p.hotel_power, self._frames_due * self.frame_dt)
             self._energy_due, self._frames_due = 0.0, 0
 
-    def battery_summary(self) -> dict[str, float | bool]:
+    def battery_summary(self) -> BatterySummary:
         """The pack at the end: state of charge (0-1), terminal voltage (V), consumed mAh and Wh, empty."""
         self.settle_battery()
         b = self.battery
-        return {"state_of_charge": round(b.soc, 5), "voltage_v": round(b.voltage, 3),
-                "consumed_mah": round(b.consumed_mah, 1), "energy_wh": round(b.energy_j / 3600.0, 3),
-                "depleted": b.depleted}
+        return BatterySummary(state_of_charge=round(b.soc, 5), voltage_v=round(b.voltage, 3),
+                              consumed_mah=round(b.consumed_mah, 1), energy_wh=round(b.energy_j / 3600.0, 3),
+                              depleted=b.depleted)
 
-    def truth(self) -> dict[str, float]:
+    def truth(self) -> TruthState:
         x, y, psi, u, v, r = self.state
         lat, lon = self.geo.sea_level_to_geodetic(x, y)
-        return dict(t=self.t, x=x, y=y, psi=psi, u=u, v=v, r=r, lat=lat, lon=lon)
+        return TruthState(t=self.t, x=x, y=y, psi=psi, u=u, v=v, r=r, lat=lat, lon=lon)
 
 
 def _esc_resolution(x: float) -> float:

@@ -32,7 +32,7 @@ import math
 import time
 from collections import Counter, deque
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, TypedDict
 
 import can
 
@@ -43,6 +43,25 @@ from common.transfer_times import TransferTimes
 if TYPE_CHECKING:
     from simulator.config import EscParams
     from simulator.vessel import Vessel
+
+
+class EscBankSummary(TypedDict):
+    """The ESC nodes' counters: commands applied, the CAN traffic by transfer, rejects by reason."""
+
+    node_ids: list[int]
+    raw_commands_applied: int
+    last_raw_command: list[int] | None           # the newest RawCommand's values for index 0 and 1
+    frames_received: int
+    transfers_received: dict[str, int]
+    transfers_lost: dict[str, int]
+    transfers_duplicated: dict[str, int]
+    transfers_sent: dict[str, int]
+    send_errors: int
+    rejects: dict[str, int]
+    autopilot_health: int | None                 # the autopilot node's NodeStatus health (None: none heard)
+    budget_stops: dict[str, int]
+    node_id_conflicts: int                       # episodes of a second sender with the autopilot's node ID
+
 
 RAW_COMMAND_OUT_OF_RANGE = "raw_command_out_of_range"
 RAW_COMMAND_MISSING_INDEX = "raw_command_missing_index"
@@ -213,19 +232,19 @@ class EscBank:
             for k in range(len(self.node_ids)):
                 self._send(k, dc.NODE_STATUS, dc.node_status(int(t)), dc.PRIORITY_LOW)
 
-    def summary(self) -> dict[str, Any]:
-        return {
-            "node_ids": list(self.node_ids),
-            "raw_commands_applied": self.commands,
-            "last_raw_command": list(self.raw) if self.raw else None,
-            "frames_received": self.receiver.frames,
-            "transfers_received": dict(sorted(self.tracker.received.items())),
-            "transfers_lost": dict(sorted(self.tracker.lost.items())),
-            "transfers_duplicated": dict(sorted(self.tracker.duplicated.items())),
-            "transfers_sent": dict(sorted(self.sent.items())),
-            "send_errors": self.send_errors,
-            "rejects": dict(sorted((self.receiver.rejects + self.rejects).items())),
-            "autopilot_health": self.autopilot_health,
-            "budget_stops": dict(sorted(self.budget_stops.items())),
-            "node_id_conflicts": self.conflicts,
-        }
+    def summary(self) -> EscBankSummary:
+        return EscBankSummary(
+            node_ids=list(self.node_ids),
+            raw_commands_applied=self.commands,
+            last_raw_command=list(self.raw) if self.raw else None,
+            frames_received=self.receiver.frames,
+            transfers_received=dict(sorted(self.tracker.received.items())),
+            transfers_lost=dict(sorted(self.tracker.lost.items())),
+            transfers_duplicated=dict(sorted(self.tracker.duplicated.items())),
+            transfers_sent=dict(sorted(self.sent.items())),
+            send_errors=self.send_errors,
+            rejects=dict(sorted((self.receiver.rejects + self.rejects).items())),
+            autopilot_health=self.autopilot_health,
+            budget_stops=dict(sorted(self.budget_stops.items())),
+            node_id_conflicts=self.conflicts,
+        )

@@ -32,9 +32,9 @@ import struct
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TypedDict
 
-from simulator.core import Command, SimulatorCore
+from simulator.core import Command, SimulatorCore, TruthState
 from simulator.sensors import G
 
 MAGIC_16 = 18458
@@ -43,6 +43,40 @@ HEADER = struct.Struct("<HHI")
 LEFT_THROTTLE, RIGHT_THROTTLE = 73, 74      # ArduPilot SRV_Channel functions
 DEFAULT_LEFT_CHANNEL, DEFAULT_RIGHT_CHANNEL = 1, 3
 MAX_DATAGRAM = 512
+
+
+class JsonLinkCounters(TypedDict):
+    """The servo packets from the firmware: taken, repeated (answered again without a step), malformed;
+    the physics steps, the firmware's physics rate (Hz) and packets from a second sender."""
+
+    packets: int
+    repeats: int
+    malformed: int
+    steps: int
+    frame_rate_hz: int
+    wrong_peer: int
+
+
+class JsonPhysicsSummary(TypedDict):
+    """:meth:`JsonPhysics.summary`: the packets, the steps, simulated time (s), distance run (m), the truth
+    at the end."""
+
+    packets: int
+    repeats: int
+    malformed: int
+    steps: int
+    sim_time_s: float
+    frame_rate_hz: int
+    distance_m: float
+    final_state: TruthState
+
+
+class JsonServerSummary(JsonPhysicsSummary):
+    """:meth:`JsonServer.run`: the physics' summary, packets from a second sender, and whether it ended
+    because the firmware went quiet."""
+
+    wrong_peer: int
+    idle_end: bool
 
 
 @dataclass(frozen=True)
@@ -197,11 +231,11 @@ class JsonPhysics:
         d = self.core.derivative()
         return d[3] - v * r, d[4] + u * r
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> JsonPhysicsSummary:
         c = self.core
-        return {"packets": self.packets, "repeats": self.repeats, "malformed": self.malformed,
-                "steps": c.n, "sim_time_s": c.t, "frame_rate_hz": self.frame_rate,
-                "distance_m": c.distance, "final_state": c.truth()}
+        return JsonPhysicsSummary(packets=self.packets, repeats=self.repeats, malformed=self.malformed, steps=c.n,
+                                  sim_time_s=c.t, frame_rate_hz=self.frame_rate, distance_m=c.distance,
+                                  final_state=c.truth())
 
 
 class JsonServer:
@@ -233,7 +267,7 @@ class JsonServer:
     def done(self) -> bool:
         return self._stop or (self.end_frame is not None and self.physics.core.n >= self.end_frame)
 
-    def run(self) -> dict[str, Any]:
+    def run(self) -> JsonServerSummary:
         """Serve until done; the physics' summary."""
         last = time.monotonic()
         self.sock.settimeout(0.1)
@@ -259,7 +293,7 @@ class JsonServer:
             if self.after_step is not None and self.physics.core.n != n:
                 self.after_step(self.physics.core)
             self.sock.sendto(reply, sender)
-        return {**self.physics.summary(), "wrong_peer": self.wrong_peer, "idle_end": self.idle}
+        return JsonServerSummary(**self.physics.summary(), wrong_peer=self.wrong_peer, idle_end=self.idle)
 
     def close(self) -> None:
         self.sock.close()

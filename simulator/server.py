@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, NotRequired, TypedDict
 
 from common.percentiles import StreamingPercentiles
-from common.udp import BusyPoll, UdpEndpoint
-from simulator.core import OUT_OF_STEP, Command, SimulatorCore
+from common.udp import BusyPoll, BusyPollSummary, UdpEndpoint
+from simulator.core import OUT_OF_STEP, BatterySummary, Command, SimulatorCore, TruthState
+from simulator.esc import EscBankSummary
 
 if TYPE_CHECKING:
     from simulator.esc import EscBank
@@ -27,6 +28,99 @@ STALLS_KEPT = 100   # stall events kept for the summary (count and total are exa
 LEARN = "learn"
 # Why a pipelined lockstep refuses CAN actuators (here and in hil.commands.can_options' pre-flight).
 PIPELINE_NOT_WITH_CAN = "the pipelined lockstep takes its commands over MAVLink, not from CAN ESCs"
+
+
+class JitterMs(TypedDict):
+    """Real time: how late the steps were (ms of wall time)."""
+
+    p50: float | None
+    p99: float | None
+    max: float | None
+
+
+class Stepping(TypedDict):
+    """Lockstep: the steps from the first to the last and the wall time between them (s)."""
+
+    steps: int
+    wall_s: float
+    steps_per_s: float | None
+
+
+class StallEvent(TypedDict):
+    t_s: float           # s of simulated time
+    length_s: float      # wall s
+
+
+class Stalls(TypedDict):
+    """Real time: the stalls (the process paused), counted and the first STALLS_KEPT of them listed."""
+
+    count: int
+    total_s: float
+    events: list[StallEvent]
+
+
+class CommandPort(TypedDict):
+    """Who sent commands to the simulator's port, and what it refused of them."""
+
+    source: str | None                   # "host:port" of the autopilot that earned the port; None: none
+    wrong_source_address: int
+    wrong_source_id: int
+    budget_stops: int
+    kernel_drops: int | None
+
+
+class GpsCounts(TypedDict):
+    fixes: int
+    dropout_fixes: int
+    glitches: int
+
+
+class AisCounts(TypedDict):
+    ships: int
+    reports: int
+    lost: int
+
+
+class SimulatorCanSummary(EscBankSummary):
+    """``--actuators can``: the ESC bank's counters, with the lockstep's missing commands and the MAVLink
+    commands ignored because the thrust comes from CAN."""
+
+    lockstep_commands_missing: int
+    mavlink_commands_ignored: int
+
+
+class SimulatorSummary(TypedDict):
+    """What `hil sim` prints at its end (times in s, distances in m): the steps, the traffic on its ports,
+    rejects by reason, the failsafes, the stalls, the battery and the truth at the end."""
+
+    mode: str                            # "lockstep" or "realtime"
+    seed: int
+    steps: int
+    sim_time_s: float
+    wall_time_s: float
+    steps_per_wall_s: float | None
+    stepping: Stepping | None
+    messages_sent: dict[str, int]
+    datagrams_sent: int
+    commands_received: int
+    rejects: dict[str, int]
+    malformed_dropped: int
+    clamped_controls: int
+    stale_command_events: int
+    stale_command_times_s: list[float]
+    lockstep_resends: int
+    pipeline_skips: NotRequired[int]     # the pipelined lockstep only
+    busy_poll: BusyPollSummary | None
+    command_port: CommandPort
+    jitter_ms: JitterMs | None
+    stalls: Stalls
+    gps: GpsCounts
+    battery: BatterySummary
+    distance_m: float
+    ais: AisCounts | None
+    final_state: TruthState
+    can: NotRequired[SimulatorCanSummary]   # --actuators can
+    commands_on: NotRequired[str]        # "host:port" of the command port (added by `hil sim`)
 
 
 class SimulatorServer:
@@ -101,7 +195,7 @@ class SimulatorServer:
             self.progress(f"sim: t={c.t:.1f} s, {c.n} steps, {c.n / max(1e-9, now - start):.0f} steps/s, "
                           f"{c.commands_received} commands")
 
-    def run(self) -> dict[str, Any]:
+    def run(self) -> SimulatorSummary:
         start = time.monotonic()
         try:
             if self.pipeline:
@@ -290,57 +384,59 @@ class SimulatorServer:
         return t0 + late
 
     # -- report ----------------------------------------------------------------------------
-    def jitter_ms(self) -> dict[str, float | None] | None:
+    def jitter_ms(self) -> JitterMs | None:
         j = self.lateness
         if not j.count:
             return None
-        return {"p50": j.percentile(50), "p99": j.percentile(99), "max": j.max}
+        return JitterMs(p50=j.percentile(50), p99=j.percentile(99), max=j.max)
 
-    def stepping(self) -> dict[str, float | None] | None:
+    def stepping(self) -> Stepping | None:
         """Lockstep: the steps from the first to the last and the wall time between them (s), i.e.
         the loop's speed without start-up and shut-down; None before two steps or in real time."""
         steps = self.core.n - self.first_step_n
         if self.first_step_at is None or self.last_step_at is None or steps < 1:
             return None
         wall = self.last_step_at - self.first_step_at
-        return {"steps": steps, "wall_s": round(wall, 6),
-                "steps_per_s": round(steps / wall, 1) if wall > 0 else None}
+        return Stepping(steps=steps, wall_s=round(wall, 6), steps_per_s=round(steps / wall, 1) if wall > 0 else None)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> SimulatorSummary:
         c = self.core
-        return {
-            "mode": "lockstep" if self.lockstep else "realtime",
-            "seed": c.cfg.sim.seed,
-            "steps": c.n,
-            "sim_time_s": c.t,
-            "wall_time_s": self.wall_time,
-            "steps_per_wall_s": c.n / self.wall_time if self.wall_time > 0 else None,
-            "stepping": self.stepping(),
-            "messages_sent": dict(sorted(c.messages_sent.items())),
-            "datagrams_sent": self.datagrams_sent,
-            "commands_received": c.commands_received,
-            "rejects": dict(sorted(c.rejects.items())),
-            "malformed_dropped": sum(v for k, v in c.rejects.items() if k != OUT_OF_STEP),
-            "clamped_controls": c.clamped_controls,
-            "stale_command_events": c.stale_command_events,
-            "stale_command_times_s": [round(t, 3) for t in c.stale_command_times],
-            "lockstep_resends": self.lockstep_resends,
-            **({"pipeline_skips": self.pipeline_skips} if self.pipeline else {}),
-            "busy_poll": None if self.busy is None else self.busy.summary(),
-            "command_port": {"source": None if self.ep.peer is None else f"{self.ep.peer[0]}:{self.ep.peer[1]}",
-                             "wrong_source_address": self.ep.wrong_source,
-                             "wrong_source_id": c.rejects.get("wrong_source_id", 0),
-                             "budget_stops": self.budget_stops + self.ep.budget_stops,
-                             "kernel_drops": self.ep.kernel_drops()},
-            "jitter_ms": self.jitter_ms(),
-            "stalls": {"count": self.stall_count, "total_s": round(self.stall_total_s, 3),
-                       "events": [{"t_s": round(t, 3), "length_s": round(d, 3)} for t, d in self.stalls]},
-            "gps": {"fixes": c.gps.fixes, "dropout_fixes": c.gps.dropout_fixes, "glitches": c.gps.glitches},
-            "battery": c.battery_summary(),
-            "distance_m": c.distance,
-            "ais": None if c.traffic is None else {"ships": len(c.traffic.ships), "reports": c.traffic.reports_sent,
-                                                   "lost": c.traffic.reports_lost},
-            "final_state": c.truth(),
-            **({"can": {**self.esc.summary(), "lockstep_commands_missing": self.can_commands_missing,
-                        "mavlink_commands_ignored": self.mavlink_commands_ignored}} if self.esc is not None else {}),
-        }
+        out = SimulatorSummary(
+            mode="lockstep" if self.lockstep else "realtime",
+            seed=c.cfg.sim.seed,
+            steps=c.n,
+            sim_time_s=c.t,
+            wall_time_s=self.wall_time,
+            steps_per_wall_s=c.n / self.wall_time if self.wall_time > 0 else None,
+            stepping=self.stepping(),
+            messages_sent=dict(sorted(c.messages_sent.items())),
+            datagrams_sent=self.datagrams_sent,
+            commands_received=c.commands_received,
+            rejects=dict(sorted(c.rejects.items())),
+            malformed_dropped=sum(v for k, v in c.rejects.items() if k != OUT_OF_STEP),
+            clamped_controls=c.clamped_controls,
+            stale_command_events=c.stale_command_events,
+            stale_command_times_s=[round(t, 3) for t in c.stale_command_times],
+            lockstep_resends=self.lockstep_resends,
+            busy_poll=None if self.busy is None else self.busy.summary(),
+            command_port=CommandPort(source=None if self.ep.peer is None else f"{self.ep.peer[0]}:{self.ep.peer[1]}",
+                                     wrong_source_address=self.ep.wrong_source,
+                                     wrong_source_id=c.rejects.get("wrong_source_id", 0),
+                                     budget_stops=self.budget_stops + self.ep.budget_stops,
+                                     kernel_drops=self.ep.kernel_drops()),
+            jitter_ms=self.jitter_ms(),
+            stalls=Stalls(count=self.stall_count, total_s=round(self.stall_total_s, 3),
+                          events=[StallEvent(t_s=round(t, 3), length_s=round(d, 3)) for t, d in self.stalls]),
+            gps=GpsCounts(fixes=c.gps.fixes, dropout_fixes=c.gps.dropout_fixes, glitches=c.gps.glitches),
+            battery=c.battery_summary(),
+            distance_m=c.distance,
+            ais=None if c.traffic is None else AisCounts(ships=len(c.traffic.ships), reports=c.traffic.reports_sent,
+                                                         lost=c.traffic.reports_lost),
+            final_state=c.truth(),
+        )
+        if self.pipeline:
+            out["pipeline_skips"] = self.pipeline_skips
+        if self.esc is not None:
+            out["can"] = SimulatorCanSummary(**self.esc.summary(), lockstep_commands_missing=self.can_commands_missing,
+                                             mavlink_commands_ignored=self.mavlink_commands_ignored)
+        return out

@@ -15,6 +15,8 @@ from pathlib import Path
 import pytest
 from conftest import REPO, run_hil
 
+from hil.run_summary import read_summary
+
 SITL = REPO.parent / "shared" / "ardupilot" / "ardurover"
 needs_sitl = pytest.mark.skipif(not SITL.is_file(), reason=f"the ArduRover SITL binary is not at {SITL}")
 NO_ENV = {"ARDUPILOT_SITL": ""}
@@ -148,6 +150,9 @@ def test_ardurover_flies_the_harbour_route_and_a_rerun_is_byte_identical(tmp_pat
                 proc.communicate()
         assert proc.returncode == 0, stderr[-2000:]
         summaries.append(json.loads(stdout))
+        typed = read_summary(summaries[-1])    # its simulator section as the JSON back-end typed it
+        setup = typed.ardurover()
+        assert setup is not None and typed.simulator_counters() is None and setup["mission_items"] > 1
     s = summaries[0]
     assert s["outcome"] == "goal" and s["reached_goal"] and s["collisions"] == 0
     assert s["min_clearance_m"] > 1.0 and s["energy_J"] > 0 and s["actuators"] == "ardupilot"

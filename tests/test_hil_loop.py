@@ -16,6 +16,7 @@ from hil.hilrun import (
     RunOptions,
     run_loop,
 )
+from hil.run_summary import read_summary
 
 
 def _run(hil, tmp_path, *args: str, name: str = "run", traffic: bool = True) -> tuple[int, dict]:
@@ -25,6 +26,8 @@ def _run(hil, tmp_path, *args: str, name: str = "run", traffic: bool = True) -> 
     summary = json.loads(r.stdout.strip().splitlines()[-1])
     assert (out / "summary.json").exists() and (out / "run.tlog").exists()
     assert not traffic or (out / "run.tlog").stat().st_size > 0
+    typed = read_summary(summary)     # every section as its owner typed it (hil/run_summary.py)
+    assert typed.simulator_counters() == typed.simulator and typed.ardurover() is None   # None: no simulator summary
     return r.returncode, summary
 
 

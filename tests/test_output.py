@@ -10,7 +10,7 @@ import struct
 
 import numpy as np
 import pytest
-from support.summaries import run_summary
+from support.summaries import SIMULATOR, run_summary
 
 from autopilot_bridge.summary import ControlLatency, NavigationCounts
 from hil import cli, console, plots
@@ -23,7 +23,7 @@ SUMMARY = run_summary(
     tracking={"frames": 100, "cross_track_rms_m": 0.2, "cross_track_max_m": 0.9},
     navigation_rmse_m=0.1, control_latency_ms=ControlLatency(p50=0.4, p99=6.0, max=80.0, frames=100),
     navigation=NavigationCounts(updates={"gps_pos": 450}, rejected={"gps_pos": 4}, position_resets=0),
-    simulator={"steps": 4530, "malformed_dropped": 0, "stale_command_events": 1, "jitter_ms": None},
+    simulator={**SIMULATOR, "stale_command_events": 1},
     events=tuple(f"{t:.2f}s fallback: reactive avoidance, no valid local path " + "x" * 300 for t in range(2000)),
     gcs={"rejects": {f"reason_{i}": i + 1 for i in range(60)}, "received": {}, "signing": False},
     actuators="mavlink", run_folder="/tmp/run", plot="/tmp/run/plot.png",

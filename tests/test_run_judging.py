@@ -42,7 +42,7 @@ def straight_run(seconds: int = 10) -> Records:
 def record(**kw: Any) -> RunRecord:
     base: dict[str, Any] = dict(scenario="harbour", seed=3, lockstep=True, speedup=1.0, outcome="goal",
                                 collision_at=None, min_clearance=4.25, wall_s=1.234, decided=None, autopilot=None,
-                                simulator=None, simulator_restarts=0, pinned={}, warnings=(), can_log={},
+                                simulator=None, simulator_restarts=0, pinned={}, warnings=(), can_log=None,
                                 tlog=Path("run.tlog"))
     base.update(kw)
     return RunRecord(**base)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -218,3 +219,59 @@ def test_a_fixed_scenario_without_start_or_goal_says_so(tmp_path, key):
     with pytest.raises(ConfigError, match=f"{key}: missing key") as err:
         scenarios.load_spec(str(path))
     assert "\n" not in str(err.value)
+
+
+def test_the_vessel_computer_takes_the_route_hil_run_planned_and_plans_it_when_started_alone(tmp_path, monkeypatch,
+                                                                                             capsys):
+    """hil.assembly.computer.known_scenario: with `hil run`'s route.json the route is taken as planned there
+    (no planning); alone it plans the route itself; a route planned for another scenario, chart or safety
+    radius, or a file that is not one, is a one-line UsageError."""
+    from hil import routing, settings
+    from hil.assembly.computer import known_scenario
+
+    cfg = settings.load()
+    calls: list[routing.RouteRequest] = []
+    real = scenarios.plan_route
+
+    def counted(req: routing.RouteRequest) -> np.ndarray:
+        calls.append(req)
+        return real(req)
+
+    monkeypatch.setattr(scenarios, "plan_route", counted)
+    alone = known_scenario(cfg, "harbour")
+    assert len(calls) == 1 and "planned the global route through" in capsys.readouterr().err
+    planned = scenarios.load("harbour", cfg.current, cfg.planner.safety_radius, cfg.geodesy)
+    request = planned.route
+    assert isinstance(request, routing.RouteRequest)
+    file = tmp_path / "route.json"
+    routing.write_route(file, routing.planned_route(request, planned.reference_path))
+    assert len(calls) == 2
+    handed = known_scenario(cfg, "harbour", str(file))
+    assert len(calls) == 2, "the vessel computer planned the route again"
+    np.testing.assert_array_equal(handed.reference_path, alone.reference_path)
+    assert "not planned here" in capsys.readouterr().err
+
+    def refused(route_file: str, scenario: str = "harbour", safety: float | None = None) -> str:
+        c = cfg if safety is None else settings.load(None, [f"planner.safety_radius={safety}"])
+        with pytest.raises(UsageError) as exc:
+            known_scenario(c, scenario, route_file)
+        assert "\n" not in str(exc.value)
+        return str(exc.value)
+
+    assert "another route's waypoints" in refused(str(file), "labyrinth")
+    assert "another safety radius" in refused(str(file), safety=cfg.planner.safety_radius + 0.5)
+    table = json.loads(file.read_text())
+    table["chart_sha256"] = "0" * 64
+    (tmp_path / "chart.json").write_text(json.dumps(table))
+    assert "another chart" in refused(str(tmp_path / "chart.json"))
+    table = json.loads(file.read_text())
+    table["path"][3] = [1e6, 5.0]
+    (tmp_path / "far.json").write_text(json.dumps(table))
+    assert "on the chart" in refused(str(tmp_path / "far.json"))
+    del table["path"]
+    (tmp_path / "short.json").write_text(json.dumps(table))
+    assert refused(str(tmp_path / "short.json")).endswith("path: missing key")
+    (tmp_path / "junk.json").write_text("{not json")
+    assert "not JSON" in refused(str(tmp_path / "junk.json"))
+    assert "No such file" in refused(str(tmp_path / "none.json"))
+    assert len(calls) == 2     # a refused route is one line before anything is planned

@@ -224,6 +224,32 @@ def test_realtime_stale_commands_and_sigterm_summary():
     assert summary["final_state"]["u"] < 1.0  # coasting down without thrust
 
 
+def test_the_summary_with_can_escs_is_read_as_the_simulators_type():
+    """The simulator with its ESC bank on a CAN bus (python-can's in-process bus: `hil sim` would refuse
+    it) runs over its real UDP endpoint and gives a summary that, through JSON, reads strictly as
+    SimulatorSummary, its ``can`` section included (what `hil run` reads with read_simulator_summary)."""
+    from hil import settings
+    from hil.assembly.simulator import build_simulator
+    from hil.console import to_json
+    from hil.run_summary import read_simulator_summary
+
+    client = HilClient()
+    cfg = settings.load(None, ['can.actuators="can"', 'can.interface="virtual"',
+                               f'can.channel="sim-summary-{os.getpid()}"', "sim.lockstep=false", "sim.duration=0.5",
+                               "sim.speedup=20.0", 'link.commands_on="127.0.0.1:0"',
+                               f'link.state_to=["127.0.0.1:{client.port}"]'])
+    parts = build_simulator(cfg, None, ())
+    try:
+        summary = parts.server.run()
+    finally:
+        parts.close(None)
+        client.close()
+    typed = read_simulator_summary(json.loads(to_json(summary)))
+    assert typed == json.loads(to_json(summary)) and typed["steps"] == 50 and typed["mode"] == "realtime"
+    can = typed.get("can")
+    assert can is not None and can["node_ids"] and can["raw_commands_applied"] == 0
+
+
 def test_realtime_applies_newest_command():
     client = HilClient()
     proc = start_sim(client.port, "--speedup", "5", "--duration", "3")

@@ -150,3 +150,23 @@ def test_loading_a_scenario_plans_no_route_its_first_use_plans_it_once(tmp_path,
     bad = scenarios.load(str(pond_scenario(tmp_path, [[10.0, 20.0], [51.0, 30.0], [90.0, 20.0]])))
     with pytest.raises(ConfigError, match=r"reference_path\[1\]: \(51\.0, 30\.0\) m is inside an obstacle"):
         _ = bad.reference_path
+
+
+def test_a_run_plans_its_route_once_and_its_vessel_computer_takes_it(hil, tmp_path):
+    """`hil run` plans the global route before starting any process and hands it to the vessel computer
+    (route.json, `hil autopilot --route`), which does not plan it again: one planning per run, counted by
+    the line each planning process writes."""
+    from hil.routing import read_route
+
+    out = tmp_path / "run"
+    r = hil("run", "--scenario", str(scenario_file(tmp_path, "harbour", HARBOUR_4)), "--lockstep", "--duration", "3",
+            "--json", "--no-plot", "--out", str(out), timeout=600)
+    assert r.stdout.strip(), r.stderr[-2000:]
+    autopilot_log = (out / "autopilot.log").read_text()
+    planned = [ln for ln in (r.stderr + autopilot_log).splitlines() if "planned the global route" in ln]
+    assert len(planned) == 1 and planned[0].startswith("run: "), planned
+    taken = [ln for ln in autopilot_log.splitlines() if "global route from" in ln]
+    assert len(taken) == 1 and str(out / "route.json") in taken[0] and "not planned here" in taken[0]
+    route = read_route(out / "route.json")
+    assert len(route.waypoints) == len(HARBOUR_4) and f"({len(route.path)} points)" in planned[0]
+    assert json.loads(r.stdout.strip().splitlines()[-1])["sim_time_s"] == 3.0

@@ -8,11 +8,21 @@ import dataclasses
 import json
 
 import pytest
-from support.summaries import CAN, ENCOUNTER, GCS, RUN_TRAFFIC, TRAFFIC, autopilot_summary, run_summary
+from support.summaries import (
+    ARDUPILOT,
+    CAN,
+    ENCOUNTER,
+    GCS,
+    RUN_CAN,
+    RUN_TRAFFIC,
+    TRAFFIC,
+    autopilot_summary,
+    run_summary,
+)
 
 from common.tables import to_table
 from hil.errors import ConfigError, RunFailed
-from hil.run_summary import read_autopilot_summary, read_summary
+from hil.run_summary import read_autopilot_summary, read_simulator_summary, read_summary
 
 
 def _through_json(summary):
@@ -24,7 +34,9 @@ def _through_json(summary):
     run_summary(outcome="collision", reached_goal=False, collisions=1, collision_time_s=45.25, energy_J=None,
                 warnings=("another hil run streams with system id 1",), gcs=GCS,
                 encounters=(ENCOUNTER, {"mmsi": 412000104, "name": "", "type": "not met", "compliant": None}),
-                traffic=RUN_TRAFFIC, can={"autopilot": None}, plot=None, plot_error="OSError: x"),
+                traffic=RUN_TRAFFIC, can=RUN_CAN, plot=None, plot_error="OSError: x"),
+    run_summary(simulator=ARDUPILOT, actuators="ardupilot", planning_cycles=None, security=dataclasses.replace(
+        run_summary().security, simulator=None, autopilot=None, tap=None)),    # ArduRover flew
     run_summary(planning_cycles=None, plans_accepted=None, deadline_overruns=None, worker_restarts=None,
                 fallback_activations=None, tracking=None, control_latency_ms=None, navigation=None,
                 sensed_obstacles=None, simulator=None, run_folder=None, plot=None),   # the autopilot was killed
@@ -105,3 +117,58 @@ def test_a_section_is_read_as_its_owner_typed_it():
     no_frames = to_table(autopilot_summary(tracking={"frames": 0}))     # TrackingStats with nothing to say
     assert read_autopilot_summary(no_frames).tracking == {"frames": 0}
 
+
+
+def test_the_simulator_section_is_read_as_its_back_end_typed_it():
+    """``simulator`` is the vessel computer's run's section (HilSimulatorSection) or ArduRover's
+    (ArduPilotSimulatorSection): each is read strictly, the error names the key of the section the table
+    is, and ``can`` and ``security.simulator`` have their types too."""
+    hil_run = read_summary(_through_json(run_summary()))
+    assert hil_run.simulator_counters() == hil_run.simulator and hil_run.ardurover() is None
+    flown = read_summary(_through_json(run_summary(simulator=ARDUPILOT)))
+    assert flown.simulator_counters() is None and flown.ardurover() == ARDUPILOT["ardupilot"]
+    table = to_table(run_summary(simulator=ARDUPILOT))
+    table["simulator"]["ardupilot"]["instance"] = "eleven"
+    with pytest.raises(ConfigError, match=r"^summary.json: simulator.ardupilot.instance: expected an integer, "
+                                          r"got 'eleven'$"):
+        read_summary(table)
+    table = to_table(run_summary())
+    table["simulator"]["stepping"]["steps_per_s"] = "fast"
+    with pytest.raises(ConfigError, match=r"^summary.json: simulator.stepping.steps_per_s: expected a number"):
+        read_summary(table)
+    table = to_table(run_summary())
+    del table["simulator"]["battery"]
+    with pytest.raises(ConfigError, match=r"^summary.json: simulator.battery: missing key$"):
+        read_summary(table)
+    table = to_table(run_summary(can=RUN_CAN))
+    table["can"]["simulator"]["raw_commands_aplied"] = 3
+    with pytest.raises(ConfigError, match=r"^summary.json: can.simulator.raw_commands_aplied: unknown key \(did you "
+                                          r"mean 'raw_commands_applied'\?\)$"):
+        read_summary(table)
+    table = to_table(run_summary())
+    del table["security"]["simulator"]["kernel_drops"]
+    with pytest.raises(ConfigError, match=r"^summary.json: security.simulator.kernel_drops: missing key$"):
+        read_summary(table)
+
+
+def test_the_simulators_own_summaries_are_read_as_their_types():
+    """What the simulator's parts print, built for real in-process (the JSON back-end's physics answering
+    servo packets; the core's battery and truth), read back strictly as the types they declare."""
+    from hil import settings
+    from hil.config import from_typed_table
+    from simulator.core import SimulatorCore
+    from simulator.json_backend import JsonPhysics, JsonPhysicsSummary, SkidMixer, encode_servo_packet
+
+    core = SimulatorCore(settings.load(), None, ())
+    physics = JsonPhysics(core, SkidMixer.from_params({"SERVO1_FUNCTION": 73, "SERVO3_FUNCTION": 74}), (0.0, 0.0))
+    pwm = (1900, 1500, 1900) + (1500,) * 13
+    for n in range(5):
+        physics.answer(encode_servo_packet(400, n, pwm))
+    summary = json.loads(json.dumps(physics.summary()))
+    assert from_typed_table(JsonPhysicsSummary, summary, "json") == summary
+    assert summary["packets"] == 5 and summary["final_state"]["u"] > 0.0
+    summary["final_state"]["psi"] = None
+    with pytest.raises(ConfigError, match=r"^json: final_state.psi: expected a number, got None$"):
+        from_typed_table(JsonPhysicsSummary, summary, "json")
+    with pytest.raises(RunFailed, match=r"^the simulator's summary: expected a JSON object, got list$"):
+        read_simulator_summary([])

@@ -58,19 +58,37 @@ def run_options(cfg: HilConfig, lockstep: bool) -> RunOptions:
                       home_item=cfg.gcs.identity == "ardupilot")
 
 
+def known_scenario(cfg: HilConfig, scenario_name: str, route_file: str | None = None) -> Scenario:
+    """The scenario the vessel computer knows a priori, with its global route: planned here, or with
+    ``route_file`` (`hil run`'s route.json, a :class:`hil.routing.PlannedRoute`) taken as planned there,
+    so that a run plans it once. A file planned for another scenario is a one-line UsageError."""
+    from hil import scenario as scenarios
+    from hil.routing import RouteRequest, read_route
+
+    scen = scenarios.load(scenario_name, cfg.current, cfg.planner.safety_radius, cfg.geodesy)
+    if route_file is not None:
+        scen.take_planned_route(read_route(route_file), f"--route {route_file}")
+        progress(f"autopilot: global route from {route_file} ({len(scen.reference_path)} points), not planned here")
+    elif isinstance(scen.route, RouteRequest):
+        waypoints = len(scen.route.waypoints)
+        progress(f"autopilot: planned the global route through {waypoints} waypoints "
+                 f"({len(scen.reference_path)} points)")
+    return scen
+
+
 def build(cfg: HilConfig, scenario_name: str, lockstep: bool, planner_factory: str | None = None,
-          sensors_from: str | None = None) -> tuple[Autopilot, HilLink]:
+          sensors_from: str | None = None, route_file: str | None = None) -> tuple[Autopilot, HilLink]:
     """The autopilot and its parts from a configuration and a scenario (used by `hil run` too), with
-    its UDP link to the simulator (the process reports and closes it; the autopilot sees a SensorLink)."""
+    its UDP link to the simulator (the process reports and closes it; the autopilot sees a SensorLink).
+    ``route_file``: the scenario's global route as `hil run` planned it (:func:`known_scenario`)."""
     from autopilot_bridge.autopilot import Autopilot
     from autopilot_bridge.computer_setup import Devices
     from autopilot_bridge.gcs.link import GcsLink
     from autopilot_bridge.hil_link import HilLink
     from autopilot_bridge.planning_worker import PlannerWorker
     from common.geodesy import LocalFrame
-    from hil import scenario as scenarios
 
-    scen = scenarios.load(scenario_name, cfg.current, cfg.planner.safety_radius, cfg.geodesy)
+    scen = known_scenario(cfg, scenario_name, route_file)
     world = planning_world(cfg, scen)
     # What the parts take, derived here first: the configuration then only goes down.
     computer, options, time_step = computer_config(cfg), run_options(cfg, lockstep), max_time_step(cfg, lockstep)

@@ -29,6 +29,9 @@ from hil.errors import UsageError
 if TYPE_CHECKING:
     import numpy as np
 
+    from common.geodesy import LocalFrame
+    from hil.ardupilot import SitlFiles
+    from hil.run_summary import RunSummary
     from hil.settings import HilConfig
 
 ENCOUNTERS = ("colregs-head-on", "colregs-crossing-right", "colregs-crossing-left", "colregs-overtaking")
@@ -75,12 +78,12 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.set_defaults(func=run)
 
 
-def truth_track(tlog: Path, geo: Any, until_s: float) -> np.ndarray:
+def truth_track(tlog: Path, geo: LocalFrame, until_s: float) -> np.ndarray:
     """The truth (north, east) in m from a run's .tlog, up to ``until_s`` of simulated time."""
     return timed_track(tlog, geo, until_s)[1]
 
 
-def timed_track(tlog: Path, geo: Any, until_s: float) -> tuple[np.ndarray, np.ndarray]:
+def timed_track(tlog: Path, geo: LocalFrame, until_s: float) -> tuple[np.ndarray, np.ndarray]:
     """(times s, (north, east) m) of the truth in a run's .tlog, up to ``until_s`` of simulated time."""
     import numpy as np
     from pymavlink import mavutil
@@ -99,7 +102,7 @@ def timed_track(tlog: Path, geo: Any, until_s: float) -> tuple[np.ndarray, np.nd
     return np.array(times, dtype=float), np.array(pts, dtype=float).reshape(-1, 2)
 
 
-def station_figures(summary: Any, goal_ned: tuple[float, float], tolerance: float, geo: Any,
+def station_figures(summary: RunSummary, goal_ned: tuple[float, float], tolerance: float, geo: LocalFrame,
                     hold_s: float = 60.0) -> dict[str, Any]:
     """Station keeping over the last ``hold_s`` simulated seconds of a run: RMS and largest distance
     (m) from ``goal_ned``, the share of that time within ``tolerance`` (m); and when the boat first came
@@ -164,7 +167,7 @@ def moving_from(tlog: Path, until_s: float, speed: float = 0.3) -> float | None:
     return None
 
 
-def flight_figures(summary: Any, route_ned: np.ndarray, geo: Any) -> dict[str, Any]:
+def flight_figures(summary: RunSummary, route_ned: np.ndarray, geo: LocalFrame) -> dict[str, Any]:
     from autopilot_bridge.tracking_stats import TrackingSummary
     from hil.ardupilot import route_cross_track
 
@@ -240,14 +243,15 @@ def run(args: argparse.Namespace) -> int:
             if ap_summary.outcome == "interrupted":   # Ctrl-C ends the bench, not just this flight
                 raise KeyboardInterrupt
             theirs = flight_figures(ap_summary, route, geo)
-            ap = (ap_summary.simulator or {}).get("ardupilot", {})
-            theirs["setup_to_auto_s"] = ap.get("auto_at_s")   # moored until then: the mission counts from AUTO
+            ap = ap_summary.ardurover()
+            # moored until AUTO: the mission counts from there
+            theirs["setup_to_auto_s"] = None if ap is None else ap["auto_at_s"]
             theirs["collision_time_s"] = ap_summary.collision_time_s
             if fence:
-                theirs["fence"] = ap.get("fence")
-                theirs["mission_waypoints"] = ap.get("mission_items")
+                theirs["fence"] = None if ap is None else ap["fence"]
+                theirs["mission_waypoints"] = None if ap is None else ap["mission_items"]
             if theirs["reached_goal"]:
-                theirs["mission_time_s"] = ap.get("mission_time_s")
+                theirs["mission_time_s"] = None if ap is None else ap["mission_time_s"]
             ratios = {k: ratio(theirs[k], ours[k]) for k in METRICS if k != "collisions"}
             result["scenarios"][row] = {"ardurover": theirs, "vessel_computer": ours, "ratio": ratios}
             lines += [_row(row, "ArduRover", theirs), _row("", "ours", ours),
@@ -258,7 +262,8 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _station(args: argparse.Namespace, cfg: HilConfig, sitl: Any, geo: Any, root: Path, lines: list[str]) -> dict:
+def _station(args: argparse.Namespace, cfg: HilConfig, sitl: SitlFiles, geo: LocalFrame, root: Path,
+             lines: list[str]) -> dict:
     from hil.ardupilot import run_ardupilot
     from hil.hilrun import RunOptions, run_loop
 
@@ -281,7 +286,8 @@ def _station(args: argparse.Namespace, cfg: HilConfig, sitl: Any, geo: Any, root
     progress("bench ardupilot: station keeping: ArduRover (LOITER)")
     ap = run_ardupilot(opts("ardurover"), cfg, sitl)
     theirs = station_figures(ap, (gy, gx), tol, geo, args.station_hold)
-    auto = (ap.simulator or {}).get("ardupilot", {}).get("auto_at_s")
+    setup = ap.ardurover()
+    auto = None if setup is None else setup["auto_at_s"]
     if theirs["arrived_s"] is not None and auto is not None:
         theirs["arrived_s"] = round(theirs["arrived_s"] - auto, 2)   # from AUTO, as ours from the start
     keys = ("station_rms_m", "station_max_m", "within_tolerance", "arrived_s")

@@ -25,10 +25,15 @@ from __future__ import annotations
 import argparse
 import itertools
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hil.console import emit, progress
 from hil.errors import UsageError
+
+if TYPE_CHECKING:
+    import can
+
+    from hil.settings import HilConfig
 
 REAL_BUS_RATE = 8000.0     # frames/s: a 1 Mbit/s bus full of ~130-bit extended frames
 FOREIGN_NODE = 99
@@ -67,13 +72,13 @@ def _pct(xs: list[float]) -> dict[str, float] | None:
             "max": round(s[-1], 3)}
 
 
-def _queued(bus: Any) -> int | None:
+def _queued(bus: can.BusABC) -> int | None:
     """Frames waiting in a python-can virtual bus's receive queue (None: a SocketCAN socket's is not known)."""
     queue = getattr(bus, "queue", None)
     return None if queue is None else int(queue.qsize())
 
 
-def leg(cfg: Any, duration_s: float, rate: float, time_budget: bool, filtered: bool = False) -> dict[str, Any]:
+def leg(cfg: HilConfig, duration_s: float, rate: float, time_budget: bool, filtered: bool = False) -> dict[str, Any]:
     """One real-time run of ``duration_s`` wall seconds under ``rate`` foreign frames/s; ``filtered``: the
     ESC socket with the simulator's kernel filter (SocketCAN only)."""
     import can

@@ -19,10 +19,13 @@ import pstats
 import socket
 import statistics
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hil.console import emit, load_settings, progress
 from hil.errors import UsageError
+
+if TYPE_CHECKING:
+    from autopilot_bridge.navigation import NavigationParams
 
 # Profile rows: (label, [(file suffix, function name), ...]) summed by cumulative time. The rows
 # are disjoint calls of one frame (none calls another), so their shares add up; "other" is the rest.
@@ -159,7 +162,7 @@ def _timed(args: argparse.Namespace, profile: bool) -> tuple[list[float], int, c
     return times, waited, prof
 
 
-def bench_filters(nav: Any, frames: int, seed: int) -> dict[str, float]:
+def bench_filters(nav: NavigationParams, frames: int, seed: int) -> dict[str, float]:
     """Microseconds per 100 Hz frame of the navigation filter alone, per implementation, on one
     synthetic seeded sequence as the HIL link delivers it: gyro and compass every frame, GPS
     position and velocity every 10th (10 Hz), called as ``Autopilot._fuse`` calls them."""

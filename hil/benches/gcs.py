@@ -6,13 +6,16 @@ import argparse
 import json
 import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from common.tables import to_table
 from hil.console import emit, load_settings, progress
 from hil.errors import UsageError
 
 if TYPE_CHECKING:
+    from multiprocessing.queues import Queue
+    from multiprocessing.synchronize import Event
+
     from hil.run_summary import RunSummary
 
 GOAL_P99_MS = 2.0
@@ -58,7 +61,7 @@ def _requests() -> list[bytes]:
     )]
 
 
-def flood(port: int, rate: float, stop: Any, result: Any) -> None:
+def flood(port: int, rate: float, stop: Event, result: Queue[str]) -> None:
     """Send read requests to 127.0.0.1:port at ``rate`` per second in 10 ms batches until ``stop`` is set;
     count the bytes sent and the bytes the boat sent back (put on ``result`` as a JSON line)."""
     import socket
@@ -97,10 +100,11 @@ def flood(port: int, rate: float, stop: Any, result: Any) -> None:
 
 
 def _leg(summary: RunSummary) -> dict:
-    sim = summary.simulator or {}
+    sim = summary.simulator_counters()
     gcs = summary.gcs
-    return {"control_latency_ms": to_table(summary.control_latency_ms), "step_jitter_ms": sim.get("jitter_ms"),
-            "stale_command_events": sim.get("stale_command_events"),
+    return {"control_latency_ms": to_table(summary.control_latency_ms),
+            "step_jitter_ms": None if sim is None else sim["jitter_ms"],
+            "stale_command_events": None if sim is None else sim["stale_command_events"],
             "gcs_frames_in": None if gcs is None else gcs["frames_in"],
             "gcs_service_ms": None if gcs is None else gcs["service_ms"],
             "gcs_security_rejects": None if gcs is None else gcs["security_rejects"], "outcome": summary.outcome}

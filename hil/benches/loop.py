@@ -53,9 +53,9 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
 
 
 def _leg(summary: RunSummary) -> dict:
-    sim = summary.simulator or {}
-    steps = sim.get("steps") or 0
-    stepping = sim.get("stepping") or {}
+    sim = summary.simulator_counters()
+    steps = 0 if sim is None else sim["steps"]
+    stepping = None if sim is None else sim["stepping"]
     end_to_end = round(steps / summary.wall_time_s, 1) if summary.wall_time_s else None
     return {
         "sim_time_s": summary.sim_time_s,
@@ -63,20 +63,20 @@ def _leg(summary: RunSummary) -> dict:
         # The loop's speed from the simulator's first step to its last (the simulator's clock);
         # the processes' start-up and shut-down are one-off costs, reported apart.
         "steps_per_wall_s": stepping.get("steps_per_s") if stepping else end_to_end,
-        "stepping_wall_s": stepping.get("wall_s"),
-        "startup_and_shutdown_s": None if stepping.get("wall_s") is None
-        else round(summary.wall_time_s - stepping["wall_s"], 2),
+        "stepping_wall_s": None if stepping is None else stepping["wall_s"],
+        "startup_and_shutdown_s": None if stepping is None else round(summary.wall_time_s - stepping["wall_s"], 2),
         "steps_per_wall_s_end_to_end": end_to_end,
         "control_latency_ms": to_table(summary.control_latency_ms),
         "simulator_steps": steps,
-        "commands_received": sim.get("commands_received"),
-        "stale_command_events": sim.get("stale_command_events"),
-        "step_jitter_ms": sim.get("jitter_ms"),
+        "commands_received": None if sim is None else sim["commands_received"],
+        "stale_command_events": None if sim is None else sim["stale_command_events"],
+        "step_jitter_ms": None if sim is None else sim["jitter_ms"],
         "planning_cycles": summary.planning_cycles,
         "deadline_overruns": summary.deadline_overruns,
         "outcome": summary.outcome,
-        **({"pipeline_skips": sim["pipeline_skips"]} if "pipeline_skips" in sim else {}),
-        "cpus": sim.get("cpus"),   # where the processes ran (hil.placement; None: the scheduler chose)
+        **({"pipeline_skips": sim["pipeline_skips"]} if sim is not None and "pipeline_skips" in sim else {}),
+        # where the processes ran (hil.placement; None: the scheduler chose)
+        "cpus": None if sim is None else sim["cpus"],
     }
 
 

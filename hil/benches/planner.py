@@ -37,6 +37,10 @@ from planner.params import ALGORITHM_NAMES
 if TYPE_CHECKING:
     import numpy as np
 
+    from hil.flow_optimum import FlowJudge
+    from planner.params import PlannerParams
+    from planner.problem import PlanningProblem
+
 MAPS = ("bench_discs", "bench_bugtrap", "bench_maze")
 CURRENT_MAPS = ("labyrinth", "harbour", "island")
 ALGORITHMS = ALGORITHM_NAMES
@@ -139,7 +143,8 @@ def _median(values: Sequence[float | None]) -> float | None:
 class OursRunner:
     """Runs one of our planners on a fixed problem with a given budget."""
 
-    def __init__(self, algorithm: str, params: Any, problem: Any, judge: Any = None) -> None:
+    def __init__(self, algorithm: str, params: PlannerParams, problem: PlanningProblem,
+                 judge: FlowJudge | None = None) -> None:
         self.algorithm, self.params, self.problem = algorithm, replace(params, algorithm=algorithm), problem
         self.judge = judge  # hil.flow_optimum.FlowJudge: "length" is then the path's eq. (12) cost
 

@@ -21,9 +21,13 @@ import argparse
 import math
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hil.console import emit, progress
+
+if TYPE_CHECKING:
+    from simulator.battery import ThrusterPower
+    from simulator.config import VesselParams
 
 METHODS = ("into-current", "drift-and-return", "hold")
 SCENARIO = "open-water-current"
@@ -77,7 +81,8 @@ def scenario_in_current(speed: float, folder: Path) -> Path:
 
 
 def judge(truth: dict[int, tuple[float, float, float, float]], commands: list[tuple[int, float, float]],
-          goal: tuple[float, float], t_from: float, power: Any, vessel: Any) -> dict[str, float | None]:
+          goal: tuple[float, float], t_from: float, power: ThrusterPower, vessel: VesselParams
+          ) -> dict[str, float | None]:
     """Distance from ``goal`` (NED m) and electrical energy per minute after ``t_from`` (s)."""
     import numpy as np
 

@@ -73,6 +73,10 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.add_argument("--scenario", default="harbour",
                    help="scenario whose map, reference path and current the vessel knows a priori "
                         "(configs/scenarios/NAME.toml; default: harbour)")
+    p.add_argument("--route", metavar="FILE", default=None,
+                   help="the scenario's global route as `hil run` planned it (route.json in its run folder), "
+                        "so that it is not planned again; refused when planned for another scenario "
+                        "(default: plan it here)")
     p.add_argument("--listen", metavar="HOST:PORT", type=receiving, default=None,
                    help="where sensor frames arrive, HOST:PORT or udpin:HOST:PORT "
                         "(default: autopilot.listen = 127.0.0.1:14560)")
@@ -134,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
     from hil.assembly import build
 
     autopilot, link = build(cfg, args.scenario, args.lockstep, args.planner_factory,
-                            getattr(args, "sensors_from", None))
+                            getattr(args, "sensors_from", None), args.route)
     stop = {"flag": False}
     if args.can_record and autopilot.can is not None:
         autopilot.can.sent_times.start(spill_to=args.can_record)

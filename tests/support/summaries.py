@@ -14,8 +14,21 @@ from autopilot_bridge.summary import AutopilotSummary, ControlLatency, Navigatio
 from autopilot_bridge.tracking_stats import TrackingSummary
 from autopilot_bridge.traffic_awareness import EncounterRecord, TrafficSummary
 from common.udp import BusyPollSummary
+from hil.ardupilot import ArduPilotSimulatorSection, ArduRoverSetup, FenceUpload
 from hil.encounter_report import EncounterVerdict
-from hil.run_summary import RunSecurity, RunSummary, RunTraffic, TapCounters
+from hil.run_summary import (
+    BusyPollEnds,
+    HilSimulatorSection,
+    RunCan,
+    RunSecurity,
+    RunSummary,
+    RunTraffic,
+    SimulatorSecurity,
+    TapCounters,
+)
+from simulator.core import BatterySummary
+from simulator.esc import EscBankSummary
+from simulator.server import SimulatorCanSummary, Stalls, Stepping
 
 LATENCY = ControlLatency(p50=0.4, p99=6.0, max=80.0, frames=100)
 NAVIGATION = NavigationCounts(updates={"gps_pos": 450}, rejected={"gps_pos": 4, "numeric_gps": 1}, position_resets=0)
@@ -49,6 +62,26 @@ ENCOUNTER = EncounterVerdict(mmsi=412000103, name="FERRY", type="crossing-give-w
 RUN_TRAFFIC = RunTraffic(ships=1, encounters=1, collisions=0, mean_cpa_m=10.5, compliance_rate=1.0,
                          ship_collision=None, ais=None, ais_forwarded_to_gcs=0)
 BUSY = BusyPollSummary(max_us=950.0, caught=1800, missed=100, pauses=2, held=0)
+SIMULATOR = HilSimulatorSection(
+    steps=4530, commands_received=4529, malformed_dropped=0, stale_command_events=0, lockstep_resends=1,
+    jitter_ms=None, stepping=Stepping(steps=4529, wall_s=30.5, steps_per_s=148.5),
+    stalls=Stalls(count=0, total_s=0.0, events=[]),
+    battery=BatterySummary(state_of_charge=0.98, voltage_v=24.9, consumed_mah=120.5, energy_wh=3.0, depleted=False),
+    busy_poll=BusyPollEnds(simulator=None, autopilot=BUSY), stale_command_events_after_end=0, cpus=None)
+SIM_SECURITY = SimulatorSecurity(rejects={"out_of_step_command": 1}, source="127.0.0.1:40002", wrong_source_address=0,
+                                 wrong_source_id=0, budget_stops=0, kernel_drops=0)
+ARDUPILOT = ArduPilotSimulatorSection(
+    packets=40000, repeats=2, malformed=0, steps=39998, frame_rate_hz=400, wrong_peer=0,
+    ardupilot=ArduRoverSetup(binary="/opt/ardurover", instance=11, params={"CRUISE_SPEED": 1.5}, auto_at_s=41.5,
+                             mission_items=5, fence=FenceUpload(polygons=2, vertices=12, requests=12),
+                             mission_time_s=150.0, setup_failure=None, statustext=["41.0 s: Mission: 1 WP"]))
+ESC_BANK = EscBankSummary(node_ids=[20, 21], raw_commands_applied=3, last_raw_command=[4000, 4000], frames_received=6,
+                          transfers_received={"RawCommand@10": 3}, transfers_lost={}, transfers_duplicated={},
+                          transfers_sent={"Status@20": 2}, send_errors=0, rejects={}, autopilot_health=0,
+                          budget_stops={}, node_id_conflicts=0)
+RUN_CAN = RunCan(autopilot=CAN, simulator=SimulatorCanSummary(**ESC_BANK, lockstep_commands_missing=0,
+                                                              mavlink_commands_ignored=0),
+                 can_log="/tmp/run/can.log", can_log_frames=12)
 
 
 def autopilot_summary(**changes: Any) -> AutopilotSummary:
@@ -80,9 +113,8 @@ def run_summary(**changes: Any) -> RunSummary:
         energy_J=40000.0, planning_cycles=45, plans_accepted=40, deadline_overruns=0, worker_restarts=0,
         fallback_activations=2, tracking=TRACKING,
         navigation_rmse_m=0.1, control_latency_ms=LATENCY, simulator_restarts=0, navigation=NAVIGATION,
-        sensed_obstacles={"cells": 0}, simulator={"steps": 4530, "malformed_dropped": 0, "jitter_ms": None},
-        security=RunSecurity(simulator={"rejects": {}}, autopilot=LINK, autopilot_navigation_numeric={},
-                             tap=TAP),
+        sensed_obstacles={"cells": 0}, simulator=SIMULATOR,
+        security=RunSecurity(simulator=SIM_SECURITY, autopilot=LINK, autopilot_navigation_numeric={}, tap=TAP),
         tlog="/tmp/run/run.tlog", tlog_messages=9000, events=("190.25s mission complete",), actuators="mavlink",
         run_folder="/tmp/run", plot="/tmp/run/plot.png",
     )
