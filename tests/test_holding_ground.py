@@ -358,7 +358,7 @@ def test_a_set_point_that_drives_at_the_quay_stops_short_of_it(guard):
     loop = ClosedLoop(start, psi=psi)
     helm, core = loop.ap.helm, loop.core
     if not guard:
-        helm.avoidance_cap = lambda _s, u_ref: u_ref        # type: ignore[method-assign]
+        helm.avoidance_cap = lambda _s, u_ref: u_ref        # type: ignore[method-assign,assignment]
     helm.reset_controllers(NavState(0.0, *start, psi, 0.0, 0.0, 0.0, 0.0, 0.0))
     worst, closest = math.inf, math.inf
     for i in range(int(round(30.0 / core.frame_dt))):
