@@ -68,6 +68,13 @@ CELLS: tuple[Cell, ...] = (
     # Figure 11's random maps with the global route as reference path (the same maps, start and
     # goal per run as `random`); added with `whole-reuse`
     Cell("random-global", "random maps, the global route on", (), "random-global"),
+    # the equal CPU-time budget (issue 34's fourth budget), added after the 200-run campaign of the
+    # cells above (same rule): no iteration budget, each cycle stops at S of the planning thread's
+    # CPU time. S = 0.44 ms, RRT*'s median thread CPU a cycle in `paper` (time_cpu_s / cycles of the
+    # 200-run paper/runs.csv, median over RRT*'s runs; time_cpu_s is per run, to each cycle's first
+    # solution). Thread CPU is not reproducible bit for bit: the rows vary a little between runs.
+    Cell("cpu-equal", "an equal thread-CPU budget of 0.44 ms a cycle (no iteration budget)",
+         ("--local-iterations", "0", "--local-time", "0.00044", "--local-clock", "thread-cpu")),
 )
 
 # claim: (column, the paper's direction of DDRRT* - RRT*: -1 lower, +1 higher, statistic)
