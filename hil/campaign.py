@@ -75,6 +75,11 @@ CELLS: tuple[Cell, ...] = (
     # solution). Thread CPU is not reproducible bit for bit: the rows vary a little between runs.
     Cell("cpu-equal", "an equal thread-CPU budget of 0.44 ms a cycle (no iteration budget)",
          ("--local-iterations", "0", "--local-time", "0.00044", "--local-clock", "thread-cpu")),
+    # alpha_y of eqs. (11)-(12) against the resultant of the current and the mean wave drift of
+    # [waves] (section 3.4), added with `cpu-equal` (same rule): the drift of the default waves is
+    # 0.036 m/s towards the north-east; the metrics stay on the current alone
+    Cell("resultant", "alpha_y against the resultant of current and wave drift",
+         ("--set", "planner.alpha_y=\"resultant\"")),
 )
 
 # claim: (column, the paper's direction of DDRRT* - RRT*: -1 lower, +1 higher, statistic)
