@@ -34,10 +34,10 @@ def test_thread_cpu_deadline_stops_the_compiled_search_after_its_cpu_budget(alg)
     planner = make_planner(alg, PlannerParams(seed=2))
     problem = _problem()
     planner.solve(problem, Termination.iterations(10))  # compiled code loaded before the budget starts
+    c0 = time.thread_time()  # before the condition: its budget starts when it is made
     cond = Termination.thread_cpu_deadline(BUDGET)
     b = cond.bounds()
     assert b.thread_cpu_deadline is not None and b.monotonic_deadline is None and not b.poll_python
-    c0 = time.thread_time()
     res = planner.solve(problem, cond)
     used = time.thread_time() - c0
     # stopped by the compiled core's deadline check (DONE_DEADLINE), not by the tree filling up
