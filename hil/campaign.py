@@ -68,6 +68,23 @@ CELLS: tuple[Cell, ...] = (
     # Figure 11's random maps with the global route as reference path (the same maps, start and
     # goal per run as `random`); added with `whole-reuse`
     Cell("random-global", "random maps, the global route on", (), "random-global"),
+    # the equal CPU-time budget (issue 34's fourth budget), added after the 200-run campaign of the
+    # cells above (same rule): no iteration budget, each cycle stops at S of the planning thread's
+    # CPU time. S = 0.44 ms, RRT*'s median thread CPU a cycle in `paper` (time_cpu_s / cycles of the
+    # 200-run paper/runs.csv, median over RRT*'s runs; time_cpu_s is per run, to each cycle's first
+    # solution). Thread CPU is not reproducible bit for bit: the rows vary a little between runs.
+    Cell("cpu-equal", "an equal thread-CPU budget of 0.44 ms a cycle (no iteration budget)",
+         ("--local-iterations", "0", "--local-time", "0.00044", "--local-clock", "thread-cpu")),
+    # a second equal thread-CPU budget, at the paper's budget: S = 2.69 ms, the median thread CPU of
+    # RRT*'s whole 1,500-iteration search a cycle in `paper` (353 searches of its runs 0-19,
+    # docs/experiments/campaign34-full/measure_cycle_cpu.py); added after `cpu-equal` had run, same rule
+    Cell("cpu-cycle", "an equal thread-CPU budget of 2.69 ms a cycle (RRT*'s 1,500 iterations; no iteration budget)",
+         ("--local-iterations", "0", "--local-time", "0.00269", "--local-clock", "thread-cpu")),
+    # alpha_y of eqs. (11)-(12) against the resultant of the current and the mean wave drift of
+    # [waves] (section 3.4), added with `cpu-equal` (same rule): the drift of the default waves is
+    # 0.036 m/s towards the north-east; the metrics stay on the current alone
+    Cell("resultant", "alpha_y against the resultant of current and wave drift",
+         ("--set", "planner.alpha_y=\"resultant\"")),
 )
 
 # claim: (column, the paper's direction of DDRRT* - RRT*: -1 lower, +1 higher, statistic)

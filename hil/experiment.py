@@ -125,6 +125,11 @@ def _context(task: Task, sc):
         if fixed:
             _CACHE[key] = base
     ctx = make_context(base.grid, sc.goal, sc.reference_path, params, online, task.algorithm, base.field)
+    if params.alpha_y == "resultant":
+        from hil.commands.plan import wave_drift
+        # the planners' alpha_y against the current plus the mean wave drift of [waves] (the
+        # metrics stay on the current alone, as in every other campaign row)
+        ctx.wave_drift = wave_drift(cfg)
     ctx.safe_grid = base.safe_grid
     ctx._velocity_grids = base._velocity_grids   # the section 3.3 inflations do not depend on the algorithm
     return ctx

@@ -1,7 +1,9 @@
 """The compiled tree core shared by RRT*, Informed RRT* and DDRRT*.
 
 ``grow`` runs up to ``max_iter`` iterations (one iteration = one sample drawn) and returns early
-at a ``CLOCK_MONOTONIC`` deadline (checked before every iteration), at the first exact solution
+at a ``CLOCK_MONOTONIC`` deadline ``deadline_ns`` or a deadline ``cpu_deadline_ns`` on the calling
+thread's CPU clock (``CLOCK_THREAD_CPUTIME_ID``; both ns, -1 = none, both checked before every
+iteration), at the first exact solution
 when asked, or when the tree is full. One iteration is :func:`_sample`, then :func:`_ddrrt_extend`
 (DDRRT*: k nearest, dynamic domains, choose-parent by D_C) or :func:`_rrt_extend` (RRT*, Informed
 RRT*: nearest, near ball, choose-parent), each ending in :func:`_rewire_through`, then
@@ -1096,7 +1098,7 @@ def _rrt_extend(sx, sy, world, cfg, tree, state, buf, dv):
 
 
 @njit(cache=True)
-def grow(world, cfg_a, tree, state_a, scratch, max_iter, deadline_ns, stop_on_exact):
+def grow(world, cfg_a, tree, state_a, scratch, max_iter, deadline_ns, stop_on_exact, cpu_deadline_ns=-1):
     """Run up to max_iter iterations; see the module docstring for the arguments and the return
     codes. ``cfg_a`` and ``state_a`` are 1-element arrays of CONFIG and STATE; the caller keeps
     world, tree and scratch alive during the call."""
@@ -1106,6 +1108,8 @@ def grow(world, cfg_a, tree, state_a, scratch, max_iter, deadline_ns, stop_on_ex
     dv = _derive(cfg)
     for _ in range(max_iter):
         if deadline_ns >= 0 and monotonic_ns(buf.clock) >= deadline_ns:
+            return DONE_DEADLINE
+        if cpu_deadline_ns >= 0 and thread_cpu_ns(buf.clock) >= cpu_deadline_ns:
             return DONE_DEADLINE
         if state.n + 2 > cfg.cap:
             return DONE_FULL

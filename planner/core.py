@@ -3,8 +3,9 @@
 A strategy (RRT*, Informed RRT*, DDRRT*) only chooses the algorithm code and, for DDRRT*, the
 PNG sampling node. The loop honours a :class:`~planner.termination.Termination`:
 
-* iteration counts and ``time.monotonic`` deadlines are checked by the compiled core before
-  every iteration, so a deadline is overrun by at most one iteration;
+* iteration counts, ``time.monotonic`` deadlines and deadlines on the thread's CPU clock
+  (``Termination.thread_cpu_deadline``) are checked by the compiled core before every
+  iteration, so a deadline is overrun by at most one iteration;
 * conditions on any other clock (or custom predicates) make the core run one iteration per
   call, and the condition is evaluated in Python after each one.
 
@@ -37,6 +38,7 @@ _NO_FIELD.flags.writeable = False  # the same array type as a GridField's: one c
 
 
 _CLOCK_OK: bool | None = None
+_CPU_CLOCK_OK: bool | None = None
 
 
 def compiled_clock_ok() -> bool:
@@ -52,6 +54,23 @@ def compiled_clock_ok() -> bool:
         c = time.monotonic_ns()
         _CLOCK_OK = bool(a - 5_000_000 <= b <= c + 5_000_000)
     return _CLOCK_OK
+
+
+def compiled_cpu_clock_ok() -> bool:
+    """True if the compiled core's thread CPU clock (Linux clock id 3, CLOCK_THREAD_CPUTIME_ID) is
+    ``time.thread_time``'s; otherwise thread-CPU deadlines are polled from Python after every
+    iteration (same one-iteration bound)."""
+    global _CPU_CLOCK_OK
+    if _CPU_CLOCK_OK is None:
+        from planner._kernels import thread_cpu_ns
+
+        buf = np.zeros(2, dtype=np.int64)
+        thread_cpu_ns(buf)  # compiled (or loaded) before the comparison
+        a = time.thread_time_ns()
+        b = thread_cpu_ns(buf)
+        c = time.thread_time_ns()
+        _CPU_CLOCK_OK = bool(a - 5_000_000 <= b <= c + 5_000_000)
+    return _CPU_CLOCK_OK
 
 
 def _none(reason: str, t0: float, start=None) -> PlannerResult:
@@ -233,6 +252,10 @@ class TreePlanner:
         if deadline_ns >= 0 and not compiled_clock_ok():
             deadline_ns = -1
             bounds = dataclasses.replace(bounds, poll_python=True)
+        cpu_deadline_ns = -1 if bounds.thread_cpu_deadline is None else int(bounds.thread_cpu_deadline * 1e9)
+        if cpu_deadline_ns >= 0 and not compiled_cpu_clock_ok():
+            cpu_deadline_ns = -1
+            bounds = dataclasses.replace(bounds, poll_python=True)
         _tree.seed_rng(self.seed)
         why = "termination condition met"
         while True:
@@ -245,7 +268,8 @@ class TreePlanner:
                 budget = max(0, bounds.max_iterations - int(st["iter"]))
             else:
                 budget = _BIG
-            code = _tree.grow(world, cfg, tree, state, scratch, budget, deadline_ns, bounds.stop_on_exact)
+            code = _tree.grow(world, cfg, tree, state, scratch, budget, deadline_ns, bounds.stop_on_exact,
+                              cpu_deadline_ns)
             if code == _tree.DONE_DEADLINE:
                 why = "deadline reached"
                 break

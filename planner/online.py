@@ -37,6 +37,7 @@ import numpy as np
 from scipy import ndimage
 
 from planner import make_planner
+from planner.core import free_regions
 from planner.cost import path_cost_fn, path_length
 from planner.gridmap import OccupancyGrid
 from planner.metrics import path_metrics, waypoint_alpha_sums
@@ -53,6 +54,7 @@ def _p(help: str, unit: str = "", **bounds: float) -> dict[str, Any]:
 
 
 EXECUTION_MODELS = ("receding", "whole-path")
+LOCAL_CLOCKS = ("wall", "thread-cpu")
 
 
 @dataclass(frozen=True)
@@ -64,7 +66,12 @@ class OnlineParams:
     local_iterations: int = dc_field(default=1500, metadata=_p(
         "iteration budget of each local planning cycle (deterministic: the Monte Carlo default)", "", ge=0))
     local_time: float = dc_field(default=0.0, metadata=_p(
-        "wall-clock budget of each local planning cycle; 0 = iterations only", "s", ge=0))
+        "time budget of each local planning cycle, on local_clock; 0 = iterations only", "s", ge=0, le=600))
+    local_clock: Literal["wall", "thread-cpu"] = dc_field(default="wall", metadata=_p(
+        "the clock of local_time: 'wall' (CLOCK_MONOTONIC, the paper's) or 'thread-cpu' (the planning "
+        "thread's CPU time, CLOCK_THREAD_CPUTIME_ID: time the thread waits or is preempted does not count, "
+        "so an equal CPU budget is the same on a loaded machine); both are checked inside the compiled "
+        "search before every iteration"))
     max_cycles: int = dc_field(default=120, metadata=_p("cap on planning cycles per run", "", gt=0))
     max_failures: int = dc_field(default=6, metadata=_p(
         "consecutive cycles without any local path before the run is declared failed", "", gt=0))
@@ -92,6 +99,8 @@ class OnlineParams:
         if self.tree_reuse and self.execution != "whole-path":
             raise ValueError("tree_reuse: needs execution = \"whole-path\" (a receding cycle stops between tree "
                              "nodes, so no subtree starts where the vessel is)")
+        if self.local_clock not in LOCAL_CLOCKS:
+            raise ValueError(f"local_clock: must be one of {', '.join(LOCAL_CLOCKS)} (got {self.local_clock!r})")
         if self.local_iterations == 0 and self.local_time == 0:
             raise ValueError("local_iterations: a cycle needs a budget (local_iterations or local_time > 0)")
 
@@ -335,6 +344,23 @@ def _free_subgoal(ctx: OnlineContext, grid: OccupancyGrid, position: tuple[float
     return ctx.nearest_free(grid, point)
 
 
+def _connects(ctx: OnlineContext, grid: OccupancyGrid, position: tuple[float, float], index: int,
+              point: tuple[float, float]) -> bool:
+    """True if the vessel at ``position`` and its subgoal's free stand-in on ``grid`` lie in the
+    same free region of ``grid`` (4-connected, as the search checks).
+
+    The global route is planned on the safety-inflated chart, which may leave a passage only a
+    metre wide; section 3.3's velocity inflation on top can close it. The search on that map then
+    stops at once ("different free regions"), the vessel does not move, and every later cycle
+    fails the same way: runs 54 and 374 of `hil montecarlo --scenario random-global --runs 1000
+    --seed 1` were lost so by every planner. Such a cycle plans on the safety-inflated map."""
+    goal = _free_subgoal(ctx, grid, position, index, point)
+    if goal is None:
+        return False
+    labels = free_regions(grid)
+    return bool(labels[grid.cell_of(*position)] == labels[grid.cell_of(*goal)])
+
+
 def _arc_from_nearest(ref: np.ndarray, pos: tuple[float, float], progress: int = 0,
                       window: float = math.inf, radius: float = math.inf) -> tuple[int, np.ndarray]:
     """Index j of the reference waypoint nearest ``pos`` and the arc length (m) from q_j to every
@@ -424,13 +450,16 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
 
     # Planning map: velocity-inflated, else only safety-inflated, else (the vessel itself is
     # inside the inflation: pushed there, it must still get out) the recovery map, else raw.
+    # Where the velocity inflation parts the vessel from its subgoal, the safety-inflated map
+    # (the global route's) if it joins them; never a thinner one for that reason.
     velocity = reference_velocity(ctx.reference_path, sub_point, params.speed)
-    grid = None
     recovery = None if ctx.safe.is_free(*pos) else ctx.recovery_grid(pos)
-    for candidate in (ctx.planning_grid(velocity), ctx.safe_grid, recovery, ctx.grid):
-        if candidate is not None and candidate.is_free(*pos):
-            grid = candidate
-            break
+    moving = ctx.planning_grid(velocity)
+    grid = next((g for g in (moving, ctx.safe_grid, recovery, ctx.grid) if g is not None and g.is_free(*pos)), None)
+    if (grid is moving and moving is not ctx.safe_grid and ctx.safe.is_free(*pos)
+            and not _connects(ctx, moving, pos, sub_index, sub_point)
+            and _connects(ctx, ctx.safe, pos, sub_index, sub_point)):
+        grid = ctx.safe
     empty = np.zeros((0, 2))
     if grid is None:
         return CycleRecord(index, state, sub_point, rule, "none", 0.0, 0.0, 0, empty, empty, False,
@@ -592,12 +621,14 @@ def _densify(path: np.ndarray, step: float) -> np.ndarray:
 
 
 def _termination(online: OnlineParams, clock: Callable[[], float]) -> Termination:
-    """The budget of one local planning run: iterations and/or a deadline on ``clock``."""
+    """The budget of one local planning run: iterations and/or a deadline on ``clock`` (or, with
+    ``local_clock = "thread-cpu"``, on this thread's CPU clock; ``clock`` is then not read)."""
     conds = []
     if online.local_iterations > 0:
         conds.append(Termination.iterations(online.local_iterations))
     if online.local_time > 0:
-        conds.append(Termination.deadline(online.local_time, clock))
+        conds.append(Termination.thread_cpu_deadline(online.local_time) if online.local_clock == "thread-cpu"
+                     else Termination.deadline(online.local_time, clock))
     return conds[0] if len(conds) == 1 else Termination.any_of(*conds)
 
 

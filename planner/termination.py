@@ -3,8 +3,10 @@
 A :class:`Termination` is a callable returning True when the planner must stop. The planner
 tells it how far it has got (:meth:`Termination.notify`) so iteration counts and "stop at the
 first exact solution" can be evaluated; deadlines read a clock. Planners also inspect the
-conditions (:meth:`bounds`) so the compiled tree core can check the iteration budget and a
-``time.monotonic`` deadline itself, every iteration, without returning to Python.
+conditions (:meth:`bounds`) so the compiled tree core can check the iteration budget, a
+``time.monotonic`` deadline and a deadline on the calling thread's CPU clock
+(``time.thread_time``, :meth:`Termination.thread_cpu_deadline`) itself, every iteration,
+without returning to Python.
 """
 
 from __future__ import annotations
@@ -23,11 +25,12 @@ class Bounds:
     monotonic_deadline: float | None  # time.monotonic() value at which to stop
     poll_python: bool               # some condition needs a Python call after every iteration
     stop_on_exact: bool             # stop at the first exact solution
+    thread_cpu_deadline: float | None = None  # time.thread_time() value (this thread's CPU, s) at which to stop
 
 
 class Termination:
-    """A stop condition. Build with :meth:`iterations`, :meth:`deadline`, :meth:`exact_solution`
-    and combine with :meth:`any_of`."""
+    """A stop condition. Build with :meth:`iterations`, :meth:`deadline`,
+    :meth:`thread_cpu_deadline`, :meth:`exact_solution` and combine with :meth:`any_of`."""
 
     def __init__(self, check: Callable[[Termination], bool], *, max_iterations: int | None = None,
                  deadline: float | None = None, clock: Callable[[], float] | None = None,
@@ -55,18 +58,22 @@ class Termination:
         self.notify(0, False)
 
     def bounds(self) -> Bounds:
-        """The tightest iteration and monotonic-clock bounds of this condition and its children."""
+        """The tightest iteration, monotonic-clock and thread-CPU bounds of this condition and its
+        children; a deadline on any other (injected) clock is polled from Python."""
         leaves = self._leaves()
         iters = [t.max_iterations for t in leaves if t.max_iterations is not None]
         real = [t.deadline_at for t in leaves if t.deadline_at is not None and t.clock is time.monotonic]
+        cpu = [t.deadline_at for t in leaves if t.deadline_at is not None and t.clock is time.thread_time]
         poll = any(
-            (t.deadline_at is not None and t.clock is not time.monotonic) or t._custom for t in leaves
+            (t.deadline_at is not None and t.clock not in (time.monotonic, time.thread_time)) or t._custom
+            for t in leaves
         )
         return Bounds(
             max_iterations=min(iters) if iters else None,
             monotonic_deadline=min(real) if real else None,
             poll_python=poll,
             stop_on_exact=any(t.stop_on_exact for t in leaves),
+            thread_cpu_deadline=min(cpu) if cpu else None,
         )
 
     def is_bounded(self) -> bool:
@@ -97,6 +104,18 @@ class Termination:
             raise ValueError("deadline: seconds must be finite and >= 0")
         at = clock() + seconds
         return Termination(lambda t: clock() >= at, deadline=at, clock=clock)
+
+    @staticmethod
+    def thread_cpu_deadline(seconds: float) -> Termination:
+        """Stop once the calling thread has used ``seconds`` of CPU time from now (its
+        CLOCK_THREAD_CPUTIME_ID, ``time.thread_time``): time the thread sleeps, waits or is
+        preempted by other processes does not count, so the budget is the same on a loaded
+        machine. Evaluate it on the thread that runs the search (the compiled core checks it
+        before every iteration on its own thread)."""
+        if not (seconds >= 0) or math.isinf(seconds):
+            raise ValueError("thread_cpu_deadline: seconds must be finite and >= 0")
+        at = time.thread_time() + seconds
+        return Termination(lambda t: time.thread_time() >= at, deadline=at, clock=time.thread_time)
 
     @staticmethod
     def exact_solution() -> Termination:

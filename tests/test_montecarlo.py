@@ -67,7 +67,9 @@ def test_random_scenario_runs_differ_per_run(hil, tmp_path):
 
 
 @pytest.mark.parametrize("args", [("--runs", "0"), ("--jobs", "0"), ("--algorithms", "dijkstra"),
-                                  ("--scenario", "atlantis"), ("--local-iterations", "0", "--local-time", "0")])
+                                  ("--scenario", "atlantis"), ("--local-iterations", "0", "--local-time", "0"),
+                                  ("--local-iterations", "0"), ("--local-clock", "sundial"),
+                                  ("--local-time", "0.00001", "--local-clock", "thread-cpu")])
 def test_bad_arguments_exit_2(hil_main, tmp_path, args):
     p = hil_main("montecarlo", "--out", str(tmp_path), *args)
     assert p.returncode == 2
@@ -199,3 +201,16 @@ def test_ctrl_c_keeps_finished_route_runs(repo, tmp_path, sig):
         rows = list(csv.DictReader(fh))
     assert len(rows) == summary["runs_done"]
     assert "interrupted" in err.strip().splitlines()[-1] and f"{len(rows)} of 8" in err.strip().splitlines()[-1]
+
+
+def test_a_thread_cpu_budget_per_cycle_from_the_command_line(hil_main, tmp_path):
+    """`--local-iterations 0 --local-time S --local-clock thread-cpu`: issue 34's equal CPU-time cell."""
+    p = hil_main("montecarlo", "--scenario", "labyrinth", "--runs", "1", "--jobs", "1", "--algorithms", "rrt-star",
+                 "--local-iterations", "0", "--local-time", "0.002", "--local-clock", "thread-cpu", "--no-plots",
+                 "--out", str(tmp_path / "cpu"), "--json")
+    assert p.returncode == 0, p.stderr
+    summary = json.loads(p.stdout)
+    assert summary["online"] == {"local_iterations": 0, "local_time_s": 0.002, "local_clock": "thread-cpu",
+                                 "cycle_time_s": summary["online"]["cycle_time_s"]}
+    row = experiment.read_runs_csv(tmp_path / "cpu" / "runs.csv")[0]
+    assert row["cycles"] > 0 and row["iterations"] > 0

@@ -180,3 +180,27 @@ def test_recovery_grid_shrinks_the_inflation_only_near_the_vessel():
     assert not g.is_free(70.0, 64.8)                  # 25 m on, the full 2 m inflation holds
     assert ctx.recovery_grid((45.0, 65.9)) is None    # touching the wall: nothing left to shrink
     assert ctx.recovery_grid((45.0, 60.0)).is_free(45.0, 60.0)
+
+
+def test_a_route_passage_closed_by_the_velocity_inflation_is_planned_on_the_safety_map():
+    """Run 374 of `hil montecarlo --scenario random-global --seed 1`: the global route (planned on
+    the chart inflated by 2 m) leaves the start through a passage 2.5 m from the obstacles; the
+    velocity inflation closes it, so on that map the vessel and its subgoal lie in different free
+    regions. Every cycle used to fail at once there and the run was lost by every planner."""
+    from hil import experiment
+    from planner.core import free_regions
+    from planner.online import reference_velocity, select_local_subgoal
+
+    task = experiment.Task("random-global", 374, "rrt-star", 1, objective="length")
+    sc = experiment.scenario_instance("random-global", 1, 374)
+    ctx = experiment._context(task, sc)
+    sub, _, _ = select_local_subgoal(ctx, sc.start)
+    velocity_map = ctx.planning_grid(reference_velocity(ctx.reference_path, sub, ctx.params.speed))
+    for grid, connected in ((velocity_map, False), (ctx.safe, True)):
+        labels = free_regions(grid)
+        assert grid.is_free(*sc.start) and grid.is_free(*sub)
+        assert (labels[grid.cell_of(*sc.start)] == labels[grid.cell_of(*sub)]) == connected
+    rec = plan_cycle(ctx, VesselState(*sc.start, sc.start_heading), 0, seed=1)
+    assert rec.status == "exact" and len(rec.smooth_path) >= 2, rec.reason
+    row = experiment.run_task(task)
+    assert row["reached"], row["reason"]

@@ -198,6 +198,24 @@ def test_alpha_y_against_the_resultant_of_current_and_wave_drift():
         PlannerParams(alpha_y="waves")
 
 
+def test_campaign_runs_plan_alpha_y_against_the_resultant_when_asked():
+    """`hil montecarlo --set planner.alpha_y="resultant"` gives the planners the wave drift of
+    [waves] (it used to reach `hil plan` only): DDRRT*'s cycles change, the default ones do not."""
+    from hil import experiment
+    from hil.commands.plan import wave_drift
+
+    online = (("local_iterations", 300), ("max_cycles", 2))
+    plain = experiment.Task("labyrinth", 0, "ddrrt-star", 1, online_overrides=online)
+    res = replace(plain, config_overrides=('planner.alpha_y="resultant"',))
+    sc = experiment.scenario_instance("labyrinth", 1, 0)
+    assert experiment._context(plain, sc).wave_drift is None
+    drift = experiment._context(res, sc).wave_drift
+    assert drift is not None and drift == wave_drift(experiment._settings(None, ()))
+    assert 0.01 < math.hypot(*drift) < 0.1    # m/s: the default waves' mean drift, north-east
+    a, b = experiment.run_task(plain), experiment.run_task(res)
+    assert (a["search_iterations"], a["cost"]) != (b["search_iterations"], b["cost"])
+
+
 def test_first_solution_is_measured_four_ways(labyrinth):
     r = make_planner("rrt-star", PlannerParams(objective="length"), seed=1).solve(
         labyrinth, Termination.iterations(1500))

@@ -31,8 +31,8 @@ CLI_RANGES: dict[str, tuple[float, float]] = {
     "--resolution": (1e-3, 1e3),          # m per map cell
     "--deadline": (1e-3, 3600.0),         # s of planning
     "--iterations": (0, 10_000_000),      # planner iterations (0: the deadline only)
-    "--local-iterations": (1, 100_000),   # as autopilot.lockstep_iterations
-    "--local-time": (1e-3, 600.0),        # s
+    "--local-iterations": (0, 100_000),   # as autopilot.lockstep_iterations; 0: --local-time only
+    "--local-time": (1e-4, 600.0),        # s (0.1 ms: a few hundred iterations of the compiled core)
     "--cycle-time": (1e-3, 600.0),        # s
     "--inflate": (0.0, 1e3),              # m
     "--step": (1e-3, 1e4),                # m
