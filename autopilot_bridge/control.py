@@ -124,6 +124,12 @@ class SpeedController:
         self.integral = 0.0
         self.u_d = u
 
+    def limit_reference(self, bound: float) -> None:
+        """Bring the reference model's speed within +-``bound`` (m/s) now, not at its acceleration limit: the
+        speed error then brakes at once (simple avoidance: an obstacle within the stopping distance)."""
+        if self.u_d is not None:
+            self.u_d = min(max(self.u_d, -bound), bound)
+
     def update(self, u_ref: float, u: float, v: float, r: float, dt: float, u_current: float = 0.0) -> float:
         """Surge force (N) to bring surge speed over ground ``u`` (m/s) to the set-point ``u_ref``.
 

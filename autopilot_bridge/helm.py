@@ -207,7 +207,10 @@ class Helm:
                r_ref: float = 0.0, yaw_limit: float = math.inf) -> Thrust:
         tau_r = self.heading_pid.update(psi_ref, s.psi, s.r, dt, r_ref)
         tau_r = min(max(tau_r, -yaw_limit), yaw_limit)
-        tau_u = self.speed_ctl.update(self.avoidance_cap(s, u_ref), s.u, s.v, s.r, dt, u_current)
+        capped = self.avoidance_cap(s, u_ref)
+        if capped != u_ref:
+            self.speed_ctl.limit_reference(abs(capped))
+        tau_u = self.speed_ctl.update(capped, s.u, s.v, s.r, dt, u_current)
         return allocate(tau_u, tau_r, self.prop.B_u, self.prop.T_max, self.prop.T_min)
 
     def avoidance_cap(self, s: NavState, u_ref: float) -> float:
