@@ -39,6 +39,7 @@ from autopilot_bridge.vehicle import MIS_DONE_LOITER, Vehicle
 from planner.gridmap import OccupancyGrid
 
 AVOID_DECELERATION = 0.25     # m/s^2: as ARRIVAL_DECELERATION
+AVOID_COURSE_SPEED = 0.3      # m/s over ground: above it the course over ground is checked too (below, noise)
 AVOID_LOOKAHEAD = 24.0        # m: 3 m/s, the hull's top speed, stops within it (18 m + 2 s of lag)
 ARRIVAL_DECELERATION = 0.25   # m/s^2: half the speed reference model's limit (max_acceleration 0.5)
 MANUAL_STICK_TIMEOUT_S = 1.0   # wall s: an older MANUAL_CONTROL is no stick (MANUAL then holds)
@@ -215,27 +216,37 @@ class Helm:
 
     def avoidance_cap(self, s: NavState, u_ref: float) -> float:
         """The surge set-point (m/s, negative astern) limited so the boat can stop, braking at
-        ``AVOID_DECELERATION``, before the clearance along its bow (or stern, astern) falls below
-        ``avoid_clearance`` - in every mode that drives, whatever the route or the target asked, as
-        ArduPilot's simple avoidance limits the velocity towards a fence by its stopping distance. Chaotic
-        mode changes beside a quay (issue 31) left a boat heading for it at 0.8 m/s with each new route's
-        controllers starting afresh. Only a ray that goes nearer to an obstacle than the boat is now counts,
-        so a boat already inside the clearance can still sail away from it."""
+        ``AVOID_DECELERATION``, before the clearance along its bow (or stern, astern) - and along its course
+        over ground, where a turn or the current carries it - falls below ``avoid_clearance``: in every mode
+        that drives, whatever the route or the target asked, as ArduPilot's simple avoidance limits the
+        velocity towards a fence by its stopping distance. Chaotic mode changes beside a quay (issue 31) left
+        a boat heading for it at 0.8 m/s with each new route's controllers starting afresh. Only a ray that
+        goes nearer to an obstacle than the boat is now counts, so a boat already inside the clearance can
+        still sail away from it."""
         if abs(u_ref) < 1e-3:
             return u_ref
-        heading = s.psi if u_ref > 0.0 else s.psi + math.pi
-        c, sn = math.cos(heading), math.sin(heading)
-        here = self.grid.clearance_at(s.y, s.x)
-        limit = min(self.avoid_clearance, here)
-        step = self.grid.resolution
         lag = self.speed_ctl.p.speed_reference_time_constant
-        reach = min(u_ref * u_ref / (2.0 * AVOID_DECELERATION) + abs(s.u) * lag + step, AVOID_LOOKAHEAD)  # cap >= u_ref
+        reach = min(u_ref * u_ref / (2.0 * AVOID_DECELERATION) + s.speed * lag + self.grid.resolution,
+                    AVOID_LOOKAHEAD)               # beyond it the cap is above u_ref
+        free = self._free_run(s, s.psi if u_ref > 0.0 else s.psi + math.pi, reach)
+        if s.speed > AVOID_COURSE_SPEED:
+            free = min(free, self._free_run(s, s.psi + math.atan2(s.v, s.u), reach))
+        if free >= reach:
+            return u_ref
+        cap = stopping_speed_cap(free, s.speed, 0.0, AVOID_DECELERATION, lag)
+        return max(min(u_ref, cap), -cap)
+
+    def _free_run(self, s: NavState, direction: float, reach: float) -> float:
+        """m the boat can go along ``direction`` (rad) before the clearance falls below ``avoid_clearance``
+        (or below the clearance it has now); ``reach`` when nothing is nearer."""
+        c, sn = math.cos(direction), math.sin(direction)
+        limit = min(self.avoid_clearance, self.grid.clearance_at(s.y, s.x))
+        step = self.grid.resolution
         for k in range(1, int(reach / step) + 1):
             d = k * step
             if self.grid.clearance_at(s.y + d * sn, s.x + d * c) < limit:
-                cap = stopping_speed_cap(d - step, abs(s.u), 0.0, AVOID_DECELERATION, lag)
-                return max(min(u_ref, cap), -cap)
-        return u_ref
+                return d - step
+        return reach
 
     @property
     def turn_on_the_spot(self) -> float:

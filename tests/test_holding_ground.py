@@ -382,3 +382,21 @@ def test_a_set_point_that_drives_at_the_quay_stops_short_of_it(case):
     else:
         assert worst > 1.0 and closest < 1.5, (worst, closest)    # it sailed up to the quay, and stopped there
         assert case == "guarded" or changed_at > 1.9, changed_at
+
+
+def test_the_speed_limit_also_looks_along_the_course_over_ground():
+    """Helm.avoidance_cap on the harbour's chart, 3.5 m from the quay with the bow along it (its ray clear):
+    without sway the set-point stands; sliding sideways towards the quay at 0.8 m/s (a turn, the current)
+    the course over ground points at it and the set-point is cut (the chaos hour, seed 31 unsigned: a boat
+    turning at its full yaw rate beside the quay was carried onto it)."""
+    from support.closed_loop import ClosedLoop, clearance
+
+    from autopilot_bridge.navigation import NavState
+
+    helm = ClosedLoop((83.1, 115.1)).ap.helm
+    towards_quay = math.atan2(120.0 - 115.1, 94.0 - 83.1)
+    assert 3.0 < clearance(93.2, 120.1) < 4.0
+    along = NavState(0.0, 93.2, 120.1, towards_quay - math.pi / 2, 0.5, 0.0, 0.0, 0.0, 0.0)
+    assert helm.avoidance_cap(along, 1.0) == 1.0
+    sliding = NavState(0.0, 93.2, 120.1, towards_quay - math.pi / 2, 0.5, 0.8, 0.0, 0.0, 0.0)
+    assert helm.avoidance_cap(sliding, 1.0) < 0.6
