@@ -219,6 +219,9 @@ def run_all(groups: tuple[str, ...] | None = None, kernels: bool = False) -> lis
 
 
 def main(argv: list[str]) -> int:
+    from hil import numba_env
+
+    numba_env.apply()
     as_json = "--json" in argv
     names = [a for a in argv if a not in ("--json", "--kernels")]
     if len(names) != 1 or names[0] not in GROUPS:
