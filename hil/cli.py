@@ -18,7 +18,7 @@ import re
 import sys
 from typing import Any
 
-from hil import config, console, numba_env
+from hil import config, console
 from hil.errors import HilError
 
 # Subcommand modules under hil/commands/, in the order `hil --help` lists them.
@@ -83,7 +83,6 @@ def build_parser() -> ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    numba_env.apply()   # before any command imports numba
     parser = build_parser()
     try:
         args, extra = parser.parse_known_args(argv)
