@@ -22,10 +22,13 @@ KERNEL_SOURCES = ("planner/_kernels.py", "planner/_tree.py", "autopilot_bridge/n
 PLANNER_SOURCES = ("planner/_kernels.py", "planner/_tree.py")
 # CPU seconds of a cold compile, measured on the project's shared 2-core machine (docs/performance.md
 # "The first run compiles"): `NUMBA_CACHE_DIR=$(mktemp -d) hil run --duration 1` 46-50 s of user CPU
-# (5-7 s cached), shared since issue 32 by three processes (hil/warm_up.py: the planner, ~23 s, the rest
-# of the vessel computer, ~15 s, and the run itself); `hil plan --scenario harbour` ~25 s (1.3 s cached).
-COLD_COMPILE_S = 45
-COLD_PLAN_COMPILE_S = 25
+# at 6a02b12 (5-7 s cached), shared since issue 32 by three processes (hil/warm_up.py: the planner,
+# the rest of the vessel computer, and the run itself); 0.84x that since the planner's and vessel
+# computer's kernels compile at NUMBA_OPT=1 without numba's merge sort and slice-copy error path
+# (cold `hil warm-up`: 52.6 -> 44.3 s CPU, four A/B rounds), so ~40 s; `hil plan --scenario harbour`
+# ~25 s before, 0.9x that after (the planner's group: 27.1 -> 24.4 s).
+COLD_COMPILE_S = 40
+COLD_PLAN_COMPILE_S = 22
 
 
 def _index_files(source: Path) -> list[Path]:

@@ -32,7 +32,7 @@ from hil.cpu_load import HOST_LOAD_ENV, HostLoadFeed
 UML_CANDIDATES = ("/usr/bin/linux.uml", "/usr/bin/linux")
 UML_MODULES = Path("/usr/lib/uml/modules")
 CAN_MODULES = ("net/can/can.ko", "net/can/can-raw.ko", "drivers/net/can/dev/can-dev.ko", "drivers/net/can/vcan.ko")
-ENV_KEYS = ("PATH", "HOME", "LANG", "LC_ALL", "PYTHONPATH", "NUMBA_CACHE_DIR", "TMPDIR")
+ENV_KEYS = ("PATH", "HOME", "LANG", "LC_ALL", "PYTHONPATH", "NUMBA_CACHE_DIR", "NUMBA_OPT", "TMPDIR")
 
 
 @dataclass

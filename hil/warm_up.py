@@ -219,11 +219,15 @@ def run_all(groups: tuple[str, ...] | None = None, kernels: bool = False) -> lis
 
 
 def main(argv: list[str]) -> int:
+    from hil import numba_env
+
     as_json = "--json" in argv
     names = [a for a in argv if a not in ("--json", "--kernels")]
     if len(names) != 1 or names[0] not in GROUPS:
         print(f"usage: python -m hil.warm_up [--json] [--kernels] {{{','.join(GROUPS)}}}", file=sys.stderr)
         return 2
+    if names[0] in numba_env.LOW_OPT_GROUPS:
+        numba_env.apply()
     figures = compile_group(names[0], kernels="--kernels" in argv)
     if as_json:
         print(json.dumps(figures), flush=True)

@@ -365,8 +365,9 @@ def _lazy_theta_star(occ, sr, sc, gr, gc):
                 if size >= keys.shape[0]:
                     keys2 = np.empty(2 * keys.shape[0])
                     items2 = np.empty(2 * keys.shape[0], dtype=np.int64)
-                    keys2[:size] = keys[:size]
-                    items2[:size] = items[:size]
+                    for h in range(size):   # a loop, not a slice copy: numba's slice assignment brings
+                        keys2[h] = keys[h]      # its shape-mismatch error message, ~2.5 s of cold compile
+                        items2[h] = items[h]
                     keys, items = keys2, items2
                 size = _heap_push(keys, items, size, cost + math.hypot(gr - nr, gc - nc), q)
     if not found:

@@ -60,7 +60,7 @@ UNIT_MODULES = frozenset("""
     global_route guidance_kernel mavlink_crc mavlink_fast_path mission_executor modes navigation navigation_fast
     battery_monitor config_ranges encounter_route online percentiles plan_commitment plan_start_course readiness
     planner_algorithms planner_config planner_cost planner_dynamic_domain planner_fence planner_gridmap
-    planner_issue34 flow_optimum planner_registry planner_tree_golden thread_cpu_deadline
+    planner_issue34 flow_optimum planner_registry planner_stable_argsort planner_tree_golden thread_cpu_deadline
     planner_guidance planner_kgrowth planner_metrics planner_postprocess process_logging reactive route_planning
     run_judging run_plot scenarios sim_sensors sim_vessel sim_waves simulator_assembly summaries tiers tracking_stats
     traffic_planning vehicle

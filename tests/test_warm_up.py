@@ -127,3 +127,22 @@ def test_kernel_times_count_each_function_and_its_specialisations():
         assert top[-1]["kernel"].startswith("numba (")
     finally:
         times.uninstall()
+
+
+
+def test_the_vessel_computers_kernels_compile_at_numba_opt_1_unless_the_user_sets_another_level(monkeypatch):
+    from hil import numba_env
+
+    monkeypatch.delenv("NUMBA_OPT", raising=False)
+    numba_env.apply()
+    assert os.environ["NUMBA_OPT"] == "1"
+    monkeypatch.setenv("NUMBA_OPT", "3")
+    numba_env.apply()
+    assert os.environ["NUMBA_OPT"] == "3"
+    assert numba_env.LOW_OPT_GROUPS == ("planner", "vessel-computer")   # not the simulator's
+    # `hil autopilot` sets it before it builds the vessel computer (a bad scenario stops it right after)
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_OPT"}
+    probe = ("import os; from hil.cli import main; "
+             "code = main(['autopilot', '--scenario', 'no-such-scenario']); print(code, os.environ.get('NUMBA_OPT'))")
+    r = subprocess.run([sys.executable, "-c", probe], cwd=REPO, env=env, capture_output=True, text=True, timeout=120)
+    assert r.stdout.splitlines()[-1] == "2 1", (r.stdout, r.stderr)

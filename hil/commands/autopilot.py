@@ -130,6 +130,9 @@ def _overrides(args: argparse.Namespace) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hil import numba_env
+
+    numba_env.apply()   # before the vessel computer compiles or loads its kernels
     import numpy as np
 
     args.overrides = list(args.overrides) + _overrides(args)

@@ -191,6 +191,10 @@ def _ddrrt_hint(params, result, grid) -> str | None:
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
+    from hil import numba_env
+
+    numba_env.apply()   # before the planner's import
+
     from hil.first_run import COLD_PLAN_COMPILE_S, PLANNER_SOURCES, compile_notice
 
     # before the planner's import, which compiles on a cold cache
