@@ -400,3 +400,48 @@ def test_the_speed_limit_also_looks_along_the_course_over_ground():
     assert helm.avoidance_cap(along, 1.0) == 1.0
     sliding = NavState(0.0, 93.2, 120.1, towards_quay - math.pi / 2, 0.5, 0.8, 0.0, 0.0, 0.0)
     assert helm.avoidance_cap(sliding, 1.0) < 0.6
+
+
+@pytest.mark.parametrize("turn_deg", [90.0, -90.0, 135.0])
+@pytest.mark.parametrize("yaw_first", [False, True], ids=["braking_first", "yaw_first"])
+def test_a_sharp_turn_asked_at_speed_beside_the_quay_brakes_before_it_turns(turn_deg, yaw_first, monkeypatch):
+    """In-process, the harbour: the boat runs at the quay at 2 m/s, unguarded; 4 m off a new route asks for a
+    sharp turn (controllers reset, the limit on). While it must brake, the yaw moment gives way to the surge
+    force (Helm.braking_yaw_limit): a full-rate turn leaves no reverse thrust (allocate keeps the yaw first)
+    and turns the hull across its own momentum, which the thrusters cannot stop. Braking first, the hull's
+    centre stays more than 1 m off over the next 4 s; yaw first (the limit lifted), it runs onto the quay."""
+    from support.closed_loop import ClosedLoop, clearance
+
+    from autopilot_bridge.helm import Helm
+    from autopilot_bridge.navigation import NavState
+    from simulator.core import Command
+
+    if yaw_first:
+        monkeypatch.setattr(Helm, "braking_yaw_limit", property(lambda _self: math.inf))
+    start = (83.1, 115.1)
+    psi = math.atan2(120.0 - start[1], 94.0 - start[0])
+    loop = ClosedLoop(start, psi=psi)
+    helm, core = loop.ap.helm, loop.core
+    limit = helm.avoidance_cap
+    helm.avoidance_cap = lambda _s, u_ref: u_ref            # type: ignore[method-assign,assignment]
+    helm.reset_controllers(NavState(0.0, *start, psi, 0.0, 0.0, 0.0, 0.0, 0.0))
+    ref, turned_at, worst = psi, None, math.inf
+    for i in range(int(round(20.0 / core.frame_dt))):
+        t = i * core.frame_dt
+        x, y, heading, u, v, r = core.state
+        s = NavState(t, x, y, heading, u, v, r, 0.0, 0.0)
+        if turned_at is None and clearance(x, y) <= 4.0:
+            assert u > 1.9
+            turned_at, ref = t, psi + math.radians(turn_deg)
+            helm.avoidance_cap = limit                      # type: ignore[method-assign]
+            helm.reset_controllers(s)
+        th = helm.drive(s, core.frame_dt, ref, 2.0)
+        core.apply(Command(core.time_usec, th.port_cmd, th.stdb_cmd))
+        core.step()
+        if turned_at is not None and t <= turned_at + 4.0:
+            worst = min(worst, clearance(core.state[0], core.state[1]))
+    assert turned_at is not None
+    if yaw_first:
+        assert worst < 1.0, worst
+    else:
+        assert worst > 1.5, worst
