@@ -210,9 +210,11 @@ class Helm:
                r_ref: float = 0.0, yaw_limit: float = math.inf) -> Thrust:
         capped = self.avoidance_cap(s, u_ref)
         if capped != u_ref:
+            # No turn may push the boat on: a full differential with the weaker reverse thrust makes surge force
+            # (turn_on_the_spot), which crept a boat 1.5 m off a wall to 1.0 m at 0.1 m/s while it turned away.
             self.speed_ctl.limit_reference(abs(capped))
-            if s.speed > abs(capped) + AVOID_BRAKE_MARGIN:
-                yaw_limit = min(yaw_limit, self.braking_yaw_limit)
+            brake = s.speed > abs(capped) + AVOID_BRAKE_MARGIN
+            yaw_limit = min(yaw_limit, self.braking_yaw_limit if brake else self.turn_on_the_spot)
         tau_r = self.heading_pid.update(psi_ref, s.psi, s.r, dt, r_ref)
         tau_r = min(max(tau_r, -yaw_limit), yaw_limit)
         tau_u = self.speed_ctl.update(capped, s.u, s.v, s.r, dt, u_current)

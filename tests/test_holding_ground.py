@@ -445,3 +445,21 @@ def test_a_sharp_turn_asked_at_speed_beside_the_quay_brakes_before_it_turns(turn
         assert worst < 1.0, worst
     else:
         assert worst > 1.5, worst
+
+
+def test_a_boat_inside_the_margin_turns_away_without_creeping_nearer():
+    """In-process, the harbour: the boat 1.5 m from a quay's corner (inside the planner's 2 m margin, where the
+    chaos hour's mode changes left it; seed 31 signed, collision at 83.8 s), bow towards the corner, sent by
+    GUIDED to open water behind it. While its speed is limited no turn may push it ahead (a full thrust
+    differential with the weaker reverse makes surge force): it turns on the spot and leaves, never nearer
+    than where it started (before: it crept to 1.0 m while turning)."""
+    from support.closed_loop import ClosedLoop, clearance
+
+    start = (82.06, 29.16)
+    assert clearance(*start) == 1.5
+    loop = ClosedLoop(start, psi=math.radians(-8.0))
+    loop.run(1.0)
+    cmd = loop.ap.commands
+    assert cmd.arm(True).ok and cmd.goto(128.9, 75.3).ok
+    assert loop.run(15.0) >= 1.5
+    assert clearance(*loop.core.state[:2]) > 2.0          # and it got out
