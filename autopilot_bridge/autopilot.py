@@ -161,7 +161,8 @@ class Autopilot:
         self.commands = VehicleCommands(self.vehicle, self.grid, safety, self.param_table, self.actuators,
                                         lambda: self._status, self._record_event, self.geofence,
                                         self._fence_changed, onboard=self.onboard_status,
-                                        current=lambda: self.current.velocity)
+                                        current=lambda: self.current.velocity,
+                                        coast_s=propulsion.surge.m11 / propulsion.surge.d_u)
 
     @staticmethod
     def _field_prior(world: World) -> Callable[[float, float], tuple[float, float]] | None:

@@ -43,6 +43,9 @@ AVOID_BRAKE_MARGIN = 0.1      # m/s over the limit: braking, the yaw moment give
 BRAKING_YAW_SHARE = 0.1       # of the reverse thrust as a yaw moment while braking: the hull stays along its way
 AVOID_COURSE_SPEED = 0.3      # m/s over ground: above it the course over ground is checked too (below, noise)
 AVOID_LOOKAHEAD = 24.0        # m: 3 m/s, the hull's top speed, stops within it (18 m + 2 s of lag)
+BLOCKED_RUN = 1.0             # m of free water the set-point's way leaves: less, the way is blocked
+CLEAR_RUN = 3.0               # m of free water along the set-point's way that ends the blockage
+BLOCKED_SPEED = 0.2           # m/s: a set-point below it is no way to block (arrival, station keeping)
 ARRIVAL_DECELERATION = 0.25   # m/s^2: half the speed reference model's limit (max_acceleration 0.5)
 MANUAL_STICK_TIMEOUT_S = 1.0   # wall s: an older MANUAL_CONTROL is no stick (MANUAL then holds)
 
@@ -67,6 +70,8 @@ class Helm:
         # at once: from WAITING that raised, every frame, and a HOLD near the quay drifted onto it (issue 31's
         # chaos GCS found it).
         self._hold_behaviour = BehaviourMachine(start=Behaviour.IDLE)
+        self.blocked_at: tuple[float, float] | None = None   # NED m: where a blocked way keeps station
+        self._blocked_behaviour = BehaviourMachine(start=Behaviour.IDLE)
         self.reactive = ReactiveAvoidance(grid, params.fallback_range, params.min_clearance, params.fallback_speed)
         self.tracking = TrackingStats()
         self.zero_thrust = allocate(0.0, 0.0, propulsion.B_u, propulsion.T_max, propulsion.T_min)
@@ -79,6 +84,7 @@ class Helm:
     def idle(self) -> Thrust:
         """Thrusters at zero (disarmed, HOLD, a mode without a route)."""
         self.course.behaviour.pause()
+        self.blocked_at = None
         return self.zero_thrust
 
     def hold(self, s: NavState, dt: float) -> Thrust:
@@ -87,6 +93,7 @@ class Helm:
         as far inside the geofence. Nearer, it keeps station at the last point that was that far, so a
         current never sets it onto the rocks or across the fence (issue 33)."""
         self.course.behaviour.pause()
+        self.blocked_at = None
         clearance = self.grid.clearance_at(s.y, s.x)
         safe = clearance >= self.hold_clearance and self.fence_depth(s.x, s.y) >= self.hold_clearance
         if safe:
@@ -204,7 +211,40 @@ class Helm:
         thrust. Under way the speed loop's integral takes up the current (feeding the estimate forward here
         too moved the COLREGs encounters' trajectories: crossing-right seed 3 turned to port); station
         keeping, where the current is the whole load, feeds it forward (:meth:`_station_keep`)."""
+        if self._way_blocked(s, psi_ref, u_ref):
+            return self._keep_blocked(s, dt)
         return self._drive(s, dt, psi_ref, u_ref, 0.0, r_ref)
+
+    def _way_blocked(self, s: NavState, psi_ref: float, u_ref: float) -> bool:
+        """Whether the set-point asks the boat where the avoidance limit will not let it go: less than
+        ``BLOCKED_RUN`` of free water along its way (``psi_ref``, or astern for a negative ``u_ref``), until
+        ``CLEAR_RUN`` is free again. A boat held back there keeps station (:meth:`_keep_blocked`); before,
+        it stopped with its speed limited and the current set it sideways onto the quay it faced (the chaos
+        hour, seed 31 unsigned, collision at 1,051 s)."""
+        if abs(u_ref) < BLOCKED_SPEED:
+            blocked = False
+        else:
+            way = psi_ref if u_ref > 0.0 else psi_ref + math.pi
+            free = self._free_run(s, way, CLEAR_RUN)
+            blocked = free < (CLEAR_RUN if self.blocked_at is not None else BLOCKED_RUN)
+        if blocked and self.blocked_at is None:
+            self.blocked_at = (s.x, s.y)
+            self.station.reset()
+            self._blocked_behaviour.to(Behaviour.IDLE)
+            self._event(s.t, f"{self.vehicle.mode.name}: way blocked {self.grid.clearance_at(s.y, s.x):.1f} m from "
+                        "an obstacle: keeping station until it clears")
+        elif not blocked and self.blocked_at is not None:
+            self.blocked_at = None
+            self.reset_controllers(s)
+        return blocked
+
+    def _keep_blocked(self, s: NavState, dt: float) -> Thrust:
+        """Keep station where the way was blocked, against the current, as HOLD does near obstacles."""
+        assert self.blocked_at is not None
+        return self.station.command(s, dt, self.blocked_at, True, self._blocked_behaviour,
+                                    lambda st, h, psi, u, uc: self._drive(st, h, psi, u, uc,
+                                                                          yaw_limit=self.turn_on_the_spot),
+                                    self.current.velocity, lambda: self.reset_controllers(s))
 
     def _drive(self, s: NavState, dt: float, psi_ref: float, u_ref: float, u_current: float,
                r_ref: float = 0.0, yaw_limit: float = math.inf) -> Thrust:

@@ -30,6 +30,7 @@ if TYPE_CHECKING:
 
 
 DISARM_DRIFT_S = 30.0   # s of drift with the current that a disarm may leave the boat clear of obstacles and fence
+DRIFT_STEP_S = 0.5      # s between the drift's samples (at 3 m/s, the hull's top speed, 1.5 m: 3 chart cells)
 
 
 class VehicleCommands:
@@ -39,11 +40,13 @@ class VehicleCommands:
                  actuators: Actuators, status: Callable[[], VehicleStatus | None],
                  record: Callable[[str], None], geofence: GeoFence, fence_changed: Callable[[Fence], None],
                  onboard: Callable[[], OnboardStatus] | None = None,
-                 current: Callable[[], tuple[float, float]] = lambda: (0.0, 0.0)) -> None:
+                 current: Callable[[], tuple[float, float]] = lambda: (0.0, 0.0), coast_s: float = 0.0) -> None:
         """``onboard``: the sensors' and the pack's state (autopilot_bridge.onboard_status; None: nothing known);
-        ``current``: the current's estimate (NED m/s) a disarmed boat would drift with."""
+        ``current``: the current's estimate (NED m/s) a disarmed boat would drift with; ``coast_s``: the time
+        constant (s) in which the hull's own way through the water dies away, thrusters off (m11 / d_u of
+        eq. (4)'s linear damping; the quadratic and cubic terms only shorten the run)."""
         self.vehicle, self.grid, self.safety_radius = vehicle, grid, safety_radius
-        self._current = current
+        self._current, self.coast_s = current, coast_s
         self.param_table, self.actuators = params, actuators
         self._status, self._record = status, record
         self.geofence, self._fence_changed = geofence, fence_changed
@@ -80,16 +83,22 @@ class VehicleCommands:
         return Result(*self.vehicle.arm(on))
 
     def _drift_hazard(self) -> str | None:
-        """Why drifting from here with the current's estimate reaches within the safety radius of an obstacle
-        or the fence's edge within ``DISARM_DRIFT_S`` (sampled every second); None if it does not."""
-        here = self._position()
-        if here is None:
+        """Why a boat left to itself from here reaches within the safety radius of an obstacle or the fence's
+        edge within ``DISARM_DRIFT_S``: it drifts with the current's estimate and coasts on with its own way
+        through the water, which dies away in ``coast_s``. None if it stays clear."""
+        st = self._status()
+        if st is None or st.nav is None:
             return None
+        nav = st.nav
         cn, ce = self._current()
         if not (math.isfinite(cn) and math.isfinite(ce)):
             cn = ce = 0.0
-        for k in range(int(DISARM_DRIFT_S) + 1):
-            n, e = here[0] + cn * k, here[1] + ce * k
+        c, sn = math.cos(nav.psi), math.sin(nav.psi)
+        wn, we = nav.u * c - nav.v * sn - cn, nav.u * sn + nav.v * c - ce    # the way through the water
+        for k in range(int(DISARM_DRIFT_S / DRIFT_STEP_S) + 1):
+            t = k * DRIFT_STEP_S
+            coast = self.coast_s * (1.0 - math.exp(-t / self.coast_s)) if self.coast_s > 0.0 else 0.0
+            n, e = nav.x + cn * t + wn * coast, nav.y + ce * t + we * coast
             if self.grid.clearance_at(e, n) < self.safety_radius:
                 what = "an obstacle"
             elif self.geofence.depth(n, e) < self.safety_radius:
@@ -98,8 +107,8 @@ class VehicleCommands:
                 continue
             if k == 0:
                 return f"within {self.safety_radius:g} m of {what}"
-            return (f"the current ({math.hypot(cn, ce):.2f} m/s) would set the boat within {self.safety_radius:g} m "
-                    f"of {what} in {k} s")
+            return (f"its way ({math.hypot(wn, we):.2f} m/s) and the current ({math.hypot(cn, ce):.2f} m/s) would "
+                    f"set the boat within {self.safety_radius:g} m of {what} in {t:g} s")
         return None
 
     def set_mode(self, mode: Mode) -> Result:

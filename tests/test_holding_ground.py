@@ -19,6 +19,7 @@ import json
 import math
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
@@ -28,6 +29,9 @@ from support.gcs_client import Gcs, M, start_run, stop_run
 from autopilot_bridge.modes import Mode
 from common.geodesy import LocalFrame
 from hil.hilrun import free_udp_port
+
+if TYPE_CHECKING:
+    from support.closed_loop import ClosedLoop
 
 GEO = LocalFrame(38.92, 121.65, 0.0)  # [geodesy] of configs/default.toml
 REPO = Path(__file__).resolve().parents[1]
@@ -342,6 +346,33 @@ def test_a_disarm_that_leaves_the_boat_to_drift_onto_the_quay_is_refused_unless_
     assert clearance(*loop.core.state[:2]) >= 2.0
 
 
+@pytest.mark.parametrize("speed", [0.0, 1.5, -1.5])
+def test_a_disarm_counts_the_boats_own_way_as_well_as_the_current(speed):
+    """VehicleCommands' disarm check, the harbour's chart, still water: 3.5 m from the quay, beyond the 2 m
+    safety radius, a boat at rest may disarm; running at it at 1.5 m/s its way carries it m11 / d_u = 1.8 s x
+    1.5 m/s = 2.7 m on, inside the radius: refused, the way named; backing away from it at 1.5 m/s, taken."""
+    import dataclasses
+
+    from support.closed_loop import ClosedLoop, clearance
+
+    from autopilot_bridge.navigation import NavState
+
+    loop = ClosedLoop((83.1, 115.1))
+    loop.run(1.0)
+    ap, cmd = loop.ap, loop.ap.commands
+    assert cmd.arm(True).ok
+    towards_quay = math.atan2(120.0 - 115.1, 94.0 - 83.1)
+    assert 3.0 < clearance(93.2, 120.1) < 4.0 and 1.7 < cmd.coast_s < 2.0
+    nav = NavState(ap._status.t, 93.2, 120.1, towards_quay, speed, 0.0, 0.0, 0.0, 0.0)
+    ap._status = dataclasses.replace(ap._status, nav=nav)
+    cmd._current = lambda: (0.0, 0.0)
+    result = cmd.arm(False)
+    if speed > 0.0:
+        assert not result.ok and "its way (1.50 m/s)" in result.text and ap.vehicle.armed, result
+    else:
+        assert result.ok and not ap.vehicle.armed, result
+
+
 @pytest.mark.parametrize("case", ["guarded", "unguarded", "mode_change_at_speed"])
 def test_a_set_point_that_drives_at_the_quay_stops_short_of_it(case):
     """In-process, the harbour's truth and current: whatever a mode asks (here 2 m/s straight at the quay for
@@ -400,6 +431,56 @@ def test_the_speed_limit_also_looks_along_the_course_over_ground():
     assert helm.avoidance_cap(along, 1.0) == 1.0
     sliding = NavState(0.0, 93.2, 120.1, towards_quay - math.pi / 2, 0.5, 0.8, 0.0, 0.0, 0.0)
     assert helm.avoidance_cap(sliding, 1.0) < 0.6
+
+
+def _drive_at_the_quay(off_deg: float, seconds: float) -> tuple[float, ClosedLoop]:
+    """The harbour's truth and current; the helm asked for 2 m/s on a fixed heading ``off_deg`` from the line
+    at the quay beyond the GUIDED target above, for ``seconds``, the current observer fed as the pipeline
+    feeds it. The least chart clearance (m) of the hull's centre, and the loop."""
+    from support.closed_loop import ClosedLoop, clearance
+
+    from autopilot_bridge.navigation import NavState
+    from simulator.core import Command
+
+    start = (83.1, 115.1)
+    psi = math.atan2(120.0 - start[1], 94.0 - start[0]) + math.radians(off_deg)
+    loop = ClosedLoop(start, psi=psi)
+    helm, core = loop.ap.helm, loop.core
+    helm.reset_controllers(NavState(0.0, *start, psi, 0.0, 0.0, 0.0, 0.0, 0.0))
+    worst, tau = math.inf, 0.0
+    for i in range(int(round(seconds / core.frame_dt))):
+        x, y, heading, u, v, r = core.state
+        s = NavState(i * core.frame_dt, x, y, heading, u, v, r, 0.0, 0.0)
+        loop.ap.current.update(s, tau, core.frame_dt)
+        th = helm.drive(s, core.frame_dt, psi, 2.0)
+        tau = th.port + th.stdb
+        core.apply(Command(core.time_usec, th.port_cmd, th.stdb_cmd))
+        core.step()
+        worst = min(worst, clearance(core.state[0], core.state[1]))
+    return worst, loop
+
+
+@pytest.mark.parametrize("off_deg", [0.0, 30.0, -30.0, 60.0, -60.0])
+def test_a_set_point_held_at_the_quay_keeps_station_where_its_way_is_blocked(off_deg):
+    """In-process, the harbour's truth and current (0.5 m/s, setting along and onto the quays): a mode asks
+    for 2 m/s at the quay, at several angles to it, for 4 minutes. The avoidance limit stops the boat short;
+    with the way blocked the helm keeps station there against the current (Helm._way_blocked), so the hull's
+    centre stays more than half the hull's length (1 m) off, where before it was set along and onto the quay
+    with its speed limited (the chaos hour, seed 31 unsigned: collision at 1,051 s)."""
+    worst, loop = _drive_at_the_quay(off_deg, 240.0)
+    assert worst > 1.0, worst
+    assert loop.ap.helm.blocked_at is not None
+    assert math.dist(loop.core.state[:2], loop.ap.helm.blocked_at) < 3.0
+
+
+def test_without_keeping_station_a_blocked_boat_is_set_onto_the_quay(monkeypatch):
+    """The control case of the test above: the blockage never recognised, the same set-point head on runs
+    the hull onto the quay within 4 minutes, its speed limited but its sway the current's."""
+    from autopilot_bridge.helm import Helm
+
+    monkeypatch.setattr(Helm, "_way_blocked", lambda _self, _s, _psi, _u: False)
+    worst, _ = _drive_at_the_quay(0.0, 240.0)
+    assert worst < 0.5, worst
 
 
 @pytest.mark.parametrize("turn_deg", [90.0, -90.0, 135.0])
