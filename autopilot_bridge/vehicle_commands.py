@@ -107,8 +107,9 @@ class VehicleCommands:
                 continue
             if k == 0:
                 return f"within {self.safety_radius:g} m of {what}"
-            return (f"its way ({math.hypot(wn, we):.2f} m/s) and the current ({math.hypot(cn, ce):.2f} m/s) would "
-                    f"set the boat within {self.safety_radius:g} m of {what} in {t:g} s")
+            return (f"drifting with the current ({math.hypot(cn, ce):.2f} m/s) and coasting on its way through the "
+                    f"water ({math.hypot(wn, we):.2f} m/s), the boat would be within {self.safety_radius:g} m of "
+                    f"{what} in {t:g} s")
         return None
 
     def set_mode(self, mode: Mode) -> Result:

@@ -11,6 +11,7 @@ answer has been printed (bounded waits, no sleeps; a MAVProxy that exits fails a
 
 from __future__ import annotations
 
+import math
 import queue
 import shutil
 import subprocess
@@ -239,3 +240,46 @@ def test_mavproxy_flies_a_qgc_plan_as_ardurover_with_pause_resume_guided_hold_an
         if m.get_srcSystem() == 1:
             reached.append(m.seq)
     assert reached[:5] == [1, 2, 3, 4, 5], reached          # item 0 (home) never: ArduPilot's convention
+
+
+def test_mavproxy_disarm_beside_the_breakwater_is_refused_and_disarm_force_is_taken(tmp_path):
+    """Issue 31: the boat keeps station at a GUIDED target 4 m south of the breakwater, the harbour's current
+    (0.5 m/s) setting onto it (sent there by a pymavlink script with DO_REPOSITION: MAVProxy's `guided` is
+    ArduPilot's MISSION_ITEM with current = 2). MAVProxy's `disarm` is refused (TEMPORARILY_REJECTED, the boat
+    stays armed: drifting, it would be set onto the breakwater within 10 s); `disarm force` (param2 = 21196)
+    is taken."""
+    from common.mavlink import MAV_TYPE as M
+
+    target = (104.0, 92.0)                  # NED m, as tests/test_holding_ground.py's
+    port = free_udp_port()
+    proc = start_run(tmp_path / "run", "--scenario", "harbour", "--duration", "5000", "--wait-for-arm",
+                     "--speedup", "4", "--gcs", f"udpin:127.0.0.1:{port}")
+    mp = Console([MAVPROXY, f"--master=udpout:127.0.0.1:{port}", "--source-system=255",
+                  "--default-modules=mode,arm,cmdlong", f"--state-basedir={tmp_path / 'mavproxy'}"], tmp_path)
+    watcher = Gcs(f"udpout:127.0.0.1:{port}", sysid=254)
+    try:
+        mp.expect("Detected vehicle 1:1", timeout=240)
+        assert watcher.connect(60) is not None and watcher.recv("GLOBAL_POSITION_INT", 60) is not None
+        mp.send("arm throttle")
+        mp.expect("COMPONENT_ARM_DISARM: ACCEPTED")
+        lat, lon = GEO.sea_level_to_geodetic(*target)
+        ack = watcher.command(M.MAV_CMD_DO_REPOSITION, -1.0, 1.0, 0.0, float("nan"), lat, lon, 0.0)
+        assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
+
+        def there(p) -> bool:
+            n, e = GEO.geodetic_to_sea_level(p.lat * 1e-7, p.lon * 1e-7)
+            return math.dist((n, e), target) <= 1.0
+        assert watcher.recv("GLOBAL_POSITION_INT", 240, there) is not None
+        mp.send("disarm")
+        mp.expect("COMPONENT_ARM_DISARM: TEMPORARILY_REJECTED")
+        hb = watcher.recv("HEARTBEAT", 10, lambda h: h.get_srcSystem() == 1)
+        assert hb is not None and hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
+        mp.send("disarm force")
+        mp.expect("COMPONENT_ARM_DISARM: ACCEPTED")
+        hb = watcher.recv("HEARTBEAT", 10, lambda h: h.get_srcSystem() == 1 and
+                          not h.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
+        assert hb is not None
+    finally:
+        watcher.close()
+        mp.close()
+        stop_run(proc)

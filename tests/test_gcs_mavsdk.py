@@ -230,3 +230,45 @@ def test_mavsdk_mission_with_speed_loiter_and_return_to_launch(tmp_path):
         if proc is not None:
             stop_run(proc)
     check_mission_session(out / "run.tlog", GEO)
+
+
+def test_mavsdk_disarm_beside_the_breakwater_is_refused_and_kill_forces_it(tmp_path):
+    """Issue 31: MAVSDK's Action sends the boat (goto_location: DO_REPOSITION) to a target 4 m south of the
+    breakwater, the harbour's current (0.5 m/s) setting onto it, where it keeps station. Action.disarm there
+    is refused, the boat stays armed (drifting, it would be set onto the breakwater within 10 s); Action.kill
+    (MAVLink's forced disarm, param2 = 21196) is taken. The reason reaches MAVSDK as a STATUSTEXT."""
+    from mavsdk.plugins.action import ActionError
+
+    target = (104.0, 92.0)                  # NED m, as tests/test_holding_ground.py's GUIDED target
+    port = free_udp_port()
+    sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+    proc = None
+    try:
+        assert sdk.add_any_connection(f"udpin://127.0.0.1:{port}") == ConnectionResult.SUCCESS
+        proc = start_run(tmp_path / "run", "--scenario", "harbour", "--duration", "5000", "--wait-for-arm",
+                         "--speedup", "4", "--gcs", f"udpout:127.0.0.1:{port}")
+        boat = sdk.first_autopilot(240.0)
+        assert boat is not None
+        direct, telemetry, action = MavlinkDirect(boat), Telemetry(boat), Action(boat)
+        positions, armed, texts = Watch(), Watch(), Watch()
+        telemetry.subscribe_position(positions)
+        telemetry.subscribe_armed(armed)
+        direct.subscribe_message("STATUSTEXT", lambda m, ud: texts(json.loads(m.fields_json)["text"]))
+        assert positions.wait(lambda p: True, 60) is not None
+        action.arm()
+        lat, lon = GEO.sea_level_to_geodetic(*target)
+        action.goto_location(lat, lon, 0.0, float("nan"))
+        there = positions.wait(lambda p: math.dist(_ned(p), target) <= 1.0, 240)
+        assert there is not None, _ned(positions.last())
+        with pytest.raises(ActionError):
+            action.disarm()
+        assert texts.wait(lambda t: "disarm refused" in t, 10) is not None, texts.values
+        assert armed.last() is True and proc.poll() is None
+        seen = len(armed.values)
+        action.kill()
+        assert armed.wait(lambda a: len(armed.values) > seen and armed.last() is False, 10) is not None
+        assert armed.last() is False
+    finally:
+        sdk.destroy()
+        if proc is not None:
+            stop_run(proc)

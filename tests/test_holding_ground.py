@@ -319,11 +319,12 @@ def test_arrival_at_a_guided_target_near_the_quay_keeps_the_hull_off_it(speed):
     assert worst >= 2.0, worst
 
 
-def test_a_disarm_that_leaves_the_boat_to_drift_onto_the_quay_is_refused_unless_forced():
-    """In-process (tests/support/closed_loop.py): the boat keeps station at a GUIDED target 2-3 m from the
-    quay, the harbour's current setting onto it. A disarm there would leave it to drift onto the quay (the
-    chaos ground station's collisions after a disarm): refused, with the reason, and the boat keeps station;
-    a forced disarm (MAVLink param2 = 21196) is taken. In open water, 14 m from anything, a disarm is taken."""
+def test_a_disarm_that_leaves_the_boat_to_drift_onto_the_breakwater_is_refused_unless_forced():
+    """In-process (tests/support/closed_loop.py): the boat keeps station at a GUIDED target 4 m south of the
+    breakwater, where the harbour's current (0.5 m/s, north) would set a drifting hull onto it within 10 s.
+    A disarm there would leave it to do so (the chaos ground station's collisions after a disarm): refused,
+    with the reason, and the boat keeps station; a forced disarm (MAVLink param2 = 21196) is taken. In open
+    water, 14 m from anything, a disarm is taken."""
     from support.closed_loop import ClosedLoop, clearance
 
     open_water = ClosedLoop((83.1, 115.1))
@@ -333,17 +334,20 @@ def test_a_disarm_that_leaves_the_boat_to_drift_onto_the_quay_is_refused_unless_
     open_water.run(10.0)
     assert cmd.arm(False).ok and not open_water.ap.vehicle.armed
 
-    loop = ClosedLoop((83.1, 115.1))
+    target = (104.0, 92.0)
+    assert 3.5 < clearance(*target) <= 4.0
+    loop = ClosedLoop((40.0, 22.0), psi=0.8)           # the harbour scenario's start
     loop.run(2.0)
     cmd = loop.ap.commands
-    assert cmd.arm(True).ok and cmd.goto(94.0, 120.0).ok
-    loop.run(25.0)
+    assert cmd.arm(True).ok and cmd.goto(*target).ok
+    loop.run(110.0)
+    assert math.dist(loop.core.state[:2], target) < 1.0
     refused = cmd.arm(False)
     assert not refused.ok and "disarm refused" in refused.text and "force" in refused.text, refused
     assert loop.ap.vehicle.armed
-    assert loop.run(10.0) >= 2.0
+    assert loop.run(10.0) >= 3.0
     assert cmd.arm(False, force=True).ok and not loop.ap.vehicle.armed
-    assert clearance(*loop.core.state[:2]) >= 2.0
+    assert loop.run(10.0) < 1.0                          # and, left to the current, it drifts onto it
 
 
 @pytest.mark.parametrize("speed", [0.0, 1.5, -1.5])
@@ -368,7 +372,7 @@ def test_a_disarm_counts_the_boats_own_way_as_well_as_the_current(speed):
     cmd._current = lambda: (0.0, 0.0)
     result = cmd.arm(False)
     if speed > 0.0:
-        assert not result.ok and "its way (1.50 m/s)" in result.text and ap.vehicle.armed, result
+        assert not result.ok and "way through the water (1.50 m/s)" in result.text and ap.vehicle.armed, result
     else:
         assert result.ok and not ap.vehicle.armed, result
 
