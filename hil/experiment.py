@@ -16,11 +16,14 @@ import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from planner.params import ALGORITHM_NAMES, REGISTRY, Objective
+
+if TYPE_CHECKING:
+    from planner.online import OnlineResult
 
 ALGORITHMS = ALGORITHM_NAMES  # the planner's registry; the order fixes the per-algorithm seeds
 LABELS = {e.name: e.label for e in REGISTRY}
@@ -349,8 +352,9 @@ class Campaign:
     """Result of :func:`run_campaign`: the rows finished and what was kept for the figures."""
 
     rows: list[dict[str, Any]] = field(default_factory=list)
-    details: dict[str, Any] = field(default_factory=dict)      # algorithm -> OnlineResult of run 0
-    paths: dict[tuple[int, str], Any] = field(default_factory=dict)
+    details: dict[str, OnlineResult] = field(default_factory=dict)      # algorithm -> its run 0
+    # (run, algorithm) -> (the path sailed, reached the goal)
+    paths: dict[tuple[int, str], tuple[np.ndarray, bool]] = field(default_factory=dict)
     interrupted: bool = False
 
 
