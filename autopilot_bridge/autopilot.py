@@ -149,7 +149,7 @@ class Autopilot:
         self._fence_versions = 0
         self.vehicle.rally_target = self.geofence.rally_point
         self.helm.fence_depth = self.geofence.depth
-        self.nav = NavigationFilter(self.nav_params)
+        self.nav: NavigationFilter   # built by _reset, as after every simulator restart
         # Telemetry's truth: sensor health and the pack (BATT_* parameters, low-battery failsafe).
         self.onboard = OnboardSensors(BatteryMonitor(config.battery, self._battery_failsafe, self._event))
         self.failsafes = OnboardFailsafes(self.vehicle, self._event)
