@@ -1,9 +1,12 @@
-"""Assembly of the vessel computer: its parts built from a configuration and a scenario.
+"""Assembly of the vessel computer from a configuration and a scenario.
 
 `hil autopilot` (and through it every `hil run`) calls :func:`build`; the command module only
-parses arguments and runs the loop. The vessel computer's models come from the configuration
-(e.g. the nominal surge model of eq. (5), :meth:`autopilot_bridge.control.SurgeModel.from_hull`),
-never from the simulator's classes.
+parses arguments and runs the loop. Here the scenario, its planning world and the root of the
+computer's own configuration (:func:`computer_settings`) are made from the HIL configuration; the
+computer's package then opens its devices and builds it
+(:func:`autopilot_bridge.assembly.build_computer`). The vessel computer's models come from the
+configuration (e.g. the nominal surge model of eq. (5),
+:meth:`autopilot_bridge.control.SurgeModel.from_hull`), never from the simulator's classes.
 """
 
 from __future__ import annotations
