@@ -40,15 +40,13 @@ def planning_world(cfg: HilConfig, scen: Scenario) -> World:
 
 
 def computer_config(cfg: HilConfig) -> ComputerConfig:
-    """The vessel computer's tuning, and its nominal model of the hull: eq. (5) from the configuration,
-    never the simulator's classes."""
-    from autopilot_bridge.computer_setup import ComputerConfig, Propulsion
-    from autopilot_bridge.control import SurgeModel
+    """The vessel computer's tuning, and the [vessel] figures it derives its own nominal model of eq. (5)
+    from (never the simulator's classes)."""
+    from autopilot_bridge.computer_setup import ComputerConfig, Hull
 
-    hull = cfg.vessel
-    propulsion = Propulsion(SurgeModel.from_hull(hull.m, hull.rho, hull.D, hull.L, hull.d_u), hull.B_u,
-                            hull.T_max, hull.T_min)
-    return ComputerConfig(cfg.autopilot, cfg.navigation, cfg.control, propulsion, cfg.battery_monitor)
+    v = cfg.vessel
+    hull = Hull(v.m, v.rho, v.D, v.L, v.d_u, v.B_u, v.T_max, v.T_min)
+    return ComputerConfig(cfg.autopilot, cfg.navigation, cfg.control, hull, cfg.battery_monitor)
 
 
 def run_options(cfg: HilConfig, lockstep: bool) -> RunOptions:
