@@ -51,7 +51,7 @@ from autopilot_bridge import guidance
 from autopilot_bridge.actuators import Actuators, MavlinkActuators
 from autopilot_bridge.battery_monitor import FS_NONE, FS_RTL, BatteryMonitor
 from autopilot_bridge.behaviour import STATION, Behaviour
-from autopilot_bridge.computer_setup import AutopilotStats, ComputerConfig, Devices, RunOptions
+from autopilot_bridge.computer_setup import AutopilotStats, ComputerConfig, Devices, Propulsion, RunOptions
 from autopilot_bridge.control import HeadingPID, SpeedController, Thrust
 from autopilot_bridge.course import Course
 from autopilot_bridge.current_estimate import CurrentObserver
@@ -87,7 +87,7 @@ class Autopilot:
 
     def __init__(self, config: ComputerConfig, world: World, devices: Devices, options: RunOptions,
                  log: Callable[[str], None] | None = None) -> None:
-        params, propulsion = config.params, config.propulsion
+        params, propulsion = config.params, Propulsion.from_hull(config.hull)
         self.p, self.nav_params = params, config.nav
         self.world, self.link, self.worker = world, devices.link, devices.worker
         self.telemetry = devices.telemetry
@@ -149,7 +149,7 @@ class Autopilot:
         self._fence_versions = 0
         self.vehicle.rally_target = self.geofence.rally_point
         self.helm.fence_depth = self.geofence.depth
-        self.nav = NavigationFilter(self.nav_params)
+        self.nav: NavigationFilter   # built by _reset, as after every simulator restart
         # Telemetry's truth: sensor health and the pack (BATT_* parameters, low-battery failsafe).
         self.onboard = OnboardSensors(BatteryMonitor(config.battery, self._battery_failsafe, self._event))
         self.failsafes = OnboardFailsafes(self.vehicle, self._event)

@@ -24,6 +24,20 @@ if TYPE_CHECKING:
 
 
 @dataclass(frozen=True)
+class Hull:
+    """What the vessel computer is told of its hull and thrusters: the [vessel] figures of eq. (5)."""
+
+    m: float         # kg, rigid-body mass
+    rho: float       # kg/m^3, water density
+    D: float         # m, average draught
+    L: float         # m, hull length
+    d_u: float       # kg/s, linear surge damping
+    B_u: float       # m, distance between the port and starboard propellers
+    T_max: float     # N, largest forward thrust of one propeller
+    T_min: float     # N (<= 0), largest reverse thrust of one propeller
+
+
+@dataclass(frozen=True)
 class Propulsion:
     """What the controller knows of the vessel: nominal surge model and the thrusters."""
 
@@ -32,16 +46,21 @@ class Propulsion:
     T_max: float     # N
     T_min: float     # N (<= 0)
 
+    @classmethod
+    def from_hull(cls, hull: Hull) -> Propulsion:
+        """The computer's own nominal model of ``hull`` (eq. (5), :meth:`SurgeModel.from_hull`)."""
+        return cls(SurgeModel.from_hull(hull.m, hull.rho, hull.D, hull.L, hull.d_u), hull.B_u, hull.T_max, hull.T_min)
+
 
 @dataclass(frozen=True)
 class ComputerConfig:
     """How the vessel computer is tuned: its own parameters, the filter's and the controllers',
-    and what it knows of the propulsion."""
+    and what it is told of its hull (its nominal propulsion model is its own: :meth:`Propulsion.from_hull`)."""
 
     params: AutopilotParams
     nav: NavigationParams
     control: ControlParams
-    propulsion: Propulsion
+    hull: Hull
     battery: BatteryMonitorParams = field(default_factory=BatteryMonitorParams)
 
 

@@ -31,6 +31,9 @@ from multiprocessing.connection import Connection
 from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 if TYPE_CHECKING:
+    from planner.params import PlannerParams
+    from planner.problem import PlanningProblem
+    from planner.result import PlannerResult
     from planner.termination import Termination
 
 P = TypeVar("P")   # the problem a request carries (the vessel computer's: local_planning.CycleInput)
@@ -85,7 +88,8 @@ class WorkerStats:
     events: list[str] = field(default_factory=list)
 
 
-def planning_problem_handler(algorithm: str, params: Any) -> Callable[[PlanRequest], Any]:
+def planning_problem_handler(algorithm: str, params: PlannerParams
+                             ) -> Callable[[PlanRequest[PlanningProblem]], PlannerResult]:
     """Handler that solves a ``planner.problem.PlanningProblem`` with one planner, under the budget."""
     from planner import make_planner
 

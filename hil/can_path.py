@@ -25,6 +25,9 @@ import numpy as np
 from common.dronecan_codec import TRANSFER_ID_MODULO
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+    from pathlib import Path
+
     from autopilot_bridge.can_actuators import CanActuators
     from hil.settings import HilConfig
 
@@ -45,7 +48,7 @@ def pair_latency(sent_tid, sent_at, applied_tid, applied_at, modulo: int = TRANS
     return np.array(out)
 
 
-def esc_process_command(args: argparse.Namespace, record: Any) -> list[str]:
+def esc_process_command(args: argparse.Namespace, record: str | Path) -> list[str]:
     """``python -m hil.can_path esc`` with the caller's ``--config``/``--set`` (so both ends use the
     same [can] and [esc] settings), running 30 s past ``args.duration`` and recording to ``record``."""
     cmd = [sys.executable, "-m", "hil.can_path", "esc", "--duration", repr(float(args.duration) + 30.0),
@@ -73,7 +76,8 @@ def recording_actuators(cfg: HilConfig) -> CanActuators:
     return acts
 
 
-def paced(rate: float, duration: float, send: Any, idle: Any, max_idle: float = 0.005) -> int:
+def paced(rate: float, duration: float, send: Callable[[int], None], idle: Callable[[float], None],
+          max_idle: float = 0.005) -> int:
     """Call ``send(k)`` at ``rate`` Hz for ``duration`` s of wall time (no drift: the k-th call is due at
     ``t0 + k / rate``), and ``idle(seconds)`` (at most ``max_idle``) while waiting; returns the calls made."""
     period, t0, k = 1.0 / rate, time.monotonic(), 0

@@ -31,12 +31,15 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from common.geodesy import LocalFrame
 from hil.errors import ConfigError
+
+if TYPE_CHECKING:
+    from simulator.config import GeodesyParams
 
 # S-57 object classes that are obstacles to a boat (IHO S-57 Appendix A): an ENC cell's other layers
 # (depth areas, fairways, lights ...) cover the water itself and are not read.
@@ -240,7 +243,7 @@ def rasterise(path: str | Path, resolution: float, positions: LocalFrame, extent
     return ChartGrid(occ, (lat0, lon0), float(resolution))
 
 
-def geodesy_overrides(scenario: str | None, geodesy: Any) -> list[str]:
+def geodesy_overrides(scenario: str | None, geodesy: GeodesyParams) -> list[str]:
     """``--set`` overrides that put the NED origin at a chart scenario's map corner and keep the origin
     of its positions in metres (``geodesy.positions_origin``): [] for other scenarios, and for a
     scenario that does not load (the command reports that itself). ``geodesy``: the configuration's

@@ -27,7 +27,7 @@ import uuid
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Generic, TypeVar
 
 from hil.errors import UsageError
 
@@ -60,14 +60,18 @@ def _pool_init(warm_up: Callable[[], None] | None) -> None:
     _warm_once(warm_up)
 
 
+T = TypeVar("T")   # what one unit of work takes (a campaign's Task, say)
+R = TypeVar("R")   # what it gives back (its result row)
+
+
 @dataclass(frozen=True)
-class _Call:
+class _Call(Generic[T, R]):
     """``fn`` applied to an ``(index, item)`` pair, after the worker's one warm-up (picklable)."""
 
-    fn: Callable[[Any], Any]
+    fn: Callable[[T], R]
     warm_up: Callable[[], None] | None = None
 
-    def __call__(self, pair: tuple[int, Any]) -> tuple[int, Any]:
+    def __call__(self, pair: tuple[int, T]) -> tuple[int, R]:
         _warm_once(self.warm_up)
         i, item = pair
         return i, self.fn(item)
@@ -79,8 +83,8 @@ class Executor:
     workers: int = 1
     description: str = ""
 
-    def map_unordered(self, fn: Callable[[Any], Any], items: Sequence[Any],
-                      warm_up: Callable[[], None] | None = None) -> Iterator[tuple[int, Any]]:
+    def map_unordered(self, fn: Callable[[T], R], items: Sequence[T],
+                      warm_up: Callable[[], None] | None = None) -> Iterator[tuple[int, R]]:
         raise NotImplementedError
 
     def cancel(self) -> None:
@@ -98,8 +102,8 @@ class Executor:
         self.close()
 
 
-def collect(executor: Executor, fn: Callable[[Any], Any], items: Sequence[Any],
-            take: Callable[[int, Any], None]) -> bool:
+def collect(executor: Executor, fn: Callable[[T], R], items: Sequence[T],
+            take: Callable[[int, R], None]) -> bool:
     """Run ``fn`` over ``items`` on ``executor``, handing each ``(index, result)`` to ``take`` as it
     finishes. Ctrl-C (or SIGTERM, in the main thread) cancels the rest: returns True when interrupted,
     what ``take`` got so far being the finished work."""

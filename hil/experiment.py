@@ -16,11 +16,16 @@ import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from planner.params import ALGORITHM_NAMES, REGISTRY, Objective
+
+if TYPE_CHECKING:
+    from hil.scenario import Scenario, ScenarioSpec
+    from hil.settings import HilConfig
+    from planner.online import OnlineContext, OnlineResult
 
 ALGORITHMS = ALGORITHM_NAMES  # the planner's registry; the order fixes the per-algorithm seeds
 LABELS = {e.name: e.label for e in REGISTRY}
@@ -73,35 +78,39 @@ def planner_seed(seed: int, run: int, algorithm: str) -> int:
     return int(seed_sequence(seed, run, 1 + ALGORITHMS.index(algorithm)).generate_state(1)[0] & 0x7FFFFFFF)
 
 
-_CACHE: dict[Any, Any] = {}
+# Per worker process: what every task of a campaign shares (loading, inflating a chart are costly).
+_SETTINGS: dict[tuple[str | None, tuple[str, ...]], HilConfig] = {}
+_SPECS: dict[str, ScenarioSpec] = {}
+_FIXED: dict[tuple[str, str | None, tuple[str, ...]], Scenario] = {}
+_CONTEXTS: dict[tuple[str, str | None, tuple[str, ...], tuple[tuple[str, Any], ...]], OnlineContext] = {}
 
 
-def _settings(config: str | None, overrides: tuple[str, ...]):
-    key = ("settings", config, overrides)
-    if key not in _CACHE:
+def _settings(config: str | None, overrides: tuple[str, ...]) -> HilConfig:
+    key = (config, overrides)
+    if key not in _SETTINGS:
         from hil import settings
-        _CACHE[key] = settings.load(config, list(overrides))
-    return _CACHE[key]
+        _SETTINGS[key] = settings.load(config, list(overrides))
+    return _SETTINGS[key]
 
 
-def scenario_instance(name: str, seed: int, run: int, config: str | None = None, overrides: tuple[str, ...] = ()):
+def scenario_instance(name: str, seed: int, run: int, config: str | None = None,
+                      overrides: tuple[str, ...] = ()) -> Scenario:
     """The scenario instance of run ``run`` (fixed scenarios: the same for every run)."""
     from hil import scenario as scenarios
     cfg = _settings(config, overrides)
-    spec_key = ("spec", name)
-    if spec_key not in _CACHE:
-        _CACHE[spec_key] = scenarios.load_spec(name)
-    spec = _CACHE[spec_key]
+    if name not in _SPECS:
+        _SPECS[name] = scenarios.load_spec(name)
+    spec = _SPECS[name]
     if spec.kind == "fixed":
-        key = ("fixed", name, config, overrides)
-        if key not in _CACHE:
-            _CACHE[key] = scenarios.instance(spec, None, cfg.current, cfg.planner.safety_radius)
-        return _CACHE[key]
+        key = (name, config, overrides)
+        if key not in _FIXED:
+            _FIXED[key] = scenarios.instance(spec, None, cfg.current, cfg.planner.safety_radius)
+        return _FIXED[key]
     rng = np.random.default_rng(seed_sequence(seed, run, 0))
     return scenarios.instance(spec, rng, cfg.current, cfg.planner.safety_radius)
 
 
-def _context(task: Task, sc):
+def _context(task: Task, sc: Scenario) -> OnlineContext:
     """The OnlineContext of a task (cached per process for fixed scenarios: inflation is costly)."""
     from hil import scenario as scenarios
     from planner.gridmap import OccupancyGrid
@@ -113,17 +122,17 @@ def _context(task: Task, sc):
     online = scenarios.online_params(dict(task.online_overrides), "command line", base=online)
     if task.objective is not None:
         params = replace(params, objective=task.objective)
-    key = ("ctx", task.scenario, task.config, task.config_overrides, task.online_overrides)
+    key = (task.scenario, task.config, task.config_overrides, task.online_overrides)
     fixed = scenarios.load_spec(task.scenario).kind == "fixed"
-    if fixed and key in _CACHE:
-        base = _CACHE[key]
+    if fixed and key in _CONTEXTS:
+        base = _CONTEXTS[key]
     else:
         from planner.online import OnlineContext
         field_ = sc.planning_field()    # also needed for the metrics when a planner ignores it
         base = OnlineContext(grid=OccupancyGrid(sc.occ, sc.resolution), goal=sc.goal,
                              reference_path=sc.reference_path, params=params, online=online, field=field_)
         if fixed:
-            _CACHE[key] = base
+            _CONTEXTS[key] = base
     ctx = make_context(base.grid, sc.goal, sc.reference_path, params, online, task.algorithm, base.field)
     if params.alpha_y == "resultant":
         from hil.commands.plan import wave_drift
@@ -349,8 +358,9 @@ class Campaign:
     """Result of :func:`run_campaign`: the rows finished and what was kept for the figures."""
 
     rows: list[dict[str, Any]] = field(default_factory=list)
-    details: dict[str, Any] = field(default_factory=dict)      # algorithm -> OnlineResult of run 0
-    paths: dict[tuple[int, str], Any] = field(default_factory=dict)
+    details: dict[str, OnlineResult] = field(default_factory=dict)      # algorithm -> its run 0
+    # (run, algorithm) -> (the path sailed, reached the goal)
+    paths: dict[tuple[int, str], tuple[np.ndarray, bool]] = field(default_factory=dict)
     interrupted: bool = False
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import matplotlib
 
@@ -15,6 +15,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
     from autopilot_bridge.summary import AutopilotSummary
     from hil.encounter_report import EncounterVerdict
     from hil.scenario import Scenario
@@ -83,7 +85,7 @@ def plot_run(path: Path, scen: Scenario, truth: dict[int, tuple], autopilot: Aut
             "xlabel": ax.get_xlabel(), "ylabel": ax.get_ylabel()}
 
 
-def _plot_ships(ax: Any, ships: dict, encounters: Sequence[EncounterVerdict], truth: dict[int, tuple]) -> None:
+def _plot_ships(ax: Axes, ships: dict, encounters: Sequence[EncounterVerdict], truth: dict[int, tuple]) -> None:
     """Each ship's true track, and both vessels where they were at the closest point of approach."""
     by_mmsi = {e.get("mmsi"): e for e in encounters}
     times = np.array(sorted(truth)) if truth else np.zeros(0, dtype=np.int64)

@@ -227,7 +227,7 @@ class Scenario:
     def height(self) -> float:
         return self.occ.shape[0] * self.resolution
 
-    def current_field(self):
+    def current_field(self) -> CurrentSource | None:
         """The current the simulator applies (``common.current_sources``: eq. (13), uniform or a
         file's; NED), or None when disabled. Built once per scenario (a file is read once)."""
         if not self.current.enabled:
@@ -265,7 +265,7 @@ class Scenario:
 class MapFrameCurrent:
     """A NED current seen in the map frame at a fixed time: (x east, y north) -> (v_east, v_north)."""
 
-    def __init__(self, ned_field: Any, t: float) -> None:
+    def __init__(self, ned_field: CurrentSource, t: float) -> None:
         self.ned_field, self.t = ned_field, float(t)
 
     def __call__(self, x, y):

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 
@@ -64,8 +63,8 @@ def segment_cost(p, q, field, params) -> float:
     p, d, length, n = _pieces(p, q, params.step)
     if not _uses_current(field, params) or length == 0.0:
         return length
-    vx: Any
-    vy: Any
+    vx: list[float] | np.ndarray   # the current (m/s) at each piece's midpoint, map frame
+    vy: list[float] | np.ndarray
     if isinstance(field, GridField):  # one point at a time in Python floats: same values, faster
         vx, vy = [], []
         for i in range(n):

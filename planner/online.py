@@ -31,7 +31,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from dataclasses import field as dc_field
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from scipy import ndimage
@@ -39,6 +39,7 @@ from scipy import ndimage
 from planner import make_planner
 from planner.core import free_regions
 from planner.cost import path_cost_fn, path_length
+from planner.field import DisturbanceField
 from planner.gridmap import OccupancyGrid
 from planner.metrics import path_metrics, waypoint_alpha_sums
 from planner.params import PlannerParams
@@ -47,6 +48,9 @@ from planner.problem import PlanningProblem
 from planner.result import PlannerResult
 from planner.subgoal import select_subgoal
 from planner.termination import Termination
+
+if TYPE_CHECKING:
+    from planner.traffic_map import TrafficSnapshot
 
 
 def _p(help: str, unit: str = "", **bounds: float) -> dict[str, Any]:
@@ -173,7 +177,7 @@ class OnlineContext:
     reference_path: np.ndarray
     params: PlannerParams
     online: OnlineParams
-    field: Any = None              # DisturbanceField in the map frame, or None
+    field: DisturbanceField | None = None   # the current in the map frame
     wave_drift: tuple[float, float] | None = None  # m/s, map frame (PlannerParams.alpha_y = "resultant")
     safe_grid: OccupancyGrid | None = None
     _free_index: np.ndarray | None = None
@@ -413,7 +417,7 @@ def select_local_subgoal(ctx: OnlineContext, pos: tuple[float, float]) -> tuple[
 
 
 def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
-               clock: Callable[[], float] = time.monotonic, traffic: Any = None,
+               clock: Callable[[], float] = time.monotonic, traffic: TrafficSnapshot | None = None,
                reuse: tuple[np.ndarray, np.ndarray] | None = None) -> CycleRecord:
     """One planning cycle from ``state`` (see the module docstring); does not move the vessel.
 
@@ -442,7 +446,7 @@ def plan_cycle(ctx: OnlineContext, state: VesselState, index: int, seed: int,
 
 
 def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: int,
-                     clock: Callable[[], float], traffic: Any,
+                     clock: Callable[[], float], traffic: TrafficSnapshot | None,
                      reuse: tuple[np.ndarray, np.ndarray] | None = None) -> CycleRecord:
     params, online = ctx.params, ctx.online
     pos = (state.x, state.y)
@@ -537,7 +541,7 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
                               start_heading=state.heading, step=0.5)
         if sm.ok:
             smoothed, ok = sm.dense, True
-    if traffic_grid is not None:
+    if traffic_grid is not None and traffic is not None:
         from planner.traffic_map import first_conflict
 
         if ok and first_conflict(smoothed, traffic, ignore_within=keep) is not None:
@@ -570,7 +574,7 @@ def _measured(rec: CycleRecord, measures: tuple[float, int, int], reused: int = 
 
 
 def _beside_free(grid: OccupancyGrid, pos: tuple[float, float], point: tuple[float, float], radius: float,
-                 traffic: Any) -> tuple[float, float] | None:
+                 traffic: TrafficSnapshot) -> tuple[float, float] | None:
     """The free point nearest ``point`` across the direction of travel (starboard offsets first),
     inside the perceptual domain, or None."""
     dx, dy = point[0] - pos[0], point[1] - pos[1]
@@ -758,7 +762,8 @@ def sailed_waypoints(local_path: np.ndarray, sailed: float) -> tuple[np.ndarray,
 
 
 def make_context(grid: OccupancyGrid, goal: tuple[float, float], reference_path: np.ndarray,
-                 params: PlannerParams, online: OnlineParams, algorithm: str, field: Any = None) -> OnlineContext:
+                 params: PlannerParams, online: OnlineParams, algorithm: str,
+                 field: DisturbanceField | None = None) -> OnlineContext:
     """An :class:`OnlineContext` for ``algorithm`` (one of ``planner.ALGORITHMS``)."""
     return OnlineContext(grid=grid, goal=(float(goal[0]), float(goal[1])), reference_path=reference_path,
                          params=replace(params, algorithm=algorithm), online=online, field=field)

@@ -67,7 +67,8 @@ UNIT_MODULES = frozenset("""
 """.split())
 INTEGRATION_MODULES = frozenset("""
     ardupilot_json
-    autopilot_link battery bench_can_flood bench_frame bench_planner busy_poll cli connection cpu_load executors
+    autopilot_link battery bench_can_flood bench_frame bench_planner busy_poll cli computer_assembly connection cpu_load
+    executors
     gcs_esc_telemetry
     gcs_fuzz first_run friction gcs_security gcs_lockout gcs_link gcs_mission geo_cli hil_link_fast_path montecarlo
     output placement plan_cli planner_warmup

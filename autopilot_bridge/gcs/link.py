@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from typing import Any, TypedDict
 
 from autopilot_bridge.gcs.command import CommandService
@@ -126,9 +126,9 @@ class GcsLink:
         self.guard = ReplayGuard(self.key) if self.key is not None else None
         self.gate = SecurityGate(self.key, params.allowed_sysids, self.security)
         self.limiter = ReadLimiter(self.security)
-        self._parsers: dict[Any, FrameParser] = {}
+        self._parsers: dict[Hashable, FrameParser] = {}
         self.service_ms = StreamingPercentiles()   # wall time of each service() call, ms
-        self._backlog: list[tuple[Transport, Any]] = []   # stream peers whose parser holds frames not yet decoded
+        self._backlog: list[tuple[Transport, Hashable]] = []   # stream peers whose parser holds frames not yet decoded
 
         mirror = UdpEndpoint(mirror_from, list(mirror_to)) if mirror_to else None
         self.out = Outbox(codec, self.transports, mirror, self.log)
@@ -239,7 +239,7 @@ class GcsLink:
             self._internal_error("service", exc)
         self.service_ms.add((time.perf_counter() - start) * 1e3)
 
-    def _parser(self, tr: Transport, peer: Any) -> FrameParser:
+    def _parser(self, tr: Transport, peer: Hashable) -> FrameParser:
         key = peer if tr.stream else "udp"   # datagrams: one parser (no partial frames kept)
         parser = self._parsers.get(key)
         if parser is None:
@@ -279,7 +279,7 @@ class GcsLink:
         self.failsafe.check(now)
         self.telemetry.keep_alive()
 
-    def _consume(self, tr: Transport, peer: Any, data: bytes, budget: int, now: float) -> int:
+    def _consume(self, tr: Transport, peer: Hashable, data: bytes, budget: int, now: float) -> int:
         """Decode and handle one read's frames within ``budget``; the budget left."""
         parser = self._parser(tr, peer)
         parsed = parser.parse(data, keep=tr.stream, max_frames=budget)
@@ -299,7 +299,7 @@ class GcsLink:
                 self.log(f"gcs: {m.get_type()} dropped: {type(exc).__name__}: {exc}")
         return budget
 
-    def _handle(self, m: Any, now: float, tr: Transport | None = None, peer: Any = None) -> None:
+    def _handle(self, m: Any, now: float, tr: Transport | None = None, peer: Hashable = None) -> None:
         kind = m.get_type()
         self.received[kind] += 1
         if m.get_srcSystem() == self.sysid and m.get_srcComponent() == self.compid:

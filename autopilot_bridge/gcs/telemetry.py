@@ -226,7 +226,7 @@ class TelemetryService:
         got = api.esc_telemetry() if api is not None else []
         if not got:
             return
-        rows: list[dict[str, Any] | None] = [*got, None, None, None, None][:4]
+        rows: list[dict[str, float] | None] = [*got, None, None, None, None][:4]
 
         def col(key: str, scale: float, offset: float = 0.0, top: int = 65535) -> list[int]:
             return [0 if r is None else max(0, min(top, int(round((r[key] + offset) * scale)))) for r in rows]

@@ -27,8 +27,8 @@ from __future__ import annotations
 import socket
 import time
 from collections import Counter
-from collections.abc import Callable, Collection
-from typing import Any
+from collections.abc import Callable, Collection, Hashable
+from typing import cast
 
 from autopilot_bridge.gcs.peers import RANK_STRANGER, PeerTable
 from common import connection
@@ -39,6 +39,7 @@ RECONNECT_S = 1.0  # tcp: seconds between connection attempts while the ground s
 TCP_PENDING = 4          # tcpin: connections at once that have not yet sent a frame that passed the gate
 TCP_PER_ADDRESS = 4      # tcpin: connections at once from one IP address
 TCP_PROVE_S = 5.0        # tcpin: s a new connection has to send a frame that passes the gate
+TcpPeer = tuple[str, tuple[str, int]]   # an accepted connection: ("tcp", (host, port))
 TCP_IDLE_S = 10.0        # tcpin: s without a frame (a GCS sends a HEARTBEAT every second) before a peer is closed
 TCP_ACCEPTS_PER_CALL = 16
 
@@ -76,8 +77,8 @@ class UdpTransport:
     def fileno(self) -> int:
         return self.ep.sock.fileno()
 
-    def receive(self, max_reads: int = 256, hold: Collection[Any] = ()) -> list[tuple[Any, bytes]]:
-        out = []
+    def receive(self, max_reads: int = 256, hold: Collection[Hashable] = ()) -> list[tuple[Hashable, bytes]]:
+        out: list[tuple[Hashable, bytes]] = []
         for _ in range(min(256, max_reads)):  # bounded per call: a flood cannot starve the control loop
             data = self.ep.recv(timeout=0.0)
             if data is None:
@@ -85,13 +86,14 @@ class UdpTransport:
             out.append((self.ep.last_sender, data))
         return out
 
-    def heard(self, peer: Any, rank: int = RANK_STRANGER) -> None:
+    def heard(self, peer: Hashable, rank: int = RANK_STRANGER) -> None:
         """A frame from ``peer`` passed the security gate with ``rank``: it becomes (or stays) a peer if it
         earns a place in the table."""
         self.peers.earn(peer, rank)
 
     def send(self, data: bytes) -> None:
-        dests: list[Any] = self.fixed + [p for p in self.peers if p not in self.fixed]
+        # a UDP peer is its sender's (host, port)
+        dests = self.fixed + [cast(tuple[str, int], p) for p in self.peers if p not in self.fixed]
         for dest in dests:
             try:
                 self.ep.sock.sendto(data, dest)
@@ -130,12 +132,12 @@ class TcpServerTransport:
         self.lsock.setblocking(False)
         self.clock = clock
         self.counts: Counter[str] = counts if counts is not None else Counter()
-        self.conns: dict[Any, socket.socket] = {}
-        self.pending: dict[Any, float] = {}      # connection -> when it was accepted (s, clock)
+        self.conns: dict[TcpPeer, socket.socket] = {}
+        self.pending: dict[Hashable, float] = {}      # connection -> when it was accepted (s, clock)
         self.peers = PeerTable(max_peers, clock, self.counts)
         self.max_peers = max_peers
         self.sent = 0
-        self._closed: list[Any] = []             # connections closed here, reported by the next receive()
+        self._closed: list[Hashable] = []             # connections closed here, reported by the next receive()
 
     @property
     def address(self) -> tuple[str, int]:
@@ -144,7 +146,7 @@ class TcpServerTransport:
     def fileno(self) -> int:
         return self.lsock.fileno()
 
-    def _from(self, ip: str) -> list[Any]:
+    def _from(self, ip: str) -> list[TcpPeer]:
         return [p for p in self.conns if p[1][0] == ip]
 
     def _accept(self) -> None:
@@ -177,10 +179,10 @@ class TcpServerTransport:
         for peer in self.peers.idle(TCP_IDLE_S):
             self._close(peer, "tcp_idle_closed")
 
-    def receive(self, max_reads: int = 16, hold: Collection[Any] = ()) -> list[tuple[Any, bytes]]:
+    def receive(self, max_reads: int = 16, hold: Collection[Hashable] = ()) -> list[tuple[Hashable, bytes]]:
         self._expire()
         self._accept()
-        out: list[tuple[Any, bytes]] = [(peer, b"") for peer in self._closed]   # tells the link they ended
+        out: list[tuple[Hashable, bytes]] = [(peer, b"") for peer in self._closed]   # tells the link they ended
         self._closed.clear()
         for peer, conn in list(self.conns.items()):
             if peer in hold:
@@ -199,7 +201,7 @@ class TcpServerTransport:
                 out.append((peer, data))
         return out
 
-    def heard(self, peer: Any, rank: int = RANK_STRANGER) -> None:
+    def heard(self, peer: Hashable, rank: int = RANK_STRANGER) -> None:
         if peer not in self.conns:
             return
         ok, victim = self.peers.earn(peer, rank)
@@ -208,16 +210,16 @@ class TcpServerTransport:
         if victim is not None:
             self._close(victim, "tcp_peer_displaced")
 
-    def _close(self, peer: Any, why: str) -> None:
+    def _close(self, peer: Hashable, why: str) -> None:
         if peer in self.conns:
             self.counts[why] += 1
             self._drop(peer)
             self._closed.append(peer)
 
-    def _drop(self, peer: Any) -> None:
+    def _drop(self, peer: Hashable) -> None:
         self.pending.pop(peer, None)
         self.peers.drop(peer)
-        conn = self.conns.pop(peer, None)
+        conn = self.conns.pop(cast(TcpPeer, peer), None)   # this transport's peer table holds its connections only
         if conn is not None:
             conn.close()
 
@@ -280,7 +282,7 @@ class TcpClientTransport:
         return self.sock is not None and not self._connecting
 
     @property
-    def peer(self) -> Any:
+    def peer(self) -> Hashable:
         return ("tcp", (self.host, self.port), self.connects)
 
     def fileno(self) -> int:
@@ -316,7 +318,7 @@ class TcpClientTransport:
         self.sock, self._connecting = None, False
         self._next_try = self.clock() + RECONNECT_S
 
-    def receive(self, max_reads: int = 16, hold: Collection[Any] = ()) -> list[tuple[Any, bytes]]:
+    def receive(self, max_reads: int = 16, hold: Collection[Hashable] = ()) -> list[tuple[Hashable, bytes]]:
         if self.sock is None or self._connecting:
             self._retry()
             return []
@@ -338,7 +340,7 @@ class TcpClientTransport:
             out.append((peer, data))
         return out
 
-    def heard(self, peer: Any, rank: int = RANK_STRANGER) -> None:
+    def heard(self, peer: Hashable, rank: int = RANK_STRANGER) -> None:
         pass
 
     def send(self, data: bytes) -> None:
@@ -384,8 +386,8 @@ class SerialTransport:
     def fileno(self) -> int:
         return self.port.fileno()
 
-    def receive(self, max_reads: int = 16, hold: Collection[Any] = ()) -> list[tuple[Any, bytes]]:
-        out: list[tuple[Any, bytes]] = []
+    def receive(self, max_reads: int = 16, hold: Collection[Hashable] = ()) -> list[tuple[Hashable, bytes]]:
+        out: list[tuple[Hashable, bytes]] = []
         if ("serial", self.device) in hold:
             return out
         for _ in range(min(16, max_reads)):
@@ -398,7 +400,7 @@ class SerialTransport:
             out.append((("serial", self.device), data))
         return out
 
-    def heard(self, peer: Any, rank: int = RANK_STRANGER) -> None:
+    def heard(self, peer: Hashable, rank: int = RANK_STRANGER) -> None:
         pass
 
     def send(self, data: bytes) -> None:

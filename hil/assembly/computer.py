@@ -1,20 +1,23 @@
-"""Assembly of the vessel computer: its parts built from a configuration and a scenario.
+"""Assembly of the vessel computer from a configuration and a scenario.
 
 `hil autopilot` (and through it every `hil run`) calls :func:`build`; the command module only
-parses arguments and runs the loop. The vessel computer's models come from the configuration
-(e.g. the nominal surge model of eq. (5), :meth:`autopilot_bridge.control.SurgeModel.from_hull`),
-never from the simulator's classes.
+parses arguments and runs the loop. Here the scenario, its planning world and the root of the
+computer's own configuration (:func:`computer_settings`) are made from the HIL configuration; the
+computer's package then opens its devices and builds it
+(:func:`autopilot_bridge.assembly.build_computer`). The vessel computer's models come from the
+configuration (e.g. the nominal surge model of eq. (5),
+:meth:`autopilot_bridge.control.SurgeModel.from_hull`), never from the simulator's classes.
 """
 
 from __future__ import annotations
 
-import multiprocessing
 from typing import TYPE_CHECKING
 
 from hil.console import progress
 from hil.errors import UsageError
 
 if TYPE_CHECKING:
+    from autopilot_bridge.assembly import ComputerSettings
     from autopilot_bridge.autopilot import Autopilot
     from autopilot_bridge.computer_setup import ComputerConfig, RunOptions
     from autopilot_bridge.hil_link import HilLink
@@ -37,15 +40,13 @@ def planning_world(cfg: HilConfig, scen: Scenario) -> World:
 
 
 def computer_config(cfg: HilConfig) -> ComputerConfig:
-    """The vessel computer's tuning, and its nominal model of the hull: eq. (5) from the configuration,
-    never the simulator's classes."""
-    from autopilot_bridge.computer_setup import ComputerConfig, Propulsion
-    from autopilot_bridge.control import SurgeModel
+    """The vessel computer's tuning, and the [vessel] figures it derives its own nominal model of eq. (5)
+    from (never the simulator's classes)."""
+    from autopilot_bridge.computer_setup import ComputerConfig, Hull
 
-    hull = cfg.vessel
-    propulsion = Propulsion(SurgeModel.from_hull(hull.m, hull.rho, hull.D, hull.L, hull.d_u), hull.B_u,
-                            hull.T_max, hull.T_min)
-    return ComputerConfig(cfg.autopilot, cfg.navigation, cfg.control, propulsion, cfg.battery_monitor)
+    v = cfg.vessel
+    hull = Hull(v.m, v.rho, v.D, v.L, v.d_u, v.B_u, v.T_max, v.T_min)
+    return ComputerConfig(cfg.autopilot, cfg.navigation, cfg.control, hull, cfg.battery_monitor)
 
 
 def run_options(cfg: HilConfig, lockstep: bool) -> RunOptions:
@@ -76,90 +77,40 @@ def known_scenario(cfg: HilConfig, scenario_name: str, route_file: str | None = 
     return scen
 
 
+def computer_settings(cfg: HilConfig, lockstep: bool) -> ComputerSettings:
+    """The root of the vessel computer's configuration (:class:`autopilot_bridge.assembly.ComputerSettings`)
+    from the HIL configuration: the one place that reads both sides of the HIL link."""
+    from autopilot_bridge.assembly import ComputerSettings, SimulatorPeer
+
+    peer = SimulatorPeer(cfg.link.system_id, cfg.link.component_id, cfg.traffic.truth_component_id,
+                         cfg.sensors.compass.declination, max_time_step(cfg, lockstep))
+    return ComputerSettings(computer_config(cfg), (cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0), peer,
+                            cfg.gcs, cfg.tracking, cfg.colregs, cfg.can, loss_seed=cfg.sim.seed + 7)
+
+
 def build(cfg: HilConfig, scenario_name: str, lockstep: bool, planner_factory: str | None = None,
           sensors_from: str | None = None, route_file: str | None = None) -> tuple[Autopilot, HilLink]:
     """The autopilot and its parts from a configuration and a scenario (used by `hil run` too), with
     its UDP link to the simulator (the process reports and closes it; the autopilot sees a SensorLink).
-    ``route_file``: the scenario's global route as `hil run` planned it (:func:`known_scenario`)."""
-    from autopilot_bridge.autopilot import Autopilot
-    from autopilot_bridge.computer_setup import Devices
-    from autopilot_bridge.gcs.link import GcsLink
-    from autopilot_bridge.hil_link import HilLink
-    from autopilot_bridge.planning_worker import PlannerWorker
-    from common.geodesy import LocalFrame
-
-    scen = known_scenario(cfg, scenario_name, route_file)
-    world = planning_world(cfg, scen)
-    # What the parts take, derived here first: the configuration then only goes down.
-    computer, options, time_step = computer_config(cfg), run_options(cfg, lockstep), max_time_step(cfg, lockstep)
-    ap = cfg.autopilot
-    geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
-    try:
-        link = HilLink(ap.listen, ap.actuators_to, geo, declination=cfg.sensors.compass.declination,
-                       system_id=ap.system_id, component_id=ap.component_id, send_loss=ap.send_loss,
-                       recv_loss=ap.recv_loss, loss_seed=cfg.sim.seed + 7,
-                       truth_component_id=cfg.traffic.truth_component_id,
-                       sim_ids=(cfg.link.system_id, cfg.link.component_id), sensors_from=sensors_from,
-                       max_time_step=time_step,
-                       busy_poll=ap.lockstep_busy_poll if lockstep else 0.0, late_window=ap.sim_restart_gap,
-                       realtime=not lockstep)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
-    actuators = None
-    if cfg.can.actuators == "can":
-        from autopilot_bridge.can_actuators import CanActuators
-        from common.can_params import open_bus
-
-        try:
-            actuators = CanActuators(open_bus(cfg.can), cfg.can, lockstep_token=link if lockstep else None)
-        except ValueError as exc:
-            link.close()
-            raise UsageError(str(exc)) from None
-    try:
-        telemetry = GcsLink(cfg.gcs, ap.system_id, ap.component_id, geo, mirror_to=ap.telemetry_to,
-                            mirror_from=ap.telemetry_from,
-                            chart_size=(scen.height, scen.width), log=progress)
-    except ValueError as exc:
-        link.close()
-        if actuators is not None:
-            actuators.close()
-        raise UsageError(str(exc)) from None
-    # Compile (first run on a machine: ~7 s) or load the planner's numba core here, once, before
-    # the control loop starts: forked workers inherit it, so no planning cycle pays for it.
-    # One real planning cycle from the start compiles everything a cycle uses (tree core, grid
-    # kernels of pruning and smoothing).
-    import time as _time
-
-    from autopilot_bridge.local_planning import CycleInput, LocalPlan, online_cycle_handler
+    ``route_file``: the scenario's global route as `hil run` planned it (:func:`known_scenario`).
+    The configuration goes down once, as the vessel computer's own root
+    (:func:`autopilot_bridge.assembly.build_computer`)."""
+    from autopilot_bridge.assembly import SetupError, build_computer
+    from autopilot_bridge.local_planning import CycleInput
     from hil.warm_up import wait_for
 
-    t0 = _time.monotonic()
-    wait_for("planner")   # a first run compiles the planner in a process of its own (hil/warm_up.py)
-    warm_up = CycleInput(scen.start[0], scen.start[1], scen.start_heading, 0.0, 0)
-    online_cycle_handler(world, warm_up)
-    spent = _time.monotonic() - t0
-    if spent > 1.0:
-        progress(f"autopilot: planner compiled and warmed up in {spent:.1f} s (cached for next time)")
-    # fork: a restarted worker inherits the world instead of receiving it pickled; with spawn the
-    # parent blocks writing ~100 KB into a 64 KB pipe until the new interpreter has started, which
-    # stalls the control loop on every watchdog restart.
-    start_method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
-    worker: PlannerWorker[CycleInput, LocalPlan]
-    if planner_factory:
-        worker = PlannerWorker(planner_factory, (), grace_s=ap.watchdog_grace, start_method=start_method)
-    else:
-        # Each (re)started worker warms up too (its first cycle would pay the fork's page faults).
-        worker = PlannerWorker("autopilot_bridge.local_planning:online_cycle_handler", (world, warm_up),
-                               grace_s=ap.watchdog_grace, start_method=start_method)
-    from autopilot_bridge.traffic_awareness import TrafficAwareness
-
-    traffic = TrafficAwareness(cfg.tracking, cfg.colregs, geo)  # AIS targets, COLREGs encounters
-    wait_for("vessel-computer")   # the filter's, guidance's and obstacle map's kernels (hil/warm_up.py)
-    autopilot = Autopilot(computer, world,
-                          Devices(link, worker, telemetry, traffic=traffic, actuators=actuators),
-                          options)
-    telemetry.attach(autopilot.commands)
-    return autopilot, link
+    scen = known_scenario(cfg, scenario_name, route_file)
+    settings, options = computer_settings(cfg, lockstep), run_options(cfg, lockstep)
+    start = CycleInput(scen.start[0], scen.start[1], scen.start_heading, 0.0, 0)
+    world = planning_world(cfg, scen)
+    try:
+        # wait_for: a first run compiles the planner's and the vessel computer's kernels in processes
+        # of their own (hil/warm_up.py)
+        return build_computer(settings, world, options, (scen.height, scen.width), start,
+                              planner_factory=planner_factory, sensors_from=sensors_from, wait_for=wait_for,
+                              log=progress)
+    except SetupError as exc:
+        raise UsageError(str(exc)) from None
 
 
 def max_time_step(cfg: HilConfig, lockstep: bool) -> float:

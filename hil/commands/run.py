@@ -30,6 +30,8 @@ from hil.sim_client import HilClient, sim_command, start_simulator
 from planner.params import ALGORITHM_NAMES
 
 if TYPE_CHECKING:
+    from types import FrameType
+
     from hil.placement import Placement
     from hil.run_summary import RunSummary
     from hil.settings import HilConfig
@@ -42,7 +44,7 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM received: unwind like Ctrl-C so that `finally` blocks stop the simulator."""
 
 
-def _raise_terminated(signum: int, frame: Any) -> None:
+def _raise_terminated(signum: int, frame: FrameType | None) -> None:
     raise Terminated()
 
 

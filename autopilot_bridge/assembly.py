@@ -1,0 +1,141 @@
+"""The vessel computer assembled from the root of its own configuration (:class:`ComputerSettings`).
+
+The package owns this root: each section is typed by the part that reads it, and nothing of the
+simulator's or the HIL tool's configuration reaches past it (`hil.assembly.computer` derives a
+:class:`ComputerSettings` from the HIL configuration, then only hands it down). :func:`build_computer`
+opens the devices (the simulator's HIL link, the DroneCAN thrusters, the ground-station link), starts
+the planner worker and builds the :class:`autopilot_bridge.autopilot.Autopilot` on them.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from autopilot_bridge.ais_tracking import TrackerParams
+from autopilot_bridge.autopilot import Autopilot
+from autopilot_bridge.computer_setup import ComputerConfig, Devices, RunOptions
+from autopilot_bridge.gcs.config import GcsParams
+from autopilot_bridge.gcs.link import GcsLink
+from autopilot_bridge.hil_link import HilLink
+from autopilot_bridge.local_planning import CycleInput, LocalPlan, World, online_cycle_handler
+from autopilot_bridge.planning_worker import PlannerWorker
+from autopilot_bridge.traffic_awareness import TrafficAwareness
+from common.can_params import CanParams
+from common.geodesy import LocalFrame
+from planner.colregs import ColregsParams
+
+
+class SetupError(ValueError):
+    """A device that cannot be opened as configured (an address in use, no such CAN interface): the
+    caller reports it in one line."""
+
+
+@dataclass(frozen=True)
+class SimulatorPeer:
+    """What the vessel computer knows of the simulator at the other end of its HIL link: its MAVLink
+    ids, the component id its truth frames (AIS targets) come from, the compass declination (rad)
+    its sensors apply, and the largest forward step (s) of sensor time a frame may take."""
+
+    system_id: int
+    component_id: int
+    truth_component_id: int
+    declination: float
+    max_time_step: float
+
+
+@dataclass(frozen=True)
+class ComputerSettings:
+    """The root of the vessel computer's configuration: its tuning, the WGS-84 origin of its local
+    NED frame (deg, deg, m), the simulator it is linked to, the ground-station link, AIS tracking
+    and COLREGs, the CAN bus (``can.actuators == "can"``: thrusters by DroneCAN) and the seed of
+    its fault injection."""
+
+    tuning: ComputerConfig
+    origin: tuple[float, float, float]
+    simulator: SimulatorPeer
+    gcs: GcsParams
+    tracking: TrackerParams
+    colregs: ColregsParams
+    can: CanParams
+    loss_seed: int
+
+
+def _no_wait(_group: str) -> None:
+    return None   # nothing compiles elsewhere
+
+
+def build_computer(settings: ComputerSettings, world: World, options: RunOptions, chart_size: tuple[float, float],
+                   start: CycleInput, *, planner_factory: str | None = None, sensors_from: str | None = None,
+                   wait_for: Callable[[str], object] = _no_wait,
+                   log: Callable[[str], None] = lambda _m: None) -> tuple[Autopilot, HilLink]:
+    """The autopilot and its devices, with its HIL link to the simulator (the caller reports and closes
+    it; the autopilot sees a SensorLink). ``start``: the planning cycle from the scenario's start that
+    warms the planner up; ``wait_for(group)``: called before the parts that need a group of compiled
+    kernels ("planner", "vessel-computer"). A device that cannot be opened raises :class:`SetupError`,
+    with every device opened before it closed again."""
+    ap, peer = settings.tuning.params, settings.simulator
+    geo = LocalFrame(*settings.origin)
+    try:
+        link = HilLink(ap.listen, ap.actuators_to, geo, declination=peer.declination,
+                       system_id=ap.system_id, component_id=ap.component_id, send_loss=ap.send_loss,
+                       recv_loss=ap.recv_loss, loss_seed=settings.loss_seed,
+                       truth_component_id=peer.truth_component_id,
+                       sim_ids=(peer.system_id, peer.component_id), sensors_from=sensors_from,
+                       max_time_step=peer.max_time_step,
+                       busy_poll=ap.lockstep_busy_poll if options.lockstep else 0.0,
+                       late_window=ap.sim_restart_gap, realtime=not options.lockstep)
+    except ValueError as exc:
+        raise SetupError(str(exc)) from None
+    actuators = None
+    if settings.can.actuators == "can":
+        from autopilot_bridge.can_actuators import CanActuators
+        from common.can_params import open_bus
+
+        try:
+            actuators = CanActuators(open_bus(settings.can), settings.can,
+                                     lockstep_token=link if options.lockstep else None)
+        except ValueError as exc:
+            link.close()
+            raise SetupError(str(exc)) from None
+    try:
+        telemetry = GcsLink(settings.gcs, ap.system_id, ap.component_id, geo, mirror_to=ap.telemetry_to,
+                            mirror_from=ap.telemetry_from, chart_size=chart_size, log=log)   # chart_size: rows, columns
+    except ValueError as exc:
+        link.close()
+        if actuators is not None:
+            actuators.close()
+        raise SetupError(str(exc)) from None
+    worker = _planner_worker(world, start, ap.watchdog_grace, planner_factory, wait_for, log)
+    traffic = TrafficAwareness(settings.tracking, settings.colregs, geo)  # AIS targets, COLREGs encounters
+    wait_for("vessel-computer")   # the filter's, guidance's and obstacle map's kernels
+    autopilot = Autopilot(settings.tuning, world,
+                          Devices(link, worker, telemetry, traffic=traffic, actuators=actuators), options)
+    telemetry.attach(autopilot.commands)
+    return autopilot, link
+
+
+def _planner_worker(world: World, start: CycleInput, grace_s: float, planner_factory: str | None,
+                    wait_for: Callable[[str], object], log: Callable[[str], None]
+                    ) -> PlannerWorker[CycleInput, LocalPlan]:
+    """The planner worker process, after one real planning cycle here from ``start``: it compiles (first
+    run on a machine: ~7 s) or loads everything a cycle uses (tree core, grid kernels of pruning and
+    smoothing) once, before the control loop starts; forked workers inherit it, so no planning cycle
+    pays for it."""
+    t0 = time.monotonic()
+    wait_for("planner")
+    online_cycle_handler(world, start)
+    spent = time.monotonic() - t0
+    if spent > 1.0:
+        log(f"autopilot: planner compiled and warmed up in {spent:.1f} s (cached for next time)")
+    # fork: a restarted worker inherits the world instead of receiving it pickled; with spawn the
+    # parent blocks writing ~100 KB into a 64 KB pipe until the new interpreter has started, which
+    # stalls the control loop on every watchdog restart.
+    start_method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+    if planner_factory:
+        return PlannerWorker(planner_factory, (), grace_s=grace_s, start_method=start_method)
+    # Each (re)started worker warms up too (its first cycle would pay the fork's page faults).
+    return PlannerWorker("autopilot_bridge.local_planning:online_cycle_handler", (world, start),
+                         grace_s=grace_s, start_method=start_method)
