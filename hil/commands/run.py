@@ -162,6 +162,10 @@ def run(args: argparse.Namespace) -> int:
     check_can(cfg, "hil run")
     if args.demo and cfg.can.actuators == "can":
         raise UsageError("--demo drives the simulator over MAVLink; --actuators can needs the autopilot (drop --demo)")
+    if not args.demo:   # an unknown or bad scenario fails in one line before an instance is claimed or announced
+        from hil import scenario as scenarios
+
+        scenarios.load_spec(args.scenario)
     instance = None
     if cfg.gcs.endpoints and not args.demo:   # each concurrent run its own GCS ports and system id (hil.instances)
         instance = instances.claim(args.instance)
