@@ -261,7 +261,8 @@ def _run_hil(args: argparse.Namespace, cfg: HilConfig, cpus: str | Placement = "
 
             # The vessel computer's kernels in parallel processes (hil/warm_up.py); its process waits
             # for them and loads the machine code from the cache.
-            compiling = start_compiling()
+            algorithm = args.algorithm or spec.planner.get("algorithm") or cfg.planner.algorithm
+            compiling = start_compiling(algorithm=str(algorithm))
     from hil.errors import RunFailed
     from hil.files import tidy_failed_start
 
