@@ -26,9 +26,12 @@ PLANNER_SOURCES = ("planner/_kernels.py", "planner/_tree.py")
 # the rest of the vessel computer, and the run itself); 0.84x that since the planner's and vessel
 # computer's kernels compile at NUMBA_OPT=1 without numba's merge sort and slice-copy error path
 # (cold `hil warm-up`: 52.6 -> 44.3 s CPU, four A/B rounds), so ~40 s; `hil plan --scenario harbour`
-# ~25 s before, 0.9x that after (the planner's group: 27.1 -> 24.4 s).
+# ~25 s before, 0.9x that after (the planner's group: 27.1 -> 24.4 s). Since 784efb2 a run and
+# `hil plan` compile only the tree core of the planner they run: cold `hil run --duration 1`
+# 36.7-43.2 s of CPU (mean 40.3, 0.92x main's 43.6, three interleaved rounds at load 4); the planner's
+# group 0.85x (18.3 -> 15.6 s), so `hil plan` ~19 s (22 x 0.85, not measured separately).
 COLD_COMPILE_S = 40
-COLD_PLAN_COMPILE_S = 22
+COLD_PLAN_COMPILE_S = 19
 
 
 def _index_files(source: Path) -> list[Path]:
