@@ -88,7 +88,9 @@ def test_after_the_groups_the_vessel_computer_compiles_nothing(tmp_path):
     every kernel from the cache, none is compiled again. Several minutes of CPU on a cold cache."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
     for group in ("simulator", *warm_up.RUN_GROUPS):   # the simulator's group holds the geodesy
-        r = subprocess.run([sys.executable, "-m", "hil.warm_up", "--json", group], cwd=REPO, env=env,
+        # as `hil run` starts them: the planner's group compiles only the configured planner's tree core
+        algorithm = ["--algorithm", "ddrrt-star"] if group == "planner" else []
+        r = subprocess.run([sys.executable, "-m", "hil.warm_up", "--json", *algorithm, group], cwd=REPO, env=env,
                            capture_output=True, text=True, timeout=900)
         assert r.returncode == 0, r.stderr[-2000:]
         figures = json.loads(r.stdout.splitlines()[-1])
@@ -100,6 +102,8 @@ def test_after_the_groups_the_vessel_computer_compiles_nothing(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     compiled = json.loads(r.stdout.splitlines()[-1])
     assert compiled == [], compiled
+    from hil import settings
+    assert settings.load().planner.algorithm == "ddrrt-star"   # the default the groups compiled for
 
 
 def test_kernel_times_count_each_function_and_its_specialisations():
