@@ -34,9 +34,18 @@ COLD_COMPILE_S = 40
 COLD_PLAN_COMPILE_S = 19
 
 
-def _index_files(source: Path) -> list[Path]:
+TREE_SOURCE = "planner/_tree.py"
+
+
+def tree_core(algorithm: str) -> str:
+    """The tree-core kernel of ``planner/_tree.py`` a planner runs (``_tree.grow_kernel``): each
+    process compiles only its planner's, so a run with another planner compiles again."""
+    return "grow_ddrrt" if algorithm == "ddrrt-star" else "grow_rrt"
+
+
+def _index_files(source: Path, function: str = "*") -> list[Path]:
     tag = f"py{sys.version_info[0]}{sys.version_info[1]}"
-    pattern = f"{source.stem}.*.{tag}*.nbi"
+    pattern = f"{source.stem}.{function}-*.{tag}*.nbi" if function != "*" else f"{source.stem}.*.{tag}*.nbi"
     cache_dir = os.environ.get("NUMBA_CACHE_DIR")
     if cache_dir:
         root = Path(cache_dir)
@@ -44,24 +53,29 @@ def _index_files(source: Path) -> list[Path]:
     return list((source.parent / "__pycache__").glob(pattern))
 
 
-def kernels_cold(sources: tuple[str, ...] = KERNEL_SOURCES) -> bool:
+def kernels_cold(sources: tuple[str, ...] = KERNEL_SOURCES, algorithm: str | None = None) -> bool:
     """Whether a run will compile numba kernels (a missing or older cache for one of the kernel
-    modules ``sources``, paths relative to the repository)."""
-    for rel in sources:
+    modules ``sources``, paths relative to the repository, or with ``algorithm`` for that
+    planner's tree core)."""
+    checks = [(rel, "*") for rel in sources]
+    if algorithm is not None:
+        checks.append((TREE_SOURCE, tree_core(algorithm)))
+    for rel, function in checks:
         src = REPO / rel
         try:
             stamp = src.stat().st_mtime
         except OSError:
             continue
-        if not any(p.stat().st_mtime >= stamp for p in _index_files(src)):
+        if not any(p.stat().st_mtime >= stamp for p in _index_files(src, function)):
             return True
     return False
 
 
 def compile_notice(command: str, seconds: int = COLD_COMPILE_S, sources: tuple[str, ...] = KERNEL_SOURCES,
-                   processes: int = 1) -> str | None:
-    """The line to print before a command that will compile, or None when the kernels are cached."""
-    if not kernels_cold(sources):
+                   processes: int = 1, algorithm: str | None = None) -> str | None:
+    """The line to print before a command that will compile, or None when the kernels (with
+    ``algorithm``, that planner's tree core too) are cached."""
+    if not kernels_cold(sources, algorithm):
         return None
     shared = f" shared by {processes} processes" if processes > 1 else ""
     return (f"{command}: compiling numba kernels, first run only, ~{seconds} s of CPU{shared} "

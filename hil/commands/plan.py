@@ -198,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
     from hil.first_run import COLD_PLAN_COMPILE_S, PLANNER_SOURCES, compile_notice
 
     # before the planner's import, which compiles on a cold cache
-    notice = compile_notice("hil plan", COLD_PLAN_COMPILE_S, PLANNER_SOURCES)
+    notice = compile_notice("hil plan", COLD_PLAN_COMPILE_S, PLANNER_SOURCES, algorithm=args.algorithm)
     if notice:
         console.progress(notice)
 
