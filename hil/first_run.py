@@ -26,14 +26,26 @@ PLANNER_SOURCES = ("planner/_kernels.py", "planner/_tree.py")
 # the rest of the vessel computer, and the run itself); 0.84x that since the planner's and vessel
 # computer's kernels compile at NUMBA_OPT=1 without numba's merge sort and slice-copy error path
 # (cold `hil warm-up`: 52.6 -> 44.3 s CPU, four A/B rounds), so ~40 s; `hil plan --scenario harbour`
-# ~25 s before, 0.9x that after (the planner's group: 27.1 -> 24.4 s).
+# ~25 s before, 0.9x that after (the planner's group: 27.1 -> 24.4 s). Since 784efb2 a run and
+# `hil plan` compile only the tree core of the planner they run: cold `hil run --duration 1`
+# 36.7-43.2 s of CPU (mean 40.3, 0.92x main's 43.6, three interleaved rounds at load 4); the planner's
+# group 0.85x (18.3 -> 15.6 s), so `hil plan` ~19 s (22 x 0.85, not measured separately).
 COLD_COMPILE_S = 40
-COLD_PLAN_COMPILE_S = 22
+COLD_PLAN_COMPILE_S = 19
 
 
-def _index_files(source: Path) -> list[Path]:
+TREE_SOURCE = "planner/_tree.py"
+
+
+def tree_core(algorithm: str) -> str:
+    """The tree-core kernel of ``planner/_tree.py`` a planner runs (``_tree.grow_kernel``): each
+    process compiles only its planner's, so a run with another planner compiles again."""
+    return "grow_ddrrt" if algorithm == "ddrrt-star" else "grow_rrt"
+
+
+def _index_files(source: Path, function: str = "*") -> list[Path]:
     tag = f"py{sys.version_info[0]}{sys.version_info[1]}"
-    pattern = f"{source.stem}.*.{tag}*.nbi"
+    pattern = f"{source.stem}.{function}-*.{tag}*.nbi" if function != "*" else f"{source.stem}.*.{tag}*.nbi"
     cache_dir = os.environ.get("NUMBA_CACHE_DIR")
     if cache_dir:
         root = Path(cache_dir)
@@ -41,24 +53,29 @@ def _index_files(source: Path) -> list[Path]:
     return list((source.parent / "__pycache__").glob(pattern))
 
 
-def kernels_cold(sources: tuple[str, ...] = KERNEL_SOURCES) -> bool:
+def kernels_cold(sources: tuple[str, ...] = KERNEL_SOURCES, algorithm: str | None = None) -> bool:
     """Whether a run will compile numba kernels (a missing or older cache for one of the kernel
-    modules ``sources``, paths relative to the repository)."""
-    for rel in sources:
+    modules ``sources``, paths relative to the repository, or with ``algorithm`` for that
+    planner's tree core)."""
+    checks = [(rel, "*") for rel in sources]
+    if algorithm is not None:
+        checks.append((TREE_SOURCE, tree_core(algorithm)))
+    for rel, function in checks:
         src = REPO / rel
         try:
             stamp = src.stat().st_mtime
         except OSError:
             continue
-        if not any(p.stat().st_mtime >= stamp for p in _index_files(src)):
+        if not any(p.stat().st_mtime >= stamp for p in _index_files(src, function)):
             return True
     return False
 
 
 def compile_notice(command: str, seconds: int = COLD_COMPILE_S, sources: tuple[str, ...] = KERNEL_SOURCES,
-                   processes: int = 1) -> str | None:
-    """The line to print before a command that will compile, or None when the kernels are cached."""
-    if not kernels_cold(sources):
+                   processes: int = 1, algorithm: str | None = None) -> str | None:
+    """The line to print before a command that will compile, or None when the kernels (with
+    ``algorithm``, that planner's tree core too) are cached."""
+    if not kernels_cold(sources, algorithm):
         return None
     shared = f" shared by {processes} processes" if processes > 1 else ""
     return (f"{command}: compiling numba kernels, first run only, ~{seconds} s of CPU{shared} "

@@ -35,10 +35,15 @@ REPO = Path(__file__).resolve().parent.parent
 READY = "locked"
 
 
+# `python -m hil.warm_up planner --algorithm NAME`: only that planner's kernels (`hil run` compiles
+# the algorithm it runs; the tree core of DDRRT* and that of RRT*/Informed RRT* are two kernels)
+_ALGORITHMS: list[str] = []
+
+
 def _planner() -> None:
     import planner
 
-    planner.warm_up_info()
+    planner.warm_up_info(tuple(_ALGORITHMS) or None)
 
 
 def _vessel_computer() -> None:
@@ -164,14 +169,17 @@ def compile_group(group: str, kernels: bool = False) -> dict:
     return out
 
 
-def start(groups: tuple[str, ...] = RUN_GROUPS, log_dir: Path | None = None) -> list[subprocess.Popen]:
+def start(groups: tuple[str, ...] = RUN_GROUPS, log_dir: Path | None = None,
+          algorithm: str | None = None) -> list[subprocess.Popen]:
     """Start one compiling process per group and return once each holds its lock (so that a
-    :func:`wait_for` that follows waits for it). Their stderr goes to ``log_dir/compile-GROUP.log``."""
+    :func:`wait_for` that follows waits for it). Their stderr goes to ``log_dir/compile-GROUP.log``.
+    ``algorithm``: the planner group compiles only that planner's kernels (the one a run uses)."""
     procs = []
     for group in groups:
         err = open(log_dir / f"compile-{group}.log", "w") if log_dir is not None else subprocess.DEVNULL
+        extra = ["--algorithm", algorithm] if algorithm and group == "planner" else []
         try:
-            proc = subprocess.Popen([sys.executable, "-m", "hil.warm_up", group], cwd=REPO, text=True,
+            proc = subprocess.Popen([sys.executable, "-m", "hil.warm_up", *extra, group], cwd=REPO, text=True,
                                     stdout=subprocess.PIPE, stderr=err, stdin=subprocess.DEVNULL)
         finally:
             if err is not subprocess.DEVNULL:
@@ -220,11 +228,18 @@ def run_all(groups: tuple[str, ...] | None = None, kernels: bool = False) -> lis
 
 def main(argv: list[str]) -> int:
     from hil import numba_env
+    from planner.params import ALGORITHM_NAMES
 
     as_json = "--json" in argv
-    names = [a for a in argv if a not in ("--json", "--kernels")]
-    if len(names) != 1 or names[0] not in GROUPS:
-        print(f"usage: python -m hil.warm_up [--json] [--kernels] {{{','.join(GROUPS)}}}", file=sys.stderr)
+    args = list(argv)
+    if "--algorithm" in args:
+        at = args.index("--algorithm")
+        _ALGORITHMS[:] = args[at + 1:at + 2] or [""]   # no name: a usage error below
+        del args[at:at + 2]
+    names = [a for a in args if a not in ("--json", "--kernels")]
+    if len(names) != 1 or names[0] not in GROUPS or (_ALGORITHMS and _ALGORITHMS[0] not in ALGORITHM_NAMES):
+        print(f"usage: python -m hil.warm_up [--json] [--kernels] [--algorithm {{{','.join(ALGORITHM_NAMES)}}}] "
+              f"{{{','.join(GROUPS)}}}", file=sys.stderr)
         return 2
     if names[0] in numba_env.LOW_OPT_GROUPS:
         numba_env.apply()

@@ -52,12 +52,13 @@ def warm_up() -> float:
     return _warm_up()
 
 
-def warm_up_info():
+def warm_up_info(algorithms: tuple[str, ...] | None = None):
     """:func:`warm_up`, returning ``planner.registry.WarmUp(seconds, compiled)``: ``compiled`` is
-    True when numba had to compile (a cold cache) rather than load machine code."""
+    True when numba had to compile (a cold cache) rather than load machine code. ``algorithms``:
+    only these planners' kernels (default: every registered planner's)."""
     from planner.registry import warm_up_info as _info
 
-    return _info()
+    return _info(algorithms)
 
 
 __all__ = ["warm_up", "warm_up_info", "ALGORITHMS", "REGISTRY", "Planner", "PlannerParams", "PlannerResult",

@@ -1131,28 +1131,69 @@ def _rrt_extend(sx, sy, world, cfg, tree, state, buf, dv):
     return new
 
 
-@njit(cache=True)
 def grow(world, cfg_a, tree, state_a, scratch, max_iter, deadline_ns, stop_on_exact, cpu_deadline_ns=-1):
     """Run up to max_iter iterations; see the module docstring for the arguments and the return
     codes. ``cfg_a`` and ``state_a`` are 1-element arrays of CONFIG and STATE; the caller keeps
-    world, tree and scratch alive during the call."""
+    world, tree and scratch alive during the call. DDRRT* runs :func:`grow_ddrrt`, RRT* and
+    Informed RRT* :func:`grow_rrt`: two kernels, so that a process compiles only the extension
+    step its algorithm uses (each is about half of the tree core's compile)."""
+    kernel = grow_kernel(int(cfg_a[0]["algo"]))
+    return kernel(world, cfg_a, tree, state_a, scratch, max_iter, deadline_ns, stop_on_exact, cpu_deadline_ns)
+
+
+def grow_kernel(algo: int) -> Callable[..., int]:
+    """The compiled kernel :func:`grow` runs for an algorithm code."""
+    return cast(Callable[..., int], grow_ddrrt if algo == DDRRT_STAR else grow_rrt)
+
+
+@njit(cache=True, inline="always")
+def _stop_before(deadline_ns, cpu_deadline_ns, cfg, state, buf):
+    """The return code that ends the search before the next iteration, or -1 to go on."""
+    if deadline_ns >= 0 and monotonic_ns(buf.clock) >= deadline_ns:
+        return DONE_DEADLINE
+    if cpu_deadline_ns >= 0 and thread_cpu_ns(buf.clock) >= cpu_deadline_ns:
+        return DONE_DEADLINE
+    if state.n + 2 > cfg.cap:
+        return DONE_FULL
+    return -1
+
+
+@njit(cache=True)
+def grow_ddrrt(world, cfg_a, tree, state_a, scratch, max_iter, deadline_ns, stop_on_exact, cpu_deadline_ns=-1):
+    """:func:`grow` for DDRRT* (``cfg.algo`` DDRRT_STAR)."""
     cfg = cfg_a[0]
     state = state_a[0]
     world, tree, buf = _borrowed(world, tree, scratch)
     dv = _derive(cfg)
     for _ in range(max_iter):
-        if deadline_ns >= 0 and monotonic_ns(buf.clock) >= deadline_ns:
-            return DONE_DEADLINE
-        if cpu_deadline_ns >= 0 and thread_cpu_ns(buf.clock) >= cpu_deadline_ns:
-            return DONE_DEADLINE
-        if state.n + 2 > cfg.cap:
-            return DONE_FULL
+        code = _stop_before(deadline_ns, cpu_deadline_ns, cfg, state, buf)
+        if code >= 0:
+            return code
         state.iter += 1
         sx, sy, from_png = _sample(cfg, tree, state)
-        if cfg.algo == DDRRT_STAR:
-            new = _ddrrt_extend(sx, sy, from_png, world, cfg, tree, state, buf, dv)
-        else:
-            new = _rrt_extend(sx, sy, world, cfg, tree, state, buf, dv)
+        new = _ddrrt_extend(sx, sy, from_png, world, cfg, tree, state, buf, dv)
+        if new < 0:
+            continue
+        _try_goal(new, world, cfg, tree, state, buf.clock)
+        if stop_on_exact and state.goal >= 0:
+            return DONE_EXACT
+    return DONE_ITERATIONS
+
+
+@njit(cache=True)
+def grow_rrt(world, cfg_a, tree, state_a, scratch, max_iter, deadline_ns, stop_on_exact, cpu_deadline_ns=-1):
+    """:func:`grow` for RRT* and Informed RRT* (``cfg.algo`` RRT_STAR or INFORMED_RRT_STAR)."""
+    cfg = cfg_a[0]
+    state = state_a[0]
+    world, tree, buf = _borrowed(world, tree, scratch)
+    dv = _derive(cfg)
+    for _ in range(max_iter):
+        code = _stop_before(deadline_ns, cpu_deadline_ns, cfg, state, buf)
+        if code >= 0:
+            return code
+        state.iter += 1
+        sx, sy, from_png = _sample(cfg, tree, state)
+        new = _rrt_extend(sx, sy, world, cfg, tree, state, buf, dv)
         if new < 0:
             continue
         _try_goal(new, world, cfg, tree, state, buf.clock)

@@ -257,6 +257,7 @@ class TreePlanner:
             cpu_deadline_ns = -1
             bounds = dataclasses.replace(bounds, poll_python=True)
         _tree.seed_rng(self.seed)
+        grow = _tree.grow_kernel(int(cfg[0]["algo"]))
         why = "termination condition met"
         while True:
             termination.notify(int(st["iter"]), bool(st["goal"] >= 0))
@@ -268,7 +269,7 @@ class TreePlanner:
                 budget = max(0, bounds.max_iterations - int(st["iter"]))
             else:
                 budget = _BIG
-            code = _tree.grow(world, cfg, tree, state, scratch, budget, deadline_ns, bounds.stop_on_exact,
+            code = grow(world, cfg, tree, state, scratch, budget, deadline_ns, bounds.stop_on_exact,
                               cpu_deadline_ns)
             if code == _tree.DONE_DEADLINE:
                 why = "deadline reached"

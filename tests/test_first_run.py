@@ -66,3 +66,29 @@ def test_hil_plan_asks_only_about_the_planner_kernels(tmp_path, monkeypatch):
                 p.unlink()
     assert first_run.kernels_cold()
     assert not first_run.kernels_cold(first_run.PLANNER_SOURCES)
+
+
+def test_a_planner_whose_tree_core_is_not_cached_is_cold(tmp_path, monkeypatch):
+    """A run compiles only its planner's tree core (planner._tree.grow_kernel): with DDRRT*'s
+    cached, a run with RRT* still compiles, and says so."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    _fake_cache(tmp_path, newer=True)
+    tag = f"py{sys.version_info[0]}{sys.version_info[1]}"
+    src = first_run.REPO / first_run.TREE_SOURCE
+    index = tmp_path / f"{src.parent.name}_0123abcd" / f"{src.stem}.grow_ddrrt-1160.{tag}.nbi"
+    index.write_bytes(b"")
+    t = src.stat().st_mtime + 10
+    os.utime(index, (t, t))
+    assert not first_run.kernels_cold() and not first_run.kernels_cold(algorithm="ddrrt-star")
+    assert first_run.kernels_cold(algorithm="rrt-star") and first_run.kernels_cold(algorithm="informed-rrt-star")
+    assert first_run.compile_notice("run", algorithm="rrt-star") is not None
+    assert first_run.compile_notice("run", algorithm="ddrrt-star") is None
+
+
+def test_the_tree_core_names_are_the_kernels_of_planner_tree():
+    from planner import _tree
+    from planner.params import ALGORITHM_NAMES
+
+    for name in ALGORITHM_NAMES:
+        code = _tree.DDRRT_STAR if name == "ddrrt-star" else _tree.RRT_STAR
+        assert getattr(_tree, first_run.tree_core(name)) is _tree.grow_kernel(code)

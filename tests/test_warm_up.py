@@ -88,7 +88,9 @@ def test_after_the_groups_the_vessel_computer_compiles_nothing(tmp_path):
     every kernel from the cache, none is compiled again. Several minutes of CPU on a cold cache."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
     for group in ("simulator", *warm_up.RUN_GROUPS):   # the simulator's group holds the geodesy
-        r = subprocess.run([sys.executable, "-m", "hil.warm_up", "--json", group], cwd=REPO, env=env,
+        # as `hil run` starts them: the planner's group compiles only the configured planner's tree core
+        algorithm = ["--algorithm", "ddrrt-star"] if group == "planner" else []
+        r = subprocess.run([sys.executable, "-m", "hil.warm_up", "--json", *algorithm, group], cwd=REPO, env=env,
                            capture_output=True, text=True, timeout=900)
         assert r.returncode == 0, r.stderr[-2000:]
         figures = json.loads(r.stdout.splitlines()[-1])
@@ -100,6 +102,8 @@ def test_after_the_groups_the_vessel_computer_compiles_nothing(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     compiled = json.loads(r.stdout.splitlines()[-1])
     assert compiled == [], compiled
+    from hil import settings
+    assert settings.load().planner.algorithm == "ddrrt-star"   # the default the groups compiled for
 
 
 def test_kernel_times_count_each_function_and_its_specialisations():
@@ -146,3 +150,33 @@ def test_the_vessel_computers_kernels_compile_at_numba_opt_1_unless_the_user_set
              "code = main(['autopilot', '--scenario', 'no-such-scenario']); print(code, os.environ.get('NUMBA_OPT'))")
     r = subprocess.run([sys.executable, "-c", probe], cwd=REPO, env=env, capture_output=True, text=True, timeout=120)
     assert r.stdout.splitlines()[-1] == "2 1", (r.stdout, r.stderr)
+
+
+ONE_PLANNER = textwrap.dedent("""
+    import json, sys
+    import planner
+    from planner import _tree
+    planner.warm_up_info((sys.argv[1],))
+    print(json.dumps([len(_tree.grow_ddrrt.signatures), len(_tree.grow_rrt.signatures)]))
+""")
+
+
+@pytest.mark.parametrize("algorithm, kernels", [("ddrrt-star", [1, 0]), ("rrt-star", [0, 1]),
+                                                ("informed-rrt-star", [0, 1])])
+def test_a_run_compiles_only_the_tree_core_of_its_planner(algorithm, kernels):
+    """`hil run`'s planner group (`--algorithm`): DDRRT*'s tree core and RRT*'s are two kernels,
+    and a process warmed up for one planner loads or compiles only that one."""
+    r = subprocess.run([sys.executable, "-c", ONE_PLANNER, algorithm], cwd=REPO, capture_output=True, text=True,
+                       timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert json.loads(r.stdout.splitlines()[-1]) == kernels
+
+
+def test_an_unknown_planner_is_refused():
+    import planner
+
+    with pytest.raises(ValueError, match="unknown planner"):
+        planner.warm_up_info(("rrt-sharp",))
+    r = subprocess.run([sys.executable, "-m", "hil.warm_up", "--algorithm", "rrt-sharp", "planner"], cwd=REPO,
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "usage" in r.stderr

@@ -198,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
     from hil.first_run import COLD_PLAN_COMPILE_S, PLANNER_SOURCES, compile_notice
 
     # before the planner's import, which compiles on a cold cache
-    notice = compile_notice("hil plan", COLD_PLAN_COMPILE_S, PLANNER_SOURCES)
+    notice = compile_notice("hil plan", COLD_PLAN_COMPILE_S, PLANNER_SOURCES, algorithm=args.algorithm)
     if notice:
         console.progress(notice)
 
@@ -235,7 +235,7 @@ def run(args: argparse.Namespace) -> int:
         if not raw.is_free(*pt):
             raise UsageError(f"{what} {pt[0]:g},{pt[1]:g}: inside an obstacle")
     # One-off costs first, each timed, so that --deadline is the search alone.
-    warm = warm_up_info()
+    warm = warm_up_info((params.algorithm,))   # only the kernels this planner runs
     if warm.compiled:
         console.progress(f"hil plan: compiled the planner (cold numba cache) in {warm.seconds:.1f} s, "
                          f"before the clock started")

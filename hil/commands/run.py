@@ -258,16 +258,18 @@ def _run_hil(args: argparse.Namespace, cfg: HilConfig, cpus: str | Placement = "
              f"{who}, seed {seed}, up to {args.duration:g} s simulated, run folder {out}")
     from hil.first_run import compile_notice
 
-    notice = compile_notice("run", processes=3 if args.autopilot != "ardupilot" else 1)
+    ours = args.autopilot != "ardupilot"
+    algorithm = str(args.algorithm or spec.planner.get("algorithm") or cfg.planner.algorithm) if ours else None
+    notice = compile_notice("run", processes=3 if ours else 1, algorithm=algorithm)
     compiling: list[subprocess.Popen] = []
     if notice:
         progress(notice)
-        if args.autopilot != "ardupilot":
+        if ours:
             from hil.warm_up import start as start_compiling
 
             # The vessel computer's kernels in parallel processes (hil/warm_up.py); its process waits
             # for them and loads the machine code from the cache.
-            compiling = start_compiling()
+            compiling = start_compiling(algorithm=algorithm)
     from hil.errors import RunFailed
     from hil.files import tidy_failed_start
 
