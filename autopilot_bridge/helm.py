@@ -13,6 +13,7 @@ import math
 import time
 from collections.abc import Callable
 
+from autopilot_bridge.angles import wrap_angle
 from autopilot_bridge.behaviour import STATION, Behaviour, BehaviourMachine
 from autopilot_bridge.computer_setup import Propulsion
 from autopilot_bridge.config import AutopilotParams
@@ -46,6 +47,11 @@ AVOID_LOOKAHEAD = 24.0        # m: 3 m/s, the hull's top speed, stops within it 
 BLOCKED_RUN = 1.0             # m of free water the set-point's way leaves: less, the way is blocked
 CLEAR_RUN = 3.0               # m of free water along the set-point's way that ends the blockage
 BLOCKED_SPEED = 0.2           # m/s: a set-point below it is no way to block (arrival, station keeping)
+DRIFT_SPEED = 0.1             # m/s over ground: above it the course over ground counts (below, noise)
+DRIFT_ANGLE = math.radians(35.0)   # rad between the course over ground and the way asked: set off it
+CELL_SLACK = 0.1              # m: a way along a wall that only crosses the chart's cell-centre steps is no blockage
+BLOCKED_HOLD_S = 5.0          # s: a blockage keeps station at least this long (no flicker at its edge)
+BLOCKED_TELL_S = 10.0         # s between two events of a blockage
 ARRIVAL_DECELERATION = 0.25   # m/s^2: half the speed reference model's limit (max_acceleration 0.5)
 MANUAL_STICK_TIMEOUT_S = 1.0   # wall s: an older MANUAL_CONTROL is no stick (MANUAL then holds)
 
@@ -72,6 +78,7 @@ class Helm:
         self._hold_behaviour = BehaviourMachine(start=Behaviour.IDLE)
         self.blocked_at: tuple[float, float] | None = None   # NED m: where a blocked way keeps station
         self._blocked_behaviour = BehaviourMachine(start=Behaviour.IDLE)
+        self._blocked_since = self._blocked_told = -math.inf   # s of vehicle time
         self.reactive = ReactiveAvoidance(grid, params.fallback_range, params.min_clearance, params.fallback_speed)
         self.tracking = TrackingStats()
         self.zero_thrust = allocate(0.0, 0.0, propulsion.B_u, propulsion.T_max, propulsion.T_min)
@@ -216,23 +223,36 @@ class Helm:
         return self._drive(s, dt, psi_ref, u_ref, 0.0, r_ref)
 
     def _way_blocked(self, s: NavState, psi_ref: float, u_ref: float) -> bool:
-        """Whether the set-point asks the boat where the avoidance limit will not let it go: less than
-        ``BLOCKED_RUN`` of free water along its way (``psi_ref``, or astern for a negative ``u_ref``), until
-        ``CLEAR_RUN`` is free again. A boat held back there keeps station (:meth:`_keep_blocked`); before,
-        it stopped with its speed limited and the current set it sideways onto the quay it faced (the chaos
-        hour, seed 31 unsigned, collision at 1,051 s)."""
+        """Whether the boat must keep station (:meth:`_keep_blocked`) rather than follow the set-point:
+        the set-point asks it where the avoidance limit will not let it go (less than ``BLOCKED_RUN`` of free
+        water along ``psi_ref``, or astern for a negative ``u_ref``), or the current sets it there sideways
+        (as little free water along its course over ground, above ``DRIFT_SPEED`` and ``DRIFT_ANGLE`` off the
+        way asked; inside the avoidance clearance, any way), which no surge limit stops. It keeps station for
+        at least ``BLOCKED_HOLD_S``, until ``CLEAR_RUN`` is free along the way asked. Before, a boat held
+        back by the limit, or creeping at a slow set-point, was set sideways onto the quay beside it (the
+        chaos hour, seed 31: unsigned at 1,051 s, signed at 1,805 s)."""
+        cog = s.psi + math.atan2(s.v, s.u)
+        inside = self.grid.clearance_at(s.y, s.x) < self.avoid_clearance
         if abs(u_ref) < BLOCKED_SPEED:
-            blocked = False
+            wanted_free, astray = math.inf, True
         else:
             way = psi_ref if u_ref > 0.0 else psi_ref + math.pi
-            free = self._free_run(s, way, CLEAR_RUN)
-            blocked = free < (CLEAR_RUN if self.blocked_at is not None else BLOCKED_RUN)
+            wanted_free = self._free_run(s, way, CLEAR_RUN, CELL_SLACK)
+            astray = inside or abs(wrap_angle(cog - way)) > DRIFT_ANGLE
+        drifting = astray and s.speed > DRIFT_SPEED and \
+            self._free_run(s, cog, BLOCKED_RUN, CELL_SLACK) < BLOCKED_RUN
+        if self.blocked_at is None:
+            blocked = wanted_free < BLOCKED_RUN or drifting
+        else:
+            blocked = wanted_free < CLEAR_RUN or drifting or s.t - self._blocked_since < BLOCKED_HOLD_S
         if blocked and self.blocked_at is None:
-            self.blocked_at = (s.x, s.y)
+            self.blocked_at, self._blocked_since = (s.x, s.y), s.t
             self.station.reset()
             self._blocked_behaviour.to(Behaviour.IDLE)
-            self._event(s.t, f"{self.vehicle.mode.name}: way blocked {self.grid.clearance_at(s.y, s.x):.1f} m from "
-                        "an obstacle: keeping station until it clears")
+            if s.t - self._blocked_told >= BLOCKED_TELL_S:
+                self._blocked_told = s.t
+                self._event(s.t, f"{self.vehicle.mode.name}: {'set towards' if drifting else 'way blocked'} "
+                            f"{self.grid.clearance_at(s.y, s.x):.1f} m from an obstacle: keeping station")
         elif not blocked and self.blocked_at is not None:
             self.blocked_at = None
             self.reset_controllers(s)
@@ -253,7 +273,7 @@ class Helm:
             # No turn may push the boat on: a full differential with the weaker reverse thrust makes surge force
             # (turn_on_the_spot), which crept a boat 1.5 m off a wall to 1.0 m at 0.1 m/s while it turned away.
             self.speed_ctl.limit_reference(abs(capped))
-            brake = s.speed > abs(capped) + AVOID_BRAKE_MARGIN
+            brake = abs(s.u) > abs(capped) + AVOID_BRAKE_MARGIN   # surge momentum: the sway no thrust stops
             yaw_limit = min(yaw_limit, self.braking_yaw_limit if brake else self.turn_on_the_spot)
         tau_r = self.heading_pid.update(psi_ref, s.psi, s.r, dt, r_ref)
         tau_r = min(max(tau_r, -yaw_limit), yaw_limit)
@@ -282,11 +302,11 @@ class Helm:
         cap = stopping_speed_cap(free, s.speed, 0.0, AVOID_DECELERATION, lag)
         return max(min(u_ref, cap), -cap)
 
-    def _free_run(self, s: NavState, direction: float, reach: float) -> float:
+    def _free_run(self, s: NavState, direction: float, reach: float, slack: float = 0.0) -> float:
         """m the boat can go along ``direction`` (rad) before the clearance falls below ``avoid_clearance``
-        (or below the clearance it has now); ``reach`` when nothing is nearer."""
+        (or more than ``slack`` m below the clearance it has now); ``reach`` when nothing is nearer."""
         c, sn = math.cos(direction), math.sin(direction)
-        limit = min(self.avoid_clearance, self.grid.clearance_at(s.y, s.x))
+        limit = min(self.avoid_clearance, self.grid.clearance_at(s.y, s.x) - slack)
         step = self.grid.resolution
         for k in range(1, int(reach / step) + 1):
             d = k * step

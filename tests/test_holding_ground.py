@@ -487,6 +487,51 @@ def test_without_keeping_station_a_blocked_boat_is_set_onto_the_quay(monkeypatch
     assert worst < 0.5, worst
 
 
+def _creep_beside_the_pier(start: tuple[float, float], heading_deg: float, seconds: float) -> float:
+    """The harbour's truth and current; the helm asked for 0.2 m/s on a fixed heading ``heading_deg`` from
+    ``start``, west of the pier head at (96 m N, 122 m E), where the current (0.4 m/s) sets east onto it.
+    The least chart clearance (m) of the hull's centre."""
+    from support.closed_loop import ClosedLoop, clearance
+
+    from autopilot_bridge.navigation import NavState
+    from simulator.core import Command
+
+    psi = math.radians(heading_deg)
+    loop = ClosedLoop(start, psi=psi)
+    helm, core = loop.ap.helm, loop.core
+    helm.reset_controllers(NavState(0.0, *start, psi, 0.0, 0.0, 0.0, 0.0, 0.0))
+    worst, tau = math.inf, 0.0
+    for i in range(int(round(seconds / core.frame_dt))):
+        x, y, heading, u, v, r = core.state
+        s = NavState(i * core.frame_dt, x, y, heading, u, v, r, 0.0, 0.0)
+        loop.ap.current.update(s, tau, core.frame_dt)
+        th = helm.drive(s, core.frame_dt, psi, 0.2)
+        tau = th.port + th.stdb
+        core.apply(Command(core.time_usec, th.port_cmd, th.stdb_cmd))
+        core.step()
+        worst = min(worst, clearance(core.state[0], core.state[1]))
+    return worst
+
+
+@pytest.mark.parametrize("start,heading_deg", [((96.4, 117.5), 0.0), ((95.0, 116.5), -20.0), ((97.0, 116.0), 0.0)])
+def test_a_boat_set_sideways_towards_the_pier_keeps_station_off_it(start, heading_deg):
+    """In-process, the harbour's truth and current: at a creeping set-point (0.2 m/s, bow north) beside a pier
+    head, the current sets the boat sideways towards it at 0.3-0.4 m/s, which no surge limit stops. When its
+    course over ground leaves less than 1 m before the avoidance clearance, the helm keeps station (into the
+    current, Helm._way_blocked), its yaw moment not held back by a braking its surge does not need: the
+    hull's centre stays at least 1 m off for a minute (the chaos hour, seed 31 signed, collision at 1,805 s:
+    GUIDED's first metres beside the pier head, bow north, sliding east at 0.3 m/s)."""
+    assert _creep_beside_the_pier(start, heading_deg, 60.0) >= 1.0
+
+
+def test_without_the_drift_rule_a_creeping_boat_is_set_onto_the_pier(monkeypatch):
+    """The control case: the blockage never recognised, the first case above runs onto the pier head."""
+    from autopilot_bridge.helm import Helm
+
+    monkeypatch.setattr(Helm, "_way_blocked", lambda _self, _s, _psi, _u: False)
+    assert _creep_beside_the_pier((96.4, 117.5), 0.0, 60.0) < 0.5
+
+
 @pytest.mark.parametrize("turn_deg", [90.0, -90.0, 135.0])
 @pytest.mark.parametrize("yaw_first", [False, True], ids=["braking_first", "yaw_first"])
 def test_a_sharp_turn_asked_at_speed_beside_the_quay_brakes_before_it_turns(turn_deg, yaw_first, monkeypatch):
@@ -501,8 +546,9 @@ def test_a_sharp_turn_asked_at_speed_beside_the_quay_brakes_before_it_turns(turn
     from autopilot_bridge.navigation import NavState
     from simulator.core import Command
 
-    if yaw_first:
+    if yaw_first:   # the control case: neither the braking's yaw limit nor keeping station when blocked
         monkeypatch.setattr(Helm, "braking_yaw_limit", property(lambda _self: math.inf))
+        monkeypatch.setattr(Helm, "_way_blocked", lambda _self, _s, _psi, _u: False)
     start = (83.1, 115.1)
     psi = math.atan2(120.0 - start[1], 94.0 - start[0])
     loop = ClosedLoop(start, psi=psi)

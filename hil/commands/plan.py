@@ -197,11 +197,6 @@ def run(args: argparse.Namespace) -> int:
 
     from hil.first_run import COLD_PLAN_COMPILE_S, PLANNER_SOURCES, compile_notice
 
-    # before the planner's import, which compiles on a cold cache
-    notice = compile_notice("hil plan", COLD_PLAN_COMPILE_S, PLANNER_SOURCES, algorithm=args.algorithm)
-    if notice:
-        console.progress(notice)
-
     import numpy as np
 
     from hil import scenario as scenarios
@@ -234,7 +229,11 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(f"{what} {pt[0]:g},{pt[1]:g}: outside the {raw.width:g} m x {raw.height:g} m map")
         if not raw.is_free(*pt):
             raise UsageError(f"{what} {pt[0]:g},{pt[1]:g}: inside an obstacle")
-    # One-off costs first, each timed, so that --deadline is the search alone.
+    # One-off costs first, each timed, so that --deadline is the search alone. The inputs are checked by now: a
+    # user's mistake is one line, with no compile notice before it.
+    notice = compile_notice("hil plan", COLD_PLAN_COMPILE_S, PLANNER_SOURCES, algorithm=params.algorithm)
+    if notice:
+        console.progress(notice)
     warm = warm_up_info((params.algorithm,))   # only the kernels this planner runs
     if warm.compiled:
         console.progress(f"hil plan: compiled the planner (cold numba cache) in {warm.seconds:.1f} s, "
