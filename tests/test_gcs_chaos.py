@@ -112,7 +112,8 @@ def test_a_chaos_ground_station_crashes_nothing_and_every_refusal_is_counted(tmp
     try:
         ap, sim = _child_pid(proc.pid, b"autopilot"), _child_pid(proc.pid, b"sim")
         assert ap is not None and sim is not None, "no autopilot or simulator process"
-        chaos = ChaosGcs(seed=CHAOS_SEED, udp=("127.0.0.1", udp), tcp=("127.0.0.1", tcp), key=KEY if signing else None)
+        chaos = ChaosGcs(seed=CHAOS_SEED, udp=("127.0.0.1", udp), tcp=("127.0.0.1", tcp), key=KEY if signing else None,
+                         vessel=1 + n)
         chaos.wait_for(("HEARTBEAT",), 120.0)
         rss0, fd0 = _usage(ap)
         sim_rss0, sim_fd0 = _usage(sim)
@@ -145,7 +146,8 @@ def test_a_chaos_ground_station_crashes_nothing_and_every_refusal_is_counted(tmp
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     print(f"\nchaos {'signed' if signing else 'unsigned'} {stats.wall_s:.0f} s: actions {dict(stats.actions)}; "
           f"mission acks {dict(stats.mission_acks)}; command acks {dict(stats.command_acks)}; "
-          f"connections {stats.connections}; frames {stats.frames_sent}; RSS {rss0:.1f} -> {rss1:.1f} MB; "
+          f"connections {stats.connections}; frames {stats.frames_sent}; foreign frames {stats.foreign}; "
+          f"RSS {rss0:.1f} -> {rss1:.1f} MB; "
           f"fds {fd0} -> {fd1}; simulator RSS {sim_rss0:.1f} -> {sim_rss1:.1f} MB, fds {sim_fd0} -> {sim_fd1}; "
           f"gcs security_rejects {summary['gcs']['security_rejects']}; "
           f"signature_failures {summary['gcs']['signature_failures']}; attacks {dict(stats.attacks)}")

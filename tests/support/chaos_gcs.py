@@ -43,8 +43,10 @@ SIGNED_ONLY = {"wrong_key": 1, "replay": 1}
 MODES = (0, 4, 5, 10, 11, 15, 3, 99, 255)     # MANUAL HOLD LOITER AUTO RTL GUIDED and three unknown ones
 # Control gains are left alone: their advertised ranges include values that cannot steer the boat
 # (HDG_KP = 0 was accepted and, with seed 31, the boat then hit the quay 84.6 s into a 150 s leg;
-# docs/security.md, Open). Every other parameter is fair game.
-UNSAFE_PARAMS = frozenset({"HDG_KP", "HDG_KI", "HDG_KD", "SPD_BANDWIDTH"})
+# docs/security.md, Open). SYSID_THISMAV too: it re-addresses the vessel, and the client tells its vessel
+# from another run's by the system id (tests/test_vessel_parameters.py changes it). Every other parameter
+# is fair game.
+UNSAFE_PARAMS = frozenset({"HDG_KP", "HDG_KI", "HDG_KD", "SPD_BANDWIDTH", "SYSID_THISMAV"})
 
 
 @dataclass
@@ -55,6 +57,7 @@ class ChaosStats:
     command_acks: Counter[str] = field(default_factory=Counter)     # COMMAND_ACK results addressed to us
     attacks: Counter[str] = field(default_factory=Counter)          # signed frames meant to be refused, by kind
     connections: int = 0
+    foreign: int = 0      # frames from another system id: another run's vessel still sending to a port now ours
     tcp_connect_failures: int = 0
     frames_sent: int = 0
     wall_s: float = 0.0
@@ -66,17 +69,19 @@ def _name(enum: str, value: int) -> str:
 
 
 class ChaosGcs:
-    """``udp``/``tcp``: the vessel's udpin and tcpin addresses (either may be None)."""
+    """``udp``/``tcp``: the vessel's udpin and tcpin addresses (either may be None); ``vessel``: its system id.
+    Frames from any other system id are counted as ``foreign`` and otherwise ignored: a run beside this one
+    may still send to a UDP port its own ground station let go and this client's new socket was given."""
 
     def __init__(self, seed: int, udp: tuple[str, int] | None, tcp: tuple[str, int] | None = None,
-                 key: bytes | None = None, sysid: int = 255) -> None:
+                 key: bytes | None = None, sysid: int = 255, vessel: int = 1) -> None:
         if udp is None and tcp is None:
             raise ValueError("chaos GCS: give a UDP or a TCP address")
         self.rng = np.random.default_rng(seed)
         self.udp, self.tcp, self.key = udp, tcp, key
         self.stats = ChaosStats()
         self.mav = self._mav(sysid, key)
-        self.target = 1
+        self.vessel = self.target = vessel
         self.anchor: tuple[float, float] | None = None    # the vessel's lat/lon (deg), from GLOBAL_POSITION_INT
         self.params: list[str] = []
         self.sock: socket.socket | None = None
@@ -165,6 +170,9 @@ class ChaosGcs:
                 break
             for m in self.parser.parse_buffer(data) or []:
                 if isinstance(m, (mavlink2.MAVLink_bad_data, mavlink2.MAVLink_unknown)):
+                    continue
+                if m.get_srcSystem() != self.vessel:
+                    self.stats.foreign += 1
                     continue
                 out.append(m)
         for m in out:
