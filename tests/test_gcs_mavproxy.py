@@ -242,12 +242,13 @@ def test_mavproxy_flies_a_qgc_plan_as_ardurover_with_pause_resume_guided_hold_an
     assert reached[:5] == [1, 2, 3, 4, 5], reached          # item 0 (home) never: ArduPilot's convention
 
 
-def test_mavproxy_disarm_beside_the_breakwater_is_refused_and_disarm_force_is_taken(tmp_path):
-    """Issue 31: the boat keeps station at a GUIDED target 4 m south of the breakwater, the harbour's current
-    (0.5 m/s) setting onto it (sent there by a pymavlink script with DO_REPOSITION: MAVProxy's `guided` is
-    ArduPilot's MISSION_ITEM with current = 2). MAVProxy's `disarm` is refused (TEMPORARILY_REJECTED, the boat
-    stays armed: drifting, it would be set onto the breakwater within 10 s); `disarm force` (param2 = 21196)
-    is taken."""
+def test_mavproxy_guided_then_disarm_beside_the_breakwater_is_refused_and_disarm_force_is_taken(tmp_path):
+    """Issue 31: MAVProxy's `guided LAT LON ALT` as ArduPilot's guided "fly to" (MISSION_ITEM_INT with
+    current = 2, as QGroundControl's "Go to location" on an ArduPilot vehicle) is refused in HOLD
+    (MISSION_ACK ERROR, as ArduRover) and taken in GUIDED: the boat keeps station at the target 4 m south
+    of the breakwater, the harbour's current (0.5 m/s) setting onto it. MAVProxy's `disarm` is refused
+    there (TEMPORARILY_REJECTED, the boat stays armed: drifting, it would be set onto the breakwater within
+    10 s); `disarm force` (param2 = 21196) is taken."""
     from common.mavlink import MAV_TYPE as M
 
     target = (104.0, 92.0)                  # NED m, as tests/test_holding_ground.py's
@@ -255,7 +256,7 @@ def test_mavproxy_disarm_beside_the_breakwater_is_refused_and_disarm_force_is_ta
     proc = start_run(tmp_path / "run", "--scenario", "harbour", "--duration", "5000", "--wait-for-arm",
                      "--speedup", "4", "--gcs", f"udpin:127.0.0.1:{port}")
     mp = Console([MAVPROXY, f"--master=udpout:127.0.0.1:{port}", "--source-system=255",
-                  "--default-modules=mode,arm,cmdlong", f"--state-basedir={tmp_path / 'mavproxy'}"], tmp_path)
+                  "--default-modules=mode,arm,cmdlong,wp", f"--state-basedir={tmp_path / 'mavproxy'}"], tmp_path)
     watcher = Gcs(f"udpout:127.0.0.1:{port}", sysid=254)
     try:
         mp.expect("Detected vehicle 1:1", timeout=240)
@@ -263,8 +264,13 @@ def test_mavproxy_disarm_beside_the_breakwater_is_refused_and_disarm_force_is_ta
         mp.send("arm throttle")
         mp.expect("COMPONENT_ARM_DISARM: ACCEPTED")
         lat, lon = GEO.sea_level_to_geodetic(*target)
-        ack = watcher.command(M.MAV_CMD_DO_REPOSITION, -1.0, 1.0, 0.0, float("nan"), lat, lon, 0.0)
-        assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
+        mp.send("set guided_use_reposition 0")    # MAVProxy 1.8 sends DO_REPOSITION unless told otherwise
+        mp.send(f"guided {lat:.7f} {lon:.7f} 0")
+        mp.expect("not GUIDED")                   # in HOLD: refused, the reason in a STATUSTEXT
+        mp.send("mode GUIDED")
+        mp.expect("DO_SET_MODE: ACCEPTED")
+        mp.send(f"guided {lat:.7f} {lon:.7f} 0")
+        mp.expect("TYPE_MISSION: ACCEPTED")
 
         def there(p) -> bool:
             n, e = GEO.geodetic_to_sea_level(p.lat * 1e-7, p.lon * 1e-7)

@@ -4,6 +4,7 @@ protocol state machine) wired to the vessel's command API, with conversions betw
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -13,6 +14,7 @@ from autopilot_bridge import mission_commands as mc
 from autopilot_bridge.gcs.context import Outbox, VehicleView
 from autopilot_bridge.gcs.mission import FENCE, MISSION, RALLY, MissionItem, MissionServer, fence_polygons, has_position
 from autopilot_bridge.mission_commands import MissionCommand
+from autopilot_bridge.modes import Mode
 from common.mavlink import MAV_TYPE as M
 from planner.fence import Circle, Fence
 
@@ -20,6 +22,7 @@ from planner.fence import Circle, Fence
 MISSION_MESSAGES = tuple(sorted(name[len("_on_"):].upper() for name in vars(MissionServer)
                                 if name.startswith("_on_mission")))
 MISSION_WRITES = frozenset({"MISSION_COUNT", "MISSION_ITEM", "MISSION_ITEM_INT", "MISSION_CLEAR_ALL"})
+GUIDED_GOTO = 2     # MISSION_ITEM(_INT).current: ArduPilot's guided "fly to" request, not an upload's item
 
 
 class MissionService:
@@ -107,9 +110,43 @@ class MissionService:
     def _on_message(self, m: Any, now: float) -> None:
         if self.server is None:
             return
+        if m.get_type() in ("MISSION_ITEM", "MISSION_ITEM_INT") and m.current == GUIDED_GOTO and \
+                getattr(m, "mission_type", MISSION) == MISSION:
+            self._guided_goto(m)
+            return
         for o in self.server.handle(m, now):
             self.out.send(o.name, *o.args)
         self._events()
+
+    def _guided_goto(self, m: Any) -> None:
+        """ArduPilot's guided "fly to": a NAV_WAYPOINT item with current = 2, outside any upload (MAVProxy's
+        ``guided LAT LON ALT``, QGroundControl's "Go to location" on an ArduPilot vehicle). Taken in GUIDED
+        only, as ArduRover takes it, and checked as any GUIDED target; answered with MISSION_ACK."""
+        api, st = self.view.api, self.view.status
+        if m.get_type() == "MISSION_ITEM_INT":
+            lat, lon = m.x * 1e-7, m.y * 1e-7
+        else:
+            lat, lon = float(m.x), float(m.y)
+        why = None
+        if api is None or st is None:
+            why = "guided goto: no vessel yet"
+        elif m.command != M.MAV_CMD_NAV_WAYPOINT:
+            why = f"guided goto: command {m.command} is not NAV_WAYPOINT"
+        elif st.mode is not Mode.GUIDED:
+            why = f"guided goto: in {st.mode.name}, not GUIDED (switch to GUIDED first, as on ArduRover)"
+        elif not (math.isfinite(lat) and math.isfinite(lon)) or not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+            why = "guided goto: bad latitude/longitude"
+        else:
+            off = self.view.on_chart(lat, lon)
+            if off is not None:
+                why = f"guided goto: {off[1]}"
+            else:
+                r = api.goto(*self.view.geo.geodetic_to_sea_level(lat, lon))
+                why = None if r.ok else r.text
+        result = M.MAV_MISSION_ACCEPTED if why is None else M.MAV_MISSION_ERROR
+        if why is not None:
+            self.out.statustext(why, M.MAV_SEVERITY_WARNING)
+        self.out.send("mission_ack", m.get_srcSystem(), m.get_srcComponent(), result, MISSION)
 
     def tick(self, now: float) -> None:
         """Re-requests and timeouts of an upload under way."""

@@ -195,11 +195,10 @@ def run(args: argparse.Namespace) -> int:
 
     numba_env.apply()   # before the planner's import
 
-    from hil.first_run import COLD_PLAN_COMPILE_S, PLANNER_SOURCES, compile_notice
-
     import numpy as np
 
     from hil import scenario as scenarios
+    from hil.first_run import COLD_PLAN_COMPILE_S, PLANNER_SOURCES, compile_notice
     from planner import make_planner, warm_up_info
     from planner.core import free_regions
     from planner.field import GridField
