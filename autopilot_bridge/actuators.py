@@ -28,6 +28,10 @@ class Actuators(Protocol):
         """Per ESC (port, starboard): its newest status, or None; [] where the back-end has none."""
         ...
 
+    def alarms(self) -> list[str]:
+        """What the back-end found wrong since the last call (a node-ID conflict on CAN), as warnings."""
+        ...
+
     def summary(self) -> CanPathSummary | None:
         """The back-end's counters for the run summary (None: nothing beyond the HIL link's)."""
         ...
@@ -46,6 +50,9 @@ class MavlinkActuators:
         return None
 
     def esc_telemetry(self) -> list[dict[str, float] | None]:
+        return []
+
+    def alarms(self) -> list[str]:
         return []
 
     def summary(self) -> CanPathSummary | None:

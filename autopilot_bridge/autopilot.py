@@ -478,6 +478,8 @@ class Autopilot:
             if self.telemetry is not None:
                 self.telemetry.service()
             self.actuators.service()
+            for alarm in self.actuators.alarms():
+                self._event(self.last_t or 0.0, alarm, warning=True)
 
     def _numeric_fault(self, f: SensorFrame, received_at: float, exc: BaseException) -> None:
         """A numeric error escaped a frame (docs/security.md): stop the thrusters for this frame,

@@ -22,7 +22,7 @@ nodes hold that RawCommand (docs/can.md).
 from __future__ import annotations
 
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable
 from typing import TypedDict
 
@@ -34,6 +34,8 @@ from common.can_params import CanParams
 from common.transfer_times import TransferTimes
 
 MAX_FRAMES_PER_SERVICE = 256
+ECHO_MEMORY = 128          # frames sent lately: one of them read back is the interface's echo, not an impostor
+CONFLICT_QUIET_S = 2.0     # s of wall time without an impostor's frame that end a node-ID conflict episode
 
 
 
@@ -50,6 +52,8 @@ class CanPathSummary(TypedDict):
     send_errors: int
     frames_received: int
     own_frames_ignored: int
+    impostor_frames: int
+    node_id_conflicts: int
     transfers_received: dict[str, int]
     transfers_lost: dict[str, int]
     transfers_duplicated: dict[str, int]
@@ -79,10 +83,16 @@ class CanActuators:
         self.next_node_status_t = 0.0
         self.started = clock()
         self.sent_times = TransferTimes()   # latency records: transfer ID and wall time commanded
+        self._echoes: deque[tuple[int, bytes]] = deque(maxlen=ECHO_MEMORY)
+        self.impostor_frames = 0            # frames with our node ID that we did not send
+        self.node_id_conflicts = 0          # episodes of them (CONFLICT_QUIET_S apart)
+        self._last_impostor = -float("inf")
+        self._alarms: list[str] = []
 
     def _send(self, full_name: str, payload: bytes, priority: int) -> int:
         tid = self.tids.take(full_name)
         for frame in dc.to_frames(full_name, payload, self.node_id, tid, priority):
+            self._echoes.append((frame.arbitration_id, bytes(frame.data)))
             try:
                 self.bus.send(frame, timeout=0.1)
             except can.CanError:
@@ -111,11 +121,32 @@ class CanActuators:
         for k in range(MAX_FRAMES_PER_SERVICE):
             if msg is None:
                 return
+            if msg.is_extended_id and msg.arbitration_id & 0x7F == self.node_id:
+                self._own_id(msg)
             tr = self.receiver.feed(msg)
             if tr is not None:
                 self._on_transfer(tr)
             if k + 1 < MAX_FRAMES_PER_SERVICE:  # the rest of a flood waits for the next call
                 msg = self.bus.recv(0.0)
+
+    def _own_id(self, msg: can.Message) -> None:
+        """A frame with this node's ID: the interface's echo of one sent lately, or an impostor's. DroneCAN
+        has no authentication, and the ESCs obey whoever sends as this node: each episode of an impostor's
+        frames raises one alarm (:meth:`alarms`) and is counted."""
+        if (msg.arbitration_id, bytes(msg.data)) in self._echoes:
+            return
+        self.impostor_frames += 1
+        now = self.clock()
+        if now - self._last_impostor > CONFLICT_QUIET_S:
+            self.node_id_conflicts += 1
+            self._alarms.append(f"CAN: another node sends as node {self.node_id} (node-ID conflict): "
+                                "the ESCs may obey it")
+        self._last_impostor = now
+
+    def alarms(self) -> list[str]:
+        """Alarms raised since the last call (the vessel computer reports them as warnings)."""
+        out, self._alarms = self._alarms, []
+        return out
 
     def _on_transfer(self, tr: dc.Transfer) -> None:
         if not self.tracker.observe(tr):
@@ -155,6 +186,8 @@ class CanActuators:
             send_errors=self.send_errors,
             frames_received=self.receiver.frames,
             own_frames_ignored=self.receiver.own_frames,
+            impostor_frames=self.impostor_frames,
+            node_id_conflicts=self.node_id_conflicts,
             transfers_received=dict(sorted(self.tracker.received.items())),
             transfers_lost=dict(sorted(self.tracker.lost.items())),
             transfers_duplicated=dict(sorted(self.tracker.duplicated.items())),

@@ -173,6 +173,30 @@ def test_a_second_sender_claiming_the_autopilots_node_id_is_a_conflict_and_steer
     assert not esc.conflict and esc.raw == (2048, 2048) and esc.summary()["node_id_conflicts"] == 1
 
 
+def test_an_impostor_sending_as_the_autopilot_raises_one_alarm_an_echo_none(rig):
+    """Issue 31: frames with the autopilot's node ID that it did not send (an impostor: DroneCAN has no
+    authentication, and the ESCs obey it) raise one alarm per episode, which the vessel computer reports as
+    a warning (STATUSTEXT), and are counted; a frame it sent, read back (an interface's echo), is neither.
+    Before, both were only counted as ignored, and an impostor that silenced the autopilot went unnoticed."""
+    cfg, core, esc, acts, intruder = rig
+    node = cfg.can.autopilot_node_id
+    acts.send_controls(0, 0.5, 0.5)
+    echo = dc.to_frames(dc.RAW_COMMAND, dc.raw_command([dc.quantize(0.5), dc.quantize(0.5)]), node, 0,
+                        dc.PRIORITY_HIGH)
+    for f in echo:
+        intruder.send(f)
+    acts.service(1.0)
+    assert acts.alarms() == [] and acts.summary()["impostor_frames"] == 0
+    for k in range(5):
+        for f in dc.to_frames(dc.RAW_COMMAND, dc.raw_command([-8191, -8191]), node, 9 + k):
+            intruder.send(f)
+    acts.service(1.0)
+    alarms = acts.alarms()
+    assert len(alarms) == 1 and f"another node sends as node {node}" in alarms[0], alarms
+    s = acts.summary()
+    assert s["impostor_frames"] == 5 and s["node_id_conflicts"] == 1 and acts.alarms() == []
+
+
 def test_autopilot_ignores_its_own_node_id_and_counts_lost_status(rig):
     cfg, core, esc, acts, intruder = rig
     # a frame claiming the autopilot's own node ID (e.g. echoed by an interface) is ignored

@@ -47,6 +47,7 @@ GCS = GcsSummary(endpoints=["127.0.0.1:14551"], datagrams_in=20, datagrams_out=4
                  service_ms=ServiceTimes(p50=0.02, p99=0.4, max=1.5, calls=1903))
 CAN = CanPathSummary(interface="virtual", channel="vcan0", node_id=10, raw_commands_sent=3,
                      transfers_sent={"RawCommand": 3}, send_errors=0, frames_received=6, own_frames_ignored=0,
+                     impostor_frames=0, node_id_conflicts=0,
                      transfers_received={"Status@20": 2}, transfers_lost={}, transfers_duplicated={}, rejects={},
                      esc_status={"port": {"node_id": 20.0, "rpm": 900.0, "voltage": 24.1}}, esc_health={"20": 0})
 TRAFFIC = TrafficSummary(ais=AisSummary(tracked=1, accepted=40, new_tracks=1, forgotten=0, rejected={}),
