@@ -49,9 +49,12 @@ CLEAR_RUN = 3.0               # m of free water along the set-point's way that e
 BLOCKED_SPEED = 0.2           # m/s: a set-point below it is no way to block (arrival, station keeping)
 DRIFT_SPEED = 0.1             # m/s over ground: above it the course over ground counts (below, noise)
 DRIFT_ANGLE = math.radians(35.0)   # rad between the course over ground and the way asked: set off it
+DRIFT_LOOKAHEAD_S = 6.0       # s of the set ahead that are checked: the keeper's turn into the current takes 3-5 s
 CELL_SLACK = 0.1              # m: a way along a wall that only crosses the chart's cell-centre steps is no blockage
 BLOCKED_HOLD_S = 5.0          # s: a blockage keeps station at least this long (no flicker at its edge)
 BLOCKED_TELL_S = 10.0         # s between two events of a blockage
+RETREAT_RANGE = 2.0           # m: how far a blocked boat may move off to keep station clear of the obstacle
+RETREAT_BEARINGS = 16         # directions searched for that point
 ARRIVAL_DECELERATION = 0.25   # m/s^2: half the speed reference model's limit (max_acceleration 0.5)
 MANUAL_STICK_TIMEOUT_S = 1.0   # wall s: an older MANUAL_CONTROL is no stick (MANUAL then holds)
 
@@ -239,14 +242,14 @@ class Helm:
             way = psi_ref if u_ref > 0.0 else psi_ref + math.pi
             wanted_free = self._free_run(s, way, CLEAR_RUN, CELL_SLACK)
             astray = inside or abs(wrap_angle(cog - way)) > DRIFT_ANGLE
-        drifting = astray and s.speed > DRIFT_SPEED and \
-            self._free_run(s, cog, BLOCKED_RUN, CELL_SLACK) < BLOCKED_RUN
+        drift_run = max(BLOCKED_RUN, s.speed * DRIFT_LOOKAHEAD_S)
+        drifting = astray and s.speed > DRIFT_SPEED and self._free_run(s, cog, drift_run, CELL_SLACK) < drift_run
         if self.blocked_at is None:
             blocked = wanted_free < BLOCKED_RUN or drifting
         else:
             blocked = wanted_free < CLEAR_RUN or drifting or s.t - self._blocked_since < BLOCKED_HOLD_S
         if blocked and self.blocked_at is None:
-            self.blocked_at, self._blocked_since = (s.x, s.y), s.t
+            self.blocked_at, self._blocked_since = self._retreat_point(s), s.t
             self.station.reset()
             self._blocked_behaviour.to(Behaviour.IDLE)
             if s.t - self._blocked_told >= BLOCKED_TELL_S:
@@ -258,13 +261,33 @@ class Helm:
             self.reset_controllers(s)
         return blocked
 
+    def _retreat_point(self, s: NavState) -> tuple[float, float]:
+        """Where a blocked boat keeps station (NED m): the nearest point within ``RETREAT_RANGE`` that is at
+        least the planner's safety radius from every obstacle, else the clearest one there. Held where it
+        stood, 1.5 m from a pier head, a boat turning into the current swept its ends within a quarter of
+        a metre of it, and the current's next push touched (the chaos hour, seed 31 signed, 660.7 s)."""
+        best, best_clearance = (s.x, s.y), self.grid.clearance_at(s.y, s.x)
+        if best_clearance >= self.safety_radius:
+            return best
+        for k in range(1, int(RETREAT_RANGE / self.grid.resolution) + 1):
+            d = k * self.grid.resolution
+            for j in range(RETREAT_BEARINGS):
+                a = 2.0 * math.pi * j / RETREAT_BEARINGS
+                n, e = s.x + d * math.cos(a), s.y + d * math.sin(a)
+                c = self.grid.clearance_at(e, n)
+                if c > best_clearance:
+                    best, best_clearance = (n, e), c
+            if best_clearance >= self.safety_radius:
+                break
+        return best
+
     def _keep_blocked(self, s: NavState, dt: float) -> Thrust:
         """Keep station where the way was blocked, against the current, as HOLD does near obstacles."""
         assert self.blocked_at is not None
         return self.station.command(s, dt, self.blocked_at, True, self._blocked_behaviour,
                                     lambda st, h, psi, u, uc: self._drive(st, h, psi, u, uc,
                                                                           yaw_limit=self.turn_on_the_spot),
-                                    self.current.velocity, lambda: self.reset_controllers(s))
+                                    self.current.velocity, lambda: self.reset_controllers(s), rest=False)
 
     def _drive(self, s: NavState, dt: float, psi_ref: float, u_ref: float, u_current: float,
                r_ref: float = 0.0, yaw_limit: float = math.inf) -> Thrust:

@@ -61,16 +61,17 @@ class StationKeeper:
         self.resting = True
 
     def command(self, s: NavState, dt: float, point: tuple[float, float], loiter: bool, behaviour: BehaviourMachine,
-                drive: Drive, current: tuple[float, float], on_resume: Callable[[], None]) -> Thrust:
+                drive: Drive, current: tuple[float, float], on_resume: Callable[[], None], rest: bool = True) -> Thrust:
         """This frame's thrust to keep station at ``point`` (NED m) in ``current`` (NED m/s);
-        ``on_resume()`` when the thrusters take over again after resting (the controllers start afresh)."""
+        ``on_resume()`` when the thrusters take over again after resting (the controllers start afresh).
+        ``rest`` False: never rest in still water (beside an obstacle, a boat with way on must be stopped)."""
         en, ee = point[0] - s.x, point[1] - s.y
         d = math.hypot(en, ee)
         if self.method == "drift-and-return":
             return self._drift_and_return(s, dt, d, en, ee, loiter, behaviour, drive, on_resume)
         cn, ce = current
         still = math.hypot(cn, ce) < STILL_WATER
-        if not loiter or (still and d <= 0.5 * self.radius):
+        if not loiter or (rest and still and d <= 0.5 * self.radius):
             behaviour.to(Behaviour.COMPLETE)
             self._heading = None
             self.resting = True

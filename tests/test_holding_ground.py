@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pytest
 from scipy.ndimage import distance_transform_edt
+from support.closed_loop import COLLISION_CLEARANCE
 from support.gcs_client import Gcs, M, start_run, stop_run
 
 from autopilot_bridge.modes import Mode
@@ -415,7 +416,7 @@ def test_a_set_point_that_drives_at_the_quay_stops_short_of_it(case):
     if case == "unguarded":
         assert worst == 0.0
     else:
-        assert worst > 1.0 and closest < 1.5, (worst, closest)    # it sailed up to the quay, and stopped there
+        assert worst > COLLISION_CLEARANCE and closest < 2.5, (worst, closest)   # it sailed up to the quay, stopped
         assert case == "guarded" or changed_at > 1.9, changed_at
 
 
@@ -469,10 +470,10 @@ def test_a_set_point_held_at_the_quay_keeps_station_where_its_way_is_blocked(off
     """In-process, the harbour's truth and current (0.5 m/s, setting along and onto the quays): a mode asks
     for 2 m/s at the quay, at several angles to it, for 4 minutes. The avoidance limit stops the boat short;
     with the way blocked the helm keeps station there against the current (Helm._way_blocked), so the hull's
-    centre stays more than half the hull's length (1 m) off, where before it was set along and onto the quay
+    centre stays clear of what hil run's judge calls a collision, where before it was set along and onto the quay
     with its speed limited (the chaos hour, seed 31 unsigned: collision at 1,051 s)."""
     worst, loop = _drive_at_the_quay(off_deg, 240.0)
-    assert worst > 1.0, worst
+    assert worst > COLLISION_CLEARANCE, worst
     assert loop.ap.helm.blocked_at is not None
     assert math.dist(loop.core.state[:2], loop.ap.helm.blocked_at) < 3.0
 
@@ -513,15 +514,17 @@ def _creep_beside_the_pier(start: tuple[float, float], heading_deg: float, secon
     return worst
 
 
-@pytest.mark.parametrize("start,heading_deg", [((96.4, 117.5), 0.0), ((95.0, 116.5), -20.0), ((97.0, 116.0), 0.0)])
+@pytest.mark.parametrize("start,heading_deg", [((96.4, 117.5), 0.0), ((95.0, 116.5), -20.0), ((97.0, 116.0), 0.0),
+                                               ((91.2, 127.8), 90.0)])
 def test_a_boat_set_sideways_towards_the_pier_keeps_station_off_it(start, heading_deg):
     """In-process, the harbour's truth and current: at a creeping set-point (0.2 m/s, bow north) beside a pier
     head, the current sets the boat sideways towards it at 0.3-0.4 m/s, which no surge limit stops. When its
-    course over ground leaves less than 1 m before the avoidance clearance, the helm keeps station (into the
+    course over ground leaves less than 6 s of its set before the avoidance clearance, the helm keeps station (into the
     current, Helm._way_blocked), its yaw moment not held back by a braking its surge does not need: the
-    hull's centre stays at least 1 m off for a minute (the chaos hour, seed 31 signed, collision at 1,805 s:
-    GUIDED's first metres beside the pier head, bow north, sliding east at 0.3 m/s)."""
-    assert _creep_beside_the_pier(start, heading_deg, 60.0) >= 1.0
+    hull stays clear of what hil run's judge calls a collision for a minute (the chaos hour, seed 31 signed, 1,805 s:
+    GUIDED's first metres beside the pier head, bow north, sliding east at 0.3 m/s; and at 660.7 s, from
+    1.5 m off its south side, where the boat had been held, not moved off, when its way was blocked)."""
+    assert _creep_beside_the_pier(start, heading_deg, 60.0) > COLLISION_CLEARANCE
 
 
 def test_without_the_drift_rule_a_creeping_boat_is_set_onto_the_pier(monkeypatch):

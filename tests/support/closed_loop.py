@@ -27,6 +27,11 @@ OCC = np.load(REPO / "configs" / "maps" / "harbour.npy")
 CLEARANCE = distance_transform_edt(~OCC) * 0.5     # m, rows north, columns east, 0.5 m cells
 
 
+# hil run's judge (hil.judging.Judge): a collision is a hull centre nearer than half the hull's length (1 m) to
+# an obstacle cell's edge, that is nearer than 1.25 m to its centre in the measure of clearance() below.
+COLLISION_CLEARANCE = 1.25
+
+
 def clearance(north: float, east: float) -> float:
     """m from the harbour cell holding (north, east) to the nearest obstacle cell (cell centres)."""
     return float(CLEARANCE[min(max(int(north / 0.5), 0), OCC.shape[0] - 1),
