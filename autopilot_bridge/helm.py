@@ -50,6 +50,7 @@ BLOCKED_SPEED = 0.2           # m/s: a set-point below it is no way to block (ar
 DRIFT_SPEED = 0.1             # m/s over ground: above it the course over ground counts (below, noise)
 DRIFT_ANGLE = math.radians(35.0)   # rad between the course over ground and the way asked: set off it
 DRIFT_LOOKAHEAD_S = 6.0       # s of the set ahead that are checked: the keeper's turn into the current takes 3-5 s
+DRIFT_SURGE = 0.5             # m/s: above it the boat's own way carries it, which the surge limit governs
 CELL_SLACK = 0.1              # m: a way along a wall that only crosses the chart's cell-centre steps is no blockage
 BLOCKED_HOLD_S = 5.0          # s: a blockage keeps station at least this long (no flicker at its edge)
 BLOCKED_TELL_S = 10.0         # s between two events of a blockage
@@ -242,8 +243,9 @@ class Helm:
             way = psi_ref if u_ref > 0.0 else psi_ref + math.pi
             wanted_free = self._free_run(s, way, CLEAR_RUN, CELL_SLACK)
             astray = inside or abs(wrap_angle(cog - way)) > DRIFT_ANGLE
-        drift_run = max(BLOCKED_RUN, s.speed * DRIFT_LOOKAHEAD_S)
-        drifting = astray and s.speed > DRIFT_SPEED and self._free_run(s, cog, drift_run, CELL_SLACK) < drift_run
+        drift_run = min(max(BLOCKED_RUN, s.speed * DRIFT_LOOKAHEAD_S), CLEAR_RUN)
+        drifting = astray and s.speed > DRIFT_SPEED and s.u < DRIFT_SURGE and \
+            self._free_run(s, cog, drift_run, CELL_SLACK) < drift_run
         if self.blocked_at is None:
             blocked = wanted_free < BLOCKED_RUN or drifting
         else:
