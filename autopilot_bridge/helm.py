@@ -284,7 +284,8 @@ class Helm:
         return best
 
     def _keep_blocked(self, s: NavState, dt: float) -> Thrust:
-        """Keep station where the way was blocked, against the current, as HOLD does near obstacles."""
+        """Keep station at the retreat point (:meth:`_retreat_point`), against the current, as HOLD does near
+        obstacles."""
         assert self.blocked_at is not None
         return self.station.command(s, dt, self.blocked_at, True, self._blocked_behaviour,
                                     lambda st, h, psi, u, uc: self._drive(st, h, psi, u, uc,
