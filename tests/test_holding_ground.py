@@ -438,17 +438,15 @@ def test_the_speed_limit_also_looks_along_the_course_over_ground():
     assert helm.avoidance_cap(sliding, 1.0) < 0.6
 
 
-def _drive_at_the_quay(off_deg: float, seconds: float) -> tuple[float, ClosedLoop]:
-    """The harbour's truth and current; the helm asked for 2 m/s on a fixed heading ``off_deg`` from the line
-    at the quay beyond the GUIDED target above, for ``seconds``, the current observer fed as the pipeline
-    feeds it. The least chart clearance (m) of the hull's centre, and the loop."""
+def _hold_set_point(start: tuple[float, float], psi: float, speed: float, seconds: float) -> tuple[float, ClosedLoop]:
+    """The harbour's truth and current; the helm asked for ``speed`` m/s on the fixed heading ``psi`` (rad)
+    from ``start`` for ``seconds``, the current observer fed as the pipeline feeds it. The least chart
+    clearance (m) of the hull's centre, and the loop."""
     from support.closed_loop import ClosedLoop, clearance
 
     from autopilot_bridge.navigation import NavState
     from simulator.core import Command
 
-    start = (83.1, 115.1)
-    psi = math.atan2(120.0 - start[1], 94.0 - start[0]) + math.radians(off_deg)
     loop = ClosedLoop(start, psi=psi)
     helm, core = loop.ap.helm, loop.core
     helm.reset_controllers(NavState(0.0, *start, psi, 0.0, 0.0, 0.0, 0.0, 0.0))
@@ -457,12 +455,19 @@ def _drive_at_the_quay(off_deg: float, seconds: float) -> tuple[float, ClosedLoo
         x, y, heading, u, v, r = core.state
         s = NavState(i * core.frame_dt, x, y, heading, u, v, r, 0.0, 0.0)
         loop.ap.current.update(s, tau, core.frame_dt)
-        th = helm.drive(s, core.frame_dt, psi, 2.0)
+        th = helm.drive(s, core.frame_dt, psi, speed)
         tau = th.port + th.stdb
         core.apply(Command(core.time_usec, th.port_cmd, th.stdb_cmd))
         core.step()
         worst = min(worst, clearance(core.state[0], core.state[1]))
     return worst, loop
+
+
+def _drive_at_the_quay(off_deg: float, seconds: float) -> tuple[float, ClosedLoop]:
+    """2 m/s on a heading ``off_deg`` from the line at the quay beyond the GUIDED target above."""
+    start = (83.1, 115.1)
+    return _hold_set_point(start, math.atan2(120.0 - start[1], 94.0 - start[0]) + math.radians(off_deg), 2.0,
+                           seconds)
 
 
 @pytest.mark.parametrize("off_deg", [0.0, 30.0, -30.0, 60.0, -60.0])
@@ -489,29 +494,9 @@ def test_without_keeping_station_a_blocked_boat_is_set_onto_the_quay(monkeypatch
 
 
 def _creep_beside_the_pier(start: tuple[float, float], heading_deg: float, seconds: float) -> float:
-    """The harbour's truth and current; the helm asked for 0.2 m/s on a fixed heading ``heading_deg`` from
-    ``start``, west of the pier head at (96 m N, 122 m E), where the current (0.4 m/s) sets east onto it.
-    The least chart clearance (m) of the hull's centre."""
-    from support.closed_loop import ClosedLoop, clearance
-
-    from autopilot_bridge.navigation import NavState
-    from simulator.core import Command
-
-    psi = math.radians(heading_deg)
-    loop = ClosedLoop(start, psi=psi)
-    helm, core = loop.ap.helm, loop.core
-    helm.reset_controllers(NavState(0.0, *start, psi, 0.0, 0.0, 0.0, 0.0, 0.0))
-    worst, tau = math.inf, 0.0
-    for i in range(int(round(seconds / core.frame_dt))):
-        x, y, heading, u, v, r = core.state
-        s = NavState(i * core.frame_dt, x, y, heading, u, v, r, 0.0, 0.0)
-        loop.ap.current.update(s, tau, core.frame_dt)
-        th = helm.drive(s, core.frame_dt, psi, 0.2)
-        tau = th.port + th.stdb
-        core.apply(Command(core.time_usec, th.port_cmd, th.stdb_cmd))
-        core.step()
-        worst = min(worst, clearance(core.state[0], core.state[1]))
-    return worst
+    """0.2 m/s on the heading ``heading_deg`` from ``start``, west of the pier head at (96 m N, 122 m E), where
+    the current (0.4 m/s) sets east onto it: the least chart clearance (m) of the hull's centre."""
+    return _hold_set_point(start, math.radians(heading_deg), 0.2, seconds)[0]
 
 
 @pytest.mark.parametrize("start,heading_deg", [((96.4, 117.5), 0.0), ((95.0, 116.5), -20.0), ((97.0, 116.0), 0.0),
