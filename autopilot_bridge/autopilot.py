@@ -347,8 +347,11 @@ class Autopilot:
         self.failsafes.check(s, c.behaviour.state)
         self._apply_route(t)
         v = self.vehicle
-        # The active mode decides where the thrust comes from (autopilot_bridge.modes); disarmed: none.
-        cmd = v.active.output(self.helm, v, s, dt) if v.armed else self.helm.idle()
+        # The active mode decides where the thrust comes from (autopilot_bridge.modes), after the keep-off guard
+        # (autopilot_bridge.keep_off); disarmed: none.
+        cmd = self.helm.keep_clear(s, dt) if v.armed else self.helm.idle()
+        if cmd is None:
+            cmd = v.active.output(self.helm, v, s, dt)
         if self.lockstep and (self.pace_speedup is not None or not v.armed):
             self._pace(t, self.pace_speedup if (self.pace_speedup is not None and v.armed) else 1.0)
         else:

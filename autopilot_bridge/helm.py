@@ -29,6 +29,7 @@ from autopilot_bridge.control import (
 from autopilot_bridge.course import Course
 from autopilot_bridge.current_estimate import CurrentObserver
 from autopilot_bridge.guidance import GuidanceOutput
+from autopilot_bridge.keep_off import KeepOff, clear_point
 from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavState
 from autopilot_bridge.plan_acceptance import PlanAcceptance
@@ -55,7 +56,8 @@ CELL_SLACK = 0.1              # m: a way along a wall that only crosses the char
 BLOCKED_HOLD_S = 5.0          # s: a blockage keeps station at least this long (no flicker at its edge)
 BLOCKED_TELL_S = 10.0         # s between two events of a blockage
 RETREAT_RANGE = 2.0           # m: how far a blocked boat may move off to keep station clear of the obstacle
-RETREAT_BEARINGS = 16         # directions searched for that point
+STATION_MARGIN = 0.5          # m beyond the safety radius that a mode's station point is moved to (keep_off.MARGIN)
+STATION_REACH = 3.0           # m: how far it may be moved
 ARRIVAL_DECELERATION = 0.25   # m/s^2: half the speed reference model's limit (max_acceleration 0.5)
 MANUAL_STICK_TIMEOUT_S = 1.0   # wall s: an older MANUAL_CONTROL is no stick (MANUAL then holds)
 
@@ -75,6 +77,7 @@ class Helm:
         self.avoid_clearance = 0.75 * safety_radius    # m: no speed that cannot stop before this clearance
         self.fence_depth: Callable[[float, float], float] = lambda _n, _e: math.inf
         self.last_safe: tuple[float, float] | None = None
+        self._hold_point: tuple[float, float] = (0.0, 0.0)     # NED m: where HOLD keeps station (while holding)
         self.holding = False
         # The station keeper's state in HOLD (not the route's). From IDLE, since it goes to COMPLETE or RETURNING
         # at once: from WAITING that raised, every frame, and a HOLD near the quay drifted onto it (issue 31's
@@ -83,6 +86,8 @@ class Helm:
         self.blocked_at: tuple[float, float] | None = None   # NED m: where a blocked way keeps station
         self._blocked_behaviour = BehaviourMachine(start=Behaviour.IDLE)
         self._blocked_since = self._blocked_told = -math.inf   # s of vehicle time
+        self.keep_off = KeepOff(grid, safety_radius, station, self._keeping_drive, lambda: self.current.velocity,
+                                self.reset_controllers, event)
         self.reactive = ReactiveAvoidance(grid, params.fallback_range, params.min_clearance, params.fallback_speed)
         self.tracking = TrackingStats()
         self.zero_thrust = allocate(0.0, 0.0, propulsion.B_u, propulsion.T_max, propulsion.T_min)
@@ -96,13 +101,31 @@ class Helm:
         """Thrusters at zero (disarmed, HOLD, a mode without a route)."""
         self.course.behaviour.pause()
         self.blocked_at = None
+        self.keep_off.reset()
         return self.zero_thrust
+
+    def keep_clear(self, s: NavState, dt: float) -> Thrust | None:
+        """Armed, ahead of the mode: the keep-off guard's thrust (:mod:`autopilot_bridge.keep_off`), or None
+        when the mode has the helm. A pilot at MANUAL's stick always has it."""
+        v = self.vehicle
+        if v.mode == Mode.MANUAL and self._stick_live(v.manual):
+            self.keep_off.reset()
+            return None
+        return self.keep_off.command(s, dt)
+
+    @staticmethod
+    def _stick_live(stick: tuple[float, float, float] | None) -> bool:
+        return stick is not None and time.monotonic() - stick[2] <= MANUAL_STICK_TIMEOUT_S
 
     def hold(self, s: NavState, dt: float) -> Thrust:
         """HOLD, armed: thrusters off and the boat drifts, as ArduRover's HOLD - while it is at least
         ``hold_clearance`` (twice the planner's safety radius) from every charted or sensed obstacle and
-        as far inside the geofence. Nearer, it keeps station at the last point that was that far, so a
-        current never sets it onto the rocks or across the fence (issue 33)."""
+        as far inside the geofence. Nearer, it keeps station, so a current never sets it onto the rocks or
+        across the fence (issue 33): near the fence at the last point that was that far inside it; near an
+        obstacle where it is, or at the nearest point half a metre beyond the safety radius
+        (:meth:`station_point`). Sent back to a last safe point 4 m off, the station keeper asked for more way
+        than astern gives and turned bow first through 135 degrees while the current set it onto the
+        breakwater (issue 31's chaos, in-process)."""
         self.course.behaviour.pause()
         self.blocked_at = None
         clearance = self.grid.clearance_at(s.y, s.x)
@@ -113,14 +136,15 @@ class Helm:
             return self.zero_thrust
         if not self.holding:
             self.holding = True
-            depth = min(clearance, self.fence_depth(s.x, s.y))
-            self._event(s.t, f"{self.vehicle.mode.name}: {depth:.1f} m from an obstacle or the fence: keeping "
-                        "station at the last safe point")
+            depth = self.fence_depth(s.x, s.y)
             self.station.reset()
-        point = self.last_safe if self.last_safe is not None else (s.x, s.y)
-        return self.station.command(s, dt, point, True, self._hold_behaviour,
-                                    lambda st, h, psi, u, uc: self._drive(st, h, psi, u, uc,
-                                                                          yaw_limit=self.turn_on_the_spot),
+            if depth < self.hold_clearance and self.last_safe is not None:
+                self._hold_point, where = self.last_safe, "at the last safe point"
+            else:
+                self._hold_point, where = self.station_point((s.x, s.y)), "clear of it"
+            self._event(s.t, f"{self.vehicle.mode.name}: {min(clearance, depth):.1f} m from an obstacle or the "
+                        f"fence: keeping station {where}")
+        return self.station.command(s, dt, self._hold_point, True, self._hold_behaviour, self._keeping_drive,
                                     self.current.velocity, lambda: self.reset_controllers(s))
 
     def manual(self, stick: tuple[float, float, float] | None, s: NavState, dt: float) -> Thrust:
@@ -129,7 +153,7 @@ class Helm:
         HOLD: here that drifts only while clear of obstacles and the fence, and keeps station nearer, so
         a ground station that selects MANUAL and sends nothing never leaves the boat to the current."""
         self.course.behaviour.pause()
-        if stick is None or time.monotonic() - stick[2] > MANUAL_STICK_TIMEOUT_S:
+        if stick is None or not self._stick_live(stick):
             return self.hold(s, dt)
         self.holding = False
         x, r = stick[0], stick[1]
@@ -268,29 +292,25 @@ class Helm:
         least the planner's safety radius from every obstacle, else the clearest one there. Held where it
         stood, 1.5 m from a pier head, a boat turning into the current swept its ends within a quarter of
         a metre of it, and the current's next push touched (the chaos hour, seed 31 signed, 660.7 s)."""
-        best, best_clearance = (s.x, s.y), self.grid.clearance_at(s.y, s.x)
-        if best_clearance >= self.safety_radius:
-            return best
-        for k in range(1, int(RETREAT_RANGE / self.grid.resolution) + 1):
-            d = k * self.grid.resolution
-            for j in range(RETREAT_BEARINGS):
-                a = 2.0 * math.pi * j / RETREAT_BEARINGS
-                n, e = s.x + d * math.cos(a), s.y + d * math.sin(a)
-                c = self.grid.clearance_at(e, n)
-                if c > best_clearance:
-                    best, best_clearance = (n, e), c
-            if best_clearance >= self.safety_radius:
-                break
-        return best
+        return clear_point(self.grid, (s.x, s.y), self.safety_radius, RETREAT_RANGE)
 
     def _keep_blocked(self, s: NavState, dt: float) -> Thrust:
         """Keep station at the retreat point (:meth:`_retreat_point`), against the current, as HOLD does near
         obstacles."""
         assert self.blocked_at is not None
-        return self.station.command(s, dt, self.blocked_at, True, self._blocked_behaviour,
-                                    lambda st, h, psi, u, uc: self._drive(st, h, psi, u, uc,
-                                                                          yaw_limit=self.turn_on_the_spot),
+        return self.station.command(s, dt, self.blocked_at, True, self._blocked_behaviour, self._keeping_drive,
                                     self.current.velocity, lambda: self.reset_controllers(s), rest=False)
+
+    def _keeping_drive(self, s: NavState, dt: float, psi_ref: float, u_ref: float, u_current: float) -> Thrust:
+        """The station keeper's drive: it may turn on the spot at any speed it asks."""
+        return self._drive(s, dt, psi_ref, u_ref, u_current, yaw_limit=self.turn_on_the_spot)
+
+    def station_point(self, point: tuple[float, float]) -> tuple[float, float]:
+        """Where a mode asked to keep station at ``point`` (NED m) keeps it: there, or, inside ``STATION_MARGIN``
+        beyond the safety radius of an obstacle, the nearest point within ``STATION_REACH`` that is that clear
+        (:func:`autopilot_bridge.keep_off.clear_point`). Held 1.5 m off the breakwater, a LOITER entered there
+        was set onto it (the chaos hour, seed 31, at f5d6fd1)."""
+        return clear_point(self.grid, point, self.safety_radius + STATION_MARGIN, STATION_REACH)
 
     def _drive(self, s: NavState, dt: float, psi_ref: float, u_ref: float, u_current: float,
                r_ref: float = 0.0, yaw_limit: float = math.inf) -> Thrust:
@@ -377,8 +397,5 @@ class Helm:
         """After the route's end: loiter when the route says so or MIS_DONE_BEHAVE is loiter, else hold."""
         route = self.vehicle.route
         loiter = self.vehicle.mission_done == MIS_DONE_LOITER or (route is not None and route.loiter)
-        return self.station.command(s, dt, self.course.goal_ned, loiter, self.course.behaviour,
-                                    lambda st, h, psi, u, uc: self._drive(st, h, psi, u, uc,
-                                                                          yaw_limit=self.turn_on_the_spot),
-                                    self.current.velocity,
-                                    lambda: self.reset_controllers(s))
+        return self.station.command(s, dt, self.station_point(self.course.goal_ned), loiter, self.course.behaviour,
+                                    self._keeping_drive, self.current.velocity, lambda: self.reset_controllers(s))

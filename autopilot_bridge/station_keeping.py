@@ -11,6 +11,10 @@ feed-forward:
 * the bow points along ``w`` - into the current when on the point (it weathervanes), towards the point
   in still water - and the surge set-point is ``v_d`` along the bow, over ground, with the current's
   component along the bow fed forward to the speed controller (the drag of the speed through the water);
+* the boat goes along ``w`` by its nearer end: bow first, or stern first where the stern is nearer (with
+  20 degrees of hysteresis either side of abeam; on taking over, whichever end is nearer) and the current is
+  within what astern holds (``MAX_ASTERN``); stern first, the way back is slowed so the water speed stays
+  within it, rather than the boat turned broadside to the current;
 * in still water (``|c|`` below ``STILL_WATER``: no current, no wave drift) and within half of LOIT_RADIUS,
   the thrusters rest, as ArduRover's boats drift inside the radius; beyond it the boat is brought back.
 
@@ -87,11 +91,18 @@ class StationKeeper:
         if w >= TURN_HOLD or self._heading is None:
             axis = math.atan2(we, wn) if w > 1e-9 else s.psi
             ahead = math.cos(axis - s.psi)           # > 0: the bow is the nearer end to point along w
-            if w > MAX_ASTERN or ahead > ASTERN_HYSTERESIS:
+            fresh = self._heading is None             # no end chosen yet: the nearer one
+            if math.hypot(cn, ce) > MAX_ASTERN or ahead > (0.0 if fresh else ASTERN_HYSTERESIS):
                 self._astern = False
-            elif ahead < -ASTERN_HYSTERESIS:
+            elif ahead < (0.0 if fresh else -ASTERN_HYSTERESIS):
                 self._astern = True
             self._heading = axis + math.pi if self._astern else axis
+        if self._astern and w > MAX_ASTERN:
+            # Stern first the way back is slower, not turned round: broadside to the current while it turned bow
+            # first, a boat 2 m off the breakwater was set onto it (issue 31's chaos, in-process).
+            f = _within(vn, ve, cn, ce, MAX_ASTERN)
+            vn, ve = f * vn, f * ve
+            self._heading = math.atan2(ve - ce, vn - cn) + math.pi
         psi = self._heading
         bow = (math.cos(s.psi), math.sin(s.psi))
         u_ref = vn * bow[0] + ve * bow[1]
@@ -110,3 +121,12 @@ class StationKeeper:
             self.resting = False
             on_resume()
         return drive(s, dt, math.atan2(ee, en), min(self.max_speed, max(0.3, 0.5 * d)), 0.0)
+
+
+def _within(vn: float, ve: float, cn: float, ce: float, limit: float) -> float:
+    """The largest f in [0, 1] with |f v - c| <= ``limit`` (m/s; |c| below it): how much of the ground velocity
+    wanted ``v`` a water speed of at most ``limit`` gives in the current ``c``."""
+    vv, vc, cc = vn * vn + ve * ve, vn * cn + ve * ce, cn * cn + ce * ce
+    if vv < 1e-12:
+        return 1.0
+    return min(max((vc + math.sqrt(max(vc * vc - vv * (cc - limit * limit), 0.0))) / vv, 0.0), 1.0)

@@ -582,3 +582,56 @@ def test_a_boat_inside_the_margin_turns_away_without_creeping_nearer():
     assert cmd.arm(True).ok and cmd.goto(128.9, 75.3).ok
     assert loop.run(15.0) >= 1.5
     assert clearance(*loop.core.state[:2]) > 2.0          # and it got out
+
+
+def _change_modes_beside(start: tuple[float, float], seed: int, seconds: float) -> float:
+    """Armed at ``start`` (1.4-1.85 m from the breakwater or a pier head, where the harbour's current sets onto
+    it), a ground station changes mode every 0.5-2.5 s (seeded): LOITER, MANUAL without a stick, GUIDED (half
+    the time with a target up to 4 m off, refused when inside the margin), HOLD and RTL (home: the start). The
+    least chart clearance (m) of the hull's centre."""
+    import random
+
+    from support.closed_loop import ClosedLoop
+
+    rng = random.Random(seed)
+    loop = ClosedLoop(start)
+    loop.ap.pace_speedup = None       # lockstep at full speed: no person watches
+    loop.run(0.2)
+    cmd = loop.ap.commands
+    assert cmd.arm(True).ok
+    worst, t = math.inf, 0.0
+    while t < seconds:
+        mode = rng.choice([Mode.LOITER, Mode.MANUAL, Mode.GUIDED, Mode.HOLD, Mode.RTL, Mode.LOITER])
+        if mode is Mode.GUIDED and rng.random() < 0.5:
+            cmd.goto(loop.core.state[0] + rng.uniform(-4.0, 4.0), loop.core.state[1] + rng.uniform(-4.0, 4.0))
+        else:
+            assert cmd.set_mode(mode).ok
+        dt = rng.uniform(0.5, 2.5)
+        worst, t = min(worst, loop.run(dt)), t + dt
+    return worst
+
+
+@pytest.mark.parametrize("start,seed", [((106.5, 92.0), 1), ((106.5, 92.0), 3), ((106.5, 123.3), 1),
+                                        ((95.0, 120.0), 0), ((96.0, 119.5), 5)])
+def test_modes_changed_every_second_beside_the_breakwater_never_set_the_boat_onto_it(start, seed):
+    """The chaos hour's last collisions (seed 31 at f5d6fd1, unsigned 983.7 s, signed 1,739.9 s): the boat
+    1.5-2 m south of the breakwater, the current (0.5 m/s) setting north onto it, the ground station changing
+    mode every 1-2 s. Each mode started its station keeping afresh where it was asked (LOITER where entered,
+    HOLD 4 m back at its last safe point, RTL at a home inside the margin), turned bow first broadside to the
+    current, and was set on. Now the keep-off guard (autopilot_bridge.keep_off) takes an armed boat at rest
+    inside the safety radius to clear water whatever the mode, mode changes do not end it, the modes' station
+    points are half a metre beyond the radius, and the station keeper backs stern first rather than turn
+    round. Three minutes each; at fbaa98c the first four cases touched (least clearance 0.0, 0.0, 0.5, 1.0 m).
+    Without the guard the other three changes still leave the last case (and the second) touching."""
+    from support.closed_loop import clearance
+
+    assert 1.4 <= clearance(*start) <= 1.85
+    assert _change_modes_beside(start, seed, 180.0) > COLLISION_CLEARANCE
+
+
+def test_without_the_keep_off_guard_mode_changes_set_the_boat_onto_the_breakwater(monkeypatch):
+    """The control case: the guard never takes over; the last case above runs onto the pier head."""
+    from autopilot_bridge.keep_off import KeepOff
+
+    monkeypatch.setattr(KeepOff, "command", lambda _self, _s, _dt: None)
+    assert _change_modes_beside((96.0, 119.5), 5, 180.0) < COLLISION_CLEARANCE
