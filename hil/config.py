@@ -82,7 +82,7 @@ def _fit(value: Any, tp: Any) -> int:
     return sum(1 if k in keys else -1 for k in value)
 
 
-def from_typed_table(tp: type[D], table: Any, source: str) -> D:
+def from_typed_table(tp: type[D], table: object, source: str) -> D:
     """A parsed JSON table read strictly as the TypedDict ``tp`` (a process's summary): every required
     key, no unknown key, each value of its type; ConfigError ``SOURCE: key: problem`` otherwise."""
     if not isinstance(table, dict):

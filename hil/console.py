@@ -87,7 +87,7 @@ class ProgressBar:
         progress(f"{self.label}: {done}/{self.total} ({rate:.1f}/s, ETA {eta_s}){' ' + extra if extra else ''}")
 
 
-def _jsonable(obj: Any) -> Any:
+def _jsonable(obj: object) -> object:
     if isinstance(obj, float) and not math.isfinite(obj):
         return None if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
     if isinstance(obj, dict):
@@ -116,7 +116,7 @@ def clip(text: str, limit: int = MAX_LINE_CHARS) -> str:
     return text[: limit - 24] + f" ... (+{len(text) - limit + 24} chars)"
 
 
-def fmt(v: Any) -> str:
+def fmt(v: object) -> str:
     """A value for a human line: numbers short, lists capped and counted."""
     if isinstance(v, bool) or v is None:
         return str(v).lower() if isinstance(v, bool) else "-"
@@ -132,11 +132,11 @@ def fmt(v: Any) -> str:
     return str(v)
 
 
-def _empty(v: Any) -> bool:
+def _empty(v: object) -> bool:
     return v is None or v == "" or (isinstance(v, (list, tuple, dict)) and not v)
 
 
-def nonzero_counters(d: Any, prefix: str = "") -> list[str]:
+def nonzero_counters(d: object, prefix: str = "") -> list[str]:
     """``key=value`` for every non-zero integer counter in a nested summary (booleans excluded)."""
     out = []
     if isinstance(d, dict):

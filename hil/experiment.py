@@ -185,7 +185,7 @@ def warm_up() -> None:
     planner.warm_up()
 
 
-def _fmt(v: Any) -> str:
+def _fmt(v: object) -> str:
     if isinstance(v, bool):
         return "1" if v else "0"
     if isinstance(v, float):
