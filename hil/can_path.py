@@ -27,6 +27,7 @@ from common.dronecan_codec import TRANSFER_ID_MODULO
 if TYPE_CHECKING:
     from collections.abc import Callable
     from pathlib import Path
+    from types import FrameType
 
     from autopilot_bridge.can_actuators import CanActuators
     from hil.settings import HilConfig
@@ -102,7 +103,7 @@ def stats_ms(lat_s: np.ndarray) -> dict[str, Any]:
 def _stop_flag() -> dict[str, bool]:
     flag = {"stop": False}
 
-    def handler(*_: Any) -> None:
+    def handler(_signum: int, _frame: FrameType | None) -> None:
         flag["stop"] = True
 
     signal.signal(signal.SIGTERM, handler)
