@@ -9,7 +9,7 @@ import math
 import sys
 import time
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # hil.settings pulls every component's config (filterpy, scipy): load it only when used
     from hil.settings import HilConfig
@@ -99,7 +99,7 @@ def _jsonable(obj: object) -> object:
     return obj
 
 
-def to_json(summary: Mapping[str, Any]) -> str:
+def to_json(summary: Mapping[str, object]) -> str:
     """Strict JSON (no NaN/Infinity tokens) of a summary dictionary."""
     return json.dumps(_jsonable(summary), allow_nan=False)
 
@@ -168,7 +168,7 @@ def wrap_items(label: str, items: list[str], max_lines: int) -> list[str]:
     return lines
 
 
-def brief(summary: Mapping[str, Any], max_lines: int = MAX_LINES) -> list[str]:
+def brief(summary: Mapping[str, object], max_lines: int = MAX_LINES) -> list[str]:
     """A generic short summary: the top-level values that are set, one line each, nested tables
     as their non-zero counters; capped at ``max_lines`` with a pointer to --json."""
     lines = []
@@ -186,7 +186,7 @@ def brief(summary: Mapping[str, Any], max_lines: int = MAX_LINES) -> list[str]:
     return lines
 
 
-def emit(args: argparse.Namespace, summary: Mapping[str, Any], human: list[str] | None = None) -> None:
+def emit(args: argparse.Namespace, summary: Mapping[str, object], human: list[str] | None = None) -> None:
     """Print the summary: one JSON object with ``--json``; otherwise ``human`` lines (a command's
     own short summary) or :func:`brief`, never more than MAX_LINES lines."""
     if getattr(args, "json", False):
