@@ -18,7 +18,7 @@ import json
 import signal
 import sys
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -92,7 +92,7 @@ def paced(rate: float, duration: float, send: Callable[[int], None], idle: Calla
     return k
 
 
-def stats_ms(lat_s: np.ndarray) -> dict[str, Any]:
+def stats_ms(lat_s: np.ndarray) -> dict[str, float | None]:
     if len(lat_s) == 0:
         return {"p50": None, "p99": None, "max": None, "samples": 0}
     ms = lat_s * 1e3
