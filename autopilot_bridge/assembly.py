@@ -9,6 +9,7 @@ the planner worker and builds the :class:`autopilot_bridge.autopilot.Autopilot` 
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import time
 from collections.abc import Callable
@@ -78,36 +79,31 @@ def build_computer(settings: ComputerSettings, world: World, options: RunOptions
     with every device opened before it closed again."""
     ap, peer = settings.tuning.params, settings.simulator
     geo = LocalFrame(*settings.origin)
-    try:
-        link = HilLink(ap.listen, ap.actuators_to, geo, declination=peer.declination,
-                       system_id=ap.system_id, component_id=ap.component_id, send_loss=ap.send_loss,
-                       recv_loss=ap.recv_loss, loss_seed=settings.loss_seed,
-                       truth_component_id=peer.truth_component_id,
-                       sim_ids=(peer.system_id, peer.component_id), sensors_from=sensors_from,
-                       max_time_step=peer.max_time_step,
-                       busy_poll=ap.lockstep_busy_poll if options.lockstep else 0.0,
-                       late_window=ap.sim_restart_gap, realtime=not options.lockstep)
-    except ValueError as exc:
-        raise SetupError(str(exc)) from None
-    actuators = None
-    if settings.can.actuators == "can":
-        from autopilot_bridge.can_actuators import CanActuators
-        from common.can_params import open_bus
-
+    with contextlib.ExitStack() as opened:   # a device that fails closes those opened before it
         try:
-            actuators = CanActuators(open_bus(settings.can), settings.can,
-                                     lockstep_token=link if options.lockstep else None)
+            link = HilLink(ap.listen, ap.actuators_to, geo, declination=peer.declination,
+                           system_id=ap.system_id, component_id=ap.component_id, send_loss=ap.send_loss,
+                           recv_loss=ap.recv_loss, loss_seed=settings.loss_seed,
+                           truth_component_id=peer.truth_component_id,
+                           sim_ids=(peer.system_id, peer.component_id), sensors_from=sensors_from,
+                           max_time_step=peer.max_time_step,
+                           busy_poll=ap.lockstep_busy_poll if options.lockstep else 0.0,
+                           late_window=ap.sim_restart_gap, realtime=not options.lockstep)
+            opened.callback(link.close)
+            actuators = None
+            if settings.can.actuators == "can":
+                from autopilot_bridge.can_actuators import CanActuators
+                from common.can_params import open_bus
+
+                actuators = CanActuators(open_bus(settings.can), settings.can,
+                                         lockstep_token=link if options.lockstep else None)
+                opened.callback(actuators.close)
+            telemetry = GcsLink(settings.gcs, ap.system_id, ap.component_id, geo, mirror_to=ap.telemetry_to,
+                                mirror_from=ap.telemetry_from, chart_size=chart_size,   # chart_size: rows, columns
+                                log=log)
         except ValueError as exc:
-            link.close()
             raise SetupError(str(exc)) from None
-    try:
-        telemetry = GcsLink(settings.gcs, ap.system_id, ap.component_id, geo, mirror_to=ap.telemetry_to,
-                            mirror_from=ap.telemetry_from, chart_size=chart_size, log=log)   # chart_size: rows, columns
-    except ValueError as exc:
-        link.close()
-        if actuators is not None:
-            actuators.close()
-        raise SetupError(str(exc)) from None
+        opened.pop_all()   # all open: the caller owns them now
     worker = _planner_worker(world, start, ap.watchdog_grace, planner_factory, wait_for, log)
     traffic = TrafficAwareness(settings.tracking, settings.colregs, geo)  # AIS targets, COLREGs encounters
     wait_for("vessel-computer")   # the filter's, guidance's and obstacle map's kernels

@@ -28,6 +28,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
+from multiprocessing.process import BaseProcess
 from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 if TYPE_CHECKING:
@@ -97,7 +98,9 @@ def planning_problem_handler(algorithm: str, params: PlannerParams
     return lambda request: planner.solve(request.problem, request.termination())
 
 
-def _resolve(factory_path: str) -> Any:
+def _resolve(factory_path: str) -> Callable[..., Callable[[PlanRequest[object]], object]]:
+    """The handler factory named ``module:function``: called with the factory's arguments, it returns
+    the handler of one :class:`PlanRequest` (a plan, or a test double's reply)."""
     module, _, name = factory_path.partition(":")
     return getattr(importlib.import_module(module), name)
 
@@ -164,7 +167,7 @@ class PlannerWorker(Generic[P, R]):
         # Any: typeshed's BaseContext has no Process (each concrete context has its own)
         self.ctx: Any = mp.get_context(start_method)
         self.stats = WorkerStats()
-        self._proc: Any = None
+        self._proc: BaseProcess | None = None
         self._conn: Connection | None = None
         self._pending: PlanRequest[P] | None = None
         self._pending_since = 0.0

@@ -307,6 +307,7 @@ class ArduPilotRun:
     def execute(self) -> RunSummary:
         from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+        from hil.assembly.simulator import simulator_settings
         from simulator.core import SimulatorCore
         from simulator.json_backend import JsonPhysics, SkidMixer
 
@@ -326,7 +327,7 @@ class ArduPilotRun:
                                            **(read_params((self.user_params,)) if self.user_params else {})})
         except ValueError as exc:
             raise UsageError(f"ArduRover parameters: {exc}") from None
-        core = SimulatorCore(cfg, None, tuple(self.scen.traffic or ()))
+        core = SimulatorCore(simulator_settings(cfg), None, tuple(self.scen.traffic or ()))
         self.core = core
         physics = JsonPhysics(core, mixer, self.home)
         physics.moored = True       # until ArduRover is armed in AUTO: its boot takes ~40 s of simulated time

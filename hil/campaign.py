@@ -27,7 +27,7 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 
 import numpy as np
 
@@ -134,9 +134,25 @@ def _ci_std(a: np.ndarray, b: np.ndarray, seed: int = 34, n: int = 2000) -> tupl
     return d, float(lo), float(hi)
 
 
-def verdicts(rows: Sequence[dict[str, Any]], a: str = "ddrrt-star", b: str = "rrt-star") -> list[dict[str, Any]]:
+class Verdict(TypedDict):
+    """One claim's verdict (verdicts.json): a measured claim has its difference DDRRT* - RRT*, its 95 %
+    interval, the difference relative to RRT* (%) and the runs (DDRRT*, RRT*) that reached the goal; the
+    success rate has the goals reached and the runs of each, (reached, runs)."""
+
+    claim: str
+    verdict: str          # reproduced, refuted, no difference, not measured, reported
+    difference: NotRequired[float]
+    ci_low: NotRequired[float]
+    ci_high: NotRequired[float]
+    relative_pct: NotRequired[float]
+    runs: NotRequired[tuple[int, int]]
+    ddrrt: NotRequired[tuple[int, int]]
+    rrt: NotRequired[tuple[int, int]]
+
+
+def verdicts(rows: Sequence[dict[str, Any]], a: str = "ddrrt-star", b: str = "rrt-star") -> list[Verdict]:
     """Each claim's difference a - b (relative to b's mean too), interval and verdict."""
-    out: list[dict[str, Any]] = []
+    out: list[Verdict] = []
     for claim, col, direction, stat in CLAIMS:
         va = np.array([float(r[col]) for r in rows if r["algorithm"] == a and r["reached"] and col in r])
         vb = np.array([float(r[col]) for r in rows if r["algorithm"] == b and r["reached"] and col in r])
@@ -159,7 +175,7 @@ def verdicts(rows: Sequence[dict[str, Any]], a: str = "ddrrt-star", b: str = "rr
     return out
 
 
-def verdict_markdown(cells: dict[str, list[dict[str, Any]]]) -> str:
+def verdict_markdown(cells: dict[str, list[Verdict]]) -> str:
     lines = ["| cell | claim | DDRRT* − RRT* | 95 % interval | vs RRT* | verdict |", "|---|---|---:|---|---:|---|"]
     for name, vs in cells.items():
         for v in vs:
@@ -176,7 +192,7 @@ def verdict_markdown(cells: dict[str, list[dict[str, Any]]]) -> str:
 _MARK = {"reproduced": "**R**", "refuted": "✗", "no difference": "="}
 
 
-def summary_markdown(cells: dict[str, list[dict[str, Any]]]) -> str:
+def summary_markdown(cells: dict[str, list[Verdict]]) -> str:
     """The verdicts as one table, a column per cell: the mark (**R** reproduced, ✗ refuted,
     = no difference) and DDRRT* - RRT* relative to RRT*; the last row the goals reached."""
     names = list(cells)

@@ -18,7 +18,7 @@ import json
 import signal
 import sys
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,6 +27,7 @@ from common.dronecan_codec import TRANSFER_ID_MODULO
 if TYPE_CHECKING:
     from collections.abc import Callable
     from pathlib import Path
+    from types import FrameType
 
     from autopilot_bridge.can_actuators import CanActuators
     from hil.settings import HilConfig
@@ -91,7 +92,7 @@ def paced(rate: float, duration: float, send: Callable[[int], None], idle: Calla
     return k
 
 
-def stats_ms(lat_s: np.ndarray) -> dict[str, Any]:
+def stats_ms(lat_s: np.ndarray) -> dict[str, float | None]:
     if len(lat_s) == 0:
         return {"p50": None, "p99": None, "max": None, "samples": 0}
     ms = lat_s * 1e3
@@ -102,7 +103,7 @@ def stats_ms(lat_s: np.ndarray) -> dict[str, Any]:
 def _stop_flag() -> dict[str, bool]:
     flag = {"stop": False}
 
-    def handler(*_: Any) -> None:
+    def handler(_signum: int, _frame: FrameType | None) -> None:
         flag["stop"] = True
 
     signal.signal(signal.SIGTERM, handler)

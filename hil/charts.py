@@ -39,6 +39,8 @@ from common.geodesy import LocalFrame
 from hil.errors import ConfigError
 
 if TYPE_CHECKING:
+    from collections.abc import Mapping
+
     from simulator.config import GeodesyParams
 
 # S-57 object classes that are obstacles to a boat (IHO S-57 Appendix A): an ENC cell's other layers
@@ -72,7 +74,7 @@ class ChartGrid:
     resolution: float
 
 
-def _buffer_of(props: dict[str, Any] | None, source: str) -> float | None:
+def _buffer_of(props: Mapping[str, object] | None, source: str) -> float | None:
     if not props or props.get("buffer") is None:
         return None
     b = props["buffer"]

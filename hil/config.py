@@ -82,7 +82,7 @@ def _fit(value: Any, tp: Any) -> int:
     return sum(1 if k in keys else -1 for k in value)
 
 
-def from_typed_table(tp: type[D], table: Any, source: str) -> D:
+def from_typed_table(tp: type[D], table: object, source: str) -> D:
     """A parsed JSON table read strictly as the TypedDict ``tp`` (a process's summary): every required
     key, no unknown key, each value of its type; ConfigError ``SOURCE: key: problem`` otherwise."""
     if not isinstance(table, dict):
@@ -96,7 +96,7 @@ def from_typed_table(tp: type[D], table: Any, source: str) -> D:
 def _convert(value: Any, tp: Any, key: str) -> Any:
     """Convert a TOML value to the annotated type ``tp`` or raise ``ValueError('key: problem')``."""
     origin = get_origin(tp)
-    if tp is Any:
+    if tp is Any or tp is object:   # a value checked where it is used (a scenario's overrides of a section)
         return value
     if tp is type(None):  # JSON's null (summaries); TOML has none
         if value is not None:

@@ -9,7 +9,7 @@ import math
 import sys
 import time
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # hil.settings pulls every component's config (filterpy, scipy): load it only when used
     from hil.settings import HilConfig
@@ -87,7 +87,7 @@ class ProgressBar:
         progress(f"{self.label}: {done}/{self.total} ({rate:.1f}/s, ETA {eta_s}){' ' + extra if extra else ''}")
 
 
-def _jsonable(obj: Any) -> Any:
+def _jsonable(obj: object) -> object:
     if isinstance(obj, float) and not math.isfinite(obj):
         return None if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
     if isinstance(obj, dict):
@@ -99,7 +99,7 @@ def _jsonable(obj: Any) -> Any:
     return obj
 
 
-def to_json(summary: Mapping[str, Any]) -> str:
+def to_json(summary: Mapping[str, object]) -> str:
     """Strict JSON (no NaN/Infinity tokens) of a summary dictionary."""
     return json.dumps(_jsonable(summary), allow_nan=False)
 
@@ -116,7 +116,7 @@ def clip(text: str, limit: int = MAX_LINE_CHARS) -> str:
     return text[: limit - 24] + f" ... (+{len(text) - limit + 24} chars)"
 
 
-def fmt(v: Any) -> str:
+def fmt(v: object) -> str:
     """A value for a human line: numbers short, lists capped and counted."""
     if isinstance(v, bool) or v is None:
         return str(v).lower() if isinstance(v, bool) else "-"
@@ -132,11 +132,11 @@ def fmt(v: Any) -> str:
     return str(v)
 
 
-def _empty(v: Any) -> bool:
+def _empty(v: object) -> bool:
     return v is None or v == "" or (isinstance(v, (list, tuple, dict)) and not v)
 
 
-def nonzero_counters(d: Any, prefix: str = "") -> list[str]:
+def nonzero_counters(d: object, prefix: str = "") -> list[str]:
     """``key=value`` for every non-zero integer counter in a nested summary (booleans excluded)."""
     out = []
     if isinstance(d, dict):
@@ -168,7 +168,7 @@ def wrap_items(label: str, items: list[str], max_lines: int) -> list[str]:
     return lines
 
 
-def brief(summary: Mapping[str, Any], max_lines: int = MAX_LINES) -> list[str]:
+def brief(summary: Mapping[str, object], max_lines: int = MAX_LINES) -> list[str]:
     """A generic short summary: the top-level values that are set, one line each, nested tables
     as their non-zero counters; capped at ``max_lines`` with a pointer to --json."""
     lines = []
@@ -186,7 +186,7 @@ def brief(summary: Mapping[str, Any], max_lines: int = MAX_LINES) -> list[str]:
     return lines
 
 
-def emit(args: argparse.Namespace, summary: Mapping[str, Any], human: list[str] | None = None) -> None:
+def emit(args: argparse.Namespace, summary: Mapping[str, object], human: list[str] | None = None) -> None:
     """Print the summary: one JSON object with ``--json``; otherwise ``human`` lines (a command's
     own short summary) or :func:`brief`, never more than MAX_LINES lines."""
     if getattr(args, "json", False):

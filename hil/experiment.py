@@ -61,7 +61,7 @@ class Task:
     run: int
     algorithm: str
     seed: int
-    online_overrides: tuple[tuple[str, Any], ...] = ()
+    online_overrides: tuple[tuple[str, object], ...] = ()
     config: str | None = None
     config_overrides: tuple[str, ...] = ()
     objective: Objective | None = None  # override of [planner] objective for this algorithm
@@ -82,7 +82,7 @@ def planner_seed(seed: int, run: int, algorithm: str) -> int:
 _SETTINGS: dict[tuple[str | None, tuple[str, ...]], HilConfig] = {}
 _SPECS: dict[str, ScenarioSpec] = {}
 _FIXED: dict[tuple[str, str | None, tuple[str, ...]], Scenario] = {}
-_CONTEXTS: dict[tuple[str, str | None, tuple[str, ...], tuple[tuple[str, Any], ...]], OnlineContext] = {}
+_CONTEXTS: dict[tuple[str, str | None, tuple[str, ...], tuple[tuple[str, object], ...]], OnlineContext] = {}
 
 
 def _settings(config: str | None, overrides: tuple[str, ...]) -> HilConfig:
@@ -185,7 +185,7 @@ def warm_up() -> None:
     planner.warm_up()
 
 
-def _fmt(v: Any) -> str:
+def _fmt(v: object) -> str:
     if isinstance(v, bool):
         return "1" if v else "0"
     if isinstance(v, float):
@@ -364,7 +364,7 @@ class Campaign:
     interrupted: bool = False
 
 
-def make_tasks(scenario: str, runs: int, algorithms: Sequence[str], seed: int, online_overrides: dict[str, Any],
+def make_tasks(scenario: str, runs: int, algorithms: Sequence[str], seed: int, online_overrides: dict[str, object],
                config: str | None, config_overrides: Sequence[str], figure_runs: int,
                baseline_objective: Objective | None = None) -> list[Task]:
     """All (run, algorithm) tasks; ``baseline_objective`` overrides the objective of RRT* and

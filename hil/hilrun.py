@@ -33,7 +33,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TextIO
+from typing import TYPE_CHECKING, TextIO
 
 import numpy as np
 
@@ -383,7 +383,9 @@ class HilRun:
             self.opts.on_progress("warning: " + msg)
 
     @staticmethod
-    def _stop(proc: subprocess.Popen | None, kill: bool = False) -> dict[str, Any] | None:
+    def _stop(proc: subprocess.Popen | None, kill: bool = False) -> object | None:
+        """Stop ``proc``'s process group; its last stdout line parsed as JSON (its summary, not yet read
+        strictly: :mod:`hil.judging` does), or None."""
         if proc is None:
             return None
         dead = proc.poll() is not None

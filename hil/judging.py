@@ -9,7 +9,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from scipy import ndimage
@@ -140,8 +140,8 @@ class RunRecord:
     min_clearance: float              # m
     wall_s: float
     decided: int | None
-    autopilot: dict[str, Any] | None      # the processes' summaries as parsed JSON, read strictly here
-    simulator: dict[str, Any] | None
+    autopilot: object | None      # the processes' summaries as parsed JSON, read strictly here
+    simulator: object | None
     simulator_restarts: int
     pinned: dict[str, int]
     warnings: tuple[str, ...]

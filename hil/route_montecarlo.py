@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     from simulator.config import CurrentParams
 
 
-def _toml_value(v: Any) -> str:
+def _toml_value(v: object) -> str:
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, (int, float, np.floating, np.integer)):

@@ -9,7 +9,7 @@ COLREGs encounters) keep those components' own tables.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, NotRequired, TypedDict, TypeVar, final
+from typing import TYPE_CHECKING, NotRequired, TypedDict, TypeVar, final
 
 from autopilot_bridge.ais_tracking import AisSummary
 from autopilot_bridge.can_actuators import CanPathSummary
@@ -164,18 +164,18 @@ class RunSummary:
         return sim["ardupilot"] if sim is not None and "ardupilot" in sim else None
 
 
-def _read(cls: type[T], table: Any, source: str) -> T:
+def _read(cls: type[T], table: object, source: str) -> T:
     if not isinstance(table, dict):
         raise ConfigError(f"{source}: expected a JSON object, got {type(table).__name__}")
     return from_table(cls, table, source)
 
 
-def read_summary(table: Any, source: str = "summary.json") -> RunSummary:
+def read_summary(table: object, source: str = "summary.json") -> RunSummary:
     """A run summary from its table (parsed JSON); ConfigError names the key that does not fit."""
     return _read(RunSummary, table, source)
 
 
-def read_simulator_summary(table: Any, source: str = "the simulator's summary") -> SimulatorSummary:
+def read_simulator_summary(table: object, source: str = "the simulator's summary") -> SimulatorSummary:
     """The simulator's summary (what `hil sim` prints) from its table; RunFailed names the key that does
     not fit (the two processes disagree on the contract: a bug, not a user mistake)."""
     try:
@@ -184,7 +184,7 @@ def read_simulator_summary(table: Any, source: str = "the simulator's summary") 
         raise RunFailed(str(exc)) from None
 
 
-def read_autopilot_summary(table: Any, source: str = "the autopilot's summary") -> AutopilotSummary:
+def read_autopilot_summary(table: object, source: str = "the autopilot's summary") -> AutopilotSummary:
     """The autopilot's summary from its table; RunFailed names the key that does not fit (the two
     processes disagree on the contract: a bug, not a user mistake)."""
     try:

@@ -47,7 +47,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, TypeVar
+from typing import TYPE_CHECKING, Literal, TypeVar
 
 import numpy as np
 
@@ -141,9 +141,9 @@ class ScenarioSpec:
     uncharted: tuple[tuple[float, float, float], ...] = param(
         "obstacles missing from the chart: discs [[x, y, radius], ...]; only the range sensor reveals them",
         "m", default=())
-    current: dict[str, Any] = field(default_factory=dict, metadata={"help": "overrides of [current]"})
-    planner: dict[str, Any] = field(default_factory=dict, metadata={"help": "overrides of [planner]"})
-    online: dict[str, Any] = field(default_factory=dict, metadata={"help": "overrides of the online process"})
+    current: dict[str, object] = field(default_factory=dict, metadata={"help": "overrides of [current]"})
+    planner: dict[str, object] = field(default_factory=dict, metadata={"help": "overrides of [planner]"})
+    online: dict[str, object] = field(default_factory=dict, metadata={"help": "overrides of the online process"})
     random: RandomSpec | None = field(default=None, metadata={"help": "random map generator (kind = 'random')"})
     traffic: tuple[ShipSpec, ...] = field(default=(), metadata={"help": "ship traffic ([[traffic]] tables)"})
     # The file it was read from (set by load_spec, not a TOML key): relative paths start there.
@@ -183,8 +183,8 @@ class Scenario:
     route: np.ndarray | RouteRequest  # the reference path (M, 2) m, or what to plan it from (hil.routing)
     current: CurrentParams          # NED
     field_time: float               # s, instant of the frozen planning field
-    planner_overrides: dict[str, Any]
-    online_overrides: dict[str, Any]
+    planner_overrides: dict[str, object]
+    online_overrides: dict[str, object]
     uncharted: tuple[tuple[float, float, float], ...] = ()   # discs (x, y, radius), m, map frame
     traffic: tuple[ShipSpec, ...] = ()                        # ships sailed by the simulator ([[traffic]])
     waypoints: np.ndarray | None = None                       # (K, 2) the route as given, m (None: = reference_path)
@@ -408,7 +408,8 @@ def _check_current(scen: Scenario, source: str) -> None:
         raise ConfigError(f"{source}: current: {exc}") from None
 
 
-def _current_params(base_current: CurrentParams, overrides: dict[str, Any], source: str) -> tuple[CurrentParams, float]:
+def _current_params(base_current: CurrentParams, overrides: dict[str, object],
+                    source: str) -> tuple[CurrentParams, float]:
     table = config.to_table(base_current)
     ov = dict(overrides)
     field_time = ov.pop("field_time", 0.0)
@@ -634,7 +635,7 @@ def _random_route(spec: ScenarioSpec, rng: np.random.Generator, canvas: Canvas, 
     raise ConfigError(f"{source}: random: no route with {k} waypoint(s) found in 200 draws")
 
 
-def planner_params(base: PlannerParams, overrides: dict[str, Any], source: str = "scenario") -> PlannerParams:
+def planner_params(base: PlannerParams, overrides: dict[str, object], source: str = "scenario") -> PlannerParams:
     """``base`` PlannerParams with ``overrides`` applied and validated (ConfigError on problems)."""
     table = config.to_table(base)
     for k, v in overrides.items():
@@ -644,7 +645,7 @@ def planner_params(base: PlannerParams, overrides: dict[str, Any], source: str =
     return config.from_table(type(base), table, source, prefix="planner")
 
 
-def online_params(overrides: dict[str, Any], source: str = "scenario",
+def online_params(overrides: dict[str, object], source: str = "scenario",
                   base: OnlineParams | None = None) -> OnlineParams:
     """OnlineParams (defaults or ``base``) with ``overrides`` applied and validated."""
     from planner.online import OnlineParams
@@ -662,7 +663,7 @@ def base_planner_params(settings_obj: HilConfig | None) -> PlannerParams:
     return getattr(settings_obj, "planner", None) or PlannerParams()
 
 
-def with_overrides(obj: D, **kw: Any) -> D:
+def with_overrides(obj: D, **kw: object) -> D:
     """``dataclasses.replace`` that ignores ``None`` values (CLI options not given)."""
     return dataclasses.replace(obj, **{k: v for k, v in kw.items() if v is not None})
 

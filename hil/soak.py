@@ -165,7 +165,7 @@ def soak_loop(args: argparse.Namespace, cfg: HilConfig, out: Path) -> dict[str, 
     return result
 
 
-def _latency(sent_path: Path, applied_path: Path) -> dict[str, Any]:
+def _latency(sent_path: Path, applied_path: Path) -> dict[str, float | None]:
     from hil.can_path import pair_latency, stats_ms
 
     st, sa = _load_record(sent_path)

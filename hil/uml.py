@@ -25,7 +25,7 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import IO
 
 from hil.cpu_load import HOST_LOAD_ENV, HostLoadFeed
 
@@ -54,7 +54,7 @@ class JobResult:
     stderr: str
     seconds: float
 
-    def json(self) -> Any:
+    def json(self) -> object:
         """The last stdout line as JSON (the hil commands' --json summary)."""
         lines = self.stdout.strip().splitlines()
         return json.loads(lines[-1]) if lines else None

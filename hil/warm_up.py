@@ -71,10 +71,11 @@ def _simulator() -> None:
     import numpy as np
 
     from hil import settings
+    from hil.assembly.simulator import simulator_settings
     from simulator.core import SimulatorCore
     from simulator.rangefinder import WorldMap
 
-    core = SimulatorCore(settings.load(), WorldMap(np.zeros((8, 8), dtype=bool), 1.0))
+    core = SimulatorCore(simulator_settings(settings.load()), WorldMap(np.zeros((8, 8), dtype=bool), 1.0))
     core.frame()
     core.geo.geodetic_to_ned(*core.geo.ned_to_geodetic(1.0, 2.0, 0.0))
     core.geo.geodetic_to_sea_level(*core.geo.sea_level_to_geodetic(1.0, 2.0))

@@ -31,7 +31,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from dataclasses import field as dc_field
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from scipy import ndimage
@@ -53,7 +53,7 @@ if TYPE_CHECKING:
     from planner.traffic_map import TrafficSnapshot
 
 
-def _p(help: str, unit: str = "", **bounds: float) -> dict[str, Any]:
+def _p(help: str, unit: str = "", **bounds: float) -> dict[str, object]:
     return {"help": help, "unit": unit, **bounds}
 
 

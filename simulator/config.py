@@ -8,13 +8,14 @@ Frozen dataclasses, filled strictly from the TOML sections of the same names by
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING
 
 from common.current_params import CurrentParams as CurrentParams  # [current]: common's current model owns it
 from common.params import param
 
 if TYPE_CHECKING:
     from common.can_params import CanParams
+    from simulator.battery import BatteryParams
     from simulator.traffic import AisParams
 
 
@@ -200,49 +201,30 @@ class GeodesyParams:
         return (self.positions_origin[0], self.positions_origin[1]) if self.positions_origin else (self.lat0, self.lon0)
 
 
-class PeerIds(Protocol):
+@dataclass(frozen=True)
+class PeerIds:
     """The MAVLink ids of the vessel computer, the one peer whose commands the simulator applies."""
 
-    @property
-    def system_id(self) -> int: ...
-
-    @property
-    def component_id(self) -> int: ...
+    system_id: int
+    component_id: int
 
 
-class SimulatorSettings(Protocol):
+@dataclass(frozen=True)
+class SimulatorSettings:
     """The root of the simulator's configuration: the sections :class:`simulator.core.SimulatorCore`
-    and :class:`simulator.server.SimulatorServer` read. ``hil.settings.HilConfig`` is one, structurally."""
+    and the simulator's assembly read, and the ids of the vessel computer it serves. The HIL tool maps
+    its configuration onto it once (``hil.assembly.simulator.simulator_settings``); the simulator
+    imports nothing of ``hil/``."""
 
-    @property
-    def vessel(self) -> VesselParams: ...
-
-    @property
-    def waves(self) -> WaveParams: ...
-
-    @property
-    def current(self) -> CurrentParams: ...
-
-    @property
-    def sensors(self) -> SensorParams: ...
-
-    @property
-    def sim(self) -> SimParams: ...
-
-    @property
-    def link(self) -> LinkParams: ...
-
-    @property
-    def geodesy(self) -> GeodesyParams: ...
-
-    @property
-    def esc(self) -> EscParams: ...
-
-    @property
-    def can(self) -> CanParams: ...
-
-    @property
-    def traffic(self) -> AisParams: ...
-
-    @property
-    def autopilot(self) -> PeerIds: ...
+    vessel: VesselParams
+    waves: WaveParams
+    current: CurrentParams
+    sensors: SensorParams
+    sim: SimParams
+    link: LinkParams
+    geodesy: GeodesyParams
+    esc: EscParams
+    can: CanParams
+    traffic: AisParams
+    battery: BatteryParams
+    computer: PeerIds

@@ -17,7 +17,7 @@ from common.current_sources import NoCurrent, make_current
 from common.dronecan_layout import RAW_COMMAND_MAX
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE, Codec
-from simulator.battery import BatteryParams, Pack, ThrusterPower
+from simulator.battery import Pack, ThrusterPower
 from simulator.config import SimulatorSettings
 from simulator.rangefinder import Rangefinder, WorldMap
 from simulator.sensors import Compass, Dvl, G, Gps, Imu, sensor_rngs
@@ -116,7 +116,7 @@ class SimulatorCore:
         self.rangefinder = (Rangefinder(s.rangefinder, world, rngs["rangefinder"])
                             if world is not None and s.rangefinder.enabled else None)
         self.rangefinder_due = _Schedule(s.rangefinder.rate_hz, self.frame_dt)
-        bp = getattr(cfg, "battery", None) or BatteryParams()
+        bp = cfg.battery
         self.battery = Pack(bp)
         self.thruster_power = ThrusterPower(cfg.esc, cfg.vessel)
         # Electrical energy (J) of the frames since the pack last drew it: the pack is integrated when
@@ -125,7 +125,7 @@ class SimulatorCore:
         self.battery_due = _Schedule(bp.rate_hz, self.frame_dt)
         self.codec = Codec(cfg.link.system_id, cfg.link.component_id, accept=("HIL_ACTUATOR_CONTROLS",))
         # The only peer whose commands count: the vessel computer's ids from the same configuration.
-        self.peer_ids = (cfg.autopilot.system_id, cfg.autopilot.component_id)
+        self.peer_ids = (cfg.computer.system_id, cfg.computer.component_id)
         i = cfg.sim.initial
         self.state: State = (float(i.x), float(i.y), float(i.psi), float(i.u), float(i.v), float(i.r))
         self.n = 0
@@ -148,9 +148,9 @@ class SimulatorCore:
         hull_rk4_step(self.state, self.dt, (0.0, 0.0, 0.0), *self._env, self.vessel.coefficients)
         self.traffic: Traffic | None = None
         if traffic:
-            from simulator.traffic import AisParams, Traffic
+            from simulator.traffic import Traffic
 
-            ais = getattr(cfg, "traffic", None) or AisParams()
+            ais = cfg.traffic
             self.traffic = Traffic(tuple(traffic), ais, cfg.sim.seed, self.geo)
             self.truth_codec = Codec(cfg.link.system_id, ais.truth_component_id)
 

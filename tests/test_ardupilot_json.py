@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from hil import settings
+from hil.assembly.simulator import simulator_settings
 from simulator.core import Command, SimulatorCore
 from simulator.json_backend import (
     MAGIC_16,
@@ -37,7 +38,7 @@ RECORDED = (bytes.fromhex("1a48b00400000000" + "dc05" * 4 + "e803" * 12),
 
 def _core(**initial: float) -> SimulatorCore:
     over = [f"sim.initial.{k}={v!r}" for k, v in initial.items()]
-    return SimulatorCore(settings.load(None, over))
+    return SimulatorCore(simulator_settings(settings.load(None, over)))
 
 
 def _pwm(left: int, right: int, n: int = 16) -> tuple[int, ...]:

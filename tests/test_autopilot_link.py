@@ -10,6 +10,7 @@ from autopilot_bridge.hil_link import HilLink
 from common.geodesy import LocalFrame
 from common.udp import UdpEndpoint
 from hil import settings
+from hil.assembly.simulator import simulator_settings
 from simulator.core import SimulatorCore
 
 
@@ -24,7 +25,7 @@ def _link(cfg) -> HilLink:
 
 
 def test_sensor_frames_decode_to_si_ned_and_truth_is_ignored(cfg):
-    core = SimulatorCore(cfg)
+    core = SimulatorCore(simulator_settings(cfg))
     link = _link(cfg)
     try:
         seen_gps = seen_dvl = 0
@@ -47,7 +48,7 @@ def test_sensor_frames_decode_to_si_ned_and_truth_is_ignored(cfg):
 
 
 def test_commands_round_trip_into_the_simulator(cfg):
-    core = SimulatorCore(cfg)
+    core = SimulatorCore(simulator_settings(cfg))
     link = _link(cfg)
     sink = UdpEndpoint("127.0.0.1:0")
     link.ep.destinations = [sink.address]

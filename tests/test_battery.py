@@ -11,6 +11,7 @@ import pytest
 from autopilot_bridge.hil_link import HilLink
 from common.geodesy import LocalFrame
 from hil import settings
+from hil.assembly.simulator import simulator_settings
 from simulator.battery import OCV_SOC, BatteryParams, Pack, cell_ocv, thruster_power
 from simulator.core import Command, SimulatorCore
 from simulator.sensors import Satellites
@@ -77,10 +78,10 @@ def test_an_empty_pack_cuts_the_thrusters_off():
         pack.draw(1000.0, 0.01)
     assert pack.depleted and pack.soc == 0.0
     cfg = settings.load(None, ["battery.initial_soc=0.0"])
-    core = SimulatorCore(cfg)
+    core = SimulatorCore(simulator_settings(cfg))
     core.apply(Command(core.time_usec, 1.0, 1.0))
     assert core.thrusts() == (0.0, 0.0)
-    full = SimulatorCore(settings.load(None, []))
+    full = SimulatorCore(simulator_settings(settings.load(None, [])))
     full.apply(Command(full.time_usec, 1.0, 1.0))
     assert full.thrusts()[0] > 100.0
 
@@ -88,7 +89,7 @@ def test_an_empty_pack_cuts_the_thrusters_off():
 def test_battery_status_reaches_the_vessel_computer_as_the_pack_is():
     """The simulator's BATTERY_STATUS (2 Hz) decoded by the vessel computer's link equals the pack."""
     cfg = settings.load(None, [])
-    core = SimulatorCore(cfg)
+    core = SimulatorCore(simulator_settings(cfg))
     link = HilLink("127.0.0.1:0", (), LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, 0.0))
     readings = []
     try:
@@ -133,7 +134,7 @@ def test_satellite_count_is_seeded_bounded_and_changes():
 
 def test_hil_gps_carries_the_satellite_count_and_none_in_a_dropout():
     cfg = settings.load(None, ["sensors.gps.dropouts=[[1.0, 1.0]]", "sensors.gps.satellite_interval=1.0"])
-    core = SimulatorCore(cfg)
+    core = SimulatorCore(simulator_settings(cfg))
     link = HilLink("127.0.0.1:0", (), LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, 0.0))
     seen = []
     try:

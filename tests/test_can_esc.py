@@ -11,6 +11,7 @@ import pytest
 from autopilot_bridge.can_actuators import CanActuators
 from common import dronecan_codec as dc
 from hil import settings
+from hil.assembly.simulator import simulator_settings
 from simulator.core import SimulatorCore
 from simulator.esc import (
     CLOCK_EVERY,
@@ -31,7 +32,7 @@ def rig():
     cfg = settings.load(None, ["can.interface=\"virtual\""])
     channel = f"esc-test-{next(_channels)}"
     buses = [can.Bus(interface="virtual", channel=channel) for _ in range(3)]
-    core = SimulatorCore(cfg)
+    core = SimulatorCore(simulator_settings(cfg))
     esc = EscBank(buses[0], cfg.can, cfg.esc, core.vessel)
     acts = CanActuators(buses[1], cfg.can)
     yield cfg, core, esc, acts, buses[2]
@@ -217,7 +218,7 @@ def test_autopilot_ignores_its_own_node_id_and_counts_lost_status(rig):
 
 def test_esc_lag_is_first_order_and_shared_by_both_paths():
     cfg = settings.load(None, ["esc.time_constant=0.1"])
-    core = SimulatorCore(cfg)
+    core = SimulatorCore(simulator_settings(cfg))
     from simulator.core import Command
     core.apply(Command(0, 1.0, 0.0))
     core.step()
@@ -227,7 +228,7 @@ def test_esc_lag_is_first_order_and_shared_by_both_paths():
         core.apply(Command(core.time_usec, 1.0, 0.0))
         core.step()
     assert core.thrust[0] == pytest.approx(core.vessel.T_max, rel=0.01)
-    instant = SimulatorCore(settings.load(None, ["esc.time_constant=0.0"]))
+    instant = SimulatorCore(simulator_settings(settings.load(None, ["esc.time_constant=0.0"])))
     instant.apply(Command(0, 1.0, 0.0))
     instant.step()
     assert instant.thrust[0] == instant.vessel.T_max
@@ -235,11 +236,11 @@ def test_esc_lag_is_first_order_and_shared_by_both_paths():
 
 def test_int14_resolution_rounds_commands_like_raw_command():
     from simulator.core import Command
-    plain = SimulatorCore(settings.load(None, ["esc.int14_resolution=false"]))
+    plain = SimulatorCore(simulator_settings(settings.load(None, ["esc.int14_resolution=false"])))
     plain.apply(Command(0, 0.5, -0.3))
     assert plain.controls == (0.5, -0.3)  # float commands on the MAVLink path (int14 is the default)
     for overrides in (["esc.int14_resolution=true"], ["can.actuators=\"can\""]):
-        core = SimulatorCore(settings.load(None, overrides))
+        core = SimulatorCore(simulator_settings(settings.load(None, overrides)))
         core.apply(Command(0, 0.5, -0.3))
         assert core.controls == (4096 / 8191, -2457 / 8191)
 

@@ -17,6 +17,7 @@ from support.world_files import LAT0, LON0, metres_box, write_cf_current  # noqa
 from common.current_sources import CurrentSourceError, GriddedCurrent, UniformCurrent, load_file  # noqa: E402
 from common.geodesy import LocalFrame  # noqa: E402
 from hil import scenario as scenarios  # noqa: E402
+from hil.assembly.simulator import simulator_settings  # noqa: E402
 from hil.config import CONFIG_DIR  # noqa: E402
 from hil.errors import ConfigError  # noqa: E402
 from hil.settings import load  # noqa: E402
@@ -228,7 +229,7 @@ def test_eq13_stays_the_default_source():
 
 def _drift(cfg, seconds: float) -> tuple[float, float]:
     """Ground velocity (north, east) of an unpowered hull after ``seconds`` in the simulator."""
-    core = SimulatorCore(cfg)
+    core = SimulatorCore(simulator_settings(cfg))
     frames = int(round(seconds / core.frame_dt))
     for _ in range(frames):
         core.step()
@@ -249,7 +250,7 @@ def test_the_simulated_boat_drifts_with_the_same_current(tmp_path, kind):
         overrides = [*calm, f"current.file={str(path)!r}"]
     cfg = load(None, overrides)
     vn, ve = _drift(cfg, 60.0)
-    source = SimulatorCore(cfg).current
+    source = SimulatorCore(simulator_settings(cfg)).current
     exp_n, exp_e = source.velocity_at(0.0, 0.0, 60.0)
     assert math.hypot(exp_n, exp_e) > 0.15
     # the drift carries the boat some metres: compare with the current where it is now

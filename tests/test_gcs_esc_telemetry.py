@@ -18,6 +18,7 @@ from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE as M
 from common.mavlink import mavlink2
 from hil import settings
+from hil.assembly.simulator import simulator_settings
 from hil.hilrun import free_udp_port
 from simulator.core import SimulatorCore
 from simulator.esc import EscBank
@@ -33,7 +34,7 @@ def _gcs_params(endpoint: str) -> GcsParams:
 def can_rig():
     cfg = settings.load(None, ["can.interface=\"virtual\""])
     buses = [can.Bus(interface="virtual", channel="gcs-esc-telemetry") for _ in range(2)]
-    core = SimulatorCore(cfg)
+    core = SimulatorCore(simulator_settings(cfg))
     yield cfg, core, EscBank(buses[0], cfg.can, cfg.esc, core.vessel), CanActuators(buses[1], cfg.can)
     for b in buses:
         b.shutdown()

@@ -17,6 +17,7 @@ from common.geodesy import LocalFrame
 from common.mavlink import Codec
 from hil import scenario as scenarios
 from hil import settings
+from hil.assembly.simulator import simulator_settings
 from hil.scenario import simulator_overrides
 from simulator.core import SimulatorCore
 from simulator.rangefinder import WorldMap
@@ -26,13 +27,14 @@ def _simulator_datagrams(scenario: str, steps: int) -> list[bytes]:
     base = settings.load()
     scen = scenarios.instance(scenarios.load_spec(scenario), None, base.current)
     cfg = settings.load(None, ["sim.seed=4", *simulator_overrides(scen, base.current)])
-    core = SimulatorCore(cfg, WorldMap(scen.truth_occ(), scen.resolution), tuple(scen.traffic))
+    core = SimulatorCore(simulator_settings(cfg), WorldMap(scen.truth_occ(), scen.resolution), tuple(scen.traffic))
     out = []
     for k in range(steps):
         out.append(core.frame())
         core.step()
         if k == steps // 2:   # a restarted simulator: its clock starts over
-            core = SimulatorCore(cfg, WorldMap(scen.truth_occ(), scen.resolution), tuple(scen.traffic))
+            core = SimulatorCore(simulator_settings(cfg), WorldMap(scen.truth_occ(), scen.resolution),
+                                 tuple(scen.traffic))
     return out
 
 

@@ -12,6 +12,7 @@ from autopilot_bridge.hil_link import HilLink
 from autopilot_bridge.obstacle_map import SensedObstacles, arc_cells, path_blocked
 from common.geodesy import LocalFrame
 from common.mavlink import Codec
+from hil.assembly.simulator import simulator_settings
 from hil.settings import load
 from simulator.core import Command, SimulatorCore
 from simulator.rangefinder import Rangefinder, WorldMap
@@ -135,7 +136,7 @@ def test_simulator_sends_obstacle_distance_at_its_rate_only_with_a_world():
     cfg = load(None, QUIET + ["sim.initial.x=10.0", "sim.initial.y=50.0"])
     dec = Codec(255, 0, accept=("HIL_SENSOR", "HIL_GPS", "HIL_STATE_QUATERNION", "OBSTACLE_DISTANCE", "BATTERY_STATUS"))
     for world, expected in ((WorldMap(wall_world(), RES), 5), (None, 0)):
-        core = SimulatorCore(cfg, world)
+        core = SimulatorCore(simulator_settings(cfg), world)
         scans = []
         for _ in range(100):                 # 1 s of IMU frames
             msgs, rejects = dec.decode(core.frame())
@@ -171,7 +172,7 @@ def test_uncharted_obstacle_is_confirmed_after_two_scans_through_the_link():
     cx, cy, radius = 50.0, 30.0, 2.0         # map x east, y north
     truth |= ((cc + 0.5) * RES - cx) ** 2 + ((rr + 0.5) * RES - cy) ** 2 <= radius ** 2
     cfg = load(None, QUIET + ["sim.initial.x=10.0", "sim.initial.y=50.0"])
-    core = SimulatorCore(cfg, WorldMap(truth, RES))
+    core = SimulatorCore(simulator_settings(cfg), WorldMap(truth, RES))
     geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
     link = HilLink("127.0.0.1:0", (), geo)
     sensed = SensedObstacles(chart, RES, confirm_hits=2)

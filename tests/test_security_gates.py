@@ -22,6 +22,7 @@ from common.geodesy import LocalFrame
 from common.mavlink import Codec
 from common.udp import UdpEndpoint
 from hil import settings
+from hil.assembly.simulator import simulator_settings
 from simulator.core import SimulatorCore
 
 STEP = 10_000  # usec, one IMU period at 100 Hz
@@ -44,7 +45,7 @@ def _sensor(codec: Codec, t_usec: int, zgyro: float = 0.01, xmag: float = 0.2, y
 
 
 def test_simulator_takes_commands_only_from_the_autopilot_ids(cfg):
-    core = SimulatorCore(cfg)
+    core = SimulatorCore(simulator_settings(cfg))
     own = Codec(cfg.autopilot.system_id, cfg.autopilot.component_id)
     stranger = Codec(200, 1)
     spoof_comp = Codec(cfg.autopilot.system_id, 191)

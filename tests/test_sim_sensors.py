@@ -9,6 +9,7 @@ import pytest
 
 from common.geodesy import LocalFrame
 from common.mavlink import Codec
+from hil.assembly.simulator import simulator_settings
 from hil.settings import load
 from simulator.core import Command, SimulatorCore, frame_layout
 from simulator.sensors import G
@@ -20,7 +21,7 @@ DECODER = ("HIL_SENSOR", "HIL_GPS", "HIL_STATE_QUATERNION", "ODOMETRY", "BATTERY
 
 def run_frames(overrides, n, controls=(0.0, 0.0)):
     """Run n frames of a SimulatorCore; yield (core state before step, decoded messages by type)."""
-    core = SimulatorCore(load(None, QUIET + list(overrides)))
+    core = SimulatorCore(simulator_settings(load(None, QUIET + list(overrides))))
     dec = Codec(255, 0, accept=DECODER)
     out = []
     for _ in range(n):
@@ -132,7 +133,7 @@ def test_imu_period_must_be_whole_steps():
 
 
 def test_stale_command_failsafe_zeroes_thrust_once_per_silence():
-    core = SimulatorCore(load(None, QUIET))
+    core = SimulatorCore(simulator_settings(load(None, QUIET)))
     for _ in range(100):
         core.apply(Command(core.time_usec, 1.0, 1.0))
         core.step()

@@ -9,6 +9,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
+from hil.assembly.simulator import simulator_settings
 from hil.settings import load
 from simulator.core import Command, SimulatorCore
 from simulator.integrator import rk4_step
@@ -44,7 +45,7 @@ def test_thrust_mapping_and_saturation(cfg):
 
 @pytest.mark.parametrize("command", [0.3, 0.7, 1.0, -0.6])
 def test_steady_surge_speed_solves_surge_equation(cfg, command):
-    core = SimulatorCore(cfg)
+    core = SimulatorCore(simulator_settings(cfg))
     for _ in range(int(60 / core.frame_dt)):
         core.apply(Command(core.time_usec, command, command))
         core.step()
@@ -89,7 +90,7 @@ def test_rk4_matches_solve_ivp_over_60s_manoeuvre(cfg):
 
 @pytest.mark.parametrize("port,stdb,sign", [(0.8, 0.4, 1), (0.4, 0.8, -1)])
 def test_more_port_thrust_turns_to_starboard(cfg, port, stdb, sign):
-    core = SimulatorCore(cfg)
+    core = SimulatorCore(simulator_settings(cfg))
     for _ in range(300):
         core.apply(Command(core.time_usec, port, stdb))
         core.step()
@@ -159,7 +160,7 @@ def test_compiled_hull_step_is_the_generic_rk4_of_the_printed_equations(cfg):
 def test_simulator_steps_with_the_compiled_hull(cfg):
     """SimulatorCore.step is the generic RK4 (simulator.integrator) over Vessel.dynamics, as the
     simulator integrated before the step was compiled."""
-    core = SimulatorCore(load(None, []))   # waves and current on
+    core = SimulatorCore(simulator_settings(load(None, [])))   # waves and current on
     v = core.vessel
     assert core.substeps == 1   # the default layout: one RK4 step a frame
     for n in range(200):

@@ -9,8 +9,23 @@ import numpy as np
 import pytest
 
 from hil import settings
-from hil.assembly.simulator import build_simulator, scenario_world
+from hil.assembly.simulator import build_simulator, scenario_world, simulator_settings
 from hil.errors import UsageError
+from simulator.core import SimulatorCore
+
+
+def test_the_simulators_root_carries_the_sections_it_reads_and_the_computers_ids():
+    cfg = settings.load(None, ["autopilot.system_id=7", "autopilot.component_id=3", "link.system_id=9",
+                               "battery.rate_hz=4", "sim.seed=5"])
+    root = simulator_settings(cfg)
+    assert root.vessel is cfg.vessel and root.waves is cfg.waves and root.current is cfg.current
+    assert root.sensors is cfg.sensors and root.sim is cfg.sim and root.link is cfg.link
+    assert root.geodesy is cfg.geodesy and root.esc is cfg.esc and root.can is cfg.can
+    assert root.traffic is cfg.traffic and root.battery is cfg.battery
+    assert (root.computer.system_id, root.computer.component_id) == (7, 3)
+    core = SimulatorCore(root)
+    assert core.peer_ids == (7, 3) and core.codec.mav.srcSystem == 9
+    assert core.battery_due.k == pytest.approx(4 * core.frame_dt)   # [battery] reached the pack
 
 
 def test_the_harbour_gives_the_simulator_its_start_current_truth_and_ships():

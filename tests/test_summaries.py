@@ -155,11 +155,12 @@ def test_the_simulators_own_summaries_are_read_as_their_types():
     """What the simulator's parts print, built for real in-process (the JSON back-end's physics answering
     servo packets; the core's battery and truth), read back strictly as the types they declare."""
     from hil import settings
+    from hil.assembly.simulator import simulator_settings
     from hil.config import from_typed_table
     from simulator.core import SimulatorCore
     from simulator.json_backend import JsonPhysics, JsonPhysicsSummary, SkidMixer, encode_servo_packet
 
-    core = SimulatorCore(settings.load(), None, ())
+    core = SimulatorCore(simulator_settings(settings.load()), None, ())
     physics = JsonPhysics(core, SkidMixer.from_params({"SERVO1_FUNCTION": 73, "SERVO3_FUNCTION": 74}), (0.0, 0.0))
     pwm = (1900, 1500, 1900) + (1500,) * 13
     for n in range(5):

@@ -13,6 +13,7 @@ from common.geodesy import LocalFrame
 from common.mavlink import Codec
 from common.udp import UdpEndpoint
 from hil import settings
+from hil.assembly.simulator import simulator_settings
 from simulator.core import SimulatorCore
 from simulator.traffic import KNOT, AisParams, Ship, ShipSpec, report_interval
 
@@ -48,7 +49,7 @@ def test_class_a_reporting_intervals():
 
 def _core(*ships: ShipSpec, overrides=()):
     cfg = settings.load(None, ["sensors.gps.glitch_probability=0.0", *overrides])
-    return SimulatorCore(cfg, traffic=ships), cfg
+    return SimulatorCore(simulator_settings(cfg), traffic=ships), cfg
 
 
 def _link(cfg) -> HilLink:

@@ -10,7 +10,7 @@ from hil.assembly.computer import (
     planning_world,
     run_options,
 )
-from hil.assembly.simulator import SimulatorParts, build_simulator, scenario_world
+from hil.assembly.simulator import SimulatorParts, build_simulator, scenario_world, simulator_settings
 
 __all__ = ["SimulatorParts", "build", "build_simulator", "computer_config", "computer_settings", "max_time_step",
-           "planning_world", "run_options", "scenario_world"]
+           "planning_world", "run_options", "scenario_world", "simulator_settings"]

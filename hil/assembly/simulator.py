@@ -2,7 +2,9 @@
 
 `hil sim` (and through it every `hil run`) calls :func:`scenario_world` and :func:`build_simulator`;
 the command module parses options, handles signals and runs the loop, as `hil autopilot` does with
-:func:`hil.assembly.computer.build`.
+:func:`hil.assembly.computer.build`. The HIL configuration is mapped once onto the simulator's own
+root (:func:`simulator_settings`, a :class:`simulator.config.SimulatorSettings`), as the vessel
+computer's is onto :class:`autopilot_bridge.assembly.ComputerSettings`.
 """
 
 from __future__ import annotations
@@ -16,10 +18,22 @@ from hil.errors import ConfigError, UsageError
 if TYPE_CHECKING:
     from common.udp import UdpEndpoint
     from hil.settings import HilConfig
+    from simulator.config import SimulatorSettings
     from simulator.esc import EscBank
     from simulator.rangefinder import WorldMap
     from simulator.server import SimulatorServer
     from simulator.traffic import ShipSpec
+
+
+def simulator_settings(cfg: HilConfig) -> SimulatorSettings:
+    """The root of the simulator's configuration from the HIL configuration: its own sections, and the
+    vessel computer's MAVLink ids (the one peer whose commands it applies)."""
+    from simulator.config import PeerIds, SimulatorSettings
+
+    return SimulatorSettings(vessel=cfg.vessel, waves=cfg.waves, current=cfg.current, sensors=cfg.sensors,
+                             sim=cfg.sim, link=cfg.link, geodesy=cfg.geodesy, esc=cfg.esc, can=cfg.can,
+                             traffic=cfg.traffic, battery=cfg.battery,
+                             computer=PeerIds(cfg.autopilot.system_id, cfg.autopilot.component_id))
 
 
 @dataclass(frozen=True)
@@ -73,31 +87,33 @@ def build_simulator(cfg: HilConfig, world: WorldMap | None, traffic: tuple[ShipS
     from simulator.core import SimulatorCore
     from simulator.server import SimulatorServer
 
+    settings = simulator_settings(cfg)
     try:
-        core = SimulatorCore(cfg, world, traffic)
+        core = SimulatorCore(settings, world, traffic)
         check_covers = getattr(core.current, "check_covers", None)   # a current file: its time span
-        if check_covers is not None and cfg.sim.duration > 0:
-            check_covers(t=(0.0, cfg.sim.duration))
+        if check_covers is not None and settings.sim.duration > 0:
+            check_covers(t=(0.0, settings.sim.duration))
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     try:
-        endpoint = UdpEndpoint(cfg.link.commands_on, cfg.link.state_to)
+        endpoint = UdpEndpoint(settings.link.commands_on, settings.link.state_to)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     esc: EscBank | None = None
     try:
-        if cfg.can.actuators == "can":
+        if settings.can.actuators == "can":
             from common.can_params import open_bus
             from simulator.esc import EscBank, kernel_filters
 
-            esc = EscBank(open_bus(cfg.can, can_filters=kernel_filters(cfg.can)), cfg.can, cfg.esc, core.vessel)
+            can = settings.can
+            esc = EscBank(open_bus(can, can_filters=kernel_filters(can)), can, settings.esc, core.vessel)
             if can_record:
                 esc.applied_times.start(spill_to=can_record)
-        server = SimulatorServer(core, endpoint, lockstep=cfg.sim.lockstep, duration=cfg.sim.duration,
-                                 speedup=cfg.sim.speedup, lockstep_resend=cfg.sim.lockstep_resend,
-                                 progress=progress, esc=esc, can_lockstep_wait=cfg.can.lockstep_wait,
-                                 command_source=command_source, busy_poll=cfg.sim.lockstep_busy_poll,
-                                 pipeline=cfg.sim.lockstep_pipeline)
+        server = SimulatorServer(core, endpoint, lockstep=settings.sim.lockstep, duration=settings.sim.duration,
+                                 speedup=settings.sim.speedup, lockstep_resend=settings.sim.lockstep_resend,
+                                 progress=progress, esc=esc, can_lockstep_wait=settings.can.lockstep_wait,
+                                 command_source=command_source, busy_poll=settings.sim.lockstep_busy_poll,
+                                 pipeline=settings.sim.lockstep_pipeline)
     except ValueError as exc:
         endpoint.close()
         if esc is not None:

@@ -311,7 +311,7 @@ def _row(scenario: str, who: str, f: dict[str, Any]) -> str:
     return " ".join(f"{c:<15}" if i == 0 else f"{c:>8}" for i, c in enumerate(cells))
 
 
-def _fmt(v: Any) -> str:
+def _fmt(v: object) -> str:
     if v is None:
         return "-"
     return f"{v:.3g}" if isinstance(v, float) else str(v)

@@ -86,6 +86,7 @@ def leg(cfg: HilConfig, duration_s: float, rate: float, time_budget: bool, filte
     from autopilot_bridge.can_actuators import CanActuators
     from common import dronecan_codec as dc
     from common.can_params import open_bus
+    from hil.assembly.simulator import simulator_settings
     from simulator.core import Command, SimulatorCore
     from simulator.esc import EscBank, kernel_filters
 
@@ -96,7 +97,7 @@ def leg(cfg: HilConfig, duration_s: float, rate: float, time_budget: bool, filte
         channel = f"can-flood-{next(_channels)}"
         esc_bus, ap_bus, flood_bus = (can.Bus(interface="virtual", channel=channel) for _ in range(3))
     try:
-        core = SimulatorCore(cfg)
+        core = SimulatorCore(simulator_settings(cfg))
         esc = EscBank(esc_bus, cfg.can, cfg.esc, core.vessel)
         if not time_budget:
             esc.budget_s = float("inf")

@@ -85,7 +85,7 @@ class _Loop:
 
     def __init__(self, args: argparse.Namespace) -> None:
         from hil import scenario as scenarios
-        from hil.assembly import build
+        from hil.assembly import build, simulator_settings
         from hil.scenario import simulator_overrides
         from simulator.core import SimulatorCore
         from simulator.rangefinder import WorldMap
@@ -102,7 +102,8 @@ class _Loop:
         seed = [f"sim.seed={int(args.seed)}"]
         sim_cfg = load_settings(argparse.Namespace(config=args.config, overrides=list(args.overrides) + seed
                                                    + simulator_overrides(scen, base.current)))
-        self.core = SimulatorCore(sim_cfg, WorldMap(scen.truth_occ(), scen.resolution), tuple(scen.traffic))
+        self.core = SimulatorCore(simulator_settings(sim_cfg), WorldMap(scen.truth_occ(), scen.resolution),
+                                  tuple(scen.traffic))
         ap_cfg = load_settings(argparse.Namespace(config=args.config, overrides=list(args.overrides) + seed + [
             'autopilot.listen="127.0.0.1:0"', f'autopilot.actuators_to=["127.0.0.1:{port}"]']))
         self.ap, self.link = build(ap_cfg, args.scenario, lockstep=True)

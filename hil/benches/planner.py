@@ -355,7 +355,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _f(v: Any, fmt: str) -> str:
+def _f(v: object, fmt: str) -> str:
     width = int(fmt.split(".")[0] or 0)
     if v is None:
         return "-".rjust(width)

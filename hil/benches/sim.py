@@ -54,9 +54,10 @@ def bench_model(cfg: HilConfig, n: int) -> float:
 
 def bench_core(cfg: HilConfig, n: int) -> float:
     """Frames per second of SimulatorCore (step + frame encoding), no sockets."""
+    from hil.assembly.simulator import simulator_settings
     from simulator.core import Command, SimulatorCore
 
-    core = SimulatorCore(cfg)
+    core = SimulatorCore(simulator_settings(cfg))
     t0 = time.perf_counter()
     for _ in range(n):
         core.frame()

@@ -19,7 +19,7 @@ import signal
 import subprocess
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from common.tables import to_table
 from hil import processes
@@ -306,7 +306,7 @@ def human_summary(s: RunSummary) -> list[str]:
     (everything else: --json and summary.json)."""
     from hil.console import MAX_LINES, clip, fmt, nonzero_counters, wrap_items
 
-    def num(v: Any, unit: str = "", digits: str = ".3g") -> str:
+    def num(v: float | None, unit: str = "", digits: str = ".3g") -> str:
         return "-" if v is None else f"{v:{digits}}{unit}"
 
     outcome = "goal reached" if s.reached_goal else s.outcome.upper()

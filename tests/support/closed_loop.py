@@ -19,6 +19,7 @@ from scipy.ndimage import distance_transform_edt
 from autopilot_bridge.hil_link import GpsFix, SensorFrame
 from hil import scenario as scenarios
 from hil import settings
+from hil.assembly.simulator import simulator_settings
 from simulator.core import Command, SimulatorCore
 from support.vessel_harness import build_computer
 
@@ -46,7 +47,7 @@ class ClosedLoop:
         scen = scenarios.instance(scenarios.load_spec("harbour"), None, base.current)
         overrides = [o for o in scenarios.simulator_overrides(scen, base.current) if not o.startswith("sim.initial")]
         overrides += [f"sim.initial.x={start[0]!r}", f"sim.initial.y={start[1]!r}", f"sim.initial.psi={psi!r}"]
-        self.core = SimulatorCore(settings.load(None, overrides))
+        self.core = SimulatorCore(simulator_settings(settings.load(None, overrides)))
         self.ap, self.link, self.worker = build_computer()
 
     def step(self) -> None:
