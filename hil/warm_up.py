@@ -85,6 +85,12 @@ GROUPS: dict[str, Callable[[], None]] = {"planner": _planner, "vessel-computer":
 # What `hil run` compiles in the background on a cold cache: the vessel computer's groups (the
 # simulator's kernels take ~1 s and compile in the simulator's own process).
 RUN_GROUPS = ("planner", "vessel-computer")
+# The planner's group is the longest chain of a cold run (it ends last); in `hil run` the other
+# group runs at this nice level so that, on a machine with fewer free CPUs than compiling
+# processes, the planner's compile is not the one slowed down (docs/performance.md, "The first
+# run compiles").
+CRITICAL_GROUP = "planner"
+BACKGROUND_NICE = 10
 
 
 def lock_path(group: str) -> Path:
@@ -178,6 +184,8 @@ def start(groups: tuple[str, ...] = RUN_GROUPS, log_dir: Path | None = None,
     for group in groups:
         err = open(log_dir / f"compile-{group}.log", "w") if log_dir is not None else subprocess.DEVNULL
         extra = ["--algorithm", algorithm] if algorithm and group == "planner" else []
+        if group != CRITICAL_GROUP:
+            extra.append("--background")
         try:
             proc = subprocess.Popen([sys.executable, "-m", "hil.warm_up", *extra, group], cwd=REPO, text=True,
                                     stdout=subprocess.PIPE, stderr=err, stdin=subprocess.DEVNULL)
@@ -236,11 +244,13 @@ def main(argv: list[str]) -> int:
         at = args.index("--algorithm")
         _ALGORITHMS[:] = args[at + 1:at + 2] or [""]   # no name: a usage error below
         del args[at:at + 2]
-    names = [a for a in args if a not in ("--json", "--kernels")]
+    names = [a for a in args if a not in ("--json", "--kernels", "--background")]
     if len(names) != 1 or names[0] not in GROUPS or (_ALGORITHMS and _ALGORITHMS[0] not in ALGORITHM_NAMES):
-        print(f"usage: python -m hil.warm_up [--json] [--kernels] [--algorithm {{{','.join(ALGORITHM_NAMES)}}}] "
-              f"{{{','.join(GROUPS)}}}", file=sys.stderr)
+        print(f"usage: python -m hil.warm_up [--json] [--kernels] [--background] "
+              f"[--algorithm {{{','.join(ALGORITHM_NAMES)}}}] {{{','.join(GROUPS)}}}", file=sys.stderr)
         return 2
+    if "--background" in argv:
+        os.nice(BACKGROUND_NICE)
     if names[0] in numba_env.LOW_OPT_GROUPS:
         numba_env.apply()
     figures = compile_group(names[0], kernels="--kernels" in argv)
