@@ -35,15 +35,17 @@ REPO = Path(__file__).resolve().parent.parent
 READY = "locked"
 
 
-# `python -m hil.warm_up planner --algorithm NAME`: only that planner's kernels (`hil run` compiles
-# the algorithm it runs; the tree core of DDRRT* and that of RRT*/Informed RRT* are two kernels)
+# `python -m hil.warm_up --algorithm NAME GROUP`, as `hil run` starts its groups: only that planner's
+# kernels (the tree core of DDRRT* and that of RRT*/Informed RRT* are two kernels), the tree core in
+# the planner's group and the tree reuse (`seed_tree`, ~2 s) at the end of the vessel computer's,
+# off the planner's group, the longest chain.
 _ALGORITHMS: list[str] = []
 
 
 def _planner() -> None:
     import planner
 
-    planner.warm_up_info(tuple(_ALGORITHMS) or None)
+    planner.warm_up_info(tuple(_ALGORITHMS) or None, tree_reuse=not _ALGORITHMS)
 
 
 def _vessel_computer() -> None:
@@ -63,6 +65,10 @@ def _vessel_computer() -> None:
     grid = OccupancyGrid(occ, 0.5)
     grid.polyline_free(np.zeros((0, 2)))
     plan_chart_route(grid, np.array([[2.0, 10.0], [18.0, 10.0]]), 0.5)
+    if _ALGORITHMS:
+        import planner
+
+        planner.warm_up_tree_reuse(tuple(_ALGORITHMS))
 
 
 def _simulator() -> None:
@@ -90,7 +96,7 @@ RUN_GROUPS = ("planner", "vessel-computer")
 # processes, the planner's compile is not the one slowed down (docs/performance.md, "The first
 # run compiles").
 CRITICAL_GROUP = "planner"
-BACKGROUND_NICE = 10
+BACKGROUND_NICE = 5
 
 
 def lock_path(group: str) -> Path:
@@ -179,11 +185,12 @@ def start(groups: tuple[str, ...] = RUN_GROUPS, log_dir: Path | None = None,
           algorithm: str | None = None) -> list[subprocess.Popen]:
     """Start one compiling process per group and return once each holds its lock (so that a
     :func:`wait_for` that follows waits for it). Their stderr goes to ``log_dir/compile-GROUP.log``.
-    ``algorithm``: the planner group compiles only that planner's kernels (the one a run uses)."""
+    ``algorithm``: only that planner's kernels (the one a run uses), its tree reuse in the vessel
+    computer's group."""
     procs = []
     for group in groups:
         err = open(log_dir / f"compile-{group}.log", "w") if log_dir is not None else subprocess.DEVNULL
-        extra = ["--algorithm", algorithm] if algorithm and group == "planner" else []
+        extra = ["--algorithm", algorithm] if algorithm and group in ("planner", "vessel-computer") else []
         if group != CRITICAL_GROUP:
             extra.append("--background")
         try:
