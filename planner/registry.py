@@ -138,7 +138,9 @@ def warm_up_tree_reuse(algorithms: tuple[str, ...]) -> None:
     grid = OccupancyGrid(occ, 0.5)
     ref = np.array([[2.0, 10.0], [18.0, 10.0]])
     tree = (np.array([[2.0, 10.0], [3.0, 10.0], [4.0, 10.5]]), np.array([-1, 0, 1]))
-    for objective, field in (("length", None), ("current", GridField.uniform(0.3, 0.1))):
+    cases: tuple[tuple[Objective, GridField | None], ...] = (("length", None),
+                                                            ("current", GridField.uniform(0.3, 0.1)))
+    for objective, field in cases:
         params = PlannerParams(max_nodes=2000, objective=objective)
         for name in algorithms:
             problem = PlanningProblem(grid, (2.0, 10.0), (18.0, 10.0), start_heading=0.0, field=field,
