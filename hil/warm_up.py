@@ -89,14 +89,11 @@ def _simulator() -> None:
 GROUPS: dict[str, Callable[[], None]] = {"planner": _planner, "vessel-computer": _vessel_computer,
                                          "simulator": _simulator}
 # What `hil run` compiles in the background on a cold cache: the vessel computer's groups (the
-# simulator's kernels take ~1 s and compile in the simulator's own process).
+# simulator's kernels take ~1 s and compile in the simulator's own process). With the tree reuse in
+# the vessel computer's group their compiles are ~12 and ~11 s of CPU, so that neither ends long
+# after the other at equal priority (a nice level on one of them starved it behind other load:
+# docs/performance.md, "The first run compiles").
 RUN_GROUPS = ("planner", "vessel-computer")
-# The planner's group is the longest chain of a cold run (it ends last); in `hil run` the other
-# group runs at this nice level so that, on a machine with fewer free CPUs than compiling
-# processes, the planner's compile is not the one slowed down (docs/performance.md, "The first
-# run compiles").
-CRITICAL_GROUP = "planner"
-BACKGROUND_NICE = 5
 
 
 def lock_path(group: str) -> Path:
@@ -191,8 +188,6 @@ def start(groups: tuple[str, ...] = RUN_GROUPS, log_dir: Path | None = None,
     for group in groups:
         err = open(log_dir / f"compile-{group}.log", "w") if log_dir is not None else subprocess.DEVNULL
         extra = ["--algorithm", algorithm] if algorithm and group in ("planner", "vessel-computer") else []
-        if group != CRITICAL_GROUP:
-            extra.append("--background")
         try:
             proc = subprocess.Popen([sys.executable, "-m", "hil.warm_up", *extra, group], cwd=REPO, text=True,
                                     stdout=subprocess.PIPE, stderr=err, stdin=subprocess.DEVNULL)
@@ -251,13 +246,11 @@ def main(argv: list[str]) -> int:
         at = args.index("--algorithm")
         _ALGORITHMS[:] = args[at + 1:at + 2] or [""]   # no name: a usage error below
         del args[at:at + 2]
-    names = [a for a in args if a not in ("--json", "--kernels", "--background")]
+    names = [a for a in args if a not in ("--json", "--kernels")]
     if len(names) != 1 or names[0] not in GROUPS or (_ALGORITHMS and _ALGORITHMS[0] not in ALGORITHM_NAMES):
-        print(f"usage: python -m hil.warm_up [--json] [--kernels] [--background] "
+        print(f"usage: python -m hil.warm_up [--json] [--kernels] "
               f"[--algorithm {{{','.join(ALGORITHM_NAMES)}}}] {{{','.join(GROUPS)}}}", file=sys.stderr)
         return 2
-    if "--background" in argv:
-        os.nice(BACKGROUND_NICE)
     if names[0] in numba_env.LOW_OPT_GROUPS:
         numba_env.apply()
     figures = compile_group(names[0], kernels="--kernels" in argv)

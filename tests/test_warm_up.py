@@ -54,20 +54,6 @@ def test_lock_files_are_per_numba_cache(monkeypatch, tmp_path):
     assert warm_up.lock_path("planner") != a != warm_up.lock_path("vessel-computer")
 
 
-def test_in_a_run_only_the_planners_group_compiles_at_full_priority(tmp_path, monkeypatch):
-    """The planner's group is a cold run's longest chain: the other group yields the CPU to it."""
-    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
-    procs = warm_up.start(log_dir=tmp_path, algorithm="ddrrt-star")
-    try:
-        ours = os.getpriority(os.PRIO_PROCESS, 0)
-        levels = {g: os.getpriority(os.PRIO_PROCESS, p.pid) for g, p in zip(warm_up.RUN_GROUPS, procs, strict=True)}
-    finally:
-        for p in procs:
-            p.kill()
-            p.wait()
-    assert levels == {"planner": ours, "vessel-computer": min(19, ours + warm_up.BACKGROUND_NICE)}
-
-
 def test_an_unknown_group_is_a_usage_error():
     r = subprocess.run([sys.executable, "-m", "hil.warm_up", "planer"], cwd=REPO, capture_output=True, text=True,
                        timeout=60)
