@@ -122,6 +122,7 @@ def _planner_worker(world: World, start: CycleInput, grace_s: float, planner_fac
     pays for it."""
     t0 = time.monotonic()
     wait_for("planner")
+    wait_for("vessel-computer")   # on a cold cache it compiles the planner's tree reuse (hil/warm_up.py)
     online_cycle_handler(world, start)
     spent = time.monotonic() - t0
     if spent > 1.0:

@@ -102,6 +102,39 @@ def arc_cells(bearings, d: np.ndarray, north: float, east: float, psi: float, se
 
 
 @njit(cache=True)
+def _sift_down(a: np.ndarray, root: int, end: int) -> None:
+    """Restore the max-heap below ``root`` within ``a[:end]``."""
+    while True:
+        child = 2 * root + 1
+        if child >= end:
+            return
+        if child + 1 < end and a[child + 1] > a[child]:
+            child += 1
+        if a[root] >= a[child]:
+            return
+        a[root], a[child] = a[child], a[root]
+        root = child
+
+
+@njit(cache=True)
+def _sort_unique(a: np.ndarray, k: int) -> int:
+    """Sort ``a[:k]`` in place (heapsort) and move its distinct values to the front, ascending;
+    returns how many: ``a[:returned]`` is ``np.unique(a[:k])``. Written out because numba's
+    ``np.unique`` brings its quicksort and comparison helpers: ~2 s of a cold compile for this."""
+    for start in range(k // 2 - 1, -1, -1):
+        _sift_down(a, start, k)
+    for end in range(k - 1, 0, -1):
+        a[0], a[end] = a[end], a[0]
+        _sift_down(a, np.int64(0), end)
+    u = 0
+    for i in range(k):
+        if u == 0 or a[i] != a[u - 1]:
+            a[u] = a[i]
+            u += 1
+    return u
+
+
+@njit(cache=True)
 def _place(r: np.ndarray, c: np.ndarray, explained_map: np.ndarray, hits: np.ndarray, confirmed: np.ndarray,
            confirm_hits: int) -> tuple[np.ndarray, int, int]:
     """The arcs' cells ``r, c`` (R, n_arc) of one scan on the grid: a return whose arc leaves the
@@ -131,10 +164,11 @@ def _place(r: np.ndarray, c: np.ndarray, explained_map: np.ndarray, hits: np.nda
                 if 0 <= ri < rows and 0 <= ci < cols:
                     cells[k] = ri * cols + ci
                     k += 1
-    cells = np.unique(cells[:k])
-    new = np.empty((len(cells), 2), np.int32)
+    u = _sort_unique(cells, k)
+    new = np.empty((u, 2), np.int32)
     m = 0
-    for lin in cells:
+    for a in range(u):
+        lin = cells[a]
         ri, ci = lin // cols, lin % cols
         if confirmed[ri, ci]:
             continue

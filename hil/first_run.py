@@ -29,8 +29,11 @@ PLANNER_SOURCES = ("planner/_kernels.py", "planner/_tree.py")
 # ~25 s before, 0.9x that after (the planner's group: 27.1 -> 24.4 s). Since 784efb2 a run and
 # `hil plan` compile only the tree core of the planner they run: cold `hil run --duration 1`
 # 36.7-43.2 s of CPU (mean 40.3, 0.92x main's 43.6, three interleaved rounds at load 4); the planner's
-# group 0.85x (18.3 -> 15.6 s), so `hil plan` ~19 s (22 x 0.85, not measured separately).
-COLD_COMPILE_S = 40
+# group 0.85x (18.3 -> 15.6 s), so `hil plan` ~19 s (22 x 0.85, not measured separately). Since
+# d979b45 (no np.unique in the sensed-obstacle map, no Informed RRT* sampler in grow_ddrrt) a cold
+# `hil run --duration 1` took 31.6-33.1 s of CPU against main's 35.3-40.3 s (four interleaved
+# rounds at load 0.6-2.5), so ~32 s; the planner's group 13.7 s (was 14.3 s), so `hil plan` ~19 s still.
+COLD_COMPILE_S = 32
 COLD_PLAN_COMPILE_S = 19
 
 

@@ -35,15 +35,17 @@ REPO = Path(__file__).resolve().parent.parent
 READY = "locked"
 
 
-# `python -m hil.warm_up planner --algorithm NAME`: only that planner's kernels (`hil run` compiles
-# the algorithm it runs; the tree core of DDRRT* and that of RRT*/Informed RRT* are two kernels)
+# `python -m hil.warm_up --algorithm NAME GROUP`, as `hil run` starts its groups: only that planner's
+# kernels (the tree core of DDRRT* and that of RRT*/Informed RRT* are two kernels), the tree core in
+# the planner's group and the tree reuse (`seed_tree`, ~2 s) at the end of the vessel computer's,
+# off the planner's group, the longest chain.
 _ALGORITHMS: list[str] = []
 
 
 def _planner() -> None:
     import planner
 
-    planner.warm_up_info(tuple(_ALGORITHMS) or None)
+    planner.warm_up_info(tuple(_ALGORITHMS) or None, tree_reuse=not _ALGORITHMS)
 
 
 def _vessel_computer() -> None:
@@ -63,6 +65,10 @@ def _vessel_computer() -> None:
     grid = OccupancyGrid(occ, 0.5)
     grid.polyline_free(np.zeros((0, 2)))
     plan_chart_route(grid, np.array([[2.0, 10.0], [18.0, 10.0]]), 0.5)
+    if _ALGORITHMS:
+        import planner
+
+        planner.warm_up_tree_reuse(tuple(_ALGORITHMS))
 
 
 def _simulator() -> None:
@@ -84,7 +90,10 @@ def _simulator() -> None:
 GROUPS: dict[str, Callable[[], None]] = {"planner": _planner, "vessel-computer": _vessel_computer,
                                          "simulator": _simulator}
 # What `hil run` compiles in the background on a cold cache: the vessel computer's groups (the
-# simulator's kernels take ~1 s and compile in the simulator's own process).
+# simulator's kernels take ~1 s and compile in the simulator's own process). With the tree reuse in
+# the vessel computer's group their compiles are ~12 and ~11 s of CPU, so that neither ends long
+# after the other at equal priority (a nice level on one of them starved it behind other load:
+# docs/performance.md, "The first run compiles").
 RUN_GROUPS = ("planner", "vessel-computer")
 
 
@@ -174,11 +183,12 @@ def start(groups: tuple[str, ...] = RUN_GROUPS, log_dir: Path | None = None,
           algorithm: str | None = None) -> list[subprocess.Popen]:
     """Start one compiling process per group and return once each holds its lock (so that a
     :func:`wait_for` that follows waits for it). Their stderr goes to ``log_dir/compile-GROUP.log``.
-    ``algorithm``: the planner group compiles only that planner's kernels (the one a run uses)."""
+    ``algorithm``: only that planner's kernels (the one a run uses), its tree reuse in the vessel
+    computer's group."""
     procs = []
     for group in groups:
         err = open(log_dir / f"compile-{group}.log", "w") if log_dir is not None else subprocess.DEVNULL
-        extra = ["--algorithm", algorithm] if algorithm and group == "planner" else []
+        extra = ["--algorithm", algorithm] if algorithm and group in ("planner", "vessel-computer") else []
         try:
             proc = subprocess.Popen([sys.executable, "-m", "hil.warm_up", *extra, group], cwd=REPO, text=True,
                                     stdout=subprocess.PIPE, stderr=err, stdin=subprocess.DEVNULL)
@@ -239,8 +249,8 @@ def main(argv: list[str]) -> int:
         del args[at:at + 2]
     names = [a for a in args if a not in ("--json", "--kernels")]
     if len(names) != 1 or names[0] not in GROUPS or (_ALGORITHMS and _ALGORITHMS[0] not in ALGORITHM_NAMES):
-        print(f"usage: python -m hil.warm_up [--json] [--kernels] [--algorithm {{{','.join(ALGORITHM_NAMES)}}}] "
-              f"{{{','.join(GROUPS)}}}", file=sys.stderr)
+        print(f"usage: python -m hil.warm_up [--json] [--kernels] "
+              f"[--algorithm {{{','.join(ALGORITHM_NAMES)}}}] {{{','.join(GROUPS)}}}", file=sys.stderr)
         return 2
     if names[0] in numba_env.LOW_OPT_GROUPS:
         numba_env.apply()

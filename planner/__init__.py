@@ -52,14 +52,22 @@ def warm_up() -> float:
     return _warm_up()
 
 
-def warm_up_info(algorithms: tuple[str, ...] | None = None):
+def warm_up_info(algorithms: tuple[str, ...] | None = None, tree_reuse: bool = True):
     """:func:`warm_up`, returning ``planner.registry.WarmUp(seconds, compiled)``: ``compiled`` is
     True when numba had to compile (a cold cache) rather than load machine code. ``algorithms``:
-    only these planners' kernels (default: every registered planner's)."""
+    only these planners' kernels (default: every registered planner's); ``tree_reuse`` False:
+    without the searches from a reused tree (see ``planner.registry.warm_up_info``)."""
     from planner.registry import warm_up_info as _info
 
-    return _info(algorithms)
+    return _info(algorithms, tree_reuse)
 
 
-__all__ = ["warm_up", "warm_up_info", "ALGORITHMS", "REGISTRY", "Planner", "PlannerParams", "PlannerResult",
-           "PlanningProblem", "Termination", "make_planner"]
+def warm_up_tree_reuse(algorithms: tuple[str, ...]) -> None:
+    """Compile only what a search from a reused tree adds (``planner.registry.warm_up_tree_reuse``)."""
+    from planner.registry import warm_up_tree_reuse as _reuse
+
+    _reuse(algorithms)
+
+
+__all__ = ["warm_up", "warm_up_info", "warm_up_tree_reuse", "ALGORITHMS", "REGISTRY", "Planner", "PlannerParams",
+           "PlannerResult", "PlanningProblem", "Termination", "make_planner"]

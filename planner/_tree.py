@@ -925,6 +925,18 @@ def _sample(cfg, tree, state):
 
 
 @njit(cache=True, inline="always")
+def _sample_ddrrt(cfg, state):
+    """:func:`_sample` for DDRRT* (``cfg.algo`` DDRRT_STAR: no informed branch), the same draws. Its
+    own function so that ``grow_ddrrt`` does not compile the Informed RRT* sampler it never runs."""
+    if cfg.use_png != 0 and state.png_hit == 0 and np.random.random() < cfg.png_p:
+        return cfg.png_x, cfg.png_y, True
+    if np.random.random() < cfg.goal_bias:
+        return cfg.gx, cfg.gy, False
+    x, y = _uniform(cfg)
+    return x, y, False
+
+
+@njit(cache=True, inline="always")
 def _steer(q0, d0, sx, sy, X, step):
     """q_new: the sample, or the point a step from node q0 (d0 from it) towards it."""
     if d0 > step:
@@ -1170,7 +1182,7 @@ def grow_ddrrt(world, cfg_a, tree, state_a, scratch, max_iter, deadline_ns, stop
         if code >= 0:
             return code
         state.iter += 1
-        sx, sy, from_png = _sample(cfg, tree, state)
+        sx, sy, from_png = _sample_ddrrt(cfg, state)
         new = _ddrrt_extend(sx, sy, from_png, world, cfg, tree, state, buf, dv)
         if new < 0:
             continue

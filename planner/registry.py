@@ -61,13 +61,16 @@ def _cache_misses() -> int:
     return n
 
 
-def warm_up_info(algorithms: tuple[str, ...] | None = None) -> WarmUp:
+def warm_up_info(algorithms: tuple[str, ...] | None = None, tree_reuse: bool = True) -> WarmUp:
     """Load (or, with a cold cache, compile) every compiled function by solving tiny problems
     with every registered planner (or only those named in ``algorithms``: a process that runs one
     planner compiles only its kernels), with and without a current field, as the online loop does
     (heading, reference path, perceptual domain). Only the first call in a process does work;
     later calls return the first call's record. The first solve in a process otherwise pays
-    ~0.2 s of cache loading (~7 s of compilation with a cold cache) inside its time budget."""
+    ~0.2 s of cache loading (~7 s of compilation with a cold cache) inside its time budget.
+    ``tree_reuse`` False: not the searches from a reused tree (``seed_tree``), which another
+    process compiles at the same time (:func:`warm_up_tree_reuse`); such a call is not recorded
+    as a warm-up."""
     global _WARM
     for name in algorithms or ():
         planner_class(name)   # ValueError for an unknown name
@@ -102,18 +105,48 @@ def warm_up_info(algorithms: tuple[str, ...] | None = None) -> WarmUp:
                 problem = PlanningProblem(grid, (2.0, 10.0), (18.0, 10.0), start_heading=0.0, field=field,
                                           reference_path=ref, domain_center=(10.0, 10.0), domain_radius=12.0)
                 r = make_planner(name, params).solve(problem, Termination.iterations(300))
-                if not repair:   # a search from a reused tree (online tree_reuse): seed_tree too
+                if not repair and tree_reuse:   # a search from a reused tree (online tree_reuse): seed_tree too
                     reuse = dataclasses.replace(problem, initial_tree=(r.tree_nodes, r.tree_parents))
                     make_planner(name, params).solve(reuse, Termination.iterations(10))
     compiled_clock_ok()
     compiled_cpu_clock_ok()  # else the first thread-CPU deadline checks its clock inside its budget
     record = WarmUp(seconds=time.monotonic() - t0, compiled=_cache_misses() > misses0)
+    if not tree_reuse:
+        return record
     if algorithms is None:
         _WARM = record
     else:
         _WARMED.update(names)
         _WARMED_RECORD[:] = [record]
     return record
+
+
+def warm_up_tree_reuse(algorithms: tuple[str, ...]) -> None:
+    """Compile (or load) only what a search from a reused tree adds (``seed_tree``), with the
+    argument types :func:`warm_up_info` gives it, without running a search: searches of 0
+    iterations from a 3-node tree never call the tree core. For a process that compiles beside
+    one running ``warm_up_info(algorithms, tree_reuse=False)``."""
+    from planner.field import GridField
+    from planner.gridmap import OccupancyGrid
+    from planner.problem import PlanningProblem
+    from planner.termination import Termination
+
+    for name in algorithms:
+        planner_class(name)   # ValueError for an unknown name
+    occ = np.zeros((40, 40), dtype=bool)
+    occ[10:30, 19:21] = True
+    grid = OccupancyGrid(occ, 0.5)
+    ref = np.array([[2.0, 10.0], [18.0, 10.0]])
+    tree = (np.array([[2.0, 10.0], [3.0, 10.0], [4.0, 10.5]]), np.array([-1, 0, 1]))
+    cases: tuple[tuple[Objective, GridField | None], ...] = (("length", None),
+                                                            ("current", GridField.uniform(0.3, 0.1)))
+    for objective, field in cases:
+        params = PlannerParams(max_nodes=2000, objective=objective)
+        for name in algorithms:
+            problem = PlanningProblem(grid, (2.0, 10.0), (18.0, 10.0), start_heading=0.0, field=field,
+                                      reference_path=ref, domain_center=(10.0, 10.0), domain_radius=12.0,
+                                      initial_tree=tree)
+            make_planner(name, params).solve(problem, Termination.iterations(0))
 
 
 def warm_up() -> float:

@@ -297,3 +297,18 @@ def test_compiled_add_scan_places_what_the_numpy_version_placed(seed):
             assert np.array_equal(fast.hits, ref.hits) and np.array_equal(fast.confirmed, ref.confirmed)
             assert fast.summary() == ref.summary() and fast._cells == ref._cells
         assert ref.count > 0 or not (~chart).any()
+
+
+def test_sort_unique_is_numpys_unique():
+    """The sensed-obstacle map's own sort-and-dedupe (it replaced np.unique for a shorter cold compile):
+    empty, one value, all equal, sorted, reversed and random cell indices with repeats."""
+    from autopilot_bridge.obstacle_map import _sort_unique
+
+    rng = np.random.default_rng(5)
+    cases = [np.zeros(0, np.int64), np.array([7]), np.full(9, 3), np.arange(20), np.arange(20)[::-1].copy()]
+    cases += [rng.integers(0, hi, n) for hi, n in ((3, 50), (1000, 300), (10**9, 64), (40, 1))]
+    for a in cases:
+        buf = np.concatenate([a, rng.integers(0, 5, 4)]).astype(np.int64)   # values past k stay untouched
+        tail = buf[len(a):].copy()
+        u = _sort_unique(buf, len(a))
+        assert np.array_equal(buf[:u], np.unique(a)) and np.array_equal(buf[len(a):], tail)

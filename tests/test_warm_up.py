@@ -88,8 +88,9 @@ def test_after_the_groups_the_vessel_computer_compiles_nothing(tmp_path):
     every kernel from the cache, none is compiled again. Several minutes of CPU on a cold cache."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
     for group in ("simulator", *warm_up.RUN_GROUPS):   # the simulator's group holds the geodesy
-        # as `hil run` starts them: the planner's group compiles only the configured planner's tree core
-        algorithm = ["--algorithm", "ddrrt-star"] if group == "planner" else []
+        # as `hil run` starts them: only the configured planner's tree core, its tree reuse (seed_tree)
+        # in the vessel computer's group; the build below then compiles nothing (the types match)
+        algorithm = ["--algorithm", "ddrrt-star"] if group in ("planner", "vessel-computer") else []
         r = subprocess.run([sys.executable, "-m", "hil.warm_up", "--json", *algorithm, group], cwd=REPO, env=env,
                            capture_output=True, text=True, timeout=900)
         assert r.returncode == 0, r.stderr[-2000:]
@@ -170,6 +171,25 @@ def test_a_run_compiles_only_the_tree_core_of_its_planner(algorithm, kernels):
                        timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     assert json.loads(r.stdout.splitlines()[-1]) == kernels
+
+
+REUSE_ONLY = textwrap.dedent("""
+    import json, sys
+    import planner
+    from planner import _tree
+    planner.warm_up_tree_reuse((sys.argv[1],))
+    print(json.dumps([len(_tree.grow_ddrrt.signatures), len(_tree.grow_rrt.signatures),
+                      len(_tree.seed_tree.signatures)]))
+""")
+
+
+def test_the_tree_reuse_compiles_without_the_tree_core():
+    """The vessel computer's group compiles `seed_tree` while the planner's compiles the tree core:
+    searches of 0 iterations from a reused tree never call (so never compile) a tree core."""
+    r = subprocess.run([sys.executable, "-c", REUSE_ONLY, "ddrrt-star"], cwd=REPO, capture_output=True, text=True,
+                       timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert json.loads(r.stdout.splitlines()[-1]) == [0, 0, 1]
 
 
 def test_an_unknown_planner_is_refused():
