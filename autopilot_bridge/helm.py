@@ -29,6 +29,8 @@ from autopilot_bridge.control import (
 from autopilot_bridge.course import Course
 from autopilot_bridge.current_estimate import CurrentObserver
 from autopilot_bridge.guidance import GuidanceOutput
+from autopilot_bridge.keep_off import MARGIN as CLEAR_MARGIN
+from autopilot_bridge.keep_off import REACH as CLEAR_REACH
 from autopilot_bridge.keep_off import KeepOff, clear_point
 from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavState
@@ -56,8 +58,6 @@ CELL_SLACK = 0.1              # m: a way along a wall that only crosses the char
 BLOCKED_HOLD_S = 5.0          # s: a blockage keeps station at least this long (no flicker at its edge)
 BLOCKED_TELL_S = 10.0         # s between two events of a blockage
 RETREAT_RANGE = 2.0           # m: how far a blocked boat may move off to keep station clear of the obstacle
-STATION_MARGIN = 0.5          # m beyond the safety radius that a mode's station point is moved to (keep_off.MARGIN)
-STATION_REACH = 3.0           # m: how far it may be moved
 ARRIVAL_DECELERATION = 0.25   # m/s^2: half the speed reference model's limit (max_acceleration 0.5)
 MANUAL_STICK_TIMEOUT_S = 1.0   # wall s: an older MANUAL_CONTROL is no stick (MANUAL then holds)
 
@@ -306,11 +306,11 @@ class Helm:
         return self._drive(s, dt, psi_ref, u_ref, u_current, yaw_limit=self.turn_on_the_spot)
 
     def station_point(self, point: tuple[float, float]) -> tuple[float, float]:
-        """Where a mode asked to keep station at ``point`` (NED m) keeps it: there, or, inside ``STATION_MARGIN``
-        beyond the safety radius of an obstacle, the nearest point within ``STATION_REACH`` that is that clear
+        """Where a mode asked to keep station at ``point`` (NED m) keeps it: there, or, inside ``keep_off.MARGIN``
+        beyond the safety radius of an obstacle, the nearest point within ``keep_off.REACH`` that is that clear
         (:func:`autopilot_bridge.keep_off.clear_point`). Held 1.5 m off the breakwater, a LOITER entered there
         was set onto it (the chaos hour, seed 31, at f5d6fd1)."""
-        return clear_point(self.grid, point, self.safety_radius + STATION_MARGIN, STATION_REACH)
+        return clear_point(self.grid, point, self.safety_radius + CLEAR_MARGIN, CLEAR_REACH)
 
     def _drive(self, s: NavState, dt: float, psi_ref: float, u_ref: float, u_current: float,
                r_ref: float = 0.0, yaw_limit: float = math.inf) -> Thrust:

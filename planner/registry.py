@@ -18,6 +18,7 @@ from planner.params import ALGORITHM_NAMES, ENTRIES, REGISTRY, Objective, Planne
 if TYPE_CHECKING:
     from planner.core import TreePlanner
     from planner.field import GridField
+    from planner.problem import PlanningProblem
 
 
 def planner_class(name: str) -> type[TreePlanner]:
@@ -80,30 +81,21 @@ def warm_up_info(algorithms: tuple[str, ...] | None = None, tree_reuse: bool = T
         if set(algorithms) <= _WARMED:
             return _WARMED_RECORD[0]
     from planner.core import compiled_clock_ok, compiled_cpu_clock_ok
-    from planner.field import GridField
-    from planner.gridmap import OccupancyGrid
-    from planner.problem import PlanningProblem
     from planner.termination import Termination
 
     t0 = time.monotonic()
     misses0 = _cache_misses()
-    occ = np.zeros((40, 40), dtype=bool)
-    occ[10:30, 19:21] = True
-    grid = OccupancyGrid(occ, 0.5)
+    problems = _warm_up_problems()
+    grid = problems[0][1].grid
     grid.segment_free(1.0, 1.0, 18.0, 18.0)
-    ref = np.array([[2.0, 10.0], [18.0, 10.0]])
-    grid.polyline_free(ref)
-    cases: tuple[tuple[Objective, GridField | None], ...] = (("length", None),
-                                                            ("current", GridField.uniform(0.3, 0.1)))
+    grid.polyline_free(np.array([[2.0, 10.0], [18.0, 10.0]]))
     names = [e.name for e in REGISTRY if algorithms is None or e.name in algorithms]
-    for objective, field in cases:
+    for objective, problem in problems:
         for repair in (False, True):
             params = PlannerParams(max_nodes=2000, objective=objective, png_repair=repair)
             for name in names:
                 if repair and not planner_class(name).uses_png:
                     continue
-                problem = PlanningProblem(grid, (2.0, 10.0), (18.0, 10.0), start_heading=0.0, field=field,
-                                          reference_path=ref, domain_center=(10.0, 10.0), domain_radius=12.0)
                 r = make_planner(name, params).solve(problem, Termination.iterations(300))
                 if not repair and tree_reuse:   # a search from a reused tree (online tree_reuse): seed_tree too
                     reuse = dataclasses.replace(problem, initial_tree=(r.tree_nodes, r.tree_parents))
@@ -126,27 +118,34 @@ def warm_up_tree_reuse(algorithms: tuple[str, ...]) -> None:
     argument types :func:`warm_up_info` gives it, without running a search: searches of 0
     iterations from a 3-node tree never call the tree core. For a process that compiles beside
     one running ``warm_up_info(algorithms, tree_reuse=False)``."""
-    from planner.field import GridField
-    from planner.gridmap import OccupancyGrid
-    from planner.problem import PlanningProblem
     from planner.termination import Termination
 
     for name in algorithms:
         planner_class(name)   # ValueError for an unknown name
+    tree = (np.array([[2.0, 10.0], [3.0, 10.0], [4.0, 10.5]]), np.array([-1, 0, 1]))
+    for objective, problem in _warm_up_problems():
+        params = PlannerParams(max_nodes=2000, objective=objective)
+        for name in algorithms:
+            make_planner(name, params).solve(dataclasses.replace(problem, initial_tree=tree),
+                                             Termination.iterations(0))
+
+
+def _warm_up_problems() -> list[tuple[Objective, PlanningProblem]]:
+    """The warm-up's tiny problems, one per objective: a 20 m square with a wall across it, from (2, 10) to
+    (18, 10) m along a reference path, in still water (length) and in a uniform current (current)."""
+    from planner.field import GridField
+    from planner.gridmap import OccupancyGrid
+    from planner.problem import PlanningProblem
+
     occ = np.zeros((40, 40), dtype=bool)
     occ[10:30, 19:21] = True
     grid = OccupancyGrid(occ, 0.5)
     ref = np.array([[2.0, 10.0], [18.0, 10.0]])
-    tree = (np.array([[2.0, 10.0], [3.0, 10.0], [4.0, 10.5]]), np.array([-1, 0, 1]))
     cases: tuple[tuple[Objective, GridField | None], ...] = (("length", None),
                                                             ("current", GridField.uniform(0.3, 0.1)))
-    for objective, field in cases:
-        params = PlannerParams(max_nodes=2000, objective=objective)
-        for name in algorithms:
-            problem = PlanningProblem(grid, (2.0, 10.0), (18.0, 10.0), start_heading=0.0, field=field,
-                                      reference_path=ref, domain_center=(10.0, 10.0), domain_radius=12.0,
-                                      initial_tree=tree)
-            make_planner(name, params).solve(problem, Termination.iterations(0))
+    return [(objective, PlanningProblem(grid, (2.0, 10.0), (18.0, 10.0), start_heading=0.0, field=field,
+                                        reference_path=ref, domain_center=(10.0, 10.0), domain_radius=12.0))
+            for objective, field in cases]
 
 
 def warm_up() -> float:
