@@ -289,3 +289,55 @@ def test_mavproxy_guided_then_disarm_beside_the_breakwater_is_refused_and_disarm
         watcher.close()
         mp.close()
         stop_run(proc)
+
+
+def test_mavproxy_mode_changes_every_second_beside_the_breakwater_keep_the_boat_off_it(tmp_path):
+    """Issue 31, the chaos hour's last collisions flown by hand with MAVProxy: GUIDED to a target 2.5 m
+    (cell-centre measure) south of the breakwater, where the harbour's current sets north onto it, then
+    `mode LOITER`, `mode HOLD`, `mode MANUAL` (no stick: HOLD) and `mode GUIDED` in turn, each taken as soon
+    as MAVProxy printed the last one's ACCEPTED, for a minute of vehicle time. MAVProxy shows each mode
+    taken; a second ground station watching GLOBAL_POSITION_INT sees the hull's centre stay clear of what
+    `hil run`'s judge calls a collision (1.25 m), and the run does not end."""
+    from support.closed_loop import COLLISION_CLEARANCE, clearance
+
+    target = (105.9, 92.0)
+    port = free_udp_port()
+    proc = start_run(tmp_path / "run", "--scenario", "harbour", "--duration", "5000", "--wait-for-arm",
+                     "--speedup", "4", "--gcs", f"udpin:127.0.0.1:{port}")
+    mp = Console([MAVPROXY, f"--master=udpout:127.0.0.1:{port}", "--source-system=255",
+                  "--default-modules=mode,arm,cmdlong,wp", f"--state-basedir={tmp_path / 'mavproxy'}"], tmp_path)
+    watcher = Gcs(f"udpout:127.0.0.1:{port}", sysid=254)
+    try:
+        mp.expect("Detected vehicle 1:1", timeout=240)
+        assert watcher.connect(60) is not None and watcher.recv("GLOBAL_POSITION_INT", 60) is not None
+        mp.send("arm throttle")
+        mp.expect("COMPONENT_ARM_DISARM: ACCEPTED")
+        mp.send("mode GUIDED")
+        mp.expect("DO_SET_MODE: ACCEPTED")
+        lat, lon = GEO.sea_level_to_geodetic(*target)
+        mp.send("set guided_use_reposition 0")
+        mp.send(f"guided {lat:.7f} {lon:.7f} 0")
+        mp.expect("TYPE_MISSION: ACCEPTED")
+
+        def ned(p) -> tuple[float, float]:
+            return GEO.geodetic_to_sea_level(p.lat * 1e-7, p.lon * 1e-7)
+        arrived = watcher.recv("GLOBAL_POSITION_INT", 240, lambda p: math.dist(ned(p), target) <= 3.0)
+        assert arrived is not None
+        t0, worst, k = arrived.time_boot_ms, math.inf, 0
+        modes = ("LOITER", "HOLD", "MANUAL", "GUIDED")
+        while True:
+            mp.send(f"mode {modes[k % len(modes)]}")
+            mp.expect("DO_SET_MODE: ACCEPTED")
+            k += 1
+            p = watcher.recv("GLOBAL_POSITION_INT", 10)
+            assert p is not None, "the run stopped streaming"
+            worst = min(worst, clearance(*ned(p)))
+            if p.time_boot_ms - t0 > 60_000:
+                break
+        assert k >= 8, k
+        assert worst > COLLISION_CLEARANCE, worst
+        assert proc.poll() is None
+    finally:
+        watcher.close()
+        mp.close()
+        stop_run(proc)
