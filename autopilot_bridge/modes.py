@@ -16,7 +16,9 @@ comes from (:meth:`RoverMode.output`):
   of the paper) plans local paths along the global reference path [position, waypoints of the leg...].
 * RTL (11): reference path [position, home]; keeps station at home (``mission_done``).
 * GUIDED (15): go to the last goto target (MAV_CMD_DO_REPOSITION, SET_POSITION_TARGET_GLOBAL_INT) and
-  keep station there; without a target the thrusters are at zero.
+  keep station there; without a target, keep station where the mode was entered, as LOITER does (Rover's
+  ``ModeGuided::_enter`` starts loitering on a boat: ``is_boat()`` -> ``start_loiter()``; a boat left at
+  zero thrust drifts with the current).
 
 Disarmed means zero thrust whatever the mode. All positions NED metres.
 """
@@ -147,10 +149,11 @@ class ModeGuided(RoverMode):
     number, flags, needs_position, drives = Mode.GUIDED, _GUIDED_FLAGS, True, True
 
     def enter(self, v: Vehicle, position: tuple[float, float] | None) -> tuple[bool, str]:
-        v.route = None
+        assert position is not None  # needs_position: Vehicle.set_mode checked it
         if v.guided_target is not None:
-            assert position is not None  # needs_position: Vehicle.set_mode checked it
             v.new_route([position, v.guided_target], v.default_radius)
+        else:
+            v.new_route([position, position], v.default_radius, loiter=True)
         return True, self.name
 
 

@@ -171,7 +171,7 @@ def test_vehicle_modes_need_what_they_need_and_disarmed_means_no_thrust():
     assert v.wants_thrust() and v.route.path.tolist()[0] == [0.0, 0.0] and len(v.route.path) == 5
     assert v.set_mode(Mode.HOLD, (0.0, 0.0))[0] and not v.wants_thrust()
     assert v.set_mode(Mode.RTL, (0.0, 30.0))[0] and v.route.path.tolist() == [[0.0, 30.0], [0.0, 0.0]]
-    assert v.set_mode(Mode.GUIDED, (0.0, 30.0))[0] and not v.wants_thrust()  # no target yet
+    assert v.set_mode(Mode.GUIDED, (0.0, 30.0))[0] and v.wants_thrust() and v.route.loiter  # no target: station
     assert v.reposition((5.0, 5.0), (0.0, 30.0))[0] and v.wants_thrust()
     empty = Vehicle([], armed=True, mode=Mode.HOLD)
     assert empty.set_mode(Mode.AUTO, (0.0, 0.0)) == (False, "AUTO: no mission")

@@ -75,7 +75,8 @@ def test_auto_needs_a_mission_and_a_refused_mode_leaves_the_old_one():
 def test_rtl_goes_home_and_guided_goes_to_its_target():
     v = vehicle()
     assert v.set_mode(Mode.RTL, (20.0, 20.0))[0] and v.route.path.tolist() == [[20.0, 20.0], [1.0, 2.0]]
-    assert v.set_mode(Mode.GUIDED, (20.0, 20.0))[0] and v.route is None and output(v) == "idle"  # no target
+    assert v.set_mode(Mode.GUIDED, (20.0, 20.0))[0]          # no target: keep station there, as Rover's boats do
+    assert v.route.path.tolist() == [[20.0, 20.0], [20.0, 20.0]] and v.route.loiter and output(v) == "navigate"
     assert v.reposition((5.0, 6.0), (20.0, 20.0)) == (True, "GUIDED")
     assert v.route.path.tolist() == [[20.0, 20.0], [5.0, 6.0]] and output(v) == "navigate"
     v.arm(False)
