@@ -34,6 +34,8 @@ from hil.hilrun import free_udp_port
 if TYPE_CHECKING:
     from support.closed_loop import ClosedLoop
 
+    from autopilot_bridge.vehicle import Vehicle
+
 GEO = LocalFrame(38.92, 121.65, 0.0)  # [geodesy] of configs/default.toml
 REPO = Path(__file__).resolve().parents[1]
 SPEEDUP = 25.0
@@ -622,16 +624,38 @@ def test_modes_changed_every_second_beside_the_breakwater_never_set_the_boat_ont
     inside the safety radius to clear water whatever the mode, mode changes do not end it, the modes' station
     points are half a metre beyond the radius, and the station keeper backs stern first rather than turn
     round. Three minutes each; at fbaa98c the first four cases touched (least clearance 0.0, 0.0, 0.5, 1.0 m).
-    Without the guard the other three changes still leave the last case (and the second) touching."""
+    Since GUIDED without a target keeps station (12c4b6c) the modes hold these cases without the guard too; the
+    guard's own cases follow."""
     from support.closed_loop import clearance
 
     assert 1.4 <= clearance(*start) <= 1.85
     assert _change_modes_beside(start, seed, 180.0) > COLLISION_CLEARANCE
 
 
-def test_without_the_keep_off_guard_mode_changes_set_the_boat_onto_the_breakwater(monkeypatch):
-    """The control case: the guard never takes over; the last case above runs onto the pier head."""
+def _drifting_guided(monkeypatch: pytest.MonkeyPatch) -> None:
+    """GUIDED as it was until 12c4b6c: without a target, zero thrust (the boat drifts with the current)."""
+    from autopilot_bridge.modes import ModeGuided
+
+    def enter(self: ModeGuided, v: Vehicle, position: tuple[float, float] | None) -> tuple[bool, str]:
+        v.route = None
+        if v.guided_target is not None and position is not None:
+            v.new_route([position, v.guided_target], v.default_radius)
+        return True, self.name
+
+    monkeypatch.setattr(ModeGuided, "enter", enter)
+
+
+def test_the_keep_off_guard_keeps_a_drifting_mode_off_the_breakwater(monkeypatch):
+    """A mode that leaves the boat at zero thrust beside the breakwater (GUIDED without a target until 12c4b6c):
+    the guard alone keeps the boat off (the modes' own station keeping now does without it in the cases above)."""
+    _drifting_guided(monkeypatch)
+    assert _change_modes_beside((96.0, 119.5), 5, 180.0) > COLLISION_CLEARANCE
+
+
+def test_without_the_keep_off_guard_a_drifting_mode_sets_the_boat_onto_the_breakwater(monkeypatch):
+    """The control case of the test above: the guard never takes over; the boat runs onto the pier head."""
     from autopilot_bridge.keep_off import KeepOff
 
+    _drifting_guided(monkeypatch)
     monkeypatch.setattr(KeepOff, "command", lambda _self, _s, _dt: None)
     assert _change_modes_beside((96.0, 119.5), 5, 180.0) < COLLISION_CLEARANCE
