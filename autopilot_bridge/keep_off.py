@@ -6,13 +6,19 @@ turns into the current first, and in a current setting onto a breakwater a boat 
 onto it while a ground station changed modes every 1-2 s (the chaos hour, seed 31, at f5d6fd1: unsigned at
 983.7 s, signed at 1,739.9 s). So, ahead of the mode:
 
-* inside the planner's safety radius of an obstacle (charted or sensed) and not under way (surge below
+* inside the planner's safety radius of an obstacle (charted or sensed), or where the current would set it
+  inside before it could turn to stem the current (:func:`drift_exposure`), and not under way (surge below
   ``UNDER_WAY``: a boat making its way along a planned path is governed by the avoidance limits), the boat
   keeps station at the nearest point within ``REACH`` that is ``MARGIN`` beyond the safety radius (else the
   clearest there), into the current, for at least ``HOLD_S``, until it is that clear or has arrived;
 * a mode change does not end it (only disarming, or a pilot's stick in MANUAL);
 * once released it takes over again only when the boat is back inside the safety radius and ``RENEW``
   nearer than where it was released, so a boat with no clear water in reach is not held for ever.
+
+A boat broadside to a 0.5 m/s current turns to stem it in about 3.5 s (``TURN_RATE``) and is set 1.7 m on
+meanwhile, however it uses its thrust; waiting until it is inside the radius left it 0.75 m to go (the
+in-process chaos search beside the breakwater's end at 2,281 s of the harbour's jet, after 12c4b6c: 5
+collisions in 300 two-minute runs, each a turn from broadside 1.8-2 m off).
 
 Station points of the modes themselves are moved to clear water by :func:`clear_point` too (Helm).
 Positions NED m, times s of vehicle time, speeds m/s.
@@ -37,6 +43,20 @@ ARRIVED = 0.75        # m from the point: arrived (with no clearer water in reac
 RENEW = 0.25          # m nearer than the release clearance before it takes over again
 BEARINGS = 16         # directions searched for a clear point
 TELL_S = 10.0         # s between two events
+TURN_RATE = 0.4       # rad/s: a turn on the spot at Helm.turn_on_the_spot's moment (in-process: 25 deg/s measured)
+SETTLE_S = 0.5        # s for the thrust to take up the current once the hull is along it
+STILL = 0.05          # m/s: a current below this sets nothing worth a turn
+
+
+def drift_exposure(psi: float, current: tuple[float, float]) -> float:
+    """Seconds a boat heading ``psi`` (rad) is set by ``current`` (NED m/s) before it can stem it: the turn of
+    its nearer end into the current at ``TURN_RATE``, then ``SETTLE_S``; 0 in still water. Turning, a
+    differential boat's thrust acts along its hull, so the set across it cannot be stopped sooner."""
+    cn, ce = current
+    if math.hypot(cn, ce) < STILL:
+        return 0.0
+    a = abs(math.remainder(psi - math.atan2(ce, cn), 2.0 * math.pi))
+    return min(a, math.pi - a) / TURN_RATE + SETTLE_S
 
 
 def clear_point(grid: OccupancyGrid, point: tuple[float, float], need: float, reach: float) -> tuple[float, float]:
@@ -77,13 +97,25 @@ class KeepOff:
         """Disarmed, or a pilot at the stick: the guard lets go."""
         self.point = self._released = None
 
+    def _set_clearance(self, s: NavState, current: tuple[float, float]) -> float:
+        """m: the least clearance on the way the current sets the boat before it can stem it (its clearance
+        now in still water or when the hull is along the current)."""
+        c = self.grid.clearance_at(s.y, s.x)
+        t = drift_exposure(s.psi, current)
+        for k in (1, 2, 3):
+            f = t * k / 3.0
+            c = min(c, self.grid.clearance_at(s.y + f * current[1], s.x + f * current[0]))
+        return c
+
     def command(self, s: NavState, dt: float) -> Thrust | None:
+        current = self._current()
         c = self.grid.clearance_at(s.y, s.x)
         if self.point is None:
-            if c >= self.safety_radius:
+            set_c = self._set_clearance(s, current)
+            if set_c >= self.safety_radius:
                 self._released = None
                 return None
-            if s.u >= UNDER_WAY or (self._released is not None and c > self._released - RENEW):
+            if s.u >= UNDER_WAY or (self._released is not None and set_c > self._released - RENEW):
                 return None
             self.point, self._since = clear_point(self.grid, (s.x, s.y), self.safety_radius + MARGIN, REACH), s.t
             self.episodes += 1
@@ -92,12 +124,18 @@ class KeepOff:
             self._on_take(s)
             if s.t - self._told >= TELL_S:
                 self._told = s.t
-                self._event(s.t, f"{c:.1f} m from an obstacle, inside the {self.safety_radius:.1f} m safety radius: "
-                                 f"keeping station {math.dist(self.point, (s.x, s.y)):.1f} m off, in clear water")
-        elif s.t - self._since >= HOLD_S and (c >= self.safety_radius + 0.5 * MARGIN or
-                                              math.dist(self.point, (s.x, s.y)) <= ARRIVED):
-            self.point, self._released = None, (c if c < self.safety_radius else None)
-            self._on_take(s)
-            return None
-        return self.station.command(s, dt, self.point, True, self._behaviour, self._drive, self._current(),
+                why = (f"{c:.1f} m from an obstacle, inside the {self.safety_radius:.1f} m safety radius"
+                       if c < self.safety_radius else
+                       f"the current ({math.hypot(*current):.1f} m/s) would set it within the {self.safety_radius:.1f}"
+                       f" m safety radius before it turned to stem it")
+                self._event(s.t, f"{why}: keeping station {math.dist(self.point, (s.x, s.y)):.1f} m off, "
+                                 f"in clear water")
+        elif s.t - self._since >= HOLD_S:
+            set_c = self._set_clearance(s, current)
+            if ((c >= self.safety_radius + 0.5 * MARGIN and set_c >= self.safety_radius)
+                    or math.dist(self.point, (s.x, s.y)) <= ARRIVED):
+                self.point, self._released = None, (set_c if set_c < self.safety_radius else None)
+                self._on_take(s)
+                return None
+        return self.station.command(s, dt, self.point, True, self._behaviour, self._drive, current,
                                     lambda: self._on_take(s), rest=False)
