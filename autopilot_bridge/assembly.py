@@ -19,13 +19,16 @@ from autopilot_bridge.ais_tracking import TrackerParams
 from autopilot_bridge.autopilot import Autopilot
 from autopilot_bridge.computer_setup import ComputerConfig, Devices, RunOptions
 from autopilot_bridge.gcs.config import GcsParams
+from autopilot_bridge.gcs.devices import open_gcs_devices
 from autopilot_bridge.gcs.link import GcsLink
-from autopilot_bridge.hil_link import HilLink
+from autopilot_bridge.hil_link import TAKEN, HilLink
 from autopilot_bridge.local_planning import CycleInput, LocalPlan, World, online_cycle_handler
 from autopilot_bridge.planning_worker import PlannerWorker
 from autopilot_bridge.traffic_awareness import TrafficAwareness
-from common.can_params import CanParams
+from common.can_params import CanParams, open_bus
 from common.geodesy import LocalFrame
+from common.mavlink import Codec
+from common.udp import UdpEndpoint
 from planner.colregs import ColregsParams
 
 
@@ -81,26 +84,29 @@ def build_computer(settings: ComputerSettings, world: World, options: RunOptions
     geo = LocalFrame(*settings.origin)
     with contextlib.ExitStack() as opened:   # a device that fails closes those opened before it
         try:
-            link = HilLink(ap.listen, ap.actuators_to, geo, declination=peer.declination,
-                           system_id=ap.system_id, component_id=ap.component_id, send_loss=ap.send_loss,
-                           recv_loss=ap.recv_loss, loss_seed=settings.loss_seed,
+            # the devices' lower-layer parts first (socket, codec, CAN bus), then the parts built on them
+            sensors_ep = UdpEndpoint(ap.listen, list(ap.actuators_to), send_loss=ap.send_loss,
+                                     recv_loss=ap.recv_loss, loss_seed=settings.loss_seed)
+            opened.callback(sensors_ep.close)
+            codec = Codec(ap.system_id, ap.component_id, accept=TAKEN)
+            bus = open_bus(settings.can) if settings.can.actuators == "can" else None
+            if bus is not None:
+                opened.callback(bus.shutdown)
+            gcs_devices = open_gcs_devices(settings.gcs, ap.system_id, ap.component_id, mirror_to=ap.telemetry_to,
+                                           mirror_from=ap.telemetry_from)
+            opened.callback(gcs_devices.close)
+            link = HilLink(sensors_ep, codec, geo, declination=peer.declination,
                            truth_component_id=peer.truth_component_id,
                            sim_ids=(peer.system_id, peer.component_id), sensors_from=sensors_from,
                            max_time_step=peer.max_time_step,
                            busy_poll=ap.lockstep_busy_poll if options.lockstep else 0.0,
                            late_window=ap.sim_restart_gap, realtime=not options.lockstep)
-            opened.callback(link.close)
             actuators = None
-            if settings.can.actuators == "can":
+            if bus is not None:
                 from autopilot_bridge.can_actuators import CanActuators
-                from common.can_params import open_bus
 
-                actuators = CanActuators(open_bus(settings.can), settings.can,
-                                         lockstep_token=link if options.lockstep else None)
-                opened.callback(actuators.close)
-            telemetry = GcsLink(settings.gcs, ap.system_id, ap.component_id, geo, mirror_to=ap.telemetry_to,
-                                mirror_from=ap.telemetry_from, chart_size=chart_size,   # chart_size: rows, columns
-                                log=log)
+                actuators = CanActuators(bus, settings.can, lockstep_token=link if options.lockstep else None)
+            telemetry = GcsLink(settings.gcs, gcs_devices, geo, chart_size=chart_size, log=log)  # rows, columns
         except ValueError as exc:
             raise SetupError(str(exc)) from None
         opened.pop_all()   # all open: the caller owns them now

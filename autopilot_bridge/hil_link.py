@@ -179,20 +179,20 @@ class SensorLink(Protocol):
 class HilLink:
     """UDP endpoint + MAVLink codec of the vessel computer's HIL link."""
 
-    def __init__(self, listen: str, actuators_to: tuple[str, ...], geo: LocalFrame, *, declination: float = 0.0,
-                 system_id: int = 1, component_id: int = 1, send_loss: float = 0.0, recv_loss: float = 0.0,
-                 loss_seed: int = 0, extra_destinations: tuple[str, ...] = (), truth_component_id: int = 52,
-                 sim_ids: tuple[int, int] | None = None, sensors_from: str | None = None,
-                 max_time_step: float = 1.0, busy_poll: float = 0.0, late_window: float = 1.0,
-                 realtime: bool = False) -> None:
-        """``sim_ids``: (system, component) id of the simulator (None: any); ``sensors_from``:
+    def __init__(self, ep: UdpEndpoint, codec: Codec, geo: LocalFrame, *, declination: float = 0.0,
+                 truth_component_id: int = 52, sim_ids: tuple[int, int] | None = None,
+                 sensors_from: str | None = None, max_time_step: float = 1.0, busy_poll: float = 0.0,
+                 late_window: float = 1.0, realtime: bool = False) -> None:
+        """The link on a socket and codec built by the assembly (:meth:`open` builds both): ``ep`` is
+        the UDP socket the sensor frames arrive on and the actuator commands leave from (the link owns
+        and closes it); ``codec``: the vessel computer's MAVLink ids, accepting :data:`TAKEN`.
+        ``sim_ids``: (system, component) id of the simulator (None: any); ``sensors_from``:
         "HOST:PORT" of the simulator's socket (None: any address); ``max_time_step``: largest
         forward step (s) of sensor time between consecutive accepted frames; ``busy_poll``: (lockstep)
         each wait for a frame polls the socket up to this long (s) before it sleeps; ``late_window``: a frame
         at most this far (s) behind the last accepted one is late (reordered), refused without counting
         towards a new timeline; ``realtime``: stalls of this process are detected and skipped (MAX_BEHIND_S)."""
-        self.ep = UdpEndpoint(listen, list(actuators_to) + list(extra_destinations),
-                              send_loss=send_loss, recv_loss=recv_loss, loss_seed=loss_seed)
+        self.ep = ep
         # lockstep: wait for the next frame polling the socket first (common.udp.BusyPoll)
         self.busy = BusyPoll(busy_poll) if busy_poll > 0 else None
         if sensors_from:
@@ -213,7 +213,7 @@ class HilLink:
         self.last_usec: int | None = None                # time of the last accepted frame
         self._candidate: tuple[int, int] | None = None   # (last time, frames) of another timeline
         self.timeline_switches = 0
-        self.codec = Codec(system_id, component_id, accept=TAKEN)
+        self.codec = codec
         self.geo = geo
         self.declination = declination
         self.rejects: Counter[str] = Counter()
@@ -224,6 +224,27 @@ class HilLink:
         self.ais: list[AisReport] = []
         self.ais_received = 0
         self.last_t = 0.0
+
+    @classmethod
+    def open(cls, listen: str, actuators_to: tuple[str, ...], geo: LocalFrame, *, system_id: int = 1,
+             component_id: int = 1, send_loss: float = 0.0, recv_loss: float = 0.0, loss_seed: int = 0,
+             extra_destinations: tuple[str, ...] = (), declination: float = 0.0, truth_component_id: int = 52,
+             sim_ids: tuple[int, int] | None = None, sensors_from: str | None = None, max_time_step: float = 1.0,
+             busy_poll: float = 0.0, late_window: float = 1.0, realtime: bool = False) -> HilLink:
+        """A link with its own socket (bound to ``listen`` "HOST:PORT", sending to ``actuators_to`` and
+        ``extra_destinations``, dropping ``send_loss``/``recv_loss`` of the datagrams, seeded by
+        ``loss_seed``) and codec (the vessel computer's ``system_id``/``component_id``), for tests and
+        tools; the vessel computer's assembly builds both itself."""
+        ep = UdpEndpoint(listen, list(actuators_to) + list(extra_destinations),
+                         send_loss=send_loss, recv_loss=recv_loss, loss_seed=loss_seed)
+        try:
+            return cls(ep, Codec(system_id, component_id, accept=TAKEN), geo, declination=declination,
+                       truth_component_id=truth_component_id, sim_ids=sim_ids, sensors_from=sensors_from,
+                       max_time_step=max_time_step, busy_poll=busy_poll, late_window=late_window,
+                       realtime=realtime)
+        except ValueError:
+            ep.close()
+            raise
 
     @property
     def address(self) -> tuple[str, int]:
