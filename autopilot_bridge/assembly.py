@@ -28,7 +28,7 @@ from autopilot_bridge.traffic_awareness import TrafficAwareness
 from common.can_params import CanParams, open_bus
 from common.geodesy import LocalFrame
 from common.mavlink import Codec
-from common.udp import UdpEndpoint
+from common.udp import BusyPoll, UdpEndpoint
 from planner.colregs import ColregsParams
 
 
@@ -81,32 +81,38 @@ def build_computer(settings: ComputerSettings, world: World, options: RunOptions
     kernels ("planner", "vessel-computer"). A device that cannot be opened raises :class:`SetupError`,
     with every device opened before it closed again."""
     ap, peer = settings.tuning.params, settings.simulator
-    geo = LocalFrame(*settings.origin)
     with contextlib.ExitStack() as opened:   # a device that fails closes those opened before it
         try:
-            # the devices' lower-layer parts first (socket, codec, CAN bus), then the parts built on them
-            sensors_ep = UdpEndpoint(ap.listen, list(ap.actuators_to), send_loss=ap.send_loss,
-                                     recv_loss=ap.recv_loss, loss_seed=settings.loss_seed)
-            opened.callback(sensors_ep.close)
-            codec = Codec(ap.system_id, ap.component_id, accept=TAKEN)
-            bus = open_bus(settings.can) if settings.can.actuators == "can" else None
-            if bus is not None:
-                opened.callback(bus.shutdown)
+            # Each device's parts are opened here and handed over built: first the ground-station
+            # link's, then the socket, codecs and CAN bus of common/, then the devices built on them.
             gcs_devices = open_gcs_devices(settings.gcs, ap.system_id, ap.component_id, mirror_to=ap.telemetry_to,
                                            mirror_from=ap.telemetry_from)
             opened.callback(gcs_devices.close)
-            link = HilLink(sensors_ep, codec, geo, declination=peer.declination,
-                           truth_component_id=peer.truth_component_id,
-                           sim_ids=(peer.system_id, peer.component_id), sensors_from=sensors_from,
-                           max_time_step=peer.max_time_step,
-                           busy_poll=ap.lockstep_busy_poll if options.lockstep else 0.0,
-                           late_window=ap.sim_restart_gap, realtime=not options.lockstep)
+            geo = LocalFrame(*settings.origin)
+            sensors_ep = UdpEndpoint(ap.listen, list(ap.actuators_to), send_loss=ap.send_loss,
+                                     recv_loss=ap.recv_loss, loss_seed=settings.loss_seed)
+            opened.callback(sensors_ep.close)
+            if sensors_from:
+                try:
+                    sensors_ep.set_peer(sensors_from)   # only the simulator's address
+                except (ValueError, OSError) as exc:
+                    raise ValueError(f"sensors_from {sensors_from!r}: {exc}") from None
+            codec = Codec(ap.system_id, ap.component_id, accept=TAKEN)
+            # lockstep: each wait for a frame polls the socket first
+            busy = BusyPoll(ap.lockstep_busy_poll) if options.lockstep and ap.lockstep_busy_poll > 0 else None
+            bus = open_bus(settings.can) if settings.can.actuators == "can" else None
+            if bus is not None:
+                opened.callback(bus.shutdown)
+            link = HilLink(sensors_ep, codec, geo, busy=busy, declination=peer.declination,
+                           truth_component_id=peer.truth_component_id, sim_ids=(peer.system_id, peer.component_id),
+                           max_time_step=peer.max_time_step, late_window=ap.sim_restart_gap,
+                           realtime=not options.lockstep)
+            telemetry = GcsLink(settings.gcs, gcs_devices, geo, chart_size=chart_size, log=log)  # rows, columns
             actuators = None
             if bus is not None:
                 from autopilot_bridge.can_actuators import CanActuators
 
                 actuators = CanActuators(bus, settings.can, lockstep_token=link if options.lockstep else None)
-            telemetry = GcsLink(settings.gcs, gcs_devices, geo, chart_size=chart_size, log=log)  # rows, columns
         except ValueError as exc:
             raise SetupError(str(exc)) from None
         opened.pop_all()   # all open: the caller owns them now
