@@ -100,9 +100,15 @@ def build_computer(settings: ComputerSettings, world: World, options: RunOptions
             codec = Codec(ap.system_id, ap.component_id, accept=TAKEN)
             # lockstep: each wait for a frame polls the socket first
             busy = BusyPoll(ap.lockstep_busy_poll) if options.lockstep and ap.lockstep_busy_poll > 0 else None
-            bus = open_bus(settings.can) if settings.can.actuators == "can" else None
-            if bus is not None:
+            bus, receiver = None, None
+            if settings.can.actuators == "can":
+                from autopilot_bridge.can_actuators import RECEIVED
+                from common.dronecan_codec import TransferReceiver
+
+                bus = open_bus(settings.can)
                 opened.callback(bus.shutdown)
+                receiver = TransferReceiver(list(RECEIVED), nodes=tuple(settings.can.esc_node_ids),
+                                            own_nodes=[settings.can.autopilot_node_id])   # the ESCs' transfers
             link = HilLink(sensors_ep, codec, geo, busy=busy, declination=peer.declination,
                            truth_component_id=peer.truth_component_id, sim_ids=(peer.system_id, peer.component_id),
                            max_time_step=peer.max_time_step, late_window=ap.sim_restart_gap,
@@ -112,7 +118,8 @@ def build_computer(settings: ComputerSettings, world: World, options: RunOptions
             if bus is not None:
                 from autopilot_bridge.can_actuators import CanActuators
 
-                actuators = CanActuators(bus, settings.can, lockstep_token=link if options.lockstep else None)
+                actuators = CanActuators(bus, settings.can, lockstep_token=link if options.lockstep else None,
+                                         receiver=receiver)
         except ValueError as exc:
             raise SetupError(str(exc)) from None
         opened.pop_all()   # all open: the caller owns them now
