@@ -123,22 +123,37 @@ def build_computer(settings: ComputerSettings, world: World, options: RunOptions
         except ValueError as exc:
             raise SetupError(str(exc)) from None
         opened.pop_all()   # all open: the caller owns them now
-    worker = _planner_worker(world, start, ap.watchdog_grace, planner_factory, wait_for, log)
+    worker = _planner_worker(world, start, ap.watchdog_grace, planner_factory)   # started last, below
     traffic = TrafficAwareness(settings.tracking, settings.colregs, geo)  # AIS targets, COLREGs encounters
     wait_for("vessel-computer")   # the filter's, guidance's and obstacle map's kernels
     autopilot = Autopilot(settings.tuning, world,
                           Devices(link, worker, telemetry, traffic=traffic, actuators=actuators), options)
     telemetry.attach(autopilot.commands)
+    _warm_up_planner(world, start, wait_for, log)
+    worker.start()   # forked from the warmed-up process, once every part is built
     return autopilot, link
 
 
-def _planner_worker(world: World, start: CycleInput, grace_s: float, planner_factory: str | None,
-                    wait_for: Callable[[str], object], log: Callable[[str], None]
+def _planner_worker(world: World, start: CycleInput, grace_s: float, planner_factory: str | None
                     ) -> PlannerWorker[CycleInput, LocalPlan]:
-    """The planner worker process, after one real planning cycle here from ``start``: it compiles (first
-    run on a machine: ~7 s) or loads everything a cycle uses (tree core, grid kernels of pruning and
-    smoothing) once, before the control loop starts; forked workers inherit it, so no planning cycle
-    pays for it."""
+    """The planner worker, not started yet: :func:`build_computer` starts it after
+    :func:`_warm_up_planner`, so that forked workers inherit the compiled kernels."""
+    # fork: a restarted worker inherits the world instead of receiving it pickled; with spawn the
+    # parent blocks writing ~100 KB into a 64 KB pipe until the new interpreter has started, which
+    # stalls the control loop on every watchdog restart.
+    start_method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+    if planner_factory:
+        return PlannerWorker(planner_factory, (), grace_s=grace_s, start_method=start_method, start=False)
+    # Each (re)started worker warms up too (its first cycle would pay the fork's page faults).
+    return PlannerWorker("autopilot_bridge.local_planning:online_cycle_handler", (world, start),
+                         grace_s=grace_s, start_method=start_method, start=False)
+
+
+def _warm_up_planner(world: World, start: CycleInput, wait_for: Callable[[str], object],
+                     log: Callable[[str], None]) -> None:
+    """One real planning cycle here from ``start``: it compiles (first run on a machine: ~7 s) or
+    loads everything a cycle uses (tree core, grid kernels of pruning and smoothing) once, before the
+    control loop starts; forked workers inherit it, so no planning cycle pays for it."""
     t0 = time.monotonic()
     wait_for("planner")
     wait_for("vessel-computer")   # on a cold cache it compiles the planner's tree reuse (hil/warm_up.py)
@@ -146,12 +161,3 @@ def _planner_worker(world: World, start: CycleInput, grace_s: float, planner_fac
     spent = time.monotonic() - t0
     if spent > 1.0:
         log(f"autopilot: planner compiled and warmed up in {spent:.1f} s (cached for next time)")
-    # fork: a restarted worker inherits the world instead of receiving it pickled; with spawn the
-    # parent blocks writing ~100 KB into a 64 KB pipe until the new interpreter has started, which
-    # stalls the control loop on every watchdog restart.
-    start_method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
-    if planner_factory:
-        return PlannerWorker(planner_factory, (), grace_s=grace_s, start_method=start_method)
-    # Each (re)started worker warms up too (its first cycle would pay the fork's page faults).
-    return PlannerWorker("autopilot_bridge.local_planning:online_cycle_handler", (world, start),
-                         grace_s=grace_s, start_method=start_method)
