@@ -30,6 +30,7 @@ from common.geodesy import LocalFrame
 from common.mavlink import Codec
 from common.udp import BusyPoll, UdpEndpoint
 from planner.colregs import ColregsParams
+from planner.gridmap import OccupancyGrid
 
 
 class SetupError(ValueError):
@@ -84,7 +85,8 @@ def build_computer(settings: ComputerSettings, world: World, options: RunOptions
     with contextlib.ExitStack() as opened:   # a device that fails closes those opened before it
         try:
             # Each device's parts are opened here and handed over built: first the ground-station
-            # link's, then the socket, codecs and CAN bus of common/, then the devices built on them.
+            # link's, then the socket, codecs and CAN bus of common/ and the chart's grid of planner/,
+            # then the devices built on them.
             gcs_devices = open_gcs_devices(settings.gcs, ap.system_id, ap.component_id, mirror_to=ap.telemetry_to,
                                            mirror_from=ap.telemetry_from)
             opened.callback(gcs_devices.close)
@@ -109,6 +111,7 @@ def build_computer(settings: ComputerSettings, world: World, options: RunOptions
                 opened.callback(bus.shutdown)
                 receiver = TransferReceiver(list(RECEIVED), nodes=tuple(settings.can.esc_node_ids),
                                             own_nodes=[settings.can.autopilot_node_id])   # the ESCs' transfers
+            chart = OccupancyGrid(world.occ.copy(), world.resolution)   # the autopilot's, sensed obstacles added
             link = HilLink(sensors_ep, codec, geo, busy=busy, declination=peer.declination,
                            truth_component_id=peer.truth_component_id, sim_ids=(peer.system_id, peer.component_id),
                            max_time_step=peer.max_time_step, late_window=ap.sim_restart_gap,
@@ -127,7 +130,7 @@ def build_computer(settings: ComputerSettings, world: World, options: RunOptions
     traffic = TrafficAwareness(settings.tracking, settings.colregs, geo)  # AIS targets, COLREGs encounters
     wait_for("vessel-computer")   # the filter's, guidance's and obstacle map's kernels
     autopilot = Autopilot(settings.tuning, world,
-                          Devices(link, worker, telemetry, traffic=traffic, actuators=actuators), options)
+                          Devices(link, worker, telemetry, traffic=traffic, actuators=actuators), options, grid=chart)
     telemetry.attach(autopilot.commands)
     _warm_up_planner(world, start, wait_for, log)
     worker.start()   # forked from the warmed-up process, once every part is built
