@@ -62,16 +62,27 @@ class CanPathSummary(TypedDict):
     esc_health: dict[str, int]
 
 
+RECEIVED = (dc.ESC_STATUS, dc.NODE_STATUS)   # the data types taken from the bus
+
+
+def esc_receiver(params: CanParams) -> dc.TransferReceiver:
+    """What the vessel computer takes from the bus: ESC_STATUS and NODE_STATUS from the ESCs' node IDs,
+    its own node ID's frames told apart (impostors)."""
+    return dc.TransferReceiver(list(RECEIVED), nodes=tuple(params.esc_node_ids), own_nodes=[params.autopilot_node_id])
+
+
 class CanActuators:
     """Thruster commands over DroneCAN on ``bus``; ESC Status read back."""
 
     def __init__(self, bus: can.BusABC, params: CanParams, lockstep_token: SensorLink | None = None,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic, *,
+                 receiver: dc.TransferReceiver | None = None) -> None:
+        """``receiver``: the transfers taken from the bus, built by the assembly
+        (:func:`esc_receiver`; None: built here from ``params``)."""
         self.bus, self.p, self.token, self.clock = bus, params, lockstep_token, clock
         self.node_id = params.autopilot_node_id
         self.esc_ids = tuple(params.esc_node_ids)
-        self.receiver = dc.TransferReceiver([dc.ESC_STATUS, dc.NODE_STATUS], nodes=self.esc_ids,
-                                            own_nodes=[self.node_id])
+        self.receiver = receiver if receiver is not None else esc_receiver(params)
         self.tracker = dc.TransferIdTracker()
         self.tids = dc.TransferIds()
         self.rejects: Counter = Counter()

@@ -179,28 +179,20 @@ class SensorLink(Protocol):
 class HilLink:
     """UDP endpoint + MAVLink codec of the vessel computer's HIL link."""
 
-    def __init__(self, listen: str, actuators_to: tuple[str, ...], geo: LocalFrame, *, declination: float = 0.0,
-                 system_id: int = 1, component_id: int = 1, send_loss: float = 0.0, recv_loss: float = 0.0,
-                 loss_seed: int = 0, extra_destinations: tuple[str, ...] = (), truth_component_id: int = 52,
-                 sim_ids: tuple[int, int] | None = None, sensors_from: str | None = None,
-                 max_time_step: float = 1.0, busy_poll: float = 0.0, late_window: float = 1.0,
-                 realtime: bool = False) -> None:
-        """``sim_ids``: (system, component) id of the simulator (None: any); ``sensors_from``:
-        "HOST:PORT" of the simulator's socket (None: any address); ``max_time_step``: largest
-        forward step (s) of sensor time between consecutive accepted frames; ``busy_poll``: (lockstep)
-        each wait for a frame polls the socket up to this long (s) before it sleeps; ``late_window``: a frame
+    def __init__(self, ep: UdpEndpoint, codec: Codec, geo: LocalFrame, *, busy: BusyPoll | None = None,
+                 declination: float = 0.0, truth_component_id: int = 52, sim_ids: tuple[int, int] | None = None,
+                 max_time_step: float = 1.0, late_window: float = 1.0, realtime: bool = False) -> None:
+        """The link on a socket and codec built by the assembly (:meth:`open` builds both): ``ep`` is
+        the UDP socket the sensor frames arrive on and the actuator commands leave from (the link owns
+        and closes it; :func:`only_from` restricts it to the simulator's address); ``codec``: the vessel
+        computer's MAVLink ids, accepting :data:`TAKEN`; ``busy``: (lockstep) each wait for a frame polls
+        the socket first (None: it sleeps on it).
+        ``sim_ids``: (system, component) id of the simulator (None: any); ``max_time_step``: largest
+        forward step (s) of sensor time between consecutive accepted frames; ``late_window``: a frame
         at most this far (s) behind the last accepted one is late (reordered), refused without counting
         towards a new timeline; ``realtime``: stalls of this process are detected and skipped (MAX_BEHIND_S)."""
-        self.ep = UdpEndpoint(listen, list(actuators_to) + list(extra_destinations),
-                              send_loss=send_loss, recv_loss=recv_loss, loss_seed=loss_seed)
-        # lockstep: wait for the next frame polling the socket first (common.udp.BusyPoll)
-        self.busy = BusyPoll(busy_poll) if busy_poll > 0 else None
-        if sensors_from:
-            try:
-                self.ep.set_peer(sensors_from)
-            except (ValueError, OSError) as exc:
-                self.ep.close()
-                raise ValueError(f"sensors_from {sensors_from!r}: {exc}") from None
+        self.ep = ep
+        self.busy = busy
         self.sim_ids = sim_ids
         self.max_step_usec = int(round(max_time_step * 1e6))
         self.late_window_usec = int(round(late_window * 1e6))
@@ -213,7 +205,7 @@ class HilLink:
         self.last_usec: int | None = None                # time of the last accepted frame
         self._candidate: tuple[int, int] | None = None   # (last time, frames) of another timeline
         self.timeline_switches = 0
-        self.codec = Codec(system_id, component_id, accept=TAKEN)
+        self.codec = codec
         self.geo = geo
         self.declination = declination
         self.rejects: Counter[str] = Counter()
@@ -224,6 +216,28 @@ class HilLink:
         self.ais: list[AisReport] = []
         self.ais_received = 0
         self.last_t = 0.0
+
+    @classmethod
+    def open(cls, listen: str, actuators_to: tuple[str, ...], geo: LocalFrame, *, system_id: int = 1,
+             component_id: int = 1, send_loss: float = 0.0, recv_loss: float = 0.0, loss_seed: int = 0,
+             extra_destinations: tuple[str, ...] = (), declination: float = 0.0, truth_component_id: int = 52,
+             sim_ids: tuple[int, int] | None = None, sensors_from: str | None = None, max_time_step: float = 1.0,
+             busy_poll: float = 0.0, late_window: float = 1.0, realtime: bool = False) -> HilLink:
+        """A link with its own socket (bound to ``listen`` "HOST:PORT", sending to ``actuators_to`` and
+        ``extra_destinations``, dropping ``send_loss``/``recv_loss`` of the datagrams, seeded by
+        ``loss_seed``; only from ``sensors_from``, :func:`only_from`) and codec (the vessel computer's
+        ``system_id``/``component_id``), polling it up to ``busy_poll`` s (:func:`lockstep_poll`), for
+        tests and tools; the vessel computer's assembly builds them itself."""
+        ep = UdpEndpoint(listen, list(actuators_to) + list(extra_destinations),
+                         send_loss=send_loss, recv_loss=recv_loss, loss_seed=loss_seed)
+        try:
+            _only_from(ep, sensors_from)
+        except ValueError:
+            ep.close()
+            raise
+        return cls(ep, Codec(system_id, component_id, accept=TAKEN), geo, busy=_lockstep_poll(busy_poll),
+                   declination=declination, truth_component_id=truth_component_id, sim_ids=sim_ids,
+                   max_time_step=max_time_step, late_window=late_window, realtime=realtime)
 
     @property
     def address(self) -> tuple[str, int]:
@@ -478,3 +492,19 @@ def _ais_report(m, t: float) -> AisReport:
     return AisReport(t, int(m.MMSI), m.lat * 1e-7, m.lon * 1e-7, course, speed, float(m.dimension_bow),
                      float(m.dimension_stern), float(m.dimension_port), float(m.dimension_starboard),
                      name.rstrip("\x00 "))
+
+
+def _only_from(ep: UdpEndpoint, sensors_from: str | None) -> None:
+    """Restrict the link's socket to the simulator's "HOST:PORT" (None: any address); ValueError with
+    one line on an address that cannot be used."""
+    if sensors_from:
+        try:
+            ep.set_peer(sensors_from)
+        except (ValueError, OSError) as exc:
+            raise ValueError(f"sensors_from {sensors_from!r}: {exc}") from None
+
+
+def _lockstep_poll(busy_poll: float) -> BusyPoll | None:
+    """(lockstep) wait for the next frame polling the socket first, up to ``busy_poll`` s
+    (:class:`common.udp.BusyPoll`); None (0): sleep on it."""
+    return BusyPoll(busy_poll) if busy_poll > 0 else None

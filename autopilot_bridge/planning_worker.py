@@ -159,7 +159,9 @@ class PlannerWorker(Generic[P, R]):
     """
 
     def __init__(self, factory: str, factory_args: tuple = (), grace_s: float = 0.5,
-                 start_method: str = "spawn", startup_timeout_s: float = 60.0) -> None:
+                 start_method: str = "spawn", startup_timeout_s: float = 60.0, *, start: bool = True) -> None:
+        """``start``: start the process now (False: at :meth:`start`, e.g. once the parent has warmed
+        up what a forked worker inherits)."""
         self.factory = factory
         self.factory_args = factory_args
         self.grace_s = grace_s
@@ -173,7 +175,13 @@ class PlannerWorker(Generic[P, R]):
         self._pending_since = 0.0
         self._ready = False
         self._started_at = 0.0
-        self._start()
+        if start:
+            self._start()
+
+    def start(self) -> None:
+        """Start the process of a worker made with ``start=False`` (nothing if it runs)."""
+        if self._proc is None:
+            self._start()
 
     # -- process management ---------------------------------------------------------------
     def _start(self) -> None:

@@ -21,7 +21,7 @@ def cfg():
 
 def _link(cfg) -> HilLink:
     geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
-    return HilLink("127.0.0.1:0", ("127.0.0.1:9",), geo, declination=cfg.sensors.compass.declination)
+    return HilLink.open("127.0.0.1:0", ("127.0.0.1:9",), geo, declination=cfg.sensors.compass.declination)
 
 
 def test_sensor_frames_decode_to_si_ned_and_truth_is_ignored(cfg):

@@ -90,7 +90,7 @@ def test_battery_status_reaches_the_vessel_computer_as_the_pack_is():
     """The simulator's BATTERY_STATUS (2 Hz) decoded by the vessel computer's link equals the pack."""
     cfg = settings.load(None, [])
     core = SimulatorCore(simulator_settings(cfg))
-    link = HilLink("127.0.0.1:0", (), LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, 0.0))
+    link = HilLink.open("127.0.0.1:0", (), LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, 0.0))
     readings = []
     try:
         for _ in range(500):
@@ -135,7 +135,7 @@ def test_satellite_count_is_seeded_bounded_and_changes():
 def test_hil_gps_carries_the_satellite_count_and_none_in_a_dropout():
     cfg = settings.load(None, ["sensors.gps.dropouts=[[1.0, 1.0]]", "sensors.gps.satellite_interval=1.0"])
     core = SimulatorCore(simulator_settings(cfg))
-    link = HilLink("127.0.0.1:0", (), LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, 0.0))
+    link = HilLink.open("127.0.0.1:0", (), LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, 0.0))
     seen = []
     try:
         for _ in range(400):
@@ -158,7 +158,7 @@ def test_the_link_drops_an_implausible_pack_or_accelerometer_and_keeps_the_frame
 
     cfg = settings.load(None, [])
     sim = Codec(cfg.link.system_id, cfg.link.component_id)
-    link = HilLink("127.0.0.1:0", (), LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, 0.0),
+    link = HilLink.open("127.0.0.1:0", (), LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, 0.0),
                    sim_ids=(cfg.link.system_id, cfg.link.component_id))
 
     def frame(k: int, acc: float, cells: list[int], current: int) -> bytes:

@@ -130,7 +130,7 @@ def closing():
 
 def test_gcs_udp_is_udpin(closing):
     port = free_udp_port()
-    link = GcsLink(params(f"udp:127.0.0.1:{port}"), 1, 1, GEO)
+    link = GcsLink.open(params(f"udp:127.0.0.1:{port}"), 1, 1, GEO)
     closing(link)
     gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     closing(gcs)
@@ -150,7 +150,7 @@ def test_gcs_tcp_client_connects_talks_and_reconnects(closing):
     server.bind(("127.0.0.1", 0))
     server.listen(1)
     port = server.getsockname()[1]
-    link = GcsLink(params(f"tcp:127.0.0.1:{port}"), 1, 1, GEO)
+    link = GcsLink.open(params(f"tcp:127.0.0.1:{port}"), 1, 1, GEO)
     closing(link)
     conn, _ = server.accept()
     closing(conn)
@@ -186,7 +186,7 @@ def test_gcs_serial_through_a_pty_pair(closing):
     master, slave = os.openpty()
     device = os.ttyname(slave)
     try:
-        link = GcsLink(params(f"serial:{device}:57600"), 1, 1, GEO)
+        link = GcsLink.open(params(f"serial:{device}:57600"), 1, 1, GEO)
         closing(link)
         hb = gcs_heartbeat()
         os.write(master, hb[:5])

@@ -51,7 +51,7 @@ def _request(sock: socket.socket, port: int, link: GcsLink, msg_id: int, timeout
 def test_esc_status_from_can_is_forwarded_as_esc_telemetry(can_rig):
     cfg, core, esc, acts = can_rig
     port = free_udp_port()
-    link = GcsLink(_gcs_params(f"udpin:127.0.0.1:{port}"), 1, 1, LocalFrame(38.92, 121.65, 0.0))
+    link = GcsLink.open(_gcs_params(f"udpin:127.0.0.1:{port}"), 1, 1, LocalFrame(38.92, 121.65, 0.0))
     link.api = SimpleNamespace(esc_telemetry=acts.esc_telemetry)  # only what REQUEST_MESSAGE touches
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.settimeout(0.05)

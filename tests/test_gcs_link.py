@@ -73,7 +73,7 @@ def _listening_gcs_and_udpout_link(closing):
     gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     closing(gcs)
     gcs.bind(("127.0.0.1", port))
-    link = GcsLink(params(f"udpout:127.0.0.1:{port}"), 1, 1, GEO)
+    link = GcsLink.open(params(f"udpout:127.0.0.1:{port}"), 1, 1, GEO)
     closing(link)
     return gcs, link
 
@@ -90,7 +90,7 @@ def test_udpin_answers_several_gcs_and_forward_sends_any_message_to_each_and_to_
     recorder = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     closing(recorder)
     recorder.bind(("127.0.0.1", rec_port))
-    link = GcsLink(params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO, mirror_to=(f"127.0.0.1:{rec_port}",))
+    link = GcsLink.open(params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO, mirror_to=(f"127.0.0.1:{rec_port}",))
     closing(link)
     clients = []
     for sysid in (255, 254):
@@ -123,7 +123,7 @@ def test_udpin_answers_several_gcs_and_forward_sends_any_message_to_each_and_to_
 
 def test_tcpin_parses_frames_split_across_reads_and_answers_the_connection(closing):
     port = free_tcp_port()
-    link = GcsLink(params(f"tcpin:127.0.0.1:{port}"), 1, 1, GEO)
+    link = GcsLink.open(params(f"tcpin:127.0.0.1:{port}"), 1, 1, GEO)
     closing(link)
     c = socket.create_connection(("127.0.0.1", port), timeout=5.0)
     closing(c)
@@ -160,7 +160,7 @@ def test_endpoint_strings_and_signing_keys(tmp_path):
 
 
 def test_a_field_out_of_its_wire_range_costs_one_message_not_the_caller(closing):
-    link = GcsLink(params(), 1, 1, GEO)
+    link = GcsLink.open(params(), 1, 1, GEO)
     closing(link)
     link.forward("VFR_HUD", 0.0, 1.0, 90, -40, 0.0, 0.0)   # throttle is uint16 on the wire
     link.forward("VFR_HUD", 0.0, 1.0, 90, 40, 0.0, 0.0)
@@ -205,7 +205,7 @@ def test_set_mode_with_a_custom_sub_mode_is_refused_not_read_as_a_rover_mode(clo
     from autopilot_bridge.vehicle import Mode, Vehicle, Waypoint
 
     port = free_udp_port()
-    link = GcsLink(params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO)
+    link = GcsLink.open(params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO)
     closing(link)
     vehicle = Vehicle([Waypoint(10.0, 10.0, 3.0)], armed=True, mode=Mode.MANUAL)
     link.attach(_VehicleOnly(vehicle))
@@ -235,7 +235,7 @@ def test_a_ping_request_is_answered_to_its_sender(closing):
     """The ping protocol (https://mavlink.io/en/services/ping.html): a PING with target 0/0 is a request; the
     answer echoes time_usec and seq and is addressed to the requester (MAVSDK pings every connection)."""
     port = free_udp_port()
-    link = GcsLink(params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO)
+    link = GcsLink.open(params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO)
     closing(link)
     gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     closing(gcs)
@@ -258,7 +258,7 @@ def test_guided_goto_by_position_target_and_by_reposition(closing):
     from autopilot_bridge.vehicle import Mode, Vehicle, Waypoint
 
     port = free_udp_port()
-    link = GcsLink(params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO, chart_size=(150.0, 200.0))
+    link = GcsLink.open(params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO, chart_size=(150.0, 200.0))
     closing(link)
     vehicle = Vehicle([Waypoint(10.0, 10.0, 3.0)], armed=True, mode=Mode.HOLD)
     link.attach(_VehicleOnly(vehicle))

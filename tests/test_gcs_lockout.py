@@ -83,7 +83,7 @@ def statustexts(msgs: list) -> list[str]:
 
 
 def make_link(closing: Any, clock: FrozenClock, *endpoints: str, key_file: str = "") -> GcsLink:
-    link = GcsLink(gcs_params(*endpoints, key_file=key_file), 1, 1, GEO, clock=clock)
+    link = GcsLink.open(gcs_params(*endpoints, key_file=key_file), 1, 1, GEO, clock=clock)
     closing(link)
     link.attach(Api())
     return link

@@ -163,8 +163,8 @@ def test_a_captured_signed_arm_replayed_over_udp_and_a_new_tcp_connection_is_ref
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         tcp_port = s.getsockname()[1]
-    link = GcsLink(gcs_params(f"udpin:127.0.0.1:{udp_port}", f"tcpin:127.0.0.1:{tcp_port}", key_file=str(key_file)),
-                   1, 1, GEO)
+    link = GcsLink.open(gcs_params(f"udpin:127.0.0.1:{udp_port}", f"tcpin:127.0.0.1:{tcp_port}",
+                                   key_file=str(key_file)), 1, 1, GEO)
     closing(link)
     api = Api()
     link.attach(api)
@@ -228,7 +228,7 @@ def _writes(mav: Any) -> dict[str, bytes]:
 def test_every_handled_message_is_a_declared_write_or_a_declared_read():
     """A handler added later cannot bypass the signature check silently: each message type the link
     dispatches is either gated (WRITES) or a read the limits know."""
-    link = GcsLink(gcs_params(), 1, 1, GEO)
+    link = GcsLink.open(gcs_params(), 1, 1, GEO)
     assert set(link.handlers) <= WRITES | READS
     assert READS - {"HEARTBEAT", "MISSION_ACK"} <= set(READ_LIMITS)
     assert not READ_COMMANDS & {M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAV_CMD_COMPONENT_ARM_DISARM}
@@ -240,7 +240,7 @@ def test_with_signing_on_every_state_or_rate_changing_message_needs_a_good_signa
     key_file = tmp_path / "gcs.key"
     key_file.write_text(KEY.hex())
     port = free_udp_port()
-    link = GcsLink(gcs_params(f"udpin:127.0.0.1:{port}", key_file=str(key_file)), 1, 1, GEO)
+    link = GcsLink.open(gcs_params(f"udpin:127.0.0.1:{port}", key_file=str(key_file)), 1, 1, GEO)
     closing(link)
     api = Api()
     link.attach(api)
@@ -292,7 +292,7 @@ def _umask() -> int:
 
 def test_one_datagram_packed_with_param_request_list_costs_one_dump_and_is_counted(closing):
     port = free_udp_port()
-    link = GcsLink(gcs_params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO, clock=FrozenClock())
+    link = GcsLink.open(gcs_params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO, clock=FrozenClock())
     closing(link)
     link.attach(Api())
     n_params = len(link.params_table)
@@ -318,7 +318,7 @@ def test_one_datagram_packed_with_param_request_list_costs_one_dump_and_is_count
 
 def test_a_flood_of_read_requests_is_answered_within_the_limits_and_every_refusal_counted(closing):
     port = free_udp_port()
-    link = GcsLink(gcs_params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO, clock=FrozenClock())
+    link = GcsLink.open(gcs_params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO, clock=FrozenClock())
     closing(link)
     link.attach(Api())
     gcs = udp_client(closing)
@@ -352,7 +352,7 @@ def test_a_flood_of_read_requests_is_answered_within_the_limits_and_every_refusa
 def test_rate_limits_refill_with_time(closing):
     clock = FrozenClock()
     port = free_udp_port()
-    link = GcsLink(gcs_params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO, clock=clock)
+    link = GcsLink.open(gcs_params(f"udpin:127.0.0.1:{port}"), 1, 1, GEO, clock=clock)
     closing(link)
     link.attach(Api())
     gcs = udp_client(closing)
@@ -379,7 +379,7 @@ def test_a_tcp_burst_beyond_the_budget_is_handled_over_several_calls_not_dropped
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         tcp_port = s.getsockname()[1]
-    link = GcsLink(gcs_params(f"tcpin:127.0.0.1:{tcp_port}"), 1, 1, GEO, clock=FrozenClock())
+    link = GcsLink.open(gcs_params(f"tcpin:127.0.0.1:{tcp_port}"), 1, 1, GEO, clock=FrozenClock())
     closing(link)
     link.attach(Api())
     tcp = socket.create_connection(("127.0.0.1", tcp_port))
@@ -402,7 +402,7 @@ def test_a_second_tcp_ground_station_is_not_cut_when_the_first_spends_the_budget
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         tcp_port = s.getsockname()[1]
-    link = GcsLink(gcs_params(f"tcpin:127.0.0.1:{tcp_port}"), 1, 1, GEO, clock=FrozenClock())
+    link = GcsLink.open(gcs_params(f"tcpin:127.0.0.1:{tcp_port}"), 1, 1, GEO, clock=FrozenClock())
     closing(link)
     link.attach(Api())
     a, b = (socket.create_connection(("127.0.0.1", tcp_port)) for _ in range(2))
@@ -424,7 +424,7 @@ def test_a_disarm_with_param2_21196_reaches_the_vehicle_as_forced_and_any_other_
     """MAV_CMD_COMPONENT_ARM_DISARM's param2 = 21196 (MAVLink: force) is a forced disarm, which the vessel
     takes even where a disarm would leave the boat to drift onto the quay; any other param2 is not."""
     udp_port = free_udp_port()
-    link = GcsLink(gcs_params(f"udpin:127.0.0.1:{udp_port}"), 1, 1, GEO)
+    link = GcsLink.open(gcs_params(f"udpin:127.0.0.1:{udp_port}"), 1, 1, GEO)
     closing(link)
     api = Api()
     link.attach(api)

@@ -41,7 +41,7 @@ def _simulator_datagrams(scenario: str, steps: int) -> list[bytes]:
 def _decode_all(datagrams: list[bytes]) -> tuple[list[str], dict]:
     cfg = settings.load()
     geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
-    link = HilLink("127.0.0.1:0", (), geo, sim_ids=(cfg.link.system_id, cfg.link.component_id),
+    link = HilLink.open("127.0.0.1:0", (), geo, sim_ids=(cfg.link.system_id, cfg.link.component_id),
                    truth_component_id=cfg.traffic.truth_component_id)
     try:
         frames = [repr(link.decode(d)) for d in datagrams]

@@ -174,7 +174,7 @@ def test_uncharted_obstacle_is_confirmed_after_two_scans_through_the_link():
     cfg = load(None, QUIET + ["sim.initial.x=10.0", "sim.initial.y=50.0"])
     core = SimulatorCore(simulator_settings(cfg), WorldMap(truth, RES))
     geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
-    link = HilLink("127.0.0.1:0", (), geo)
+    link = HilLink.open("127.0.0.1:0", (), geo)
     sensed = SensedObstacles(chart, RES, confirm_hits=2)
     confirmed_after = []
     try:

@@ -35,7 +35,7 @@ def cfg():
 
 def _link(cfg, **kw) -> HilLink:
     geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
-    return HilLink("127.0.0.1:0", (), geo, sim_ids=(cfg.link.system_id, cfg.link.component_id),
+    return HilLink.open("127.0.0.1:0", (), geo, sim_ids=(cfg.link.system_id, cfg.link.component_id),
                    max_time_step=0.015, **kw)
 
 
@@ -131,7 +131,7 @@ def test_no_spurious_timeline_switch_at_30_percent_loss_with_10_percent_reorderi
     switches = late = accepted = 0
     try:
         for seed in range(8):
-            link = HilLink("127.0.0.1:0", (), geo, sim_ids=(cfg.link.system_id, cfg.link.component_id),
+            link = HilLink.open("127.0.0.1:0", (), geo, sim_ids=(cfg.link.system_id, cfg.link.component_id),
                            max_time_step=0.25, late_window=cfg.autopilot.sim_restart_gap)
             rng = np.random.default_rng(seed)
             held: list[tuple[int, bytes]] = []      # (frame index at which it goes out, datagram)
@@ -171,7 +171,7 @@ def test_a_paused_vessel_computer_acts_on_fresh_frames_only_and_reports_the_stal
 
     geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
     sim = Codec(cfg.link.system_id, cfg.link.component_id)
-    link = HilLink("127.0.0.1:0", (), geo, sim_ids=(cfg.link.system_id, cfg.link.component_id),
+    link = HilLink.open("127.0.0.1:0", (), geo, sim_ids=(cfg.link.system_id, cfg.link.component_id),
                    max_time_step=0.25 if realtime else 0.015, realtime=realtime)
     sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:

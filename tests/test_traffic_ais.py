@@ -53,7 +53,7 @@ def _core(*ships: ShipSpec, overrides=()):
 
 
 def _link(cfg) -> HilLink:
-    return HilLink("127.0.0.1:0", ("127.0.0.1:9",), GEO, truth_component_id=cfg.traffic.truth_component_id)
+    return HilLink.open("127.0.0.1:0", ("127.0.0.1:9",), GEO, truth_component_id=cfg.traffic.truth_component_id)
 
 
 def test_ais_reports_reach_the_link_over_udp_noisy_at_class_a_rates_truth_dropped():

@@ -34,7 +34,7 @@ class Session:
 
     def __init__(self, **kw: object) -> None:
         self.ap, self.hil, self.worker = build_computer(**kw)  # type: ignore[arg-type]
-        self.link = GcsLink(GcsParams(endpoints=()), 1, 1, LocalFrame(38.92, 121.65, 0.0))
+        self.link = GcsLink.open(GcsParams(endpoints=()), 1, 1, LocalFrame(38.92, 121.65, 0.0))
         self.link.attach(self.ap.commands)
         self.gcs = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
         self.parser = mavlink2.MAVLink(None)

@@ -28,6 +28,7 @@ from typing import Any, TypedDict
 from autopilot_bridge.gcs.command import CommandService
 from autopilot_bridge.gcs.config import GcsParams
 from autopilot_bridge.gcs.context import Outbox, Transport, VehicleView
+from autopilot_bridge.gcs.devices import GcsDevices, open_gcs_devices
 from autopilot_bridge.gcs.failsafe import GcsFailsafe
 from autopilot_bridge.gcs.framing import FrameParser
 from autopilot_bridge.gcs.identity import Identity
@@ -39,17 +40,13 @@ from autopilot_bridge.gcs.signing import (
     ReplayGuard,
     SecurityGate,
     load_signing_key,
-    signing_now,
 )
 from autopilot_bridge.gcs.telemetry import TelemetryService
-from autopilot_bridge.gcs.transport import open_endpoint
 from autopilot_bridge.parameters import Param, ParamTable, bind
 from autopilot_bridge.vehicle_api import VehicleApi, VehicleStatus
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE as M
-from common.mavlink import Codec
 from common.percentiles import StreamingPercentiles
-from common.udp import UdpEndpoint
 
 __all__ = ["GcsLink", "load_signing_key"]
 
@@ -95,31 +92,23 @@ class GcsSummary(TypedDict):
 class GcsLink:
     """MAVLink 2 ground-station endpoint(s) of one vessel; the autopilot's ``telemetry`` object."""
 
-    def __init__(self, params: GcsParams, system_id: int, component_id: int, geo: LocalFrame, *,
-                 mirror_to: tuple[str, ...] = (), mirror_from: str = "127.0.0.1:0",
+    def __init__(self, params: GcsParams, devices: GcsDevices, geo: LocalFrame, *,
                  chart_size: tuple[float, float] | None = None,
                  clock: Callable[[], float] = time.monotonic, log: Callable[[str], None] | None = None) -> None:
+        """The link on its opened ``devices`` (:func:`~.devices.open_gcs_devices`; the link owns and
+        closes them); ``geo``: the vessel's NED frame; ``chart_size``: (rows, columns) of the chart."""
         self.params = params
-        self.sysid, self.compid = system_id, component_id
+        self.sysid, self.compid = devices.system_id, devices.component_id
         self.geo = geo
         self.clock = clock
         self.log: Callable[[str], None] = log or (lambda _m: None)
-        self.key = load_signing_key(params.signing_key_file) if params.signing_key_file else None
-        self.transports: list[Transport] = []
-        self.security: Counter[str] = Counter()   # refusals by reason: the gate's, the limits', the peer tables'
+        self.key = devices.key
+        self.transports: list[Transport] = devices.transports
+        self.security: Counter[str] = devices.security   # refusals by reason: the gate's, the limits', the peer tables'
         self._datagrams_out_closed = 0      # per-peer sends of transports already closed
-        try:
-            for spec in params.endpoints:
-                self.transports.append(open_endpoint(spec, params.max_peers, self.security, clock))
-        except ValueError:
-            self.close()
-            raise
         self.addresses = [t.address for t in self.transports]
-        codec = Codec(system_id, component_id)
-        if self.key is not None:
-            s = codec.mav.signing
-            s.secret_key, s.sign_outgoing, s.link_id = self.key, True, 0
-            s.timestamp = signing_now()
+        codec = devices.codec
+        system_id, component_id = devices.system_id, devices.component_id
         self.received: Counter[str] = Counter()
         self.rejects: Counter[str] = Counter()
         self.datagrams_in = 0               # UDP datagrams / TCP reads from ground stations
@@ -130,8 +119,7 @@ class GcsLink:
         self.service_ms = StreamingPercentiles()   # wall time of each service() call, ms
         self._backlog: list[tuple[Transport, Hashable]] = []   # stream peers whose parser holds frames not yet decoded
 
-        mirror = UdpEndpoint(mirror_from, list(mirror_to)) if mirror_to else None
-        self.out = Outbox(codec, self.transports, mirror, self.log)
+        self.out = Outbox(codec, self.transports, devices.mirror, self.log)
         self.view = VehicleView(system_id, component_id, geo, chart_size)
         self.identity = Identity(params.identity, codec, self.view)
         self.failsafe = GcsFailsafe(self.out, self.view, params.failsafe_timeout, params.failsafe_action,
@@ -154,6 +142,17 @@ class GcsLink:
             if twice:
                 raise ValueError(f"messages handled twice: {sorted(twice)}")
             self.handlers.update(table)
+
+    @classmethod
+    def open(cls, params: GcsParams, system_id: int, component_id: int, geo: LocalFrame, *,
+             mirror_to: tuple[str, ...] = (), mirror_from: str = "127.0.0.1:0",
+             chart_size: tuple[float, float] | None = None, clock: Callable[[], float] = time.monotonic,
+             log: Callable[[str], None] | None = None) -> GcsLink:
+        """A link that opens its own devices (:func:`~.devices.open_gcs_devices`), for tests and
+        tools; the vessel computer's assembly opens them with its other devices."""
+        devices = open_gcs_devices(params, system_id, component_id, mirror_to=mirror_to,
+                                   mirror_from=mirror_from, clock=clock)
+        return cls(params, devices, geo, chart_size=chart_size, clock=clock, log=log)
 
     # -- wiring ---------------------------------------------------------------------------------
     def attach(self, api: VehicleApi) -> None:

@@ -60,13 +60,15 @@ class UdpTransport:
     stream = False
 
     def __init__(self, kind: str, host: str, port: int, max_peers: int = 8, *,
-                 counts: Counter[str] | None = None, clock: Callable[[], float] = time.monotonic) -> None:
+                 counts: Counter[str] | None = None, clock: Callable[[], float] = time.monotonic,
+                 peers: PeerTable | None = None) -> None:
+        """``peers``: the peer table, built by :func:`open_endpoint` (None: one of ``max_peers`` here)."""
         self.kind = kind
         bind = f"{host}:{port}" if kind == "udpin" else ("127.0.0.1:0" if host in ("127.0.0.1", "localhost")
                                                          else "0.0.0.0:0")
         self.ep = UdpEndpoint(bind, [])
         self.fixed = [(socket.gethostbyname(host), port)] if kind == "udpout" else []
-        self.peers = PeerTable(max_peers, clock, counts)
+        self.peers = peers if peers is not None else PeerTable(max_peers, clock, counts)
         self.max_peers = max_peers
         self.sent = 0
 
@@ -120,7 +122,9 @@ class TcpServerTransport:
     stream = True
 
     def __init__(self, host: str, port: int, max_peers: int = 8, *, counts: Counter[str] | None = None,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic, peers: PeerTable | None = None) -> None:
+        """``peers``: the peer table, counting into ``counts``, built by :func:`open_endpoint` (None: one
+        of ``max_peers`` here)."""
         self.lsock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self.lsock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
@@ -134,7 +138,7 @@ class TcpServerTransport:
         self.counts: Counter[str] = counts if counts is not None else Counter()
         self.conns: dict[TcpPeer, socket.socket] = {}
         self.pending: dict[Hashable, float] = {}      # connection -> when it was accepted (s, clock)
-        self.peers = PeerTable(max_peers, clock, self.counts)
+        self.peers = peers if peers is not None else PeerTable(max_peers, clock, self.counts)
         self.max_peers = max_peers
         self.sent = 0
         self._closed: list[Hashable] = []             # connections closed here, reported by the next receive()
@@ -420,15 +424,17 @@ def open_endpoint(spec: str, max_peers: int = 8, counts: Counter[str] | None = N
     a ground station that cannot be reached, a serial port that cannot be opened). ``counts`` receives
     the peer table's and the TCP server's refusals (``peer_table_full``, ``tcp_idle_closed`` ...); ``clock``
     (s, monotonic) times the peers' silences."""
+    counts = counts if counts is not None else Counter()
+    peers = PeerTable(max_peers, clock, counts)   # the servers' (tcpin, udp*) place table
     kind, host, port = parse_endpoint(spec)
     if kind == "tcpin":
-        return TcpServerTransport(host, port, max_peers, counts=counts, clock=clock)
+        return TcpServerTransport(host, port, max_peers, counts=counts, clock=clock, peers=peers)
     if kind == "tcp":
         return TcpClientTransport(host, port)
     if kind == "serial":
         return SerialTransport(host, port)
     try:
-        return UdpTransport(kind, host, port, max_peers, counts=counts, clock=clock)
+        return UdpTransport(kind, host, port, max_peers, counts=counts, clock=clock, peers=peers)
     except socket.gaierror as exc:
         raise ValueError(f"{spec!r}: unknown host ({exc})") from None
 
