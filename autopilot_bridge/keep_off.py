@@ -17,8 +17,9 @@ onto it while a ground station changed modes every 1-2 s (the chaos hour, seed 3
 
 A boat broadside to a 0.5 m/s current turns to stem it in about 3.5 s (``TURN_RATE``) and is set 1.7 m on
 meanwhile, however it uses its thrust; waiting until it is inside the radius left it 0.75 m to go (the
-in-process chaos search beside the breakwater's end at 2,281 s of the harbour's jet, after 12c4b6c: 5
-collisions in 300 two-minute runs, each a turn from broadside 1.8-2 m off).
+in-process chaos search beside the breakwater's end at 2,281 s of the harbour's jet, seeds 12-387 at 12c4b6c:
+5 collisions in 376 two-minute runs, each a turn from broadside 1.8-2 m off; 2 in the same 376 with this
+rule, 9ef0244).
 
 Station points of the modes themselves are moved to clear water by :func:`clear_point` too (Helm).
 Positions NED m, times s of vehicle time, speeds m/s.

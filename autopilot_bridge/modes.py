@@ -109,7 +109,7 @@ class ModeLoiter(RoverMode):
 
     def enter(self, v: Vehicle, position: tuple[float, float] | None) -> tuple[bool, str]:
         assert position is not None  # needs_position: Vehicle.set_mode checked it
-        v.new_route([position, position], v.default_radius, loiter=True)
+        v.loiter_at(position)
         return True, self.name
 
 
@@ -153,7 +153,7 @@ class ModeGuided(RoverMode):
         if v.guided_target is not None:
             v.new_route([position, v.guided_target], v.default_radius)
         else:
-            v.new_route([position, position], v.default_radius, loiter=True)
+            v.loiter_at(position)
         return True, self.name
 
 

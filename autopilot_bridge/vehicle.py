@@ -140,6 +140,11 @@ class Vehicle:
         self.route = Route(self._versions, np.asarray(path, dtype=float).reshape(-1, 2), goal_radius, loiter)
         self._at_route_end = False
 
+    def loiter_at(self, position: tuple[float, float]) -> None:
+        """Keep station at ``position`` (NED m), as ArduRover's ``start_loiter()``: LOITER, and GUIDED
+        without a target on a boat."""
+        self.new_route([position, position], self.default_radius, loiter=True)
+
     def set_speed(self, speed: float) -> None:
         """DO_CHANGE_SPEED (m/s over ground); outside SPEED_RANGE it is clamped, with a warning."""
         v = min(max(float(speed), SPEED_RANGE[0]), SPEED_RANGE[1])
