@@ -163,26 +163,33 @@ class Vehicle:
         return True, "armed" if on else "disarmed"
 
     def set_mode(self, mode: Mode, position: tuple[float, float] | None) -> tuple[bool, str]:
-        """Switch mode (the mode class decides whether it can be entered)."""
-        new = MODES[Mode(mode)]
+        """Switch mode (the mode class decides whether it can be entered). GUIDED entered this way keeps
+        station where the boat is, whatever target it had before (ArduRover's ``ModeGuided::_enter`` on a
+        boat: ``start_loiter()``); a target comes only with :meth:`reposition`."""
+        return self._switch(Mode(mode), position, None)
+
+    def reposition(self, target: tuple[float, float], position: tuple[float, float] | None) -> tuple[bool, str]:
+        """GUIDED towards ``target`` (NED m)."""
+        if position is None:
+            return False, "GUIDED: no position yet"
+        return self._switch(Mode.GUIDED, position, target)
+
+    def _switch(self, mode: Mode, position: tuple[float, float] | None,
+                guided_target: tuple[float, float] | None) -> tuple[bool, str]:
+        new = MODES[mode]
         if new.needs_position and position is None:
             return False, f"{new.name}: no position yet"
-        previous, previous_speed = self.active, self.speed
+        previous, previous_speed, previous_target = self.active, self.speed, self.guided_target
         self.active = new
         self.speed = None   # a new mode starts at its own speed; entering AUTO may run a DO_CHANGE_SPEED
+        self.guided_target = guided_target
         ok, why = new.enter(self, position)
         if not ok:
-            self.active, self.speed = previous, previous_speed
+            self.active, self.speed, self.guided_target = previous, previous_speed, previous_target
             return False, why
         self.changed = True
         self._at_route_end = False
         return True, why
-
-    def reposition(self, target: tuple[float, float], position: tuple[float, float] | None) -> tuple[bool, str]:
-        if position is None:
-            return False, "GUIDED: no position yet"
-        self.guided_target = target
-        return self.set_mode(Mode.GUIDED, position)
 
     def replace_mission(self, mission: list[Waypoint] | list[MissionCommand] | tuple,
                         position: tuple[float, float] | None) -> None:

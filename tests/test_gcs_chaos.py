@@ -1,8 +1,8 @@
 """A chaos ground station against a live `hil run` (issue 31, point 7; tests/support/chaos_gcs.py).
 
 A real `hil run --wait-for-arm` (lockstep paced to wall time, udpin and tcpin GCS endpoints) takes the
-seeded chaos client for ``CHAOS_S`` seconds (default 40 per leg: the suite's short version, about
-2 minutes with both legs on a loaded 2-core machine), with signing off and on. Then:
+seeded chaos client for ``CHAOS_S`` seconds (default 150 per leg: the suite's five-minute version, five
+minutes of chaos with both legs, about six with the runs' starts), with signing off and on. Then:
 
 * nothing crashed: the run is still going (ended by our SIGINT, outcome "interrupted"), no collision;
 * the vessel computer's and the simulator's memory and descriptors grew within a stated bound (RSS <= 64 MB,
@@ -31,7 +31,7 @@ from support.gcs_client import REPO
 from hil import instances
 from hil.hilrun import free_udp_port
 
-CHAOS_S = float(os.environ.get("CHAOS_S", "40"))
+CHAOS_S = float(os.environ.get("CHAOS_S", "150"))
 CHAOS_SEED = int(os.environ.get("CHAOS_SEED", "31"))
 RSS_GROWTH_MB = 64.0
 FD_GROWTH = 8

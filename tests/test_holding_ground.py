@@ -701,7 +701,20 @@ def _change_modes_in_the_jet(start: tuple[float, float], seed: int, seconds: flo
 # In-process search at 12c4b6c (the guard acting inside the safety radius only): 5 of 388 such two-minute runs
 # touched, each a boat slowed broadside to the jet 1.8-2.2 m south of the breakwater's end, set on while it
 # turned to stem the current; these three of them are kept off since the guard counts the set of that turn.
+# In them GUIDED, entered by a mode change, still went back to an earlier goto's target; since it keeps station
+# where entered, as ArduRover's boats do, these mode changes no longer take the boat there, so the guard's own
+# cases below fly GUIDED as it was then (_resuming_guided).
 JET_CASES = [((106.5, 152.0), 55), ((106.5, 152.0), 73), ((107.0, 152.3), 162)]
+
+
+def _resuming_guided(monkeypatch: pytest.MonkeyPatch) -> None:
+    """GUIDED as it was until 2026-11-28: entered by a mode change, it went back to an earlier goto's target."""
+    from autopilot_bridge.vehicle import Vehicle
+
+    def set_mode(self: Vehicle, mode: Mode, position: tuple[float, float] | None) -> tuple[bool, str]:
+        return self._switch(Mode(mode), position, self.guided_target)
+
+    monkeypatch.setattr(Vehicle, "set_mode", set_mode)
 
 
 @pytest.mark.parametrize("start,seed", JET_CASES)
@@ -710,11 +723,20 @@ def test_mode_changes_in_the_jet_past_the_breakwaters_end_keep_the_boat_off_it(s
 
 
 @pytest.mark.parametrize("start,seed", JET_CASES)
+def test_counting_the_set_of_a_turn_keeps_a_boat_sent_back_to_old_targets_off_the_breakwaters_end(start, seed,
+                                                                                                 monkeypatch):
+    _resuming_guided(monkeypatch)
+    assert _change_modes_in_the_jet(start, seed, 120.0) > COLLISION_CLEARANCE
+
+
+@pytest.mark.parametrize("start,seed", JET_CASES)
 def test_without_counting_the_set_of_a_turn_the_jet_sets_the_boat_onto_the_breakwaters_end(start, seed,
                                                                                             monkeypatch):
-    """The control case: the guard takes the boat only inside the safety radius (a turn takes no time)."""
+    """The control case of the test above: the guard takes the boat only inside the safety radius (a turn
+    takes no time)."""
     from autopilot_bridge import keep_off
 
+    _resuming_guided(monkeypatch)
     monkeypatch.setattr(keep_off, "drift_exposure", lambda _psi, _current: 0.0)
     assert _change_modes_in_the_jet(start, seed, 120.0) < COLLISION_CLEARANCE
 

@@ -83,6 +83,21 @@ def test_rtl_goes_home_and_guided_goes_to_its_target():
     assert not v.wants_thrust()
 
 
+def test_guided_entered_again_by_a_mode_change_keeps_station_instead_of_resuming_an_old_target():
+    """ArduRover's boats: every entry into GUIDED starts a loiter where the boat is (``ModeGuided::_enter``:
+    ``is_boat()`` -> ``start_loiter()``); only a new reposition gives a target. Until now a GUIDED entered by
+    a mode change went back to the target of an earlier reposition."""
+    v = vehicle()
+    assert v.reposition((5.0, 6.0), (20.0, 20.0)) == (True, "GUIDED")
+    assert v.set_mode(Mode.LOITER, (15.0, 16.0))[0]
+    assert v.set_mode(Mode.GUIDED, (14.0, 15.0))[0]
+    assert v.route.path.tolist() == [[14.0, 15.0], [14.0, 15.0]] and v.route.loiter
+    assert v.set_mode(Mode.GUIDED, (13.0, 14.0))[0]           # and again from GUIDED itself
+    assert v.route.path.tolist() == [[13.0, 14.0], [13.0, 14.0]] and v.route.loiter
+    assert v.reposition((1.0, 2.0), (13.0, 14.0)) == (True, "GUIDED")
+    assert v.route.path.tolist() == [[13.0, 14.0], [1.0, 2.0]] and not v.route.loiter
+
+
 def test_behaviour_transitions_are_explicit():
     b = BehaviourMachine()
     assert b.state is Behaviour.WAITING
