@@ -14,7 +14,7 @@ def param(
     ge: float | None = None,
     lt: float | None = None,
     le: float | None = None,
-    default: Any = dataclasses.MISSING,
+    default: object = dataclasses.MISSING,
 ) -> Any:
     """A dataclass field with its meaning (``help``), SI ``unit`` and bounds checked on load.
 

@@ -29,6 +29,8 @@ if TYPE_CHECKING:
     from pathlib import Path
     from types import FrameType
 
+    from can.typechecking import CanFilter
+
     from autopilot_bridge.can_actuators import CanActuators
     from hil.settings import HilConfig
 
@@ -119,7 +121,7 @@ def esc_main(args: argparse.Namespace) -> int:
 
     cfg = settings.load(args.config, args.overrides)
     vessel = Vessel(cfg.vessel)
-    filters = None
+    filters: list[CanFilter] | None = None
     if args.only_from_autopilot:  # messages (service bit 0) from the autopilot's node ID only
         filters = [{"can_id": cfg.can.autopilot_node_id, "can_mask": 0xFF, "extended": True}]
     esc = EscBank(open_bus(cfg.can, can_filters=filters), cfg.can, cfg.esc, vessel)
