@@ -34,7 +34,7 @@ class ArgumentParser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(r"^-\.?\d")
 
-    def _get_value(self, action: argparse.Action, arg_string: str) -> Any:
+    def _get_value(self, action: argparse.Action, arg_string: str) -> object:
         """argparse's conversion, then every float/int option checked against its physical range
         (``hil.commands.arg_types.CLI_RANGES``): out of range, infinite or NaN is a one-line usage error."""
         value = super()._get_value(action, arg_string)
