@@ -30,7 +30,7 @@ class ArgumentParser(argparse.ArgumentParser):
     starts with a minus and a digit (``--miss -6,-2``, ``--start -1.5,3``, ``--heading -1e-3``) is a value,
     not an unknown option (argparse 3.11 only knows bare negative numbers; 3.13 reads them this way)."""
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
+    def __init__(self, *args: Any, **kwargs: Any) -> None:   # argparse.ArgumentParser's, passed on unchanged
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(r"^-\.?\d")
 
