@@ -20,7 +20,7 @@ JsonValue: TypeAlias = Any
 JsonTable: TypeAlias = dict[str, JsonValue]
 
 
-def absent_when_none() -> Any:
+def absent_when_none() -> Any:   # a field specifier: Any, as dataclasses.field's own
     """A field defaulting to None that :func:`to_table` leaves out while it is None (the reader
     then takes the default back)."""
     return dataclasses.field(default=None, metadata={_ABSENT_WHEN_NONE: True})

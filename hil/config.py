@@ -29,6 +29,7 @@ import typing
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypeVar, get_args, get_origin
 
+from common.params import ParamMeta
 from common.tables import JsonTable, JsonValue
 from common.tables import to_table as to_table  # the serialiser, re-exported
 from hil.errors import ConfigError
@@ -224,7 +225,7 @@ PHYSICAL_RANGES: dict[str, tuple[float, float]] = {
 MAX_INTEGER = (1 << 63) - 1   # seeds are 64-bit; counts have their own cap in PHYSICAL_RANGES
 
 
-def range_of(key: str, meta: typing.Mapping[str, Any], tp: object = float) -> tuple[float, float]:
+def range_of(key: str, meta: ParamMeta, tp: object = float) -> tuple[float, float]:
     """The inclusive (low, high) a number at dotted ``key`` may take (an open schema bound ``gt``/``lt``
     is reported as its value); array indices in ``key`` are ignored."""
     base = key.split("[", 1)[0]
@@ -237,7 +238,7 @@ def range_of(key: str, meta: typing.Mapping[str, Any], tp: object = float) -> tu
     return low, high
 
 
-def _check_range(value: object, meta: typing.Mapping[str, Any], key: str) -> None:
+def _check_range(value: object, meta: ParamMeta, key: str) -> None:
     """PHYSICAL_RANGES and MAX_INTEGER (the schema's bounds are :func:`_check_bounds`'s)."""
     base = key.split("[", 1)[0]
     values = value if isinstance(value, tuple) else (value,)
@@ -256,7 +257,7 @@ def _check_range(value: object, meta: typing.Mapping[str, Any], key: str) -> Non
             raise ValueError(f"{key}: {v} is out of range (|value| <= 2^63 - 1)")
 
 
-def _check_bounds(value: object, meta: typing.Mapping[str, Any], key: str) -> None:
+def _check_bounds(value: object, meta: ParamMeta, key: str) -> None:
     values = value if isinstance(value, tuple) else (value,)
     for v in values:
         if isinstance(v, tuple):
@@ -486,7 +487,7 @@ def key_ranges(cls: type, prefix: str = "") -> list[tuple[str, str, float, float
     return out
 
 
-def _bound_text(value: float, meta: typing.Mapping[str, Any], strict: str, key: str) -> str:
+def _bound_text(value: float, meta: ParamMeta, strict: str, key: str) -> str:
     """``> 0`` where the schema's strict bound is the effective one, else the number."""
     base = key.split("[", 1)[0]
     tightened = base in PHYSICAL_RANGES and value in PHYSICAL_RANGES[base]
@@ -503,8 +504,8 @@ def range_table(cls: type) -> str:
     return "\n".join(rows) + "\n"
 
 
-def _metas(cls: type, prefix: str = "") -> dict[str, typing.Mapping[str, Any]]:
-    out: dict[str, typing.Mapping[str, Any]] = {}
+def _metas(cls: type, prefix: str = "") -> dict[str, ParamMeta]:
+    out: dict[str, ParamMeta] = {}
     hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(cls):
         tp = hints[f.name]
