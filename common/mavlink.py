@@ -304,7 +304,7 @@ class Codec:
         self.mav.seq = (self.mav.seq + 1) % 256
         return bytes(buf)
 
-    def encode(self, name: str, *args, **kwargs) -> bytes:
+    def encode(self, name: str, *args: MavValue, **kwargs: MavValue) -> bytes:
         """Frame of message ``name`` (e.g. ``"hil_sensor"``) built from its encode() arguments.
 
         Unsigned messages without text fields are framed here, byte for byte as pymavlink frames
