@@ -21,6 +21,7 @@ import time
 from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from common.dronecan_codec import TRANSFER_ID_MODULO
 
@@ -35,7 +36,8 @@ if TYPE_CHECKING:
     from hil.settings import HilConfig
 
 
-def pair_latency(sent_tid, sent_at, applied_tid, applied_at, modulo: int = TRANSFER_ID_MODULO) -> np.ndarray:
+def pair_latency(sent_tid: npt.ArrayLike, sent_at: npt.ArrayLike, applied_tid: np.ndarray,
+                 applied_at: np.ndarray, modulo: int = TRANSFER_ID_MODULO) -> np.ndarray:
     """Latencies (s) of the applied commands, each paired with the earliest unpaired command sent
     before it with the same transfer ID (right unless ``modulo`` or more commands in a row were lost)."""
     st, sa = np.asarray(sent_tid), np.asarray(sent_at)

@@ -13,16 +13,18 @@ import csv
 import math
 import signal
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeAlias
+from types import FrameType
+from typing import TYPE_CHECKING, Any, NoReturn, TypeAlias
 
 import numpy as np
 
 from planner.params import ALGORITHM_NAMES, REGISTRY, Objective
 
 if TYPE_CHECKING:
+    from hil.executors import Executor
     from hil.scenario import Scenario, ScenarioSpec
     from hil.settings import HilConfig
     from planner.online import OnlineContext, OnlineResult
@@ -382,8 +384,9 @@ def make_tasks(scenario: str, runs: int, algorithms: Sequence[str], seed: int, o
             for i in range(runs) for alg in algorithms]
 
 
-def run_campaign(tasks: Sequence[Task], jobs: int, out_csv: Path | None = None, progress=None,
-                 executor=None) -> Campaign:
+def run_campaign(tasks: Sequence[Task], jobs: int, out_csv: Path | None = None,
+                 progress: Callable[[int, CsvRow], None] | None = None,
+                 executor: Executor | None = None) -> Campaign:
     """Run ``tasks`` on ``executor`` (default: ``jobs`` local spawned processes; ``jobs == 1`` runs
     in-process; see :mod:`hil.executors` for Dask).
 
@@ -409,7 +412,8 @@ def run_campaign(tasks: Sequence[Task], jobs: int, out_csv: Path | None = None, 
         if progress:
             progress(len(camp.rows), row)
 
-    def on_term(signum, frame):  # SIGTERM (e.g. `kill`): stop like Ctrl-C and keep the finished runs
+    # SIGTERM (e.g. `kill`): stop like Ctrl-C and keep the finished runs
+    def on_term(signum: int, frame: FrameType | None) -> NoReturn:
         raise KeyboardInterrupt
 
     previous = signal.signal(signal.SIGTERM, on_term)

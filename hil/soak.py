@@ -15,7 +15,9 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     import numpy as np
 
+    from hil.hilrun import HilRun
     from hil.settings import HilConfig
+    from hil.tap import Tap
 
 from common.tables import JsonTable, to_table
 from hil.console import progress
@@ -115,7 +117,7 @@ def soak_loop(args: argparse.Namespace, cfg: HilConfig, out: Path) -> JsonTable:
     on_can = cfg.can.actuators == "can"
     ap_rec, sim_rec = out / "autopilot-can.npz", out / "sim-can.npz"
 
-    def sample(tap, run) -> None:
+    def sample(tap: Tap, run: HilRun) -> None:
         if tap.truth and run.ap is not None and run.sim is not None and run.ap.poll() is None \
                 and run.sim.poll() is None:
             watch.sample({"autopilot": run.ap.pid, "simulator": run.sim.pid})

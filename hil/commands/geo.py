@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 from hil.console import emit, load_settings
@@ -13,7 +14,7 @@ from hil.errors import UsageError
 from hil.files import check_output_file
 
 
-def _pair(what: str):
+def _pair(what: str) -> Callable[[str], tuple[float, float]]:
     def parse(text: str) -> tuple[float, float]:
         parts = text.split(",")
         try:
