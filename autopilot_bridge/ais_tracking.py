@@ -38,6 +38,8 @@ from common.params import param
 if TYPE_CHECKING:
     from filterpy.kalman import KalmanFilter
 
+    from common.geodesy import LocalFrame
+
 KNOT = 1852.0 / 3600.0
 
 
@@ -150,7 +152,7 @@ class AisSummary(TypedDict):
 class AisTracker:
     """Tracks of every MMSI heard, with rejection counters (see the module docstring)."""
 
-    def __init__(self, params: TrackerParams, geo) -> None:
+    def __init__(self, params: TrackerParams, geo: LocalFrame) -> None:
         _kalman_filter()  # imported now, not when the first ship is heard (in a frame)
         self.p, self.geo = params, geo
         self.tracks: dict[int, _Track] = {}

@@ -123,7 +123,7 @@ def _curvature_at(signed: np.ndarray, cum: np.ndarray, index: int, along: float,
 @njit(cache=True, error_model="numpy")
 def _follow(path: np.ndarray, seg: np.ndarray, seg_len: np.ndarray, cum: np.ndarray, vertex_curvature: np.ndarray,
             signed_curvature: np.ndarray, lo: int, hi: int, north: float, east: float, lookahead: float,
-            preview: float):
+            preview: float) -> tuple[int, float, float, float, float, float, float]:
     """One LineOfSight.update in one call: (segment, heading, cross-track, remaining, distance to the
     end, curvature ahead, curvature), each term as the Python version computed it."""
     i, s = _closest(path, seg, seg_len, lo, hi, north, east)

@@ -32,7 +32,7 @@ from typing import NotRequired, Protocol, TypedDict
 
 from autopilot_bridge.ais_tracking import AisReport
 from common.geodesy import LocalFrame
-from common.mavlink import MAV_TYPE, Codec
+from common.mavlink import MAV_TYPE, Codec, MavFields
 from common.udp import BusyPoll, LossCounts, UdpEndpoint
 
 TAKEN = ("HIL_SENSOR", "HIL_GPS", "ODOMETRY", "OBSTACLE_DISTANCE", "HIL_STATE_QUATERNION", "AIS_VESSEL",
@@ -354,7 +354,7 @@ class HilLink:
         self._candidate = c
         return False
 
-    def _gps_fix(self, gps) -> GpsFix | None:
+    def _gps_fix(self, gps: MavFields) -> GpsFix | None:
         lat, lon, vn, ve = gps.lat * 1e-7, gps.lon * 1e-7, gps.vn * 0.01, gps.ve * 0.01
         if abs(lat) <= 90.0 and abs(lon) <= 180.0 and abs(vn) <= MAX_SPEED and abs(ve) <= MAX_SPEED:
             north, east = self.geo.geodetic_to_sea_level(lat, lon)
@@ -363,7 +363,7 @@ class HilLink:
         self.rejects[IMPLAUSIBLE + "gps"] += 1
         return None
 
-    def _scan(self, m) -> RangeScan | None:
+    def _scan(self, m: MavFields) -> RangeScan | None:
         """OBSTACLE_DISTANCE per the MAVLink spec: cm; max_distance + 1 = nothing; UINT16_MAX = unused."""
         if m.frame != MAV_TYPE.MAV_FRAME_BODY_FRD or m.max_distance <= m.min_distance:
             self.rejects["obstacle_distance_unsupported"] += 1
@@ -449,7 +449,7 @@ class HilLink:
         self.ep.close()
 
 
-def _gps_status(m) -> GpsStatus:
+def _gps_status(m: MavFields) -> GpsStatus:
     """HIL_GPS's own account of the fix (its integers clamped to GPS_RAW_INT's field ranges)."""
     def u16(v: int) -> int:
         return max(0, min(UINT16_MAX, int(v)))
@@ -462,7 +462,7 @@ def _gps_status(m) -> GpsStatus:
                      u16(m.epv), u16(m.vel), u16(m.cog))
 
 
-def _battery_reading(m) -> BatteryReading | None:
+def _battery_reading(m: MavFields) -> BatteryReading | None:
     """BATTERY_STATUS per the MAVLink spec (mV per cell, UINT16_MAX unused; cA, mAh, hJ, % with -1 unknown),
     or None when it is implausible for a boat's pack (no cell, a voltage or current out of range)."""
     every = list(m.voltages) + list(getattr(m, "voltages_ext", None) or [])
@@ -480,7 +480,7 @@ def _battery_reading(m) -> BatteryReading | None:
                           int(getattr(m, "charge_state", 0)))
 
 
-def _ais_report(m, t: float) -> AisReport:
+def _ais_report(m: MavFields, t: float) -> AisReport:
     """AIS_VESSEL in SI units; course/speed None when AIS marks them unavailable (36000, 65535) or
     the flags say they are not valid."""
     flags = int(m.flags)

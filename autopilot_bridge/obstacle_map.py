@@ -18,6 +18,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 from scipy import ndimage
 
@@ -48,7 +49,7 @@ class SensedObstacles:
         _place(np.zeros((0, 1), np.int64), np.zeros((0, 1), np.int64), self.explained, self.hits, self.confirmed,
                self.confirm_hits)
 
-    def add_scan(self, bearings, ranges, north: float, east: float, psi: float,
+    def add_scan(self, bearings: npt.ArrayLike, ranges: npt.ArrayLike, north: float, east: float, psi: float,
                  sector_width: float = 0.0) -> np.ndarray:
         """Place one scan (sector bearings rad from the bow, ranges m, sectors ``sector_width`` rad
         wide) seen from NED ``north, east``, heading ``psi``; returns the newly confirmed cells
@@ -89,7 +90,7 @@ class SensedObstacles:
                 "outside_map": s.outside_map, "cells": len(self._cells), "versions": self.version}
 
 
-def arc_cells(bearings, d: np.ndarray, north: float, east: float, psi: float, sector_width: float,
+def arc_cells(bearings: npt.ArrayLike, d: np.ndarray, north: float, east: float, psi: float, sector_width: float,
               res: float) -> tuple[np.ndarray, np.ndarray]:
     """Grid rows and columns ``(R, n_arc)`` int64 of the arcs of returns at ranges ``d`` (m, R > 0),
     each arc sampled at <= half a cell across its sector (one sample count for the scan)."""

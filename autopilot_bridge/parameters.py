@@ -23,7 +23,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, overload
 
-Bound = float | Callable[[Any], float]   # a number, or one computed from the owner (e.g. 0.95 x its period)
+# A number, or one computed from the owner (e.g. 0.95 x its period). The owner is whichever class declares
+# the tunable (the descriptor serves them all), so the function takes Any.
+Bound = float | Callable[[Any], float]
 
 
 @dataclass(frozen=True)

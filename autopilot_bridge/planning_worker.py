@@ -29,9 +29,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
-from typing import TYPE_CHECKING, Any, Generic, TypeVar
+from typing import TYPE_CHECKING, Generic, TypeVar, cast
 
 if TYPE_CHECKING:
+    from multiprocessing.context import ForkContext, ForkServerContext, SpawnContext
+
     from planner.params import PlannerParams
     from planner.problem import PlanningProblem
     from planner.result import PlannerResult
@@ -166,8 +168,8 @@ class PlannerWorker(Generic[P, R]):
         self.factory_args = factory_args
         self.grace_s = grace_s
         self.startup_timeout_s = startup_timeout_s
-        # Any: typeshed's BaseContext has no Process (each concrete context has its own)
-        self.ctx: Any = mp.get_context(start_method)
+        # typeshed's BaseContext has no Process (each concrete context has its own)
+        self.ctx = cast("SpawnContext | ForkContext | ForkServerContext", mp.get_context(start_method))
         self.stats = WorkerStats()
         self._proc: BaseProcess | None = None
         self._conn: Connection | None = None

@@ -20,21 +20,27 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 from pymavlink.dialects.v20 import common as M
 
 from autopilot_bridge.obstacle_map import path_blocked
 
+if TYPE_CHECKING:
+    from autopilot_bridge.gcs.mission import MissionItem
+    from planner.gridmap import OccupancyGrid
+
 _logger = logging.getLogger(__name__)
 
 
-def _to_map(ned) -> np.ndarray:
+def _to_map(ned: npt.ArrayLike) -> np.ndarray:
     return np.asarray(ned, dtype=float).reshape(-1, 2)[:, ::-1].copy()
 
 
-def check_mission(grid, waypoints_ned, safety_radius: float,
+def check_mission(grid: OccupancyGrid, waypoints_ned: npt.ArrayLike, safety_radius: float,
                   position_ned: tuple[float, float] | None = None) -> tuple[int, int, str] | None:
     """The first bad waypoint of a mission as ``(item index, MAV_MISSION_RESULT, reason)``, or None.
 
@@ -84,7 +90,7 @@ class RouteKeeper:
 
     ``grid`` is the autopilot's chart-plus-sensed map (marked in place as obstacles are sensed)."""
 
-    def __init__(self, grid, safety_radius: float, spacing: float = 10.0,
+    def __init__(self, grid: OccupancyGrid, safety_radius: float, spacing: float = 10.0,
                  log: Callable[[str], None] | None = None) -> None:
         self.grid, self.safety_radius, self.spacing = grid, float(safety_radius), float(spacing)
         self.log = log or _logger.info
@@ -93,7 +99,7 @@ class RouteKeeper:
         self.progress = 0                                  # index into path of the vessel's nearest point
         self.replans = 0
 
-    def set_route(self, waypoints_ned) -> np.ndarray:
+    def set_route(self, waypoints_ned: npt.ArrayLike) -> np.ndarray:
         """Plan the route through ``waypoints_ned`` (position first); returns the dense NED path.
         A route the chart does not allow (GUIDED or RTL into an obstacle, an unreachable point)
         is kept as given: the local planner and the reactive behaviour do what they can."""
@@ -103,7 +109,7 @@ class RouteKeeper:
         self.path = path if path is not None else self.waypoints.copy()
         return self.path
 
-    def adopt(self, path_ned) -> None:
+    def adopt(self, path_ned: npt.ArrayLike) -> None:
         """Take a route planned elsewhere (the scenario's global route) as the active one."""
         self.path = np.asarray(path_ned, dtype=float).reshape(-1, 2)
         self.waypoints = self.path.copy()
@@ -161,7 +167,8 @@ POSITION_COMMANDS = frozenset({M.MAV_CMD_NAV_WAYPOINT, M.MAV_CMD_NAV_LOITER_UNLI
                                M.MAV_CMD_NAV_LOITER_TIME, M.MAV_CMD_NAV_LAND, M.MAV_CMD_NAV_SPLINE_WAYPOINT})
 
 
-def check_mission_items(items, to_ned: Callable[[float, float], tuple[float, float]], grid, safety_radius: float,
+def check_mission_items(items: Sequence[MissionItem], to_ned: Callable[[float, float], tuple[float, float]],
+                        grid: OccupancyGrid, safety_radius: float,
                         position_ned: tuple[float, float] | None) -> tuple[int, int, str] | None:
     """:func:`check_mission` on an upload's items (``gcs.mission.MissionItem``: ``command``, ``x``,
     ``y``, ``lat``, ``lon``): ``(seq, MAV_MISSION_RESULT, reason)`` of the first bad one, or None.

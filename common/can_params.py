@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import socket
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Literal, TypedDict, Unpack
 
 import can
+from can.typechecking import CanFilters
 
 from common.params import param
 
@@ -44,7 +45,14 @@ class CanParams:
             raise ValueError("esc_node_ids: the autopilot and the two ESCs need distinct node IDs")
 
 
-def open_bus(params: CanParams, **kwargs: Any) -> can.BusABC:
+class BusOptions(TypedDict, total=False):
+    """The ``can.Bus`` options this project opens buses with."""
+
+    can_filters: CanFilters | None
+    receive_own_messages: bool
+
+
+def open_bus(params: CanParams, **kwargs: Unpack[BusOptions]) -> can.BusABC:
     """``can.Bus`` of the configured interface and channel; ValueError with a one-line reason.
 
     On SocketCAN the socket's receive buffer is raised to ``socket_rx_buffer``: the default (about

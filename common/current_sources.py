@@ -33,12 +33,15 @@ import bisect
 import math
 import os
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import numpy.typing as npt
 
 from common.current_params import CurrentParams
+
+if TYPE_CHECKING:
+    import xarray as xr
 from common.geodesy import LocalFrame
 
 EAST_NAMES = ("eastward_sea_water_velocity", "surface_eastward_sea_water_velocity",
@@ -96,7 +99,7 @@ class RawCurrentGrid:
     v: np.ndarray
 
 
-def _find_velocity(ds: Any, names: tuple[str, ...], given: str, which: str, path: str) -> Any:
+def _find_velocity(ds: xr.Dataset, names: tuple[str, ...], given: str, which: str, path: str) -> xr.DataArray:
     if given:
         if given not in ds.variables:
             raise CurrentSourceError(f"{path}: no variable {given!r} ({which}_variable); it has: "
@@ -110,7 +113,7 @@ def _find_velocity(ds: Any, names: tuple[str, ...], given: str, which: str, path
                              f"current.{which}_variable (variables: {', '.join(map(str, ds.data_vars))})")
 
 
-def _axis(ds: Any, var: Any, kind: str) -> str | None:
+def _axis(ds: xr.Dataset, var: xr.DataArray, kind: str) -> str | None:
     """The name of ``var``'s dimension that is latitude, longitude, time or depth (CF attributes or usual names)."""
     names = {"latitude": ("lat", "latitude"), "longitude": ("lon", "longitude"),
              "time": ("time", "t", "ocean_time"), "depth": ("depth", "z", "lev", "level", "deptht", "s_rho")}[kind]
@@ -129,7 +132,7 @@ def _axis(ds: Any, var: Any, kind: str) -> str | None:
     return None
 
 
-def _scale(var: Any, path: str) -> float:
+def _scale(var: xr.DataArray, path: str) -> float:
     units = " ".join(str(var.attrs.get("units", "m s-1")).strip().lower().replace("^", "").split())
     units = units.replace("metres", "m").replace("meters", "m").replace("metre", "m").replace("meter", "m")
     units = units.replace(" per second", "/s").replace("second-1", "s-1").replace("sec-1", "s-1")
@@ -161,7 +164,7 @@ def read_netcdf(path: str, east_variable: str = "", north_variable: str = "") ->
         if dims["latitude"] is None or dims["longitude"] is None:
             raise CurrentSourceError(f"{path}: {u_var.name}: no 1-D latitude/longitude dimensions (dims: "
                                      f"{', '.join(map(str, u_var.dims))}; curvilinear grids are not supported)")
-        sel: dict[str, Any] = {}
+        sel: dict[str, int] = {}
         if dims["depth"] is not None:
             depth = np.asarray(ds[dims["depth"]].values if dims["depth"] in ds.variables
                                else np.arange(u_var.sizes[dims["depth"]]), dtype=float)

@@ -27,7 +27,7 @@ from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass
 from functools import cache
-from typing import Any
+from typing import TypeAlias
 
 import can
 import dronecan
@@ -35,6 +35,11 @@ from dronecan.transport import bits_from_bytes, bytes_from_bits
 
 from common import dronecan_layout
 from common.dronecan_layout import RAW_COMMAND_MAX, quantize  # noqa: F401  (both sides' names for them)
+
+# dronecan builds its DSDL types and their message classes at run time from the DSDL definitions and
+# ships no type information, so to mypy these are Any: a message's fields are read unchecked.
+DronecanType: TypeAlias = dronecan.dsdl.parser.CompoundType      # has default_dtid, signature, fields
+DronecanMessage: TypeAlias = dronecan.transport.CompoundValue    # a message object of such a type
 
 # Data type IDs and full names (DroneCAN standard data types).
 RAW_COMMAND = "uavcan.equipment.esc.RawCommand"   # 1030
@@ -65,7 +70,7 @@ SERVICE_OR_ANONYMOUS = "service_or_anonymous"
 FAST_LAYOUTS = {RAW_COMMAND: dronecan_layout.RAW_COMMAND, NODE_STATUS: dronecan_layout.NODE_STATUS}
 
 
-def data_type(full_name: str) -> Any:
+def data_type(full_name: str) -> DronecanType:
     """The ``dronecan`` DSDL type object of ``full_name`` (has default_dtid, signature, fields)."""
     return dronecan.TYPENAMES[full_name]
 
@@ -92,7 +97,7 @@ def message_id(priority: int, dtid: int, source_node: int) -> int:
     return (priority << 24) | (dtid << 8) | source_node
 
 
-def serialize(msg: Any) -> bytes:
+def serialize(msg: DronecanMessage) -> bytes:
     """Payload bytes of a ``dronecan`` message object (tail array optimisation, zero padded)."""
     bits = msg._pack(tao=True)
     if len(bits) % 8:
@@ -100,7 +105,7 @@ def serialize(msg: Any) -> bytes:
     return bytes(bytes_from_bits(bits))
 
 
-def decode(dt: Any, payload: bytes) -> Any | None:
+def decode(dt: DronecanType, payload: bytes) -> DronecanMessage | None:
     """The ``dronecan`` message object of type ``dt`` in ``payload``, or None unless ``payload`` is
     exactly its serialisation (too short, too long, or non-zero padding)."""
     try:
@@ -112,7 +117,7 @@ def decode(dt: Any, payload: bytes) -> Any | None:
     return msg if canonical == payload else None
 
 
-def make(full_name: str, **fields: Any) -> Any:
+def make(full_name: str, **fields: object) -> DronecanMessage:
     """A ``dronecan`` message object of type ``full_name`` with ``fields`` set."""
     return data_type(full_name)(**fields)
 
@@ -146,7 +151,7 @@ class Transfer:
     transfer_id: int
     priority: int
     payload: bytes
-    msg: Any                # the decoded ``dronecan`` message object
+    msg: DronecanMessage    # the decoded ``dronecan`` message object
     timestamp: float        # of its first frame (python-can's receive timestamp, s)
 
 
@@ -239,7 +244,8 @@ class TransferReceiver:
         del self.sessions[key]
         return self._finish(dt, arb, tid, bytes(s.data), s.timestamp, multi=True)
 
-    def _finish(self, dt: Any, arb: int, tid: int, body: bytes, timestamp: float, multi: bool) -> Transfer | None:
+    def _finish(self, dt: DronecanType, arb: int, tid: int, body: bytes, timestamp: float,
+                multi: bool) -> Transfer | None:
         if multi:
             if len(body) < 3:
                 self.rejects[WRONG_DLC] += 1

@@ -18,7 +18,7 @@ import struct
 from collections import namedtuple
 from collections.abc import Callable, Iterable, Sequence
 from functools import partial
-from typing import Any
+from typing import Any, TypeAlias
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
@@ -32,6 +32,16 @@ UNWANTED_MESSAGE = "unwanted_message"  # a valid, known message this endpoint do
 REJECT_REASONS = (NOT_MAVLINK, BAD_CRC, TRUNCATED, MALFORMED, UNKNOWN_MESSAGE, UNWANTED_MESSAGE)
 
 MAV_TYPE = mavlink2  # the dialect module, for enums (e.g. MAV_FRAME_BODY_FRD)
+
+# A decoded MAVLink message, project-wide. pymavlink generates one class per message from the XML
+# dialect and ships no type information, so to mypy this is Any: its fields are read unchecked.
+MavMessage: TypeAlias = mavlink2.MAVLink_message
+# A message's fields by name: the pymavlink message, or a named tuple type made at run time from its
+# class (:func:`_fields`). Its attributes exist only at run time.
+MavFields: TypeAlias = Any
+# One field's value as ``struct`` packs it (int, float, bytes, or a list of them for an array;
+# typeshed types struct's values as Any): which one depends on the message and the field.
+MavValue: TypeAlias = Any
 
 # pymavlink checks every frame's CRC-16/MCRF4XX with the fastcrc package where it is installed (a
 # dependency of ours) and with a byte-by-byte Python loop otherwise: 22 against 6 us to encode a
@@ -47,7 +57,7 @@ class _Layout:
 
     __slots__ = ("cls", "crc_extra", "size", "unpack", "order", "spans", "strings", "texts", "_view")
 
-    def __init__(self, cls: Any) -> None:
+    def __init__(self, cls: type[MavMessage]) -> None:
         self.cls, self.crc_extra = cls, bytes((cls.crc_extra,))
         self.size, self.unpack = cls.unpacker.size, cls.unpacker.unpack
         lengths = cls.lengths
@@ -60,18 +70,18 @@ class _Layout:
         self.strings = "s" in cls.unpacker.format
         # char arrays, which the message's constructor turns into text (to the first NUL, ASCII)
         self.texts = tuple(i for i, t in enumerate(cls.fieldtypes) if t == "char")
-        self._view: Any = None
+        self._view: type[MavFields] | None = None
 
-    def view(self) -> Any:
+    def view(self) -> type[MavFields]:
         """A named tuple type of the message's fields (pymavlink's names, declared order), made once."""
         if self._view is None:
             self._view = namedtuple(self.cls.msgname, self.cls.fieldnames, rename=True)  # type: ignore[misc]
         return self._view
 
-    def fields(self, payload: bytes) -> list[Any]:
+    def fields(self, payload: bytes) -> list[MavValue]:
         t = self.unpack(payload)
         if self.order is not None:
-            out: list[Any] = [t[o] for o in self.order]
+            out: list[MavValue] = [t[o] for o in self.order]
         else:
             out = [t[tip] if n == 1 or isinstance(t[tip], bytes) else list(t[tip:tip + n]) for tip, n in self.spans]
         if self.strings:
@@ -132,7 +142,7 @@ def message_at(datagram: bytes, start: int, end: int) -> mavlink2.MAVLink_messag
     return _message(datagram, start, end, _LAYOUTS[frame_ids(datagram, start)[0]])
 
 
-def _fields(datagram: bytes, start: int, end: int, layout: _Layout) -> Any:
+def _fields(datagram: bytes, start: int, end: int, layout: _Layout) -> MavFields:
     """The fields of the clean frame ``datagram[start:end]`` by name: a named tuple of the values
     :func:`message_at`'s message holds (char arrays made text as its constructor makes them),
     without building the message."""
@@ -184,7 +194,7 @@ def _parse_clean(datagram: bytes, crc16: Callable[[bytes], int]) -> list[mavlink
     return None if spans is None else [_message(datagram, i, end, layout) for i, end, layout in spans]
 
 
-def _itself(m: Any) -> Any:
+def _itself(m: MavMessage) -> MavMessage:
     return m
 
 
@@ -213,7 +223,7 @@ class _Encoder:
 
     __slots__ = ("msg_id", "crc_extra", "pack", "names", "defaults", "wire", "declared_order")
 
-    def __init__(self, cls: Any) -> None:
+    def __init__(self, cls: type[MavMessage]) -> None:
         encode = getattr(mavlink2.MAVLink, f"{cls.msgname.lower()}_encode")
         params = list(inspect.signature(encode).parameters.values())[1:]   # after self
         self.msg_id, self.crc_extra, self.pack = cls.id, bytes((cls.crc_extra,)), cls.unpacker.pack
@@ -224,7 +234,7 @@ class _Encoder:
         # no arrays, and the wire order is encode()'s (HIL_SENSOR, HIL_GPS...): the values go as they are
         self.declared_order = all(not n and i == k for k, (i, n) in enumerate(self.wire))
 
-    def payload(self, args: tuple[Any, ...], kwargs: dict[str, Any]) -> bytes | None:
+    def payload(self, args: tuple[MavValue, ...], kwargs: dict[str, MavValue]) -> bytes | None:
         """The full (untrimmed) payload, or None where encode() would complain (pymavlink then says how)."""
         if not kwargs and len(args) <= len(self.names):   # the usual call: positional, defaults after
             tail = self.defaults[len(args):]
@@ -232,13 +242,13 @@ class _Encoder:
                 return None
             if self.declared_order:
                 return self.pack(*args, *tail)
-            values: Sequence[Any] = args + tail
+            values: Sequence[MavValue] = args + tail
         else:
             named = self._values(args, kwargs)
             if named is None:
                 return None
             values = named
-        flat: list[Any] = []
+        flat: list[MavValue] = []
         for i, n in self.wire:
             v = values[i]
             if n:
@@ -247,7 +257,7 @@ class _Encoder:
                 flat.append(v)
         return self.pack(*flat)
 
-    def _values(self, args: tuple[Any, ...], kwargs: dict[str, Any]) -> list[Any] | None:
+    def _values(self, args: tuple[MavValue, ...], kwargs: dict[str, MavValue]) -> list[MavValue] | None:
         """encode()'s arguments in declared order, defaults filled in (None where it would complain)."""
         if len(args) > len(self.names):
             return None
@@ -294,7 +304,7 @@ class Codec:
         self.mav.seq = (self.mav.seq + 1) % 256
         return bytes(buf)
 
-    def encode(self, name: str, *args, **kwargs) -> bytes:
+    def encode(self, name: str, *args: MavValue, **kwargs: MavValue) -> bytes:
         """Frame of message ``name`` (e.g. ``"hil_sensor"``) built from its encode() arguments.
 
         Unsigned messages without text fields are framed here, byte for byte as pymavlink frames
@@ -336,7 +346,7 @@ class Codec:
             return accepted, [UNWANTED_MESSAGE] * (len(clean) - len(accepted))
         return self.decode_stream(datagram)
 
-    def frames(self, datagram: bytes) -> tuple[list[tuple[str, int, int, Callable[[], Any]]], list[str]]:
+    def frames(self, datagram: bytes) -> tuple[list[tuple[str, int, int, Callable[[], MavFields]]], list[str]]:
         """:meth:`decode` for a reader that needs the fields of some messages only: each accepted
         message as (type, source system, source component, fields), where ``fields()`` gives its
         fields by name. On a clean datagram they are read from the frame when asked for
@@ -348,7 +358,7 @@ class Codec:
             return [(m.get_type(), m.get_srcSystem(), m.get_srcComponent(), partial(_itself, m)) for m in msgs], rejects
         self.mav.total_bytes_received += len(datagram)
         self.mav.total_packets_received += len(spans)
-        out: list[tuple[str, int, int, Callable[[], Any]]] = []
+        out: list[tuple[str, int, int, Callable[[], MavFields]]] = []
         for start, end in spans:
             msg_id, system, component = frame_ids(datagram, start)
             layout = _LAYOUTS[msg_id]

@@ -3,7 +3,12 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from collections.abc import Mapping
+from typing import Any, TypeAlias
+
+# A dataclass field's metadata as :func:`param` writes it: ``help`` and ``unit`` (str), ``gt``, ``ge``,
+# ``lt``, ``le`` (float or None). typeshed types ``Field.metadata`` as a mapping of Any.
+ParamMeta: TypeAlias = Mapping[str, Any]
 
 
 def param(
@@ -14,8 +19,8 @@ def param(
     ge: float | None = None,
     lt: float | None = None,
     le: float | None = None,
-    default: Any = dataclasses.MISSING,
-) -> Any:
+    default: object = dataclasses.MISSING,
+) -> Any:   # a field specifier: Any, as dataclasses.field's own
     """A dataclass field with its meaning (``help``), SI ``unit`` and bounds checked on load.
 
     The metadata keys are a plain convention (``help``, ``unit``, ``gt``, ``ge``, ``lt``,

@@ -15,6 +15,7 @@ import json
 import os
 import select
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 
@@ -94,7 +95,7 @@ class ReadyWait:
 GO = b"g"
 
 
-def wait_for_start(fd: int | None, stopped, poll_s: float = 0.05) -> bool:
+def wait_for_start(fd: int | None, stopped: Callable[[], bool], poll_s: float = 0.05) -> bool:
     """Block until the parent writes :data:`GO` on ``fd`` (True), or closes it without a word or
     ``stopped()`` turns true (False: do not start). Closes ``fd``; None: start at once."""
     if fd is None:

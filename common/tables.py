@@ -9,18 +9,24 @@ of a summary appear only when they exist, as they always have on disk.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import Any, TypeAlias
 
 _ABSENT_WHEN_NONE = "absent_when_none"
 
+# A value of a JSON or TOML document: a table, an array, text, a number or a bool (JSON: null too). Its
+# shape is the document's: a file's is checked where it is read (hil.config's strict readers); a report
+# built to be written (a benchmark's, a soak's) is read back by key. So to mypy it is Any, project-wide.
+JsonValue: TypeAlias = Any
+JsonTable: TypeAlias = dict[str, JsonValue]
 
-def absent_when_none() -> Any:
+
+def absent_when_none() -> Any:   # a field specifier: Any, as dataclasses.field's own
     """A field defaulting to None that :func:`to_table` leaves out while it is None (the reader
     then takes the default back)."""
     return dataclasses.field(default=None, metadata={_ABSENT_WHEN_NONE: True})
 
 
-def to_table(obj: Any) -> Any:
+def to_table(obj: object) -> JsonValue:
     """A dataclass instance back to plain TOML-able data (for run folders and --json)."""
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         return {f.name: to_table(getattr(obj, f.name)) for f in dataclasses.fields(obj)

@@ -29,13 +29,14 @@ import subprocess
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypedDict, final
+from typing import TYPE_CHECKING, TypedDict, final
 
 import numpy as np
 
 from autopilot_bridge.tracking_stats import TrackingSummary
 from common.frames import map_to_ned
 from common.geodesy import LocalFrame
+from common.mavlink import MavMessage
 from hil.ardupilot_fence import FENCE_VERTEX_EXCLUSION, MISSION_TYPE_FENCE, FenceItem
 from hil.errors import RunFailed, UsageError
 from simulator.json_backend import JsonLinkCounters
@@ -459,7 +460,7 @@ class ArduPilotRun:
         self.tlog.write(struct.pack(">Q", tu) + frame)
         self.tlog_frames += 1
 
-    def _send(self, msg: Any) -> None:
+    def _send(self, msg: MavMessage) -> None:
         if self.mav_peer is None:
             return
         frame = msg.pack(self.mav)
@@ -489,7 +490,7 @@ class ArduPilotRun:
                 self._take(m, t)
         self._advance(t)
 
-    def _take(self, m: Any, t: float) -> None:
+    def _take(self, m: MavMessage, t: float) -> None:
         ms, kind = self.mission, m.get_type()
         if kind == "HEARTBEAT" and m.get_srcComponent() == 1:
             ms.armed = bool(m.base_mode & 128)

@@ -27,9 +27,12 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NotRequired, TypedDict
+from typing import TYPE_CHECKING, NotRequired, TypedDict
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from hil.experiment import CsvRow
 
 # The paper's setting: RRT* and IRRT* on length, DDRRT* on eq. (12); 1,500 iterations a cycle;
 # P = 0.7 (the audit's), k = 5 fixed, DD = DR constant, none of issue 34's fixes; receding horizon.
@@ -150,7 +153,7 @@ class Verdict(TypedDict):
     rrt: NotRequired[tuple[int, int]]
 
 
-def verdicts(rows: Sequence[dict[str, Any]], a: str = "ddrrt-star", b: str = "rrt-star") -> list[Verdict]:
+def verdicts(rows: Sequence[CsvRow], a: str = "ddrrt-star", b: str = "rrt-star") -> list[Verdict]:
     """Each claim's difference a - b (relative to b's mean too), interval and verdict."""
     out: list[Verdict] = []
     for claim, col, direction, stat in CLAIMS:

@@ -21,6 +21,7 @@ import time
 from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from common.dronecan_codec import TRANSFER_ID_MODULO
 
@@ -29,11 +30,14 @@ if TYPE_CHECKING:
     from pathlib import Path
     from types import FrameType
 
+    from can.typechecking import CanFilter
+
     from autopilot_bridge.can_actuators import CanActuators
     from hil.settings import HilConfig
 
 
-def pair_latency(sent_tid, sent_at, applied_tid, applied_at, modulo: int = TRANSFER_ID_MODULO) -> np.ndarray:
+def pair_latency(sent_tid: npt.ArrayLike, sent_at: npt.ArrayLike, applied_tid: np.ndarray,
+                 applied_at: np.ndarray, modulo: int = TRANSFER_ID_MODULO) -> np.ndarray:
     """Latencies (s) of the applied commands, each paired with the earliest unpaired command sent
     before it with the same transfer ID (right unless ``modulo`` or more commands in a row were lost)."""
     st, sa = np.asarray(sent_tid), np.asarray(sent_at)
@@ -119,7 +123,7 @@ def esc_main(args: argparse.Namespace) -> int:
 
     cfg = settings.load(args.config, args.overrides)
     vessel = Vessel(cfg.vessel)
-    filters = None
+    filters: list[CanFilter] | None = None
     if args.only_from_autopilot:  # messages (service bit 0) from the autopilot's node ID only
         filters = [{"can_id": cfg.can.autopilot_node_id, "can_mask": 0xFF, "extended": True}]
     esc = EscBank(open_bus(cfg.can, can_filters=filters), cfg.can, cfg.esc, vessel)

@@ -31,7 +31,7 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -40,6 +40,8 @@ from hil.errors import ConfigError
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
+
+    from shapely.geometry.base import BaseGeometry  # shapely is untyped: Any to mypy
 
     from simulator.config import GeodesyParams
 
@@ -60,7 +62,7 @@ def is_chart(path: str | Path) -> bool:
 class ChartFeature:
     """One obstacle: a shapely geometry in longitude/latitude degrees and its buffer (m, None: the default)."""
 
-    geometry: Any
+    geometry: BaseGeometry
     buffer: float | None
 
 
@@ -189,7 +191,7 @@ def grid_corner(path: str | Path, positions: LocalFrame, extent: tuple[float, ..
     return lat0, lon0
 
 
-def to_metres(geometry: Any, frame: LocalFrame) -> Any:
+def to_metres(geometry: BaseGeometry, frame: LocalFrame) -> BaseGeometry:
     """A longitude/latitude geometry in map metres (x east, y north) of ``frame``."""
     import shapely
 

@@ -30,11 +30,11 @@ class ArgumentParser(argparse.ArgumentParser):
     starts with a minus and a digit (``--miss -6,-2``, ``--start -1.5,3``, ``--heading -1e-3``) is a value,
     not an unknown option (argparse 3.11 only knows bare negative numbers; 3.13 reads them this way)."""
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
+    def __init__(self, *args: Any, **kwargs: Any) -> None:   # argparse.ArgumentParser's, passed on unchanged
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(r"^-\.?\d")
 
-    def _get_value(self, action: argparse.Action, arg_string: str) -> Any:
+    def _get_value(self, action: argparse.Action, arg_string: str) -> object:
         """argparse's conversion, then every float/int option checked against its physical range
         (``hil.commands.arg_types.CLI_RANGES``): out of range, infinite or NaN is a one-line usage error."""
         value = super()._get_value(action, arg_string)

@@ -29,6 +29,8 @@ import typing
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypeVar, get_args, get_origin
 
+from common.params import ParamMeta
+from common.tables import JsonTable, JsonValue
 from common.tables import to_table as to_table  # the serialiser, re-exported
 from hil.errors import ConfigError
 
@@ -43,7 +45,7 @@ CONFIG_DIR = REPO_ROOT / "configs"
 DEFAULT_CONFIG = CONFIG_DIR / "default.toml"
 
 
-def _describe(tp: Any) -> str:
+def _describe(tp: object) -> str:
     if tp is float:
         return "a number"
     if tp is int:
@@ -55,7 +57,7 @@ def _describe(tp: Any) -> str:
     return getattr(tp, "__name__", str(tp))
 
 
-def _typed_table(value: Any, tp: Any, key: str) -> dict[str, Any]:
+def _typed_table(value: JsonValue, tp: object, key: str) -> dict[str, object]:
     """A JSON table read as the TypedDict ``tp`` (a summary's section): every required key there,
     no unknown key, each value of its annotated type."""
     if not isinstance(value, dict):
@@ -73,7 +75,7 @@ def _typed_table(value: Any, tp: Any, key: str) -> dict[str, Any]:
     return {k: _convert(v, hints[k], f"{where}{k}") for k, v in value.items()}
 
 
-def _fit(value: Any, tp: Any) -> int:
+def _fit(value: JsonValue, tp: object) -> int:
     """How well a table fits the TypedDict ``tp``: its keys that ``tp`` has less those it has not (a
     union of sections reports the error of the one the table was meant to be)."""
     if not (isinstance(value, dict) and typing.is_typeddict(tp)):
@@ -93,7 +95,7 @@ def from_typed_table(tp: type[D], table: object, source: str) -> D:
         raise ConfigError(f"{source}: {exc}") from None
 
 
-def _convert(value: Any, tp: Any, key: str) -> Any:
+def _convert(value: JsonValue, tp: object, key: str) -> object:
     """Convert a TOML value to the annotated type ``tp`` or raise ``ValueError('key: problem')``."""
     origin = get_origin(tp)
     if tp is Any or tp is object:   # a value checked where it is used (a scenario's overrides of a section)
@@ -223,7 +225,7 @@ PHYSICAL_RANGES: dict[str, tuple[float, float]] = {
 MAX_INTEGER = (1 << 63) - 1   # seeds are 64-bit; counts have their own cap in PHYSICAL_RANGES
 
 
-def range_of(key: str, meta: typing.Mapping[str, Any], tp: Any = float) -> tuple[float, float]:
+def range_of(key: str, meta: ParamMeta, tp: object = float) -> tuple[float, float]:
     """The inclusive (low, high) a number at dotted ``key`` may take (an open schema bound ``gt``/``lt``
     is reported as its value); array indices in ``key`` are ignored."""
     base = key.split("[", 1)[0]
@@ -236,7 +238,7 @@ def range_of(key: str, meta: typing.Mapping[str, Any], tp: Any = float) -> tuple
     return low, high
 
 
-def _check_range(value: Any, meta: typing.Mapping[str, Any], key: str) -> None:
+def _check_range(value: object, meta: ParamMeta, key: str) -> None:
     """PHYSICAL_RANGES and MAX_INTEGER (the schema's bounds are :func:`_check_bounds`'s)."""
     base = key.split("[", 1)[0]
     values = value if isinstance(value, tuple) else (value,)
@@ -255,7 +257,7 @@ def _check_range(value: Any, meta: typing.Mapping[str, Any], key: str) -> None:
             raise ValueError(f"{key}: {v} is out of range (|value| <= 2^63 - 1)")
 
 
-def _check_bounds(value: Any, meta: typing.Mapping[str, Any], key: str) -> None:
+def _check_bounds(value: object, meta: ParamMeta, key: str) -> None:
     values = value if isinstance(value, tuple) else (value,)
     for v in values:
         if isinstance(v, tuple):
@@ -290,7 +292,7 @@ def suggest(word: str, choices: typing.Iterable[str], or_list: bool = True) -> s
     return f" (expected one of: {', '.join(choices)})" if or_list and choices else ""
 
 
-def _build(cls: type[T], table: dict[str, Any], prefix: str) -> T:
+def _build(cls: type[T], table: JsonTable, prefix: str) -> T:
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
     for k in table:
@@ -315,7 +317,7 @@ def _build(cls: type[T], table: dict[str, Any], prefix: str) -> T:
         raise ValueError(f"{prefix}.{msg}" if prefix else msg) from None
 
 
-def from_table(cls: type[T], table: dict[str, Any], source: str | typing.Callable[[str], str],
+def from_table(cls: type[T], table: JsonTable, source: str | typing.Callable[[str], str],
                prefix: str = "") -> T:
     """Build dataclass ``cls`` from a parsed TOML table; errors name the source and the key.
 
@@ -330,7 +332,7 @@ def from_table(cls: type[T], table: dict[str, Any], source: str | typing.Callabl
         raise ConfigError(f"{where}: {msg}") from None
 
 
-def parse_override(text: str) -> tuple[list[str], Any]:
+def parse_override(text: str) -> tuple[list[str], JsonValue]:
     """Parse ``section.key=value`` (value in TOML syntax; a bare word is taken as a string)."""
     if "=" not in text:
         raise ConfigError(f"--set {text}: expected section.key=value")
@@ -345,7 +347,7 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     return keys, value
 
 
-def _schema_names(cls: Any, keys: list[str]) -> tuple[int, list[str]]:
+def _schema_names(cls: object, keys: list[str]) -> tuple[int, list[str]]:
     """Walk ``keys`` down dataclass ``cls``: (index of the first unknown key or -1, the names valid there)."""
     tp = cls
     for i, k in enumerate(keys):
@@ -368,12 +370,12 @@ class Layers:
     ``--set`` in order.
     """
 
-    def __init__(self, cls: Any) -> None:
+    def __init__(self, cls: type[DataclassInstance]) -> None:
         self.cls = cls
-        self.table: dict[str, Any] = {}
+        self.table: JsonTable = {}
         self.origin: dict[str, str] = {}
 
-    def _merge(self, node: dict[str, Any], layer: dict[str, Any], prefix: str, source: str) -> None:
+    def _merge(self, node: JsonTable, layer: JsonTable, prefix: str, source: str) -> None:
         for k, v in layer.items():
             key = f"{prefix}{k}"
             if isinstance(v, dict) and isinstance(node.get(k), dict):
@@ -388,7 +390,7 @@ class Layers:
             self._check(layer, [], str(path))
         self._merge(self.table, layer, "", str(path))
 
-    def _check(self, layer: dict[str, Any], keys: list[str], source: str) -> None:
+    def _check(self, layer: JsonTable, keys: list[str], source: str) -> None:
         for k, v in layer.items():
             bad, names = _schema_names(self.cls, keys + [k])
             if bad >= 0:
@@ -419,7 +421,7 @@ class Layers:
         return str(DEFAULT_CONFIG)
 
 
-def read_toml(path: str | Path) -> dict[str, Any]:
+def read_toml(path: str | Path) -> JsonTable:
     """Read a TOML file, turning every I/O or syntax problem into a one-line ConfigError."""
     p = Path(path)
     try:
@@ -485,7 +487,7 @@ def key_ranges(cls: type, prefix: str = "") -> list[tuple[str, str, float, float
     return out
 
 
-def _bound_text(value: float, meta: typing.Mapping[str, Any], strict: str, key: str) -> str:
+def _bound_text(value: float, meta: ParamMeta, strict: str, key: str) -> str:
     """``> 0`` where the schema's strict bound is the effective one, else the number."""
     base = key.split("[", 1)[0]
     tightened = base in PHYSICAL_RANGES and value in PHYSICAL_RANGES[base]
@@ -502,8 +504,8 @@ def range_table(cls: type) -> str:
     return "\n".join(rows) + "\n"
 
 
-def _metas(cls: type, prefix: str = "") -> dict[str, typing.Mapping[str, Any]]:
-    out: dict[str, typing.Mapping[str, Any]] = {}
+def _metas(cls: type, prefix: str = "") -> dict[str, ParamMeta]:
+    out: dict[str, ParamMeta] = {}
     hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(cls):
         tp = hints[f.name]

@@ -16,11 +16,15 @@ import json
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from common.geodesy import LocalFrame
 from hil.config import CONFIG_DIR
+
+if TYPE_CHECKING:
+    import xarray as xr
 
 WORLD_DIR = CONFIG_DIR / "worlds" / "bay"
 ORIGIN = (38.92, 121.65)           # deg: the map's south-west corner
@@ -34,7 +38,7 @@ HOURS = 7                          # hourly slices: 6 h of run time
 
 def _features() -> list[tuple[str, str, list, float | None]]:
     """(name, GeoJSON type, coordinates in map metres, buffer m or None) of the harbour's obstacles."""
-    def box(x0, y0, x1, y1):
+    def box(x0: float, y0: float, x1: float, y1: float) -> list[list[tuple[float, float]]]:
         return [[(x0, y0), (x1, y0), (x1, y1), (x0, y1), (x0, y0)]]
 
     island = [(40.0 + 13.0 * math.cos(a), 165.0 + 10.0 * math.sin(a)) for a in np.linspace(0, 2 * math.pi, 13)]
@@ -52,12 +56,13 @@ def _features() -> list[tuple[str, str, list, float | None]]:
 
 def chart(frame: LocalFrame) -> dict:
     """The chart as a GeoJSON FeatureCollection (longitude/latitude, 7 decimals: ~1 cm)."""
-    def ll(p):
+    def ll(p: tuple[float, float]) -> list[float]:
         lat, lon = frame.sea_level_to_geodetic(p[1], p[0])
         return [round(lon, 7), round(lat, 7)]
 
     feats = []
     for name, kind, coords, buffer in _features():
+        geo: list[list[list[float]]] | list[list[float]]
         if kind == "Polygon":
             geo = [[ll(p) for p in ring] for ring in coords]
         else:
@@ -69,7 +74,7 @@ def chart(frame: LocalFrame) -> dict:
     return {"type": "FeatureCollection", "name": "bay (self-made example harbour, BSD-3-Clause)", "features": feats}
 
 
-def current_dataset(frame: LocalFrame):
+def current_dataset(frame: LocalFrame) -> xr.Dataset:
     """The tidal current as an xarray Dataset with CF attributes (CMEMS-like layout)."""
     import pandas as pd
     import xarray as xr

@@ -27,7 +27,8 @@ import uuid
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Generic, TypeVar
+from types import FrameType, ModuleType, TracebackType
+from typing import TYPE_CHECKING, Generic, NoReturn, TypeVar
 
 from hil.errors import UsageError
 
@@ -96,7 +97,8 @@ class Executor:
     def __enter__(self) -> Executor:
         return self
 
-    def __exit__(self, exc_type, exc, tb) -> None:
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
         if exc_type is not None:
             self.cancel()
         self.close()
@@ -107,7 +109,7 @@ def collect(executor: Executor, fn: Callable[[T], R], items: Sequence[T],
     """Run ``fn`` over ``items`` on ``executor``, handing each ``(index, result)`` to ``take`` as it
     finishes. Ctrl-C (or SIGTERM, in the main thread) cancels the rest: returns True when interrupted,
     what ``take`` got so far being the finished work."""
-    def on_term(signum, frame):
+    def on_term(signum: int, frame: FrameType | None) -> NoReturn:
         raise KeyboardInterrupt
 
     main = threading.current_thread() is threading.main_thread()
@@ -132,7 +134,8 @@ class LocalProcesses(Executor):
         self.description = f"{self.workers} local process(es)" if self.workers > 1 else "this process"
         self._pool: multiprocessing.pool.Pool | None = None
 
-    def map_unordered(self, fn, items, warm_up=None):
+    def map_unordered(self, fn: Callable[[T], R], items: Sequence[T],
+                      warm_up: Callable[[], None] | None = None) -> Iterator[tuple[int, R]]:
         call = _Call(fn, warm_up)
         if self.workers <= 1:
             for pair in enumerate(items):
@@ -163,7 +166,8 @@ class LocalThreads(Executor):
         self._pool: ThreadPoolExecutor | None = None
         self._pending: set = set()
 
-    def map_unordered(self, fn, items, warm_up=None):
+    def map_unordered(self, fn: Callable[[T], R], items: Sequence[T],
+                      warm_up: Callable[[], None] | None = None) -> Iterator[tuple[int, R]]:
         _warm_once(warm_up)
         call = _Call(fn)
         self._pool = ThreadPoolExecutor(max_workers=self.workers)
@@ -183,7 +187,7 @@ class LocalThreads(Executor):
             self._pool = None
 
 
-def import_distributed():
+def import_distributed() -> ModuleType:
     """``distributed``, or a one-line UsageError with the install hint."""
     try:
         import distributed
@@ -231,7 +235,8 @@ class DaskExecutor(Executor):
     def address(self) -> str:
         return self.client.scheduler.address
 
-    def map_unordered(self, fn, items, warm_up=None):
+    def map_unordered(self, fn: Callable[[T], R], items: Sequence[T],
+                      warm_up: Callable[[], None] | None = None) -> Iterator[tuple[int, R]]:
         distributed = import_distributed()
         call = _Call(fn, warm_up)
         campaign = uuid.uuid4().hex[:12]   # keys unique per campaign: a shared cluster caches by key

@@ -13,16 +13,18 @@ import csv
 import math
 import signal
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from types import FrameType
+from typing import TYPE_CHECKING, Any, NoReturn, TypeAlias
 
 import numpy as np
 
 from planner.params import ALGORITHM_NAMES, REGISTRY, Objective
 
 if TYPE_CHECKING:
+    from hil.executors import Executor
     from hil.scenario import Scenario, ScenarioSpec
     from hil.settings import HilConfig
     from planner.online import OnlineContext, OnlineResult
@@ -44,6 +46,12 @@ DETERMINISTIC = ("run", "algorithm", "planner_seed", "reached", "reason", "cycle
 # cycles to each cycle's first solution (the whole cycle where it found none).
 TIMES = ("time_s", "time_cpu_s", "planning_time_s", "wall_s")
 COLUMNS = DETERMINISTIC + TIMES
+
+# A row of runs.csv (COLUMNS) or of table3.csv (TABLE_COLUMNS): cells of several types (text, bool, int,
+# float) read and written by column name, read back from files of older versions that lack some columns;
+# run_task's row also carries ``_detail`` (OnlineResult) and ``_path`` (the path sailed) when asked.
+# Like a JSON document's values (common.tables.JsonValue), its cells are Any to mypy.
+CsvRow: TypeAlias = dict[str, Any]
 
 # Table 3 as the paper reports it (its numbers are missing from our copy; only the relative
 # figures of section 4.2 survive), percentages relative to RRT*.
@@ -144,7 +152,7 @@ def _context(task: Task, sc: Scenario) -> OnlineContext:
     return ctx
 
 
-def run_task(task: Task) -> dict[str, Any]:
+def run_task(task: Task) -> CsvRow:
     """Run one task; returns the CSV row (plus ``_detail`` / ``_path`` when asked)."""
     from planner.online import VesselState, run_online
 
@@ -154,7 +162,7 @@ def run_task(task: Task) -> dict[str, Any]:
     pseed = planner_seed(task.seed, task.run, task.algorithm)
     res = run_online(ctx, VesselState(sc.start[0], sc.start[1], sc.start_heading), pseed)
     m = res.metrics
-    row: dict[str, Any] = {
+    row: CsvRow = {
         "run": task.run, "algorithm": task.algorithm, "planner_seed": pseed, "reached": bool(res.reached),
         "reason": res.reason, "cycles": len(res.cycles), "iterations": int(sum(c.iterations for c in res.cycles)),
         "cost": m.get("cost", math.nan), "length": m.get("length", math.nan),
@@ -204,7 +212,7 @@ class RunsWriter:
         self.w.writerow(COLUMNS)
         self.fh.flush()
 
-    def add(self, row: dict[str, Any]) -> None:
+    def add(self, row: CsvRow) -> None:
         self.w.writerow([_fmt(row[c]) for c in COLUMNS])
         self.fh.flush()
 
@@ -212,7 +220,7 @@ class RunsWriter:
         self.fh.close()
 
 
-def write_runs_csv(path: Path, rows: Iterable[dict[str, Any]]) -> Path:
+def write_runs_csv(path: Path, rows: Iterable[CsvRow]) -> Path:
     """All rows, sorted by (run, algorithm order), as CSV."""
     rows = sorted(rows, key=lambda r: (r["run"], ALGORITHMS.index(r["algorithm"])))
     w = RunsWriter(path)
@@ -222,12 +230,12 @@ def write_runs_csv(path: Path, rows: Iterable[dict[str, Any]]) -> Path:
     return path
 
 
-def read_runs_csv(path: Path) -> list[dict[str, Any]]:
+def read_runs_csv(path: Path) -> list[CsvRow]:
     """Rows back from :func:`write_runs_csv` with numbers parsed."""
     out = []
     with Path(path).open(newline="") as fh:
         for rec in csv.DictReader(fh):
-            row: dict[str, Any] = {}
+            row: CsvRow = {}
             for k, v in rec.items():
                 if k in ("algorithm", "reason"):
                     row[k] = v
@@ -250,7 +258,7 @@ def _mean_std(values: Sequence[float]) -> tuple[float, float]:
     return float(a.mean()), float(a.std(ddof=1)) if len(a) > 1 else 0.0
 
 
-def table3(rows: Sequence[dict[str, Any]], algorithms: Sequence[str] = ALGORITHMS) -> list[dict[str, Any]]:
+def table3(rows: Sequence[CsvRow], algorithms: Sequence[str] = ALGORITHMS) -> list[CsvRow]:
     """Aggregate per algorithm: means over the runs that reached the goal (success rate over all).
 
     Columns: time (s, mean of the per-run sums of search durations), time_std ("time EVP"),
@@ -261,7 +269,7 @@ def table3(rows: Sequence[dict[str, Any]], algorithms: Sequence[str] = ALGORITHM
     for alg in algorithms:
         rs = [r for r in rows if r["algorithm"] == alg]
         ok = [r for r in rs if r["reached"]]
-        rec: dict[str, Any] = {"algorithm": alg, "runs": len(rs), "reached": len(ok),
+        rec: CsvRow = {"algorithm": alg, "runs": len(rs), "reached": len(ok),
                                "success_rate": len(ok) / len(rs) if rs else math.nan}
         rec["time_s"], rec["time_std_s"] = _mean_std([r["time_s"] for r in ok])
         rec["cost"], rec["cost_std"] = _mean_std([r["cost"] for r in ok])
@@ -288,7 +296,7 @@ TABLE_COLUMNS = ("algorithm", "runs", "reached", "success_rate", "time_s", "time
                  "sum_cos_wp", "sum_sin_wp", "sum_cos_wp_vs_rrt_pct", "sum_sin_wp_vs_rrt_pct")
 
 
-def write_table_csv(path: Path, table: Sequence[dict[str, Any]]) -> Path:
+def write_table_csv(path: Path, table: Sequence[CsvRow]) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
@@ -306,7 +314,7 @@ def _pct(v: float) -> str:
     return "n/a" if v is None or not math.isfinite(v) else f"{v:+.2f}%"
 
 
-def table_markdown(table: Sequence[dict[str, Any]], title: str = "") -> str:
+def table_markdown(table: Sequence[CsvRow], title: str = "") -> str:
     """Table 3 in Markdown, with our percentages vs RRT* next to the paper's."""
     lines = []
     if title:
@@ -347,7 +355,7 @@ def table_markdown(table: Sequence[dict[str, Any]], title: str = "") -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_table_md(path: Path, table: Sequence[dict[str, Any]], title: str = "") -> Path:
+def write_table_md(path: Path, table: Sequence[CsvRow], title: str = "") -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(table_markdown(table, title))
     return path
@@ -357,7 +365,7 @@ def write_table_md(path: Path, table: Sequence[dict[str, Any]], title: str = "")
 class Campaign:
     """Result of :func:`run_campaign`: the rows finished and what was kept for the figures."""
 
-    rows: list[dict[str, Any]] = field(default_factory=list)
+    rows: list[CsvRow] = field(default_factory=list)
     details: dict[str, OnlineResult] = field(default_factory=dict)      # algorithm -> its run 0
     # (run, algorithm) -> (the path sailed, reached the goal)
     paths: dict[tuple[int, str], tuple[np.ndarray, bool]] = field(default_factory=dict)
@@ -376,8 +384,9 @@ def make_tasks(scenario: str, runs: int, algorithms: Sequence[str], seed: int, o
             for i in range(runs) for alg in algorithms]
 
 
-def run_campaign(tasks: Sequence[Task], jobs: int, out_csv: Path | None = None, progress=None,
-                 executor=None) -> Campaign:
+def run_campaign(tasks: Sequence[Task], jobs: int, out_csv: Path | None = None,
+                 progress: Callable[[int, CsvRow], None] | None = None,
+                 executor: Executor | None = None) -> Campaign:
     """Run ``tasks`` on ``executor`` (default: ``jobs`` local spawned processes; ``jobs == 1`` runs
     in-process; see :mod:`hil.executors` for Dask).
 
@@ -390,7 +399,7 @@ def run_campaign(tasks: Sequence[Task], jobs: int, out_csv: Path | None = None, 
     writer = RunsWriter(out_csv) if out_csv else None
     ex = executor if executor is not None else LocalProcesses(jobs)
 
-    def take(row: dict[str, Any]) -> None:
+    def take(row: CsvRow) -> None:
         det = row.pop("_detail", None)
         if det is not None:
             camp.details[row["algorithm"]] = det
@@ -403,7 +412,8 @@ def run_campaign(tasks: Sequence[Task], jobs: int, out_csv: Path | None = None, 
         if progress:
             progress(len(camp.rows), row)
 
-    def on_term(signum, frame):  # SIGTERM (e.g. `kill`): stop like Ctrl-C and keep the finished runs
+    # SIGTERM (e.g. `kill`): stop like Ctrl-C and keep the finished runs
+    def on_term(signum: int, frame: FrameType | None) -> NoReturn:
         raise KeyboardInterrupt
 
     previous = signal.signal(signal.SIGTERM, on_term)

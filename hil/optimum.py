@@ -85,7 +85,7 @@ def segment_clear(occ: np.ndarray, res: float, x0: float, y0: float, x1: float, 
 
 
 @numba.njit(cache=True)
-def _visibility_edges(occ: np.ndarray, res: float, pts: np.ndarray):
+def _visibility_edges(occ: np.ndarray, res: float, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     n = pts.shape[0]
     src = []
     dst = []

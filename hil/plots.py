@@ -24,6 +24,9 @@ from matplotlib.colors import ListedColormap
 from planner.params import REGISTRY
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
     from planner.online import OnlineResult
     from planner.result import PlannerResult
 
@@ -31,7 +34,7 @@ if TYPE_CHECKING:
 MapField = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
-def _draw_map(ax, occ: np.ndarray, resolution: float, inflated: np.ndarray | None = None) -> None:
+def _draw_map(ax: Axes, occ: np.ndarray, resolution: float, inflated: np.ndarray | None = None) -> None:
     h, w = occ.shape[0] * resolution, occ.shape[1] * resolution
     layer = occ.astype(np.uint8) * 2
     if inflated is not None and inflated.shape == occ.shape:
@@ -45,7 +48,7 @@ def _draw_map(ax, occ: np.ndarray, resolution: float, inflated: np.ndarray | Non
     ax.set_ylabel("y north (m)")
 
 
-def _draw_tree(ax, nodes: np.ndarray, parents: np.ndarray, color: str = "#7a9cc6", lw: float = 0.3) -> None:
+def _draw_tree(ax: Axes, nodes: np.ndarray, parents: np.ndarray, color: str = "#7a9cc6", lw: float = 0.3) -> None:
     nodes = np.asarray(nodes).reshape(-1, 2)
     parents = np.asarray(parents).reshape(-1)
     if len(nodes) < 2 or len(parents) != len(nodes):
@@ -55,7 +58,7 @@ def _draw_tree(ax, nodes: np.ndarray, parents: np.ndarray, color: str = "#7a9cc6
     ax.add_collection(LineCollection(list(segs), colors=color, linewidths=lw, alpha=0.7, zorder=2))
 
 
-def _draw_field(ax, field: MapField | None, width: float, height: float, n: int = 16) -> None:
+def _draw_field(ax: Axes, field: MapField | None, width: float, height: float, n: int = 16) -> None:
     if field is None:
         return
     xs = np.linspace(width / (2 * n), width - width / (2 * n), n)
@@ -68,13 +71,14 @@ def _draw_field(ax, field: MapField | None, width: float, height: float, n: int 
     ax.quiver(X, Y, U, V, color="#2a8f8f", alpha=0.6, width=0.003, zorder=1)
 
 
-def _path(ax, path: np.ndarray, **kw) -> None:
+def _path(ax: Axes, path: np.ndarray, **kw) -> None:   # kw: matplotlib Line2D properties, passed on
     path = np.asarray(path).reshape(-1, 2)
     if len(path):
         ax.plot(path[:, 0], path[:, 1], **kw)
 
 
-def plot_plan(out: str | Path, occ: np.ndarray, resolution: float, start, goal, result: PlannerResult,
+def plot_plan(out: str | Path, occ: np.ndarray, resolution: float, start: tuple[float, float],
+              goal: tuple[float, float], result: PlannerResult,
               inflated: np.ndarray | None = None, field: MapField | None = None, title: str = "") -> Path:
     """One planning query: map, tree, path, start and goal."""
     fig, ax = plt.subplots(figsize=(7, 7 * occ.shape[0] / occ.shape[1] + 0.5))
@@ -90,7 +94,8 @@ def plot_plan(out: str | Path, occ: np.ndarray, resolution: float, start, goal, 
 
 
 def plot_online(out: str | Path, occ: np.ndarray, resolution: float, runs: Sequence[tuple[str, OnlineResult]],
-                reference_path: np.ndarray, start, goal, perceptual_radius: float,
+                reference_path: np.ndarray, start: tuple[float, float], goal: tuple[float, float],
+                perceptual_radius: float,
                 inflated: np.ndarray | None = None, field: MapField | None = None, title: str = "") -> Path:
     """Figure 10 style, one panel per (label, OnlineResult) in ``runs``."""
     n = max(len(runs), 1)
@@ -148,7 +153,7 @@ def plot_runs_grid(out: str | Path, panels: Sequence[dict], cols: int = 3, title
     return _save(fig, out)
 
 
-def _save(fig, out: str | Path) -> Path:
+def _save(fig: Figure, out: str | Path) -> Path:
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()

@@ -71,7 +71,7 @@ class _Locked:
                         if isinstance(v, list) and len(v) == 2 and v[1] > now and _alive(int(v[0]))}
         return self.entries
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         try:
             tmp = self.path.with_suffix(f".{os.getpid()}.tmp")
             tmp.write_text(json.dumps(self.entries))

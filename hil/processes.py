@@ -6,7 +6,9 @@ import gc
 import signal
 import subprocess
 import sys
-from typing import Any
+from collections.abc import Sequence
+from pathlib import Path
+from typing import IO, TypedDict, Unpack
 
 
 def freeze_heap() -> None:
@@ -27,7 +29,18 @@ def _die_with_parent() -> None:  # pragma: no cover - runs in the child between 
         pass
 
 
-def start(cmd: list[str], **kwargs: Any) -> subprocess.Popen:
+class ChildOptions(TypedDict, total=False):
+    """The ``subprocess.Popen`` options this project starts children with."""
+
+    stdout: int | IO[bytes] | None
+    stderr: int | IO[bytes] | None
+    cwd: str | Path
+    start_new_session: bool
+    pass_fds: Sequence[int]
+    text: bool
+
+
+def start(cmd: list[str], **kwargs: Unpack[ChildOptions]) -> subprocess.Popen:
     """Start a child process that is stopped if this process dies."""
     return subprocess.Popen(cmd, preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None, **kwargs)
 

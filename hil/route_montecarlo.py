@@ -14,7 +14,7 @@ import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
@@ -78,9 +78,26 @@ class RouteJob:
         return run_loop(opts, settings.load(self.config, list(self.overrides) + NO_GCS))
 
 
+class RouteRow(TypedDict):
+    """One run of a route campaign (a row of runs.csv)."""
+
+    run: int
+    outcome: str
+    reached: bool
+    collisions: int
+    min_clearance_m: float | None      # m
+    sim_time_s: float
+    waypoints: int
+    longest_leg_m: float
+    route_length_m: float
+    path_length_m: float
+    fallbacks: int | None
+    scenario: str                       # the instance's scenario file
+
+
 def run_campaign(scenario: str, runs: int, seed: int, out: Path, executor: Executor, safety_radius: float,
                  base_current: CurrentParams | None, run_one: Callable[[tuple[int, str, str]], RunSummary],
-                 progress: Callable[[int, RunSummary], None] = lambda _i, _s: None) -> dict[str, Any]:
+                 progress: Callable[[int, RunSummary], None] = lambda _i, _s: None) -> dict[str, object]:
     """``runs`` HIL runs of ``run_one((run, scenario_file, folder))`` on instances of the random
     ``scenario``, on ``executor``; writes ``runs.csv`` and ``summary.json``. Ctrl-C or SIGTERM keeps
     the finished runs (``interrupted``, ``runs_done``; rates over the runs done)."""
@@ -95,7 +112,7 @@ def run_campaign(scenario: str, runs: int, seed: int, out: Path, executor: Execu
 
     from hil.executors import collect
 
-    rows: list[dict[str, Any]] = []
+    rows: list[RouteRow] = []
     items = [(i, str(path), str(folder)) for i, _, path, folder in plans]
 
     def take(i: int, s: RunSummary) -> None:

@@ -67,6 +67,7 @@ if TYPE_CHECKING:
     from common.geodesy import LocalFrame
     from hil.maps import Canvas
     from hil.settings import HilConfig
+    from planner.field import GridField
     from planner.online import OnlineParams
     from planner.params import PlannerParams
 
@@ -253,7 +254,7 @@ class Scenario:
         f = self.current_field()
         return None if f is None else MapFrameCurrent(f, self.field_time)
 
-    def planning_field(self, resolution: float = 1.0):
+    def planning_field(self, resolution: float = 1.0) -> GridField | None:
         """The frozen map-frame current sampled on a grid (``planner.field.GridField``), or None."""
         f = self.map_field()
         if f is None:
@@ -685,7 +686,7 @@ def load_traffic(source: str) -> tuple[ShipSpec, ...]:
     return load_spec(source).traffic
 
 
-def simulator_overrides(scen, base_current) -> list[str]:
+def simulator_overrides(scen: Scenario, base_current: CurrentParams | None) -> list[str]:
     """The ``--set`` overrides that put the simulator where `hil run` starts it on ``scen``: the
     start (map x east, y north, heading counter-clockwise from east) as NED ``sim.initial`` and the
     scenario's own ``[current]`` keys."""

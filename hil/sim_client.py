@@ -9,10 +9,13 @@ import argparse
 import subprocess
 import sys
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Unpack
 
 from hil import processes
 from hil.config import config_args
+
+if TYPE_CHECKING:
+    from common.mavlink import MavMessage
 
 
 @dataclass
@@ -21,7 +24,7 @@ class Frame:
 
     raw: bytes
     time_usec: int | None
-    messages: dict[str, Any] = field(default_factory=dict)
+    messages: dict[str, MavMessage] = field(default_factory=dict)
 
 
 class HilClient:
@@ -86,6 +89,6 @@ def sim_command(args: argparse.Namespace, client_port: int, lockstep: bool) -> l
     return cmd
 
 
-def start_simulator(cmd: list[str], **kwargs: Any) -> subprocess.Popen:
+def start_simulator(cmd: list[str], **kwargs: Unpack[processes.ChildOptions]) -> subprocess.Popen:
     """Start the simulator subprocess; it is stopped if this process dies."""
     return processes.start(cmd, **kwargs)

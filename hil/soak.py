@@ -10,14 +10,16 @@ import os
 import subprocess
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     import numpy as np
 
+    from hil.hilrun import HilRun
     from hil.settings import HilConfig
+    from hil.tap import Tap
 
-from common.tables import to_table
+from common.tables import JsonTable, to_table
 from hil.console import progress
 from hil.errors import RunFailed
 
@@ -87,9 +89,9 @@ def _load_record(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return z["tid"], z["at"]
 
 
-def _can_checks(sides: dict[str, dict | None], problems: list[str]) -> dict[str, Any]:
+def _can_checks(sides: dict[str, dict | None], problems: list[str]) -> JsonTable:
     """Per-node transfer counters of both sides; a loss or a reject is a problem."""
-    out: dict[str, Any] = {}
+    out: JsonTable = {}
     for side, s in sides.items():
         if not s:
             problems.append(f"{side}: no CAN summary")
@@ -106,7 +108,7 @@ def _can_checks(sides: dict[str, dict | None], problems: list[str]) -> dict[str,
     return out
 
 
-def soak_loop(args: argparse.Namespace, cfg: HilConfig, out: Path) -> dict[str, Any]:
+def soak_loop(args: argparse.Namespace, cfg: HilConfig, out: Path) -> JsonTable:
     from hil.cpu_load import LoadWatch, overruns_allowed
     from hil.hilrun import RunOptions, run_loop
 
@@ -115,7 +117,7 @@ def soak_loop(args: argparse.Namespace, cfg: HilConfig, out: Path) -> dict[str, 
     on_can = cfg.can.actuators == "can"
     ap_rec, sim_rec = out / "autopilot-can.npz", out / "sim-can.npz"
 
-    def sample(tap, run) -> None:
+    def sample(tap: Tap, run: HilRun) -> None:
         if tap.truth and run.ap is not None and run.sim is not None and run.ap.poll() is None \
                 and run.sim.poll() is None:
             watch.sample({"autopilot": run.ap.pid, "simulator": run.sim.pid})
@@ -134,7 +136,7 @@ def soak_loop(args: argparse.Namespace, cfg: HilConfig, out: Path) -> dict[str, 
     if summary.outcome not in ("timeout", "goal"):
         problems.append(f"run ended early: {summary.outcome}")
     sim = summary.simulator_counters()
-    result: dict[str, Any] = {
+    result: JsonTable = {
         "mode": "hil_loop", "actuators": cfg.can.actuators, "duration_s": args.duration,
         "outcome": summary.outcome, "sim_time_s": summary.sim_time_s,
         "stale_failsafe_events": None if sim is None else sim["stale_command_events"],
@@ -173,7 +175,7 @@ def _latency(sent_path: Path, applied_path: Path) -> dict[str, float | None]:
     return stats_ms(pair_latency(st, sa, at, aa))
 
 
-def soak_can_path(args: argparse.Namespace, cfg: HilConfig, out: Path) -> dict[str, Any]:
+def soak_can_path(args: argparse.Namespace, cfg: HilConfig, out: Path) -> JsonTable:
     import numpy as np
 
     from hil import processes
@@ -215,7 +217,7 @@ def soak_can_path(args: argparse.Namespace, cfg: HilConfig, out: Path) -> dict[s
     except (ValueError, IndexError, subprocess.TimeoutExpired):
         raise RunFailed("the ESC node process printed no summary") from None
     behind = k - int(args.duration * args.rate)
-    result: dict[str, Any] = {"mode": "can_path", "rate_hz": args.rate, "duration_s": args.duration,
+    result: JsonTable = {"mode": "can_path", "rate_hz": args.rate, "duration_s": args.duration,
                               "commands_sent": acts.commands_sent,
                               "commands_behind_schedule": -behind if behind < 0 else 0}
     result["can"] = _can_checks({"autopilot": to_table(acts.summary()), "esc_nodes": esc_summary}, problems)

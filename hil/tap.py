@@ -12,10 +12,10 @@ import os
 import struct
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from common.geodesy import LocalFrame
-from common.mavlink import Codec, clean_frames, frame_ids, leading_uint64, mavlink2, message_at
+from common.mavlink import Codec, MavMessage, clean_frames, frame_ids, leading_uint64, mavlink2, message_at
 from common.udp import UdpEndpoint
 from hil.run_summary import TapCounters
 
@@ -115,7 +115,7 @@ class Tap:
     def _refuse(self, reason: str) -> None:
         self.refused[reason] = self.refused.get(reason, 0) + 1
 
-    def _allowed(self, m: Any, sender: tuple[str, int] | None) -> bool:
+    def _allowed(self, m: MavMessage, sender: tuple[str, int] | None) -> bool:
         """Truth only from the simulator's socket and ids; commands only from the autopilot's socket."""
         kind = m.get_type()
         truth = kind == "HIL_STATE_QUATERNION" or (kind == "AIS_VESSEL" and
@@ -158,7 +158,7 @@ class Tap:
             start, end = spans[ids.index(_HIL_SENSOR)]
             clock = leading_uint64(data, start, end)
         stamp = self._stamp_at(clock)
-        batch: list[Any] = []
+        batch: list[MavMessage] = []
         for (start, end), msg_id in zip(spans, ids, strict=True):
             if msg_id in _READ:
                 batch.append(message_at(data, start, end))
@@ -171,7 +171,7 @@ class Tap:
         if batch:
             self._take(batch, stamp, sender)
 
-    def _take(self, msgs: list[Any], stamp: bytes, sender: tuple[str, int] | None) -> None:
+    def _take(self, msgs: list[MavMessage], stamp: bytes, sender: tuple[str, int] | None) -> None:
         own = self._own
         for m in msgs:
             if not self._allowed(m, sender):

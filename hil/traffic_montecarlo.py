@@ -24,7 +24,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
@@ -105,9 +105,28 @@ class TrafficJob:
         return run_loop(opts, settings.load(self.config, list(self.overrides) + NO_GCS))
 
 
+class TrafficRow(TypedDict):
+    """One ship of one run of a traffic campaign (a row of runs.csv): where it started (m), its speed
+    (m/s) and course (deg), and the judge's verdict (:class:`hil.encounter_report.EncounterVerdict`)."""
+
+    run: int
+    outcome: str
+    mmsi: int
+    start_x: float
+    start_y: float
+    speed: float
+    course_deg: float
+    type: str | None
+    cpa_m: float | None
+    action: str | None
+    collision: bool | None
+    compliant: bool | None
+    note: str
+
+
 def run_campaign(scenario: str, runs: int, seed: int, draw: TrafficDraw, out: Path, executor: Executor,
                  run_one: Callable[[tuple[int, tuple[ShipSpec, ...]]], RunSummary],
-                 progress: Callable[[int, RunSummary], None] = lambda _i, _s: None) -> dict[str, Any]:
+                 progress: Callable[[int, RunSummary], None] = lambda _i, _s: None) -> dict[str, object]:
     """``runs`` HIL runs of ``run_one((run, ships))`` on ``executor`` (:mod:`hil.executors`);
     returns the campaign summary and writes ``runs.csv`` and ``summary.json``. Ctrl-C or SIGTERM keeps
     the finished runs (``interrupted``, ``runs_done``; rates over the runs done)."""
@@ -124,7 +143,7 @@ def run_campaign(scenario: str, runs: int, seed: int, draw: TrafficDraw, out: Pa
         progress(len(results), s)
 
     interrupted = collect(executor, run_one, plans, take)
-    rows: list[dict[str, Any]] = []
+    rows: list[TrafficRow] = []
     for i in sorted(results):       # the same rows in the same order whatever the executor
         s, ships = results[i], plans[i][1]
         for e in s.encounters or ():
@@ -141,9 +160,10 @@ def run_campaign(scenario: str, runs: int, seed: int, draw: TrafficDraw, out: Pa
         w.writerows(rows)
     risky = [r for r in rows if r["type"] not in ("no risk", "not met", None)]
     cpas = [r["cpa_m"] for r in rows if r["cpa_m"] is not None]
-    by_type: dict[str, list[dict]] = {}
+    by_type: dict[str, list[TrafficRow]] = {}
     for r in risky:
-        by_type.setdefault(r["type"], []).append(r)
+        if r["type"] is not None:   # always (``risky`` has a type)
+            by_type.setdefault(r["type"], []).append(r)
     summary = {
         "scenario": scenario, "runs": runs, "seed": seed, "interrupted": interrupted, "runs_done": len(results),
         "ships_per_run": draw.ships,

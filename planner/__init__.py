@@ -6,7 +6,7 @@ nothing of the rest of the project (numpy, scipy, numba only).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from planner.params import ALGORITHM_NAMES, REGISTRY, PlannerParams
 
@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 _LAZY = {"PlanningProblem": "planner.problem", "PlannerResult": "planner.result", "Termination": "planner.termination"}
 
 
-def __getattr__(name: str) -> Any:
+def __getattr__(name: str) -> type:
     if name in _LAZY:
         import importlib
 

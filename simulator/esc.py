@@ -41,6 +41,8 @@ from common.can_params import CanParams
 from common.transfer_times import TransferTimes
 
 if TYPE_CHECKING:
+    from can.typechecking import CanFilter
+
     from simulator.config import EscParams
     from simulator.vessel import Vessel
 
@@ -80,7 +82,7 @@ POLL_BUDGET_S = 0.002
 CLOCK_EVERY = 4            # frames between clock reads (inside UML a clock read is a 33 us system call)
 
 
-def kernel_filters(params: CanParams) -> list[dict[str, int | bool]] | None:
+def kernel_filters(params: CanParams) -> list[CanFilter] | None:
     """The ESC nodes' receive filter on SocketCAN: messages (service bit 0) from the autopilot's node only,
     applied by the kernel, so a flood from other nodes never reaches the simulator's socket: it costs no
     step any work and waits in no queue ahead of the autopilot's commands (issue 31). Frames dropped there

@@ -9,13 +9,13 @@ SET_POSITION_TARGET_GLOBAL_INT are handled here too (they command the vessel wit
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
 
 from autopilot_bridge.gcs.context import Outbox, VehicleView, finite
 from autopilot_bridge.gcs.failsafe import GcsFailsafe
 from autopilot_bridge.modes import Mode
 from autopilot_bridge.vehicle_api import Result, VehicleApi
 from common.mavlink import MAV_TYPE as M
+from common.mavlink import MavMessage
 
 CommandResult = tuple[int, str]   # (MAV_RESULT, why)
 CommandHandler = Callable[[list[float], float, float], CommandResult]   # (param1-4, x/param5, y/param6)
@@ -54,19 +54,19 @@ class CommandService:
             raise ValueError(f"MAV_CMD handled twice: {sorted(twice)}")
         self.table.update(handlers)
 
-    def handlers(self) -> dict[str, Callable[[Any, float], None]]:
+    def handlers(self) -> dict[str, Callable[[MavMessage, float], None]]:
         return {"COMMAND_LONG": self._on_command, "COMMAND_INT": self._on_command, "SET_MODE": self._on_set_mode,
                 "MANUAL_CONTROL": self._on_manual_control,
                 "SET_POSITION_TARGET_GLOBAL_INT": self._on_position_target,
                 "SET_HOME_POSITION": self._on_set_home_position}
 
-    def refuse(self, m: Any) -> None:
+    def refuse(self, m: MavMessage) -> None:
         """A command refused by the security gate: COMMAND_ACK DENIED to its sender."""
         if m.get_type() in ("COMMAND_LONG", "COMMAND_INT"):
             self.out.send("command_ack", m.command, M.MAV_RESULT_DENIED, 0, 0, m.get_srcSystem(), m.get_srcComponent())
 
     # -- messages ---------------------------------------------------------------------------------
-    def _on_command(self, m: Any, now: float) -> None:
+    def _on_command(self, m: MavMessage, now: float) -> None:
         if m.target_system not in (0, self.view.sysid) or m.target_component not in (0, self.view.compid):
             return
         p = [m.param1, m.param2, m.param3, m.param4]
@@ -86,12 +86,12 @@ class CommandService:
             return M.MAV_RESULT_UNSUPPORTED, ""
         return handler(p, x5, y6)
 
-    def _on_set_mode(self, m: Any, now: float) -> None:
+    def _on_set_mode(self, m: MavMessage, now: float) -> None:
         if m.target_system == self.view.sysid and m.base_mode & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED \
                 and self.view.api is not None:
             self.set_mode(m.custom_mode)
 
-    def _on_manual_control(self, m: Any, now: float) -> None:
+    def _on_manual_control(self, m: MavMessage, now: float) -> None:
         api = self.view.api
         if m.target in (0, self.view.sysid) and api is not None:
             def clip(v: float) -> float:
@@ -99,7 +99,7 @@ class CommandService:
 
             api.manual_input(clip(m.x), clip(m.r), now)
 
-    def _on_position_target(self, m: Any, now: float) -> None:
+    def _on_position_target(self, m: MavMessage, now: float) -> None:
         """SET_POSITION_TARGET_GLOBAL_INT: a GUIDED goto (position only; velocity/acceleration ignored)."""
         if m.target_system not in (0, self.view.sysid) or self.view.api is None:
             return
@@ -109,7 +109,7 @@ class CommandService:
         if code != M.MAV_RESULT_ACCEPTED and why:
             self.out.statustext(why, M.MAV_SEVERITY_WARNING)
 
-    def _on_set_home_position(self, m: Any, now: float) -> None:
+    def _on_set_home_position(self, m: MavMessage, now: float) -> None:
         """SET_HOME_POSITION (deprecated for MAV_CMD_DO_SET_HOME, still sent by some ground stations)."""
         if m.target_system not in (0, self.view.sysid) or self.view.api is None:
             return

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Callable, Collection, Hashable
-from typing import Any, Protocol
+from typing import Protocol, cast
 
 from autopilot_bridge.vehicle_api import VehicleApi, VehicleStatus
 from common.geodesy import LocalFrame
@@ -38,11 +38,11 @@ def enum_name(enum: str, value: int) -> str:
     return entry.name if entry is not None else f"{enum}_{int(value)}"
 
 
-def finite(x: Any) -> bool:
+def finite(x: float | None) -> bool:
     return x is not None and math.isfinite(x)
 
 
-def text_of(v: Any) -> str:
+def text_of(v: object) -> str:
     """A MAVLink char[] field as text (trailing NULs removed)."""
     return (v.decode(errors="replace") if isinstance(v, (bytes, bytearray)) else str(v)).rstrip("\x00")
 
@@ -91,7 +91,7 @@ class Outbox:
         self.record(data)
         self.sent += 1
 
-    def send(self, name: str, *args: Any) -> None:
+    def send(self, name: str, *args: object) -> None:
         try:
             frame = self.codec.encode(name, *args)
         except Exception as exc:  # a field out of its wire range must cost a message, never the control loop
@@ -101,11 +101,12 @@ class Outbox:
             return
         self.send_frame(frame)
         if name == "command_ack":
-            cmd, result = enum_name("MAV_CMD", args[0]), enum_name("MAV_RESULT", args[1])
+            # COMMAND_ACK's command and result, MISSION_ACK's type: enum fields, ints on the wire
+            cmd, result = enum_name("MAV_CMD", cast(int, args[0])), enum_name("MAV_RESULT", cast(int, args[1]))
             self.command_acks[result] += 1
             self.commands[f"{cmd}:{result}"] += 1
         elif name == "mission_ack":
-            self.mission_acks[enum_name("MAV_MISSION_RESULT", args[2])] += 1
+            self.mission_acks[enum_name("MAV_MISSION_RESULT", cast(int, args[2]))] += 1
 
     def statustext(self, text: str, severity: int = M.MAV_SEVERITY_INFO) -> None:
         """One STATUSTEXT, or for a text over its 50 bytes MAVLink 2 chunks that ground stations join

@@ -15,12 +15,12 @@ blind or drift, so it is on here by default (``[gcs] failsafe_action``, ``failsa
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
 
 from autopilot_bridge.gcs.context import Outbox, VehicleView
 from autopilot_bridge.modes import Mode
 from autopilot_bridge.parameters import Tunable
 from common.mavlink import MAV_TYPE as M
+from common.mavlink import MavMessage
 
 FS_NOTHING, FS_RTL, FS_HOLD = 0, 1, 2     # FS_ACTION, ArduRover's numbers
 ACTION_OF_CONFIG = {"none": FS_NOTHING, "rtl": FS_RTL, "hold": FS_HOLD}
@@ -45,10 +45,10 @@ class GcsFailsafe:
         self.events = 0
         self.last_heartbeat: float | None = None
 
-    def handlers(self) -> dict[str, Callable[[Any, float], None]]:
+    def handlers(self) -> dict[str, Callable[[MavMessage, float], None]]:
         return {"HEARTBEAT": self._on_heartbeat}
 
-    def _on_heartbeat(self, m: Any, now: float) -> None:
+    def _on_heartbeat(self, m: MavMessage, now: float) -> None:
         if m.type == M.MAV_TYPE_GCS and (not self.require_signed or getattr(m, "_signed", False)):
             self.last_heartbeat = now
 

@@ -9,10 +9,9 @@ requests costs a bounded amount of work.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 from autopilot_bridge.gcs.signing import ReplayGuard
-from common.mavlink import MALFORMED, TRUNCATED, UNKNOWN_MESSAGE, bad_data_reason, mavlink2, reset_parser
+from common.mavlink import MALFORMED, TRUNCATED, UNKNOWN_MESSAGE, MavMessage, bad_data_reason, mavlink2, reset_parser
 
 BUFFER_LIMIT = 1 << 16   # bytes of a stream's unparsed backlog before it is dropped
 
@@ -21,7 +20,7 @@ BUFFER_LIMIT = 1 << 16   # bytes of a stream's unparsed backlog before it is dro
 class Parsed:
     """One call's result: decoded messages, reject reasons, and bytes dropped by the frame budget."""
 
-    msgs: list[Any] = field(default_factory=list)
+    msgs: list[MavMessage] = field(default_factory=list)
     rejects: list[str] = field(default_factory=list)
     over_budget_bytes: int = 0
 

@@ -12,9 +12,9 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass
-from typing import Any
 
 from common.mavlink import MAV_TYPE as M
+from common.mavlink import MavMessage
 
 FRAME_BUDGET = 32   # frames decoded and handled per service call, all transports together (~30 µs each)
 
@@ -66,12 +66,12 @@ class ReadLimiter:
         self.buckets = {kind: _Bucket(rate) for kind, rate in (limits or READ_LIMITS).items()}
 
     @staticmethod
-    def kind_of(m: Any, kind: str) -> str | None:
+    def kind_of(m: MavMessage, kind: str) -> str | None:
         if kind in ("COMMAND_LONG", "COMMAND_INT"):
             return "READ_COMMAND" if m.command in READ_COMMANDS else None
         return kind
 
-    def allows(self, m: Any, kind: str, now: float) -> bool:
+    def allows(self, m: MavMessage, kind: str, now: float) -> bool:
         key = self.kind_of(m, kind)
         bucket = self.buckets.get(key) if key is not None else None
         if bucket is None or bucket.take(now):

@@ -23,7 +23,7 @@ from __future__ import annotations
 import time
 from collections import Counter
 from collections.abc import Callable, Hashable
-from typing import Any, TypedDict
+from typing import TypedDict
 
 from autopilot_bridge.gcs.command import CommandService
 from autopilot_bridge.gcs.config import GcsParams
@@ -46,11 +46,12 @@ from autopilot_bridge.parameters import Param, ParamTable, bind
 from autopilot_bridge.vehicle_api import VehicleApi, VehicleStatus
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE as M
+from common.mavlink import MavMessage
 from common.percentiles import StreamingPercentiles
 
 __all__ = ["GcsLink", "load_signing_key"]
 
-Handler = Callable[[Any, float], None]
+Handler = Callable[[MavMessage, float], None]
 
 
 class ServiceTimes(TypedDict):
@@ -199,7 +200,7 @@ class GcsLink:
         return self.out.encode_errors
 
     # -- sending --------------------------------------------------------------------------------
-    def forward(self, name: str, *fields: Any) -> None:
+    def forward(self, name: str, *fields: object) -> None:
         """Encode message ``name`` (e.g. "ais_vessel") with the vessel's ids and send it to every GCS."""
         self.out.send(name.lower(), *fields)
 
@@ -298,7 +299,7 @@ class GcsLink:
                 self.log(f"gcs: {m.get_type()} dropped: {type(exc).__name__}: {exc}")
         return budget
 
-    def _handle(self, m: Any, now: float, tr: Transport | None = None, peer: Hashable = None) -> None:
+    def _handle(self, m: MavMessage, now: float, tr: Transport | None = None, peer: Hashable = None) -> None:
         kind = m.get_type()
         self.received[kind] += 1
         if m.get_srcSystem() == self.sysid and m.get_srcComponent() == self.compid:

@@ -31,11 +31,11 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 
 from autopilot_bridge import mission_commands as mc
 from autopilot_bridge.gcs.upload_claim import UploadClaim
 from common.mavlink import MAV_TYPE as M
+from common.mavlink import MavMessage
 
 MISSION = M.MAV_MISSION_TYPE_MISSION
 FENCE = M.MAV_MISSION_TYPE_FENCE
@@ -245,7 +245,7 @@ class MissionServer:
     def _count(self, key: str) -> None:
         self.stats[key] = self.stats.get(key, 0) + 1
 
-    def _for_us(self, msg: Any) -> bool:
+    def _for_us(self, msg: MavMessage) -> bool:
         return (msg.target_system in (0, self.system_id())
                 and msg.target_component in (0, self.compid, M.MAV_COMP_ID_ALL))
 
@@ -259,7 +259,7 @@ class MissionServer:
         return Out(name, (up.partner[0], up.partner[1], len(up.items), up.mission_type))
 
     # -- inputs ------------------------------------------------------------------------------
-    def handle(self, msg: Any, now: float) -> list[Out]:
+    def handle(self, msg: MavMessage, now: float) -> list[Out]:
         """React to one decoded message (types other than the mission protocol's are ignored)."""
         kind = msg.get_type()
         handler = getattr(self, f"_on_{kind.lower()}", None)
@@ -281,7 +281,7 @@ class MissionServer:
         self._count("re_requests")
         return [self._request(up, now)]
 
-    def _on_mission_count(self, msg: Any, sender: tuple[int, int], now: float) -> list[Out]:
+    def _on_mission_count(self, msg: MavMessage, sender: tuple[int, int], now: float) -> list[Out]:
         mtype = getattr(msg, "mission_type", MISSION)
         if mtype not in PLAN_TYPES:
             self._count("unsupported_plan_type")
@@ -315,7 +315,8 @@ class MissionServer:
             self.upload.retries, self.upload.last_request = again.retries, again.last_request
         return taken + [request]
 
-    def _on_mission_item_int(self, msg: Any, sender: tuple[int, int], now: float, legacy: bool = False) -> list[Out]:
+    def _on_mission_item_int(self, msg: MavMessage, sender: tuple[int, int], now: float,
+                             legacy: bool = False) -> list[Out]:
         mtype = getattr(msg, "mission_type", MISSION)
         up = self.upload
         if up is None or up.partner != sender:
@@ -377,7 +378,7 @@ class MissionServer:
         check = self.plan_checks.get(mtype)
         return check(items) if check is not None else None
 
-    def _on_mission_item(self, msg: Any, sender: tuple[int, int], now: float) -> list[Out]:
+    def _on_mission_item(self, msg: MavMessage, sender: tuple[int, int], now: float) -> list[Out]:
         return self._on_mission_item_int(msg, sender, now, legacy=True)
 
     def _replace(self, items: tuple[MissionItem, ...], sender: tuple[int, int], now: float,
@@ -389,12 +390,13 @@ class MissionServer:
         self.events.append(MissionEvent("replaced", items, mission_type=mtype))
         return [self._ack(sender, M.MAV_MISSION_ACCEPTED, mtype)]
 
-    def _on_mission_request_list(self, msg: Any, sender: tuple[int, int], now: float) -> list[Out]:
+    def _on_mission_request_list(self, msg: MavMessage, sender: tuple[int, int], now: float) -> list[Out]:
         mtype = getattr(msg, "mission_type", MISSION)
         count = len(self.plans.get(mtype, ()))
         return [Out("mission_count", (sender[0], sender[1], count, mtype))]
 
-    def _on_mission_request_int(self, msg: Any, sender: tuple[int, int], now: float, legacy: bool = False) -> list[Out]:
+    def _on_mission_request_int(self, msg: MavMessage, sender: tuple[int, int], now: float,
+                                legacy: bool = False) -> list[Out]:
         mtype = getattr(msg, "mission_type", MISSION)
         plan = self.plans.get(mtype, ())
         if not 0 <= msg.seq < len(plan):
@@ -409,10 +411,10 @@ class MissionServer:
         return [Out("mission_item_int", (sender[0], sender[1], msg.seq, it.frame, it.command, 0, it.autocontinue,
                                          it.param1, it.param2, it.param3, it.param4, it.x, it.y, it.z, mtype))]
 
-    def _on_mission_request(self, msg: Any, sender: tuple[int, int], now: float) -> list[Out]:
+    def _on_mission_request(self, msg: MavMessage, sender: tuple[int, int], now: float) -> list[Out]:
         return self._on_mission_request_int(msg, sender, now, legacy=True)
 
-    def _on_mission_clear_all(self, msg: Any, sender: tuple[int, int], now: float) -> list[Out]:
+    def _on_mission_clear_all(self, msg: MavMessage, sender: tuple[int, int], now: float) -> list[Out]:
         mtype = getattr(msg, "mission_type", MISSION)
         if mtype not in (*PLAN_TYPES, M.MAV_MISSION_TYPE_ALL):
             return [self._ack(sender, M.MAV_MISSION_UNSUPPORTED, mtype)]
@@ -424,14 +426,14 @@ class MissionServer:
                 self._replace((), sender, now, t)
         return [self._ack(sender, M.MAV_MISSION_ACCEPTED, mtype)]
 
-    def _on_mission_set_current(self, msg: Any, sender: tuple[int, int], now: float) -> list[Out]:
+    def _on_mission_set_current(self, msg: MavMessage, sender: tuple[int, int], now: float) -> list[Out]:
         if not 0 <= msg.seq < len(self.items):
             self._count("set_current_rejected")
             return [Out("statustext", (M.MAV_SEVERITY_WARNING, f"mission: no item {msg.seq}".encode()))]
         self.events.append(MissionEvent("set_current", seq=int(msg.seq)))
         return []
 
-    def _on_mission_ack(self, msg: Any, sender: tuple[int, int], now: float) -> list[Out]:
+    def _on_mission_ack(self, msg: MavMessage, sender: tuple[int, int], now: float) -> list[Out]:
         return []  # the GCS's ack at the end of a download: nothing left to do
 
     def take_events(self) -> list[MissionEvent]:

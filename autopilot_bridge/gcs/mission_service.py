@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 
@@ -16,6 +15,7 @@ from autopilot_bridge.gcs.mission import FENCE, MISSION, RALLY, MissionItem, Mis
 from autopilot_bridge.mission_commands import MissionCommand
 from autopilot_bridge.modes import Mode
 from common.mavlink import MAV_TYPE as M
+from common.mavlink import MavMessage
 from planner.fence import Circle, Fence
 
 # Every MISSION_* message the protocol state machine has a handler for.
@@ -53,7 +53,7 @@ class MissionService:
         return MissionItem(M.MAV_FRAME_GLOBAL, M.MAV_CMD_NAV_WAYPOINT, 1, 0.0, 0.0, 0.0, 0.0,
                            int(round(lat * 1e7)), int(round(lon * 1e7)), float(self.view.geo.alt0))
 
-    def handlers(self) -> dict[str, Callable[[Any, float], None]]:
+    def handlers(self) -> dict[str, Callable[[MavMessage, float], None]]:
         return {name: self._on_message for name in MISSION_MESSAGES}
 
     def total(self) -> int:
@@ -101,13 +101,13 @@ class MissionService:
         api = self.view.api
         return None if api is None else api.check_mission(items, self.view.geo.geodetic_to_sea_level)
 
-    def refuse(self, m: Any) -> None:
+    def refuse(self, m: MavMessage) -> None:
         """A write refused by the security gate: MISSION_DENIED to its sender (mission writes only)."""
         if m.get_type() in MISSION_WRITES:
             self.out.send("mission_ack", m.get_srcSystem(), m.get_srcComponent(), M.MAV_MISSION_DENIED,
                           getattr(m, "mission_type", 0))
 
-    def _on_message(self, m: Any, now: float) -> None:
+    def _on_message(self, m: MavMessage, now: float) -> None:
         if self.server is None:
             return
         if m.get_type() in ("MISSION_ITEM", "MISSION_ITEM_INT") and m.current == GUIDED_GOTO and \
@@ -118,7 +118,7 @@ class MissionService:
             self.out.send(o.name, *o.args)
         self._events()
 
-    def _guided_goto(self, m: Any) -> None:
+    def _guided_goto(self, m: MavMessage) -> None:
         """ArduPilot's guided "fly to": a NAV_WAYPOINT item with current = 2, outside any upload (MAVProxy's
         ``guided LAT LON ALT``, QGroundControl's "Go to location" on an ArduPilot vehicle). Taken in GUIDED
         only, as ArduRover takes it, and checked as any GUIDED target; answered with MISSION_ACK."""

@@ -12,11 +12,11 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable
-from typing import Any
 
 from autopilot_bridge.gcs.context import Outbox, VehicleView, text_of
 from autopilot_bridge.parameters import ParamTable
 from common.mavlink import MAV_TYPE as M
+from common.mavlink import MavMessage
 
 DUMP_PER_CALL = 16   # PARAM_VALUE of a list dump sent per service call
 
@@ -31,11 +31,11 @@ class ParameterService:
     def attach(self, table: ParamTable) -> None:
         self.table = table
 
-    def handlers(self) -> dict[str, Callable[[Any, float], None]]:
+    def handlers(self) -> dict[str, Callable[[MavMessage, float], None]]:
         return {"PARAM_REQUEST_LIST": self._on_request_list, "PARAM_REQUEST_READ": self._on_request_read,
                 "PARAM_SET": self._on_set}
 
-    def _for_us(self, m: Any) -> bool:
+    def _for_us(self, m: MavMessage) -> bool:
         return self.table is not None and getattr(m, "target_system", self.view.sysid) in (0, self.view.sysid)
 
     def _value(self, i: int) -> None:
@@ -57,7 +57,7 @@ class ParameterService:
     def dumping(self) -> bool:
         return self._dump_next is not None
 
-    def _on_request_list(self, m: Any, now: float) -> None:
+    def _on_request_list(self, m: MavMessage, now: float) -> None:
         if not self._for_us(m):
             return
         if self._dump_next is not None:
@@ -65,7 +65,7 @@ class ParameterService:
             return
         self._dump_next = 0   # sent from tick(), after every request of this service call joined it
 
-    def _on_request_read(self, m: Any, now: float) -> None:
+    def _on_request_read(self, m: MavMessage, now: float) -> None:
         if not self._for_us(m):
             return
         t = self.table
@@ -74,7 +74,7 @@ class ParameterService:
         if 0 <= i < len(t):
             self._value(i)
 
-    def _on_set(self, m: Any, now: float) -> None:
+    def _on_set(self, m: MavMessage, now: float) -> None:
         if not self._for_us(m):
             return
         t = self.table

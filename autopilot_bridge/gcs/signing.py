@@ -23,10 +23,9 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 from autopilot_bridge.gcs.peers import RANK_GCS, RANK_SIGNED, RANK_STRANGER
-from common.mavlink import MAV_TYPE, mavlink2
+from common.mavlink import MAV_TYPE, MavMessage, mavlink2
 
 SIGNING_EPOCH = 1420070400  # 2015-01-01 00:00:00 UTC, the MAVLink 2 signing timestamp origin
 NEW_STREAM_SLACK = 6_000_000  # a new stream's first timestamp may lag our clock by 60 s (10 µs units), as the spec
@@ -118,7 +117,7 @@ class ReplayGuard:
         self.timestamp = clock   # the stamps we accept never move our clock (a wrong GCS clock stays its own)
         return True
 
-    def install(self, mav: Any) -> None:
+    def install(self, mav: mavlink2.MAVLink) -> None:
         """Make a pymavlink parser verify with this guard and decode unsigned frames too (the gate decides)."""
         mav.signing.secret_key = self.key
         mav.signing.timestamp = self.timestamp
@@ -134,11 +133,11 @@ class SecurityGate:
         self.allowed = frozenset(allowed_sysids)
         self.counts = counts
 
-    def signed(self, m: Any) -> bool:
+    def signed(self, m: MavMessage) -> bool:
         """Signed with our key and fresh (the frame passed :class:`ReplayGuard` while it was parsed)."""
         return bool(getattr(m, "_signed", False))
 
-    def allows(self, m: Any, kind: str) -> bool:
+    def allows(self, m: MavMessage, kind: str) -> bool:
         if kind not in WRITES:
             return True
         if self.allowed and m.get_srcSystem() not in self.allowed:
@@ -155,7 +154,7 @@ class SecurityGate:
             return False
         return True
 
-    def peer_rank(self, m: Any, kind: str) -> int:
+    def peer_rank(self, m: MavMessage, kind: str) -> int:
         """The place a frame that passed :meth:`allows` earns its sender in the peer table (:mod:`.peers`):
         signed with our key; without signing, a frame that talks like a ground station (a GCS HEARTBEAT
         or a write, from an allowed system id); anything else ranks as a stranger's."""

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
 
 from autopilot_bridge.behaviour import Behaviour
 from autopilot_bridge.gcs.context import Outbox, VehicleView, finite
@@ -20,7 +19,7 @@ from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavState
 from autopilot_bridge.onboard_status import OnboardStatus
 from common.mavlink import MAV_TYPE as M
-from common.mavlink import mavlink2
+from common.mavlink import MavMessage, mavlink2
 
 # Default stream intervals (s of vessel time); a GCS changes them per message.
 DEFAULT_INTERVALS = {
@@ -74,7 +73,7 @@ class TelemetryService:
         }
 
     # -- dispatch tables -------------------------------------------------------------------------
-    def handlers(self) -> dict[str, Callable[[Any, float], None]]:
+    def handlers(self) -> dict[str, Callable[[MavMessage, float], None]]:
         return {"PING": self._on_ping, "REQUEST_DATA_STREAM": self._on_request_data_stream}
 
     def commands(self) -> dict[int, Callable[[list[float], float, float], CommandResult]]:
@@ -304,13 +303,13 @@ class TelemetryService:
                       [M.MAV_CMD_NAV_WAYPOINT] * n + [65535] * (5 - n))
 
     # -- messages ---------------------------------------------------------------------------------
-    def _on_ping(self, m: Any, now: float) -> None:
+    def _on_ping(self, m: MavMessage, now: float) -> None:
         # The ping protocol (mavlink.io/en/services/ping.html): a request has target 0/0; the reply
         # echoes time_usec and seq, addressed to the sender.
         if m.target_system == 0 and m.target_component == 0:
             self.out.send("ping", m.time_usec, m.seq, m.get_srcSystem(), m.get_srcComponent())
 
-    def _on_request_data_stream(self, m: Any, now: float) -> None:
+    def _on_request_data_stream(self, m: MavMessage, now: float) -> None:
         if m.target_system not in (0, self.view.sysid):
             return
         start, rate_hz = m.start_stop, m.req_message_rate

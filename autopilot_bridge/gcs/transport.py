@@ -253,7 +253,7 @@ class TcpClientTransport:
 
     stream = True
 
-    def __init__(self, host: str, port: int, clock=None) -> None:
+    def __init__(self, host: str, port: int, clock: Callable[[], float] | None = None) -> None:
         import time
 
         self.host, self.port = host, port
@@ -419,7 +419,8 @@ class SerialTransport:
 
 
 def open_endpoint(spec: str, max_peers: int = 8, counts: Counter[str] | None = None,
-                  clock: Callable[[], float] = time.monotonic):
+                  clock: Callable[[], float] = time.monotonic
+                  ) -> UdpTransport | TcpServerTransport | TcpClientTransport | SerialTransport:
     """A transport from a connection string (ValueError with one line on bad input, a busy port,
     a ground station that cannot be reached, a serial port that cannot be opened). ``counts`` receives
     the peer table's and the TCP server's refusals (``peer_table_full``, ``tcp_idle_closed`` ...); ``clock``

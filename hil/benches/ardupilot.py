@@ -21,8 +21,9 @@ import math
 import subprocess
 import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
+from common.tables import JsonTable
 from hil.console import emit, load_settings, progress
 from hil.errors import UsageError
 
@@ -103,7 +104,7 @@ def timed_track(tlog: Path, geo: LocalFrame, until_s: float) -> tuple[np.ndarray
 
 
 def station_figures(summary: RunSummary, goal_ned: tuple[float, float], tolerance: float, geo: LocalFrame,
-                    hold_s: float = 60.0) -> dict[str, Any]:
+                    hold_s: float = 60.0) -> JsonTable:
     """Station keeping over the last ``hold_s`` simulated seconds of a run: RMS and largest distance
     (m) from ``goal_ned``, the share of that time within ``tolerance`` (m); and when the boat first came
     within ``tolerance`` (s, None: never)."""
@@ -112,7 +113,7 @@ def station_figures(summary: RunSummary, goal_ned: tuple[float, float], toleranc
     t, track = timed_track(Path(summary.tlog), geo, summary.sim_time_s)
     d = np.hypot(track[:, 0] - goal_ned[0], track[:, 1] - goal_ned[1]) if len(t) else np.zeros(0)
     inside = np.flatnonzero(d <= tolerance)
-    out: dict[str, Any] = {"outcome": summary.outcome, "collisions": summary.collisions,
+    out: JsonTable = {"outcome": summary.outcome, "collisions": summary.collisions,
                            "min_clearance_m": summary.min_clearance_m,
                            "arrived_s": round(float(t[inside[0]]), 2) if len(inside) else None}
     held = d[t >= t[-1] - hold_s] if len(t) else d
@@ -142,7 +143,7 @@ def station_scenario(folder: Path, goal_xy: tuple[float, float]) -> Path:
     return out
 
 
-def _toml(table: dict[str, Any], prefix: str = "") -> str:
+def _toml(table: JsonTable, prefix: str = "") -> str:
     import json
 
     flat = [f"{k} = {json.dumps(v)}" for k, v in table.items() if not isinstance(v, dict)]
@@ -167,7 +168,7 @@ def moving_from(tlog: Path, until_s: float, speed: float = 0.3) -> float | None:
     return None
 
 
-def flight_figures(summary: RunSummary, route_ned: np.ndarray, geo: LocalFrame) -> dict[str, Any]:
+def flight_figures(summary: RunSummary, route_ned: np.ndarray, geo: LocalFrame) -> JsonTable:
     from autopilot_bridge.tracking_stats import TrackingSummary
     from hil.ardupilot import route_cross_track
 
@@ -216,13 +217,13 @@ def run(args: argparse.Namespace) -> int:
         if scenarios.load_spec(name).kind != "fixed":
             raise UsageError(f"scenario {name!r} draws a new map per run; the bench needs fixed scenarios")
     geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
-    result: dict[str, Any] = {"commit": commit(), "seed": args.seed, "duration_s": args.duration,
+    result: JsonTable = {"commit": commit(), "seed": args.seed, "duration_s": args.duration,
                               "ardupilot": str(sitl.binary), "scenarios": {}}
     lines = [f"ArduRover against the vessel computer, seed {args.seed}, lockstep, commit {result['commit']}",
              " ".join(f"{c:<15}" if i == 0 else f"{c:>8}" for i, c in enumerate(HEAD))]
     with tempfile.TemporaryDirectory(prefix="hil-bench-ardupilot-") as tmp:
         root = Path(args.out) if args.out else Path(tmp)
-        flown: dict[str, dict[str, Any]] = {}     # the vessel computer's figures per scenario, flown once
+        flown: dict[str, JsonTable] = {}     # the vessel computer's figures per scenario, flown once
         rows = [(name, False) for name in args.scenarios] + [(name, True) for name in args.fence_scenarios]
         for name, fence in rows:
             scen = scenarios.load(name, cfg.current, cfg.planner.safety_radius)
@@ -306,7 +307,7 @@ HEAD = ("scenario", "who", "outcome", "time s", "way s", "xte rms", "xte max", "
         "coll")   # time: to the goal (ArduRover's from AUTO); way: from the start of motion; xte: from the route
 
 
-def _row(scenario: str, who: str, f: dict[str, Any]) -> str:
+def _row(scenario: str, who: str, f: JsonTable) -> str:
     cells = (scenario, who, str(f.get("outcome", "")), *(_fmt(f.get(k)) for k in METRICS))
     return " ".join(f"{c:<15}" if i == 0 else f"{c:>8}" for i, c in enumerate(cells))
 

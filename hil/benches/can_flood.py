@@ -25,8 +25,9 @@ from __future__ import annotations
 import argparse
 import itertools
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
+from common.tables import JsonTable
 from hil.console import emit, progress
 from hil.errors import UsageError
 
@@ -78,7 +79,7 @@ def _queued(bus: can.BusABC) -> int | None:
     return None if queue is None else int(queue.qsize())
 
 
-def leg(cfg: HilConfig, duration_s: float, rate: float, time_budget: bool, filtered: bool = False) -> dict[str, Any]:
+def leg(cfg: HilConfig, duration_s: float, rate: float, time_budget: bool, filtered: bool = False) -> JsonTable:
     """One real-time run of ``duration_s`` wall seconds under ``rate`` foreign frames/s; ``filtered``: the
     ESC socket with the simulator's kernel filter (SocketCAN only)."""
     import can

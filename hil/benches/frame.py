@@ -19,8 +19,9 @@ import pstats
 import socket
 import statistics
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
+from common.tables import JsonTable
 from hil.console import emit, load_settings, progress
 from hil.errors import UsageError
 
@@ -203,7 +204,7 @@ def run(args: argparse.Namespace) -> int:
     progress(f"bench frame: {args.steps} frames on {args.scenario}, no profiler")
     plain, waited, _ = _timed(args, profile=False)
     us = sorted(t * 1e6 for t in plain)
-    result: dict[str, Any] = {
+    result: JsonTable = {
         "scenario": args.scenario, "steps": args.steps, "frames_waiting_for_planner": waited,
         "navigation_filter": getattr(load_settings(args).navigation, "filter", "filterpy"),
         "frame_us": {"mean": round(statistics.fmean(us), 1), "p50": round(us[len(us) // 2], 1),

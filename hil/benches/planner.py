@@ -28,8 +28,9 @@ import statistics
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
+from common.tables import JsonTable
 from hil import console
 from hil.errors import UsageError
 from planner.params import ALGORITHM_NAMES
@@ -148,7 +149,7 @@ class OursRunner:
         self.algorithm, self.params, self.problem = algorithm, replace(params, algorithm=algorithm), problem
         self.judge = judge  # hil.flow_optimum.FlowJudge: "length" is then the path's eq. (12) cost
 
-    def solve(self, seed: int, budget_s: float, first: bool = False) -> dict[str, Any]:
+    def solve(self, seed: int, budget_s: float, first: bool = False) -> JsonTable:
         from planner import make_planner
         from planner.termination import Termination
         planner = make_planner(self.algorithm, replace(self.params, seed=seed))
@@ -192,7 +193,7 @@ class OmplRunner:
         self.start, self.goal, self.step = start, goal, step
         self.extent = max(w, h)
 
-    def solve(self, seed: int, budget_s: float, first: bool = False) -> dict[str, Any]:
+    def solve(self, seed: int, budget_s: float, first: bool = False) -> JsonTable:
         ob, og = self.ob, self.og
         from ompl import util as ou
         if hasattr(ou, "RNG") and hasattr(ou.RNG, "setSeed"):
@@ -228,7 +229,7 @@ class OmplRunner:
                 "first": dt if (first and exact) else None}
 
 
-def _measure(runner, seeds: list[int], budgets: tuple[float, ...], optimum: float, label: str) -> dict[str, Any]:
+def _measure(runner, seeds: list[int], budgets: tuple[float, ...], optimum: float, label: str) -> JsonTable:
     firsts: list[float | None] = []
     ratios: dict[float, list[float]] = {b: [] for b in budgets}
     rates: list[float] = []
@@ -249,7 +250,7 @@ def _measure(runner, seeds: list[int], budgets: tuple[float, ...], optimum: floa
     }
 
 
-def end_to_end(map_name: str, algorithm: str, budget_s: float, args: argparse.Namespace) -> dict[str, Any]:
+def end_to_end(map_name: str, algorithm: str, budget_s: float, args: argparse.Namespace) -> JsonTable:
     """Wall time of one `hil plan --scenario MAP --deadline B` process (s), split into the search
     and the one-off costs the command reports (warm-up, set-up; startup_s = the rest)."""
     import json
@@ -301,7 +302,7 @@ def run(args: argparse.Namespace) -> int:
     console.progress(f"hil bench planner: {len(args.maps)} maps x {len(args.algorithms)} planners, {seeds_n} seeds, "
                      f"budgets {', '.join(f'{b:g}' for b in budgets)} s, step {params.step:g} m; OMPL: {ompl_note}")
     seeds = list(range(1, seeds_n + 1))
-    report: dict[str, Any] = {"objective": args.objective, "seeds": seeds_n, "budgets_s": list(budgets),
+    report: JsonTable = {"objective": args.objective, "seeds": seeds_n, "budgets_s": list(budgets),
                               "step_m": params.step,
                               "ompl": ompl_note, "targets": TARGETS, "maps": {}}
     for name in args.maps:
@@ -314,7 +315,7 @@ def run(args: argparse.Namespace) -> int:
         optimum = opt.length
         field = sc.planning_field() if args.objective == "current" else None
         problem = PlanningProblem(grid=grid, start=sc.start, goal=sc.goal, field=field)
-        entry: dict[str, Any] = {"optimum_m": opt.length, "optimum_vertices": opt.vertices, "planners": {}}
+        entry: JsonTable = {"optimum_m": opt.length, "optimum_vertices": opt.vertices, "planners": {}}
         console.progress(f"{name}: optimum {opt.length:.2f} m ({opt.vertices} visibility vertices)")
         if args.objective == "current":
             from hil.flow_optimum import FlowJudge
@@ -364,7 +365,7 @@ def _f(v: object, fmt: str) -> str:
     return format(v, fmt)
 
 
-def _print_table(report: dict[str, Any]) -> None:
+def _print_table(report: JsonTable) -> None:
     budgets = [f"{b:g}" for b in report["budgets_s"]]
     head = (f"{'map':15} {'planner':18} {'iter/s':>9} {'first (ms)':>10} "
             + " ".join(f"{'x@' + b + 's':>8}" for b in budgets))

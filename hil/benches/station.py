@@ -21,8 +21,9 @@ import argparse
 import math
 import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
+from common.tables import JsonTable
 from hil.console import emit, progress
 
 if TYPE_CHECKING:
@@ -134,9 +135,9 @@ def run(args: argparse.Namespace) -> int:
     currents = _parse_currents(args.currents)
     with tempfile.TemporaryDirectory(prefix="hil-bench-station-") as tmp:
         out = Path(args.out) if args.out else Path(tmp)
-        table: dict[str, Any] = {"scenario": SCENARIO, "seed": args.seed, "hold_s": args.hold, "currents": {}}
+        table: JsonTable = {"scenario": SCENARIO, "seed": args.seed, "hold_s": args.hold, "currents": {}}
         for v in currents:
-            rows: dict[str, Any] = {}
+            rows: JsonTable = {}
             for method in METHODS:
                 progress(f"bench station: current {v:g} m/s, {method} ...")
                 rows[method] = one(v, method, args, out)

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 
 from common import connection
 
 
-def endpoint(role: connection.Role):
+def endpoint(role: connection.Role) -> Callable[[str], str]:
     """An argparse type checking a connection string for ``role`` (common.connection)."""
     def check(text: str) -> str:
         try:

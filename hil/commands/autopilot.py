@@ -146,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
     if args.can_record and autopilot.can is not None:
         autopilot.can.sent_times.start(spill_to=args.can_record)
 
-    def request_stop(*_):
+    def request_stop(*_: object) -> None:
         stop["flag"] = True
 
     previous = {sig: signal.signal(sig, request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}

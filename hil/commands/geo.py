@@ -6,15 +6,15 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 from hil.console import emit, load_settings
 from hil.errors import UsageError
 from hil.files import check_output_file
 
 
-def _pair(what: str):
+def _pair(what: str) -> Callable[[str], tuple[float, float]]:
     def parse(text: str) -> tuple[float, float]:
         parts = text.split(",")
         try:
@@ -50,7 +50,7 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.set_defaults(func=run)
 
 
-def plan_document(points: list[tuple[float, float]], home: tuple[float, float], speed: float) -> dict[str, Any]:
+def plan_document(points: list[tuple[float, float]], home: tuple[float, float], speed: float) -> dict[str, object]:
     """A QGroundControl .plan (JSON, mission version 2) of NAV_WAYPOINT items at ``points`` (lat, lon deg),
     at sea level (altitude 0 m relative to home), for a surface boat."""
     items = [{"type": "SimpleItem", "autoContinue": True, "command": 16, "doJumpId": i + 1, "frame": 3,
@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
         n, e = frame.geodetic_to_sea_level(lat, lon)
         return e, n
 
-    result: dict[str, Any] = {"origin": [frame.lat0, frame.lon0]}
+    result: dict[str, object] = {"origin": [frame.lat0, frame.lon0]}
     lines = [f"origin (map x = 0, y = 0): {frame.lat0:.7f}, {frame.lon0:.7f}"]
     given = getattr(scen.geodesy, "positions_origin", ())
     if given and tuple(given) != (frame.lat0, frame.lon0):
@@ -97,18 +97,20 @@ def run(args: argparse.Namespace) -> int:
         lines.append(f"the scenario's positions in metres count from {given[0]:.7f}, {given[1]:.7f} "
                      f"(map {e:.2f}, {n:.2f} m); the map metres here are the run's")
     if args.to_latlon or args.to_metres:
-        result["to_latlon"] = [[x, y, *latlon(x, y)] for x, y in args.to_latlon]
-        result["to_metres"] = [[lat, lon, *metres(lat, lon)] for lat, lon in args.to_metres]
-        lines += [f"{x:g}, {y:g} m -> {la:.7f}, {lo:.7f}" for x, y, la, lo in result["to_latlon"]]
-        lines += [f"{la:.7f}, {lo:.7f} -> {x:.2f}, {y:.2f} m" for la, lo, x, y in result["to_metres"]]
+        to_latlon = [[x, y, *latlon(x, y)] for x, y in args.to_latlon]
+        to_metres = [[lat, lon, *metres(lat, lon)] for lat, lon in args.to_metres]
+        result["to_latlon"], result["to_metres"] = to_latlon, to_metres
+        lines += [f"{x:g}, {y:g} m -> {la:.7f}, {lo:.7f}" for x, y, la, lo in to_latlon]
+        lines += [f"{la:.7f}, {lo:.7f} -> {x:.2f}, {y:.2f} m" for la, lo, x, y in to_metres]
     else:
         for name, p in (("start", scen.start), ("goal", scen.goal)):
-            result[name] = [p[0], p[1], *latlon(p[0], p[1])]
-            lines.append(f"{name}: {p[0]:g}, {p[1]:g} m = {result[name][2]:.7f}, {result[name][3]:.7f}")
+            row = [p[0], p[1], *latlon(p[0], p[1])]
+            result[name] = row
+            lines.append(f"{name}: {p[0]:g}, {p[1]:g} m = {row[2]:.7f}, {row[3]:.7f}")
         given = scen.waypoints if scen.waypoints is not None else scen.reference_path
-        result["waypoints"] = [[float(x), float(y), *latlon(float(x), float(y))] for x, y in given]
-        lines.append("waypoints (as given): " + "; ".join(f"{la:.7f}, {lo:.7f}"
-                                                          for _x, _y, la, lo in result["waypoints"]))
+        waypoints = [[float(x), float(y), *latlon(float(x), float(y))] for x, y in given]
+        result["waypoints"] = waypoints
+        lines.append("waypoints (as given): " + "; ".join(f"{la:.7f}, {lo:.7f}" for _x, _y, la, lo in waypoints))
     if out is not None:
         route = [latlon(float(x), float(y)) for x, y in scen.reference_path]
         doc = plan_document(route, latlon(*scen.start), float(cfg.planner.speed))

@@ -6,12 +6,18 @@ import argparse
 import math
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hil import console, executors
 from hil.errors import RunFailed, UsageError
 from hil.files import check_output_folder
 from hil.scenario_names import available as scenario_names
 from planner.params import ALGORITHM_NAMES
+
+if TYPE_CHECKING:
+    from hil.experiment import Campaign
+    from hil.run_summary import RunSummary
+    from hil.scenario import ScenarioSpec
 
 
 def _algorithms(text: str) -> tuple[str, ...]:
@@ -136,7 +142,7 @@ def run_traffic(args: argparse.Namespace) -> int:
     bar = console.ProgressBar(args.runs, "montecarlo traffic", every_s=2.0)
     bad = [0]
 
-    def progress(done, s):
+    def progress(done: int, s: RunSummary) -> None:
         bad[0] += 1 if s.collisions else 0
         bar.update(done, f"collisions {bad[0]}")
 
@@ -171,7 +177,7 @@ def run_routes(args: argparse.Namespace, argv_scenario: str | None) -> int:
     bar = console.ProgressBar(args.runs, "montecarlo routes", every_s=2.0)
     ok = [0]
 
-    def progress(done, s):
+    def progress(done: int, s: RunSummary) -> None:
         ok[0] += 1 if s.reached_goal else 0
         bar.update(done, f"reached {ok[0]}/{done}")
 
@@ -298,7 +304,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _figures(args, spec, camp, out: Path) -> dict[str, str]:
+def _figures(args: argparse.Namespace, spec: ScenarioSpec, camp: Campaign, out: Path) -> dict[str, str]:
     from hil import experiment, plots
     from hil import scenario as scenarios
 

@@ -6,12 +6,19 @@ import argparse
 import math
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hil import console
 from hil.errors import UsageError
 from hil.files import PLOT_SUFFIXES, check_output_file
 from hil.scenario_names import available as scenario_names
 from planner.params import ALGORITHM_NAMES, SEED_MAX
+
+if TYPE_CHECKING:
+    from hil.settings import HilConfig
+    from planner.gridmap import OccupancyGrid
+    from planner.params import PlannerParams
+    from planner.result import PlannerResult
 
 ALGORITHMS = ALGORITHM_NAMES
 
@@ -49,7 +56,7 @@ def _current(text: str) -> str | tuple[float, float]:
             from None
 
 
-def wave_drift(settings) -> tuple[float, float] | None:
+def wave_drift(settings: HilConfig) -> tuple[float, float] | None:
     """The vessel's steady drift under the mean wave force of eq. (6) (m/s, map frame: x east,
     y north), or None with waves off: the following-seas surge force 0.5 rho alpha^2 L C_X over the
     surge damping d_u, towards the waves' mean direction (NED, clockwise from north). The drift
@@ -174,7 +181,7 @@ def _judged(grid, map_field, params, start, goal, path) -> dict[str, float]:
     return {"cost_judged": cost, "optimum": best.cost, "cost_over_optimum": cost / best.cost}
 
 
-def _ddrrt_hint(params, result, grid) -> str | None:
+def _ddrrt_hint(params: PlannerParams, result: PlannerResult, grid: OccupancyGrid) -> str | None:
     """Why DDRRT* failed where the ESD test threw away most samples, and what to use instead."""
     if params.algorithm != "ddrrt-star" or result.status == "exact" or not result.iterations:
         return None
