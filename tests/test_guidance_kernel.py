@@ -160,3 +160,19 @@ def test_the_yaw_feed_forward_curvature_matches_numpy_around_every_vertex() -> N
             along = float(rng.uniform(0, 1)) * float(los.seg_len[i])
             span = float(rng.choice([0.0, 0.5, 1.0, 7.0, 1e9]))
             assert bits(los.curvature_at(i, along, span)) == bits(reference_curvature_at(los, i, along, span))
+
+
+def test_the_compiled_search_is_numpys_searchsorted() -> None:
+    from autopilot_bridge.guidance import _search
+
+    rng = np.random.default_rng(7)
+    arrays = [np.array([]), np.array([1.0]), np.array([0.0, 0.0, 0.0]), np.array([-np.inf, 0.0, np.inf]),
+              np.array([0.0, 1.0, np.nan, np.nan]), np.array([np.nan])]
+    arrays += [np.sort(rng.integers(0, 6, n).astype(float)) for n in (2, 5, 17, 64)]
+    arrays += [np.cumsum(rng.random(n)) for n in (3, 40, 333)]
+    for a in arrays:
+        values = [*a, np.nan, np.inf, -np.inf, -1.0, 0.5, 2.5, 1e9, *rng.uniform(-1, 8, 20)]
+        for v in values:
+            for side in ("left", "right"):
+                got = _search(a, float(v), np.bool_(side == "right"))
+                assert got == int(np.searchsorted(a, v, side=side)), (a, v, side)
