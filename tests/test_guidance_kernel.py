@@ -136,7 +136,8 @@ def test_a_nan_curvature_wins_the_preview_as_in_numpy() -> None:
 
 def test_the_compiled_sum_is_numpys_sum_bit_for_bit() -> None:
     """The curvature's mean sums as numpy does (pairwise, 8 accumulators): on slices of every length
-    up to 300, of values over six orders of magnitude, signed zeros included."""
+    up to 300 and longer ones (several levels of halving), of values over six orders of magnitude,
+    signed zeros included."""
     from autopilot_bridge.guidance import _pairwise_sum
 
     rng = np.random.default_rng(17)
@@ -144,6 +145,10 @@ def test_the_compiled_sum_is_numpys_sum_bit_for_bit() -> None:
         n = int(rng.integers(0, 300))
         a = rng.standard_normal(n + 10) * 10.0 ** rng.uniform(-3, 3, n + 10)
         a[rng.random(n + 10) < 0.05] = -0.0
+        lo = int(rng.integers(0, 10))
+        assert bits(_pairwise_sum(a, lo, n)) == bits(float(a[lo:lo + n].sum())), (lo, n)
+    for n in [*range(120, 1100, 7), 1024, 2047, 2048, 4096, 5000]:   # several levels of halving
+        a = rng.standard_normal(n + 10) * 10.0 ** rng.uniform(-3, 3, n + 10)
         lo = int(rng.integers(0, 10))
         assert bits(_pairwise_sum(a, lo, n)) == bits(float(a[lo:lo + n].sum())), (lo, n)
 
