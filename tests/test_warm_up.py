@@ -192,6 +192,26 @@ def test_the_tree_reuse_compiles_without_the_tree_core():
     assert json.loads(r.stdout.splitlines()[-1]) == [0, 0, 1]
 
 
+REPAIR_ONLY = textwrap.dedent("""
+    import json, sys
+    import planner
+    from planner import _png, _tree
+    planner.warm_up_png_repair((sys.argv[1],))
+    print(json.dumps([len(_tree.grow_ddrrt.signatures), len(_tree.grow_rrt.signatures),
+                      len(_png.repair.signatures)]))
+""")
+
+
+@pytest.mark.parametrize("algorithm, kernels", [("ddrrt-star", [0, 0, 1]), ("rrt-star", [0, 0, 0])])
+def test_the_png_repair_compiles_without_the_tree_core(algorithm, kernels):
+    """The vessel computer's group compiles the PGNode's repair (DDRRT* only: RRT* has no PGNode)
+    while the planner's compiles the tree core: the PGNode alone never calls a tree core."""
+    r = subprocess.run([sys.executable, "-c", REPAIR_ONLY, algorithm], cwd=REPO, capture_output=True, text=True,
+                       timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert json.loads(r.stdout.splitlines()[-1]) == kernels
+
+
 def test_an_unknown_planner_is_refused():
     import planner
 
