@@ -37,15 +37,16 @@ READY = "locked"
 
 # `python -m hil.warm_up --algorithm NAME GROUP`, as `hil run` starts its groups: only that planner's
 # kernels (the tree core of DDRRT* and that of RRT*/Informed RRT* are two kernels), the tree core in
-# the planner's group and the tree reuse (`seed_tree`, ~2 s) and the PGNode's repair (~0.7 s) at the
-# end of the vessel computer's, off the planner's group, the longest chain.
+# the planner's group (its searches without the PGNode: the same tree-core types) and the tree reuse
+# (`seed_tree`, ~2 s) and the PGNode's kernels (its target and repair, ~1.5 s) at the end of the
+# vessel computer's, off the planner's group, the longest chain.
 _ALGORITHMS: list[str] = []
 
 
 def _planner() -> None:
     import planner
 
-    planner.warm_up_info(tuple(_ALGORITHMS) or None, tree_reuse=not _ALGORITHMS, png_repair=not _ALGORITHMS)
+    planner.warm_up_info(tuple(_ALGORITHMS) or None, tree_reuse=not _ALGORITHMS, png=not _ALGORITHMS)
 
 
 def _vessel_computer() -> None:
@@ -69,7 +70,7 @@ def _vessel_computer() -> None:
         import planner
 
         planner.warm_up_tree_reuse(tuple(_ALGORITHMS))
-        planner.warm_up_png_repair(tuple(_ALGORITHMS))   # last: the planner's group has cached the PGNode by then
+        planner.warm_up_png(tuple(_ALGORITHMS))
 
 
 def _simulator() -> None:

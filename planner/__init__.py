@@ -52,15 +52,15 @@ def warm_up() -> float:
     return _warm_up()
 
 
-def warm_up_info(algorithms: tuple[str, ...] | None = None, tree_reuse: bool = True, png_repair: bool = True):
+def warm_up_info(algorithms: tuple[str, ...] | None = None, tree_reuse: bool = True, png: bool = True):
     """:func:`warm_up`, returning ``planner.registry.WarmUp(seconds, compiled)``: ``compiled`` is
     True when numba had to compile (a cold cache) rather than load machine code. ``algorithms``:
     only these planners' kernels (default: every registered planner's); ``tree_reuse`` False:
-    without the searches from a reused tree, ``png_repair`` False: without the PGNode's repair
+    without the searches from a reused tree, ``png`` False: without the PGNode
     (see ``planner.registry.warm_up_info``)."""
     from planner.registry import warm_up_info as _info
 
-    return _info(algorithms, tree_reuse, png_repair)
+    return _info(algorithms, tree_reuse, png)
 
 
 def warm_up_tree_reuse(algorithms: tuple[str, ...]) -> None:
@@ -70,12 +70,12 @@ def warm_up_tree_reuse(algorithms: tuple[str, ...]) -> None:
     _reuse(algorithms)
 
 
-def warm_up_png_repair(algorithms: tuple[str, ...]) -> None:
-    """Compile only the PGNode's repair (``planner.registry.warm_up_png_repair``)."""
-    from planner.registry import warm_up_png_repair as _repair
+def warm_up_png(algorithms: tuple[str, ...]) -> None:
+    """Compile only the PGNode's kernels (``planner.registry.warm_up_png``)."""
+    from planner.registry import warm_up_png as _png
 
-    _repair(algorithms)
+    _png(algorithms)
 
 
-__all__ = ["warm_up", "warm_up_info", "warm_up_tree_reuse", "warm_up_png_repair", "ALGORITHMS", "REGISTRY",
+__all__ = ["warm_up", "warm_up_info", "warm_up_tree_reuse", "warm_up_png", "ALGORITHMS", "REGISTRY",
            "Planner", "PlannerParams", "PlannerResult", "PlanningProblem", "Termination", "make_planner"]
