@@ -92,9 +92,10 @@ def _simulator() -> None:
 GROUPS: dict[str, Callable[[], None]] = {"planner": _planner, "vessel-computer": _vessel_computer,
                                          "simulator": _simulator}
 # What `hil run` compiles in the background on a cold cache: the vessel computer's groups (the
-# simulator's kernels take ~1 s and compile in the simulator's own process). With the tree reuse in
-# the vessel computer's group their compiles are ~12 and ~11 s of CPU, so that neither ends long
-# after the other at equal priority (a nice level on one of them starved it behind other load:
+# simulator's kernels take ~1 s and compile in the simulator's own process). With the tree reuse and
+# the PGNode in the vessel computer's group their compiles are ~11.6 s of CPU each (a cold run at
+# 7999673, load 2.3: they ended 0.2 s apart), so that neither ends long after the other at equal
+# priority (a nice level on one of them starved it behind other load:
 # docs/performance.md, "The first run compiles").
 RUN_GROUPS = ("planner", "vessel-computer")
 
