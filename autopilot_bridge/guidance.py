@@ -59,10 +59,30 @@ def _closest(path: np.ndarray, seg: np.ndarray, seg_len: np.ndarray, lo: int, hi
     return best_k, best_s
 
 
+@njit(cache=True)
+def _search(a: np.ndarray, v: float, right: bool) -> int:
+    """``np.searchsorted(a, v, side="right" if right else "left")`` for a sorted float array: numpy's
+    binary search and order (NaN after every number). Written out because numba's brings its own
+    helpers, compiled once per side (~0.6 s of a cold compile); ``right`` is passed as ``np.bool_``
+    so that this compiles once (a literal True/False would be a type of its own)."""
+    lo, hi = 0, len(a)
+    v_nan = math.isnan(v)
+    while lo < hi:
+        mid = lo + ((hi - lo) >> 1)
+        m = a[mid]
+        # right: m <= v (every m when v is NaN); left: m < v (NaN last: a number below a NaN v)
+        below = (v_nan or m <= v) if right else (m < v or (v_nan and not math.isnan(m)))
+        if below:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
 @njit(cache=True, error_model="numpy")
 def _max_between(values: np.ndarray, cum: np.ndarray, index: int, limit: float) -> float:
     """max(values[index:max(index, searchsorted(cum, limit, "right") - 1)]), 0 when empty (NaN wins, as in numpy)."""
-    hi = int(np.searchsorted(cum, limit, side="right"))
+    hi = _search(cum, limit, np.bool_(True))
     out, found = 0.0, False
     for j in range(index, min(max(index, hi - 1), len(values))):   # a slice stops at the end
         v = values[j]
@@ -74,38 +94,70 @@ def _max_between(values: np.ndarray, cum: np.ndarray, index: int, limit: float) 
 
 
 @njit(cache=True)
-def _pairwise_sum(a: np.ndarray, lo: int, n: int) -> float:
-    """numpy's sum of ``a[lo:lo + n]`` (float64, contiguous), in its order: pairwise, 8 accumulators
-    per block of <= 128, from -0.0 below 8 (tests/test_guidance_kernel.py compares it with np.sum)."""
-    if n == 0:
-        return 0.0
+def _block_sum(a: np.ndarray, lo: int, n: int) -> float:
+    """numpy's sum of ``a[lo:lo + n]`` for ``n`` <= 128: 8 accumulators, from -0.0 below 8."""
     if n < 8:
         res = -0.0
         for i in range(lo, lo + n):
             res += a[i]
         return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    while i < n - (n % 8):
+        r0 += a[lo + i]
+        r1 += a[lo + i + 1]
+        r2 += a[lo + i + 2]
+        r3 += a[lo + i + 3]
+        r4 += a[lo + i + 4]
+        r5 += a[lo + i + 5]
+        r6 += a[lo + i + 6]
+        r7 += a[lo + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit(cache=True)
+def _pairwise_sum(a: np.ndarray, lo: int, n: int) -> float:
+    """numpy's sum of ``a[lo:lo + n]`` (float64, contiguous), in its order: pairwise, halves rounded
+    down to a multiple of 8, blocks of <= 128 by :func:`_block_sum` (tests/test_guidance_kernel.py
+    compares it with np.sum). numpy recurses; this walks the same tree on a stack (a recursive
+    numba function took ~3 s of a cold compile, this ~0.5 s)."""
+    if n == 0:
+        return 0.0   # numpy's empty sum is +0.0 (a block of fewer than 8 starts from -0.0)
     if n <= 128:
-        r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
-        r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
-        i = 8
-        while i < n - (n % 8):
-            r0 += a[lo + i]
-            r1 += a[lo + i + 1]
-            r2 += a[lo + i + 2]
-            r3 += a[lo + i + 3]
-            r4 += a[lo + i + 4]
-            r5 += a[lo + i + 5]
-            r6 += a[lo + i + 6]
-            r7 += a[lo + i + 7]
-            i += 8
-        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-        while i < n:
-            res += a[lo + i]
-            i += 1
-        return res
-    n2 = n // 2
-    n2 -= n2 % 8
-    return _pairwise_sum(a, lo, n2) + _pairwise_sum(a, lo + n2, n - n2)
+        return _block_sum(a, lo, n)
+    los = np.empty(64, np.int64)   # a depth of 64 halvings covers any array
+    ns = np.empty(64, np.int64)
+    state = np.zeros(64, np.int64)   # 0: left half next, 1: right half next, 2: add the two
+    sums = np.empty(64)
+    top, k = 0, 0
+    los[0], ns[0] = lo, n
+    while top >= 0:
+        m = ns[top]
+        if m <= 128:
+            sums[k] = _block_sum(a, los[top], m)
+            k += 1
+            top -= 1
+            continue
+        half = m // 2
+        half -= half % 8
+        if state[top] == 2:
+            sums[k - 2] = sums[k - 2] + sums[k - 1]
+            k -= 1
+            top -= 1
+            continue
+        right = state[top] == 1
+        state[top] += 1
+        los[top + 1] = los[top] + half if right else los[top]
+        ns[top + 1] = m - half if right else half
+        state[top + 1] = 0
+        top += 1
+    return sums[0]
 
 
 @njit(cache=True, error_model="numpy")
@@ -113,8 +165,8 @@ def _curvature_at(signed: np.ndarray, cum: np.ndarray, index: int, along: float,
     """Mean of ``signed[max(lo - 1, 0):max(hi - 1, 0)]`` with lo, hi the searchsorted positions of
     ``cum[index] + along -/+ span`` (left, right), 0 when empty: LineOfSight.curvature_at's rule."""
     s = cum[index] + along
-    lo = max(int(np.searchsorted(cum, s - span, side="left")) - 1, 0)
-    hi = min(max(int(np.searchsorted(cum, s + span, side="right")) - 1, 0), len(signed))
+    lo = max(_search(cum, s - span, np.bool_(False)) - 1, 0)
+    hi = min(max(_search(cum, s + span, np.bool_(True)) - 1, 0), len(signed))
     if hi <= lo:
         return 0.0
     return _pairwise_sum(signed, lo, hi - lo) / (hi - lo)

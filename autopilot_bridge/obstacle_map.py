@@ -165,7 +165,7 @@ def _place(r: np.ndarray, c: np.ndarray, explained_map: np.ndarray, hits: np.nda
                 if 0 <= ri < rows and 0 <= ci < cols:
                     cells[k] = ri * cols + ci
                     k += 1
-    u = _sort_unique(cells, k)
+    u = _sort_unique(cells, np.int64(k))   # not the literal 0 `k` is typed as first: one compile
     new = np.empty((u, 2), np.int32)
     m = 0
     for a in range(u):

@@ -37,15 +37,16 @@ READY = "locked"
 
 # `python -m hil.warm_up --algorithm NAME GROUP`, as `hil run` starts its groups: only that planner's
 # kernels (the tree core of DDRRT* and that of RRT*/Informed RRT* are two kernels), the tree core in
-# the planner's group and the tree reuse (`seed_tree`, ~2 s) at the end of the vessel computer's,
-# off the planner's group, the longest chain.
+# the planner's group (its searches without the PGNode: the same tree-core types) and the tree reuse
+# (`seed_tree`, ~2 s) and the PGNode's kernels (its target and repair, ~1.5 s) at the end of the
+# vessel computer's, off the planner's group, the longest chain.
 _ALGORITHMS: list[str] = []
 
 
 def _planner() -> None:
     import planner
 
-    planner.warm_up_info(tuple(_ALGORITHMS) or None, tree_reuse=not _ALGORITHMS)
+    planner.warm_up_info(tuple(_ALGORITHMS) or None, tree_reuse=not _ALGORITHMS, png=not _ALGORITHMS)
 
 
 def _vessel_computer() -> None:
@@ -69,6 +70,7 @@ def _vessel_computer() -> None:
         import planner
 
         planner.warm_up_tree_reuse(tuple(_ALGORITHMS))
+        planner.warm_up_png(tuple(_ALGORITHMS))
 
 
 def _simulator() -> None:
@@ -90,9 +92,10 @@ def _simulator() -> None:
 GROUPS: dict[str, Callable[[], None]] = {"planner": _planner, "vessel-computer": _vessel_computer,
                                          "simulator": _simulator}
 # What `hil run` compiles in the background on a cold cache: the vessel computer's groups (the
-# simulator's kernels take ~1 s and compile in the simulator's own process). With the tree reuse in
-# the vessel computer's group their compiles are ~12 and ~11 s of CPU, so that neither ends long
-# after the other at equal priority (a nice level on one of them starved it behind other load:
+# simulator's kernels take ~1 s and compile in the simulator's own process). With the tree reuse and
+# the PGNode in the vessel computer's group their compiles are ~11.6 s of CPU each (a cold run at
+# 7999673, load 2.3: they ended 0.2 s apart), so that neither ends long after the other at equal
+# priority (a nice level on one of them starved it behind other load:
 # docs/performance.md, "The first run compiles").
 RUN_GROUPS = ("planner", "vessel-computer")
 

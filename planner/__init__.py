@@ -52,14 +52,15 @@ def warm_up() -> float:
     return _warm_up()
 
 
-def warm_up_info(algorithms: tuple[str, ...] | None = None, tree_reuse: bool = True):
+def warm_up_info(algorithms: tuple[str, ...] | None = None, tree_reuse: bool = True, png: bool = True):
     """:func:`warm_up`, returning ``planner.registry.WarmUp(seconds, compiled)``: ``compiled`` is
     True when numba had to compile (a cold cache) rather than load machine code. ``algorithms``:
     only these planners' kernels (default: every registered planner's); ``tree_reuse`` False:
-    without the searches from a reused tree (see ``planner.registry.warm_up_info``)."""
+    without the searches from a reused tree, ``png`` False: without the PGNode
+    (see ``planner.registry.warm_up_info``)."""
     from planner.registry import warm_up_info as _info
 
-    return _info(algorithms, tree_reuse)
+    return _info(algorithms, tree_reuse, png)
 
 
 def warm_up_tree_reuse(algorithms: tuple[str, ...]) -> None:
@@ -69,5 +70,12 @@ def warm_up_tree_reuse(algorithms: tuple[str, ...]) -> None:
     _reuse(algorithms)
 
 
-__all__ = ["warm_up", "warm_up_info", "warm_up_tree_reuse", "ALGORITHMS", "REGISTRY", "Planner", "PlannerParams",
-           "PlannerResult", "PlanningProblem", "Termination", "make_planner"]
+def warm_up_png(algorithms: tuple[str, ...]) -> None:
+    """Compile only the PGNode's kernels (``planner.registry.warm_up_png``)."""
+    from planner.registry import warm_up_png as _png
+
+    _png(algorithms)
+
+
+__all__ = ["warm_up", "warm_up_info", "warm_up_tree_reuse", "warm_up_png", "ALGORITHMS", "REGISTRY",
+           "Planner", "PlannerParams", "PlannerResult", "PlanningProblem", "Termination", "make_planner"]

@@ -62,7 +62,8 @@ def _cache_misses() -> int:
     return n
 
 
-def warm_up_info(algorithms: tuple[str, ...] | None = None, tree_reuse: bool = True) -> WarmUp:
+def warm_up_info(algorithms: tuple[str, ...] | None = None, tree_reuse: bool = True,
+                 png: bool = True) -> WarmUp:
     """Load (or, with a cold cache, compile) every compiled function by solving tiny problems
     with every registered planner (or only those named in ``algorithms``: a process that runs one
     planner compiles only its kernels), with and without a current field, as the online loop does
@@ -70,8 +71,10 @@ def warm_up_info(algorithms: tuple[str, ...] | None = None, tree_reuse: bool = T
     later calls return the first call's record. The first solve in a process otherwise pays
     ~0.2 s of cache loading (~7 s of compilation with a cold cache) inside its time budget.
     ``tree_reuse`` False: not the searches from a reused tree (``seed_tree``), which another
-    process compiles at the same time (:func:`warm_up_tree_reuse`); such a call is not recorded
-    as a warm-up."""
+    process compiles at the same time (:func:`warm_up_tree_reuse`); ``png`` False: searches without
+    the PGNode (``png_probability`` 0: the same tree-core types, the PGNode's kernels not called),
+    which another process compiles likewise (:func:`warm_up_png`). Either makes the call
+    unrecorded as a warm-up."""
     global _WARM
     for name in algorithms or ():
         planner_class(name)   # ValueError for an unknown name
@@ -91,8 +94,10 @@ def warm_up_info(algorithms: tuple[str, ...] | None = None, tree_reuse: bool = T
     grid.polyline_free(np.array([[2.0, 10.0], [18.0, 10.0]]))
     names = [e.name for e in REGISTRY if algorithms is None or e.name in algorithms]
     for objective, problem in problems:
-        for repair in (False, True):
+        for repair in (False, True) if png else (False,):
             params = PlannerParams(max_nodes=2000, objective=objective, png_repair=repair)
+            if not png:
+                params = dataclasses.replace(params, png_probability=0.0)
             for name in names:
                 if repair and not planner_class(name).uses_png:
                     continue
@@ -103,7 +108,7 @@ def warm_up_info(algorithms: tuple[str, ...] | None = None, tree_reuse: bool = T
     compiled_clock_ok()
     compiled_cpu_clock_ok()  # else the first thread-CPU deadline checks its clock inside its budget
     record = WarmUp(seconds=time.monotonic() - t0, compiled=_cache_misses() > misses0)
-    if not tree_reuse:
+    if not (tree_reuse and png):
         return record
     if algorithms is None:
         _WARM = record
@@ -128,6 +133,21 @@ def warm_up_tree_reuse(algorithms: tuple[str, ...]) -> None:
         for name in algorithms:
             make_planner(name, params).solve(dataclasses.replace(problem, initial_tree=tree),
                                              Termination.iterations(0))
+
+
+def warm_up_png(algorithms: tuple[str, ...]) -> None:
+    """Compile (or load) only the PGNode's kernels (``planner._png``: the target and its repair),
+    with the argument types :func:`warm_up_info`'s searches give them, without a search
+    (``png_node`` alone never calls a tree core). For a process that compiles beside one running
+    ``warm_up_info(algorithms, png=False)``."""
+    for name in algorithms:
+        planner_class(name)   # ValueError for an unknown name
+    for objective, problem in _warm_up_problems():
+        for repair in (False, True):
+            params = PlannerParams(max_nodes=2000, objective=objective, png_repair=repair)
+            for name in algorithms:
+                if planner_class(name).uses_png:
+                    make_planner(name, params).png_node(problem)
 
 
 def _warm_up_problems() -> list[tuple[Objective, PlanningProblem]]:

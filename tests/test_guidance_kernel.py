@@ -136,7 +136,8 @@ def test_a_nan_curvature_wins_the_preview_as_in_numpy() -> None:
 
 def test_the_compiled_sum_is_numpys_sum_bit_for_bit() -> None:
     """The curvature's mean sums as numpy does (pairwise, 8 accumulators): on slices of every length
-    up to 300, of values over six orders of magnitude, signed zeros included."""
+    up to 300 and longer ones (several levels of halving), of values over six orders of magnitude,
+    signed zeros included."""
     from autopilot_bridge.guidance import _pairwise_sum
 
     rng = np.random.default_rng(17)
@@ -144,6 +145,10 @@ def test_the_compiled_sum_is_numpys_sum_bit_for_bit() -> None:
         n = int(rng.integers(0, 300))
         a = rng.standard_normal(n + 10) * 10.0 ** rng.uniform(-3, 3, n + 10)
         a[rng.random(n + 10) < 0.05] = -0.0
+        lo = int(rng.integers(0, 10))
+        assert bits(_pairwise_sum(a, lo, n)) == bits(float(a[lo:lo + n].sum())), (lo, n)
+    for n in [*range(120, 1100, 7), 1024, 2047, 2048, 4096, 5000]:   # several levels of halving
+        a = rng.standard_normal(n + 10) * 10.0 ** rng.uniform(-3, 3, n + 10)
         lo = int(rng.integers(0, 10))
         assert bits(_pairwise_sum(a, lo, n)) == bits(float(a[lo:lo + n].sum())), (lo, n)
 
@@ -160,3 +165,19 @@ def test_the_yaw_feed_forward_curvature_matches_numpy_around_every_vertex() -> N
             along = float(rng.uniform(0, 1)) * float(los.seg_len[i])
             span = float(rng.choice([0.0, 0.5, 1.0, 7.0, 1e9]))
             assert bits(los.curvature_at(i, along, span)) == bits(reference_curvature_at(los, i, along, span))
+
+
+def test_the_compiled_search_is_numpys_searchsorted() -> None:
+    from autopilot_bridge.guidance import _search
+
+    rng = np.random.default_rng(7)
+    arrays = [np.array([]), np.array([1.0]), np.array([0.0, 0.0, 0.0]), np.array([-np.inf, 0.0, np.inf]),
+              np.array([0.0, 1.0, np.nan, np.nan]), np.array([np.nan])]
+    arrays += [np.sort(rng.integers(0, 6, n).astype(float)) for n in (2, 5, 17, 64)]
+    arrays += [np.cumsum(rng.random(n)) for n in (3, 40, 333)]
+    for a in arrays:
+        values = [*a, np.nan, np.inf, -np.inf, -1.0, 0.5, 2.5, 1e9, *rng.uniform(-1, 8, 20)]
+        for v in values:
+            for side in ("left", "right"):
+                got = _search(a, float(v), np.bool_(side == "right"))
+                assert got == int(np.searchsorted(a, v, side=side)), (a, v, side)

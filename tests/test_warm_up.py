@@ -192,6 +192,32 @@ def test_the_tree_reuse_compiles_without_the_tree_core():
     assert json.loads(r.stdout.splitlines()[-1]) == [0, 0, 1]
 
 
+PNG_ONLY = textwrap.dedent("""
+    import json, sys
+    import planner
+    from planner import _png, _tree
+    if sys.argv[2] == "png":
+        planner.warm_up_png((sys.argv[1],))
+    else:
+        planner.warm_up_info((sys.argv[1],), tree_reuse=False, png=False)
+    print(json.dumps([len(_tree.grow_ddrrt.signatures), len(_tree.grow_rrt.signatures),
+                      len(_png.raw_target.signatures), len(_png.repair.signatures)]))
+""")
+
+
+@pytest.mark.parametrize("algorithm, part, kernels", [("ddrrt-star", "png", [0, 0, 1, 1]),
+                                                      ("ddrrt-star", "searches", [1, 0, 0, 0]),
+                                                      ("rrt-star", "png", [0, 0, 0, 0])])
+def test_the_png_kernels_and_the_tree_core_compile_apart(algorithm, part, kernels):
+    """`hil run`'s vessel computer's group compiles the PGNode's kernels (DDRRT* only: RRT* has no
+    PGNode) while the planner's compiles the tree core: the PGNode alone never calls a tree core,
+    and the planner group's searches without a PGNode never call its kernels."""
+    r = subprocess.run([sys.executable, "-c", PNG_ONLY, algorithm, part], cwd=REPO, capture_output=True, text=True,
+                       timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert json.loads(r.stdout.splitlines()[-1]) == kernels
+
+
 def test_an_unknown_planner_is_refused():
     import planner
 
