@@ -33,7 +33,10 @@ PLANNER_SOURCES = ("planner/_kernels.py", "planner/_tree.py")
 # d979b45 (no np.unique in the sensed-obstacle map, no Informed RRT* sampler in grow_ddrrt) a cold
 # `hil run --duration 1` took 31.6-33.1 s of CPU against main's 35.3-40.3 s (four interleaved
 # rounds at load 0.6-2.5), so ~32 s; the planner's group 13.7 s (was 14.3 s), so `hil plan` ~19 s still.
-COLD_COMPILE_S = 32
+# At cf757b3 (guidance's sum and search, the PGNode's kernels in the other group) four interleaved rounds
+# on fresh clones at load 0.2-2.9 gave 33.1-40.6 s of CPU (mean 37.2; bbd8929's 38.1-41.7, mean 39.3:
+# docs/performance.md, "Fifth pass"), so ~37 s.
+COLD_COMPILE_S = 37
 COLD_PLAN_COMPILE_S = 19
 
 
