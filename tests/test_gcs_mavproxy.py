@@ -341,3 +341,57 @@ def test_mavproxy_mode_changes_every_second_beside_the_breakwater_keep_the_boat_
         watcher.close()
         mp.close()
         stop_run(proc)
+
+
+def test_mavproxy_guided_entered_again_keeps_station_instead_of_resuming_the_old_target(tmp_path):
+    """ArduRover's boats start a loiter on every entry into GUIDED (``ModeGuided::_enter``); only a new goto
+    gives a target. Flown with MAVProxy: `guided` to open water 24 m north of the harbour's start, `mode LOITER`
+    half-way, then `mode GUIDED` again. A second ground station sees the boat keep station where GUIDED was
+    entered (80 s of vehicle time at --speedup 4); until b26c891 it went on to the old target."""
+    target = (64.0, 22.0)                   # NED m, 24 m north of the start, open water (15 m clear)
+    port = free_udp_port()
+    proc = start_run(tmp_path / "run", "--scenario", "harbour", "--duration", "5000", "--wait-for-arm",
+                     "--speedup", "4", "--gcs", f"udpin:127.0.0.1:{port}")
+    mp = Console([MAVPROXY, f"--master=udpout:127.0.0.1:{port}", "--source-system=255",
+                  "--default-modules=mode,arm,cmdlong,wp", f"--state-basedir={tmp_path / 'mavproxy'}"], tmp_path)
+    watcher = Gcs(f"udpout:127.0.0.1:{port}", sysid=254)
+
+    def ned(p) -> tuple[float, float]:
+        return GEO.geodetic_to_sea_level(p.lat * 1e-7, p.lon * 1e-7)
+    try:
+        mp.expect("Detected vehicle 1:1", timeout=240)
+        assert watcher.connect(60) is not None
+        start = watcher.recv("GLOBAL_POSITION_INT", 60)
+        assert start is not None
+        mp.send("arm throttle")
+        mp.expect("COMPONENT_ARM_DISARM: ACCEPTED")
+        mp.send("mode GUIDED")
+        mp.expect("DO_SET_MODE: ACCEPTED")
+        lat, lon = GEO.sea_level_to_geodetic(*target)
+        mp.send("set guided_use_reposition 0")
+        mp.send(f"guided {lat:.7f} {lon:.7f} 0")
+        mp.expect("TYPE_MISSION: ACCEPTED")
+        half = math.dist(ned(start), target) / 2.0
+        assert watcher.recv("GLOBAL_POSITION_INT", 240, lambda p: math.dist(ned(p), target) <= half) is not None
+        mp.send("mode LOITER")
+        mp.expect("DO_SET_MODE: ACCEPTED")
+        mp.send("mode GUIDED")
+        mp.expect("DO_SET_MODE: ACCEPTED")
+        assert watcher.recv("HEARTBEAT", 10, lambda h: h.get_srcSystem() == 1 and h.custom_mode == 15) is not None
+        entered = watcher.recv("GLOBAL_POSITION_INT", 10)
+        assert entered is not None
+        here, t0, farthest, nearest = ned(entered), entered.time_boot_ms, 0.0, math.inf
+        while True:
+            p = watcher.recv("GLOBAL_POSITION_INT", 10)
+            assert p is not None, "the run stopped streaming"
+            farthest = max(farthest, math.dist(ned(p), here))
+            nearest = min(nearest, math.dist(ned(p), target))
+            if p.time_boot_ms - t0 > 80_000:
+                break
+        assert farthest <= 5.0, farthest                          # kept station where GUIDED was entered
+        assert nearest >= math.dist(here, target) - 5.0, nearest  # never went on to the old target
+        assert proc.poll() is None
+    finally:
+        watcher.close()
+        mp.close()
+        stop_run(proc)
