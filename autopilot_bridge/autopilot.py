@@ -86,9 +86,9 @@ class Autopilot:
     """One vessel computer's frame pipeline: sensors -> navigation -> planning -> helm -> thrusters."""
 
     def __init__(self, config: ComputerConfig, world: World, devices: Devices, options: RunOptions,
-                 log: Callable[[str], None] | None = None, *, grid: OccupancyGrid | None = None) -> None:
-        """``grid``: the chart's occupancy grid, which the sensed obstacles are added to, built by the
-        assembly from ``world`` (None: built here)."""
+                 log: Callable[[str], None] | None = None, *, grid: OccupancyGrid) -> None:
+        """``grid``: the chart's occupancy grid (a copy of ``world``'s), which the sensed obstacles are
+        added to, built by the assembly."""
         params, propulsion = config.params, Propulsion.from_hull(config.hull)
         self.p, self.nav_params = params, config.nav
         self.world, self.link, self.worker = world, devices.link, devices.worker
@@ -105,8 +105,7 @@ class Autopilot:
         reference_ned = map_to_ned_path(world.reference_path)
         # The chart plus the obstacles sensed on the way (kept across simulator restarts: the
         # world did not change).
-        self.grid = grid if grid is not None else OccupancyGrid(world.occ.copy(), world.resolution)
-        self.grid.polyline_free(np.zeros((0, 2)))   # plan acceptance's check compiled now, not in a frame
+        self.grid = grid
         self.sensed = SensedObstacles(world.occ, world.resolution, params.sensed_confirm_hits,
                                       params.sensed_explain_radius)
         # The global route (autopilot_bridge/route_planning.py): planned on this grid for every new
@@ -165,6 +164,7 @@ class Autopilot:
                                         self._fence_changed, onboard=self.onboard_status,
                                         current=lambda: self.current.velocity,
                                         coast_s=propulsion.surge.m11 / propulsion.surge.d_u)
+        self.grid.polyline_free(np.zeros((0, 2)))   # plan acceptance's check compiled now, not in a frame
 
     @staticmethod
     def _field_prior(world: World) -> Callable[[float, float], tuple[float, float]] | None:

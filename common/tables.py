@@ -12,6 +12,7 @@ import dataclasses
 from typing import Any, TypeAlias
 
 _ABSENT_WHEN_NONE = "absent_when_none"
+_DERIVED = "derived"
 
 # A value of a JSON or TOML document: a table, an array, text, a number or a bool (JSON: null too). Its
 # shape is the document's: a file's is checked where it is read (hil.config's strict readers); a report
@@ -26,11 +27,18 @@ def absent_when_none() -> Any:   # a field specifier: Any, as dataclasses.field'
     return dataclasses.field(default=None, metadata={_ABSENT_WHEN_NONE: True})
 
 
+def derived() -> dict[str, bool]:
+    """The metadata of a field computed from the others (``init=False``): :func:`to_table` leaves it
+    out, as the reader computes it again."""
+    return {_DERIVED: True}
+
+
 def to_table(obj: object) -> JsonValue:
     """A dataclass instance back to plain TOML-able data (for run folders and --json)."""
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         return {f.name: to_table(getattr(obj, f.name)) for f in dataclasses.fields(obj)
-                if not (f.metadata.get(_ABSENT_WHEN_NONE) and getattr(obj, f.name) is None)}
+                if not f.metadata.get(_DERIVED)
+                and not (f.metadata.get(_ABSENT_WHEN_NONE) and getattr(obj, f.name) is None)}
     if isinstance(obj, tuple):
         return [to_table(v) for v in obj]
     if isinstance(obj, dict):

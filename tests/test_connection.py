@@ -178,7 +178,7 @@ def test_gcs_tcp_client_connects_talks_and_reconnects(closing):
 def test_gcs_tcp_client_without_a_server_is_a_start_up_error():
     port = free_tcp_port()
     with pytest.raises(ValueError, match=f"cannot connect to TCP 127.0.0.1:{port}"):
-        open_endpoint(f"tcp:127.0.0.1:{port}")
+        open_endpoint(c.parse(f"tcp:127.0.0.1:{port}", c.GCS))
 
 
 def test_gcs_serial_through_a_pty_pair(closing):
@@ -218,4 +218,4 @@ def test_gcs_serial_through_a_pty_pair(closing):
 def test_gcs_serial_that_does_not_exist_is_one_line():
     pytest.importorskip("serial", reason="the serial: form needs pyserial")
     with pytest.raises(ValueError, match="cannot open serial port /dev/nonexistent-tty"):
-        open_endpoint("serial:/dev/nonexistent-tty:57600")
+        open_endpoint(c.parse("serial:/dev/nonexistent-tty:57600", c.GCS))

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
+from common import connection
+from common.connection import Connection
 from common.params import param
+from common.tables import derived
 
 
 @dataclass(frozen=True)
@@ -43,11 +46,16 @@ class GcsParams:
                            "docs/security.md)", ge=1, le=64,
                            default=8)
 
-    def __post_init__(self) -> None:
-        from autopilot_bridge.gcs.transport import parse_endpoint
+    # The endpoints parsed once, as the section is read (a bad one is a one-line error then, not when
+    # the link opens): what the link's devices open (autopilot_bridge.gcs.devices).
+    connections: tuple[Connection, ...] = field(default=(), init=False, repr=False, compare=False,
+                                                metadata=derived())
 
+    def __post_init__(self) -> None:
+        parsed = []
         for e in self.endpoints:
             try:
-                parse_endpoint(e)
+                parsed.append(connection.parse(e, connection.GCS))
             except ValueError as exc:
                 raise ValueError(f"endpoints: {exc}") from None
+        object.__setattr__(self, "connections", tuple(parsed))

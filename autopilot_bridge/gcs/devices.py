@@ -54,8 +54,8 @@ def open_gcs_devices(params: GcsParams, system_id: int, component_id: int, *, mi
     security: Counter[str] = Counter()
     transports: list[Transport] = []
     try:
-        for spec in params.endpoints:
-            transports.append(open_endpoint(spec, params.max_peers, security, clock))
+        for conn in params.connections:
+            transports.append(open_endpoint(conn, params.max_peers, security, clock))
         codec = Codec(system_id, component_id)
         if key is not None:
             s = codec.mav.signing

@@ -64,11 +64,11 @@ class UdpTransport:
                  peers: PeerTable | None = None) -> None:
         """``peers``: the peer table, built by :func:`open_endpoint` (None: one of ``max_peers`` here)."""
         self.kind = kind
+        self.peers = peers if peers is not None else PeerTable(max_peers, clock, counts)
         bind = f"{host}:{port}" if kind == "udpin" else ("127.0.0.1:0" if host in ("127.0.0.1", "localhost")
                                                          else "0.0.0.0:0")
         self.ep = UdpEndpoint(bind, [])
         self.fixed = [(socket.gethostbyname(host), port)] if kind == "udpout" else []
-        self.peers = peers if peers is not None else PeerTable(max_peers, clock, counts)
         self.max_peers = max_peers
         self.sent = 0
 
@@ -418,16 +418,16 @@ class SerialTransport:
         self.port.close()
 
 
-def open_endpoint(spec: str, max_peers: int = 8, counts: Counter[str] | None = None,
+def open_endpoint(c: connection.Connection, max_peers: int = 8, counts: Counter[str] | None = None,
                   clock: Callable[[], float] = time.monotonic
                   ) -> UdpTransport | TcpServerTransport | TcpClientTransport | SerialTransport:
-    """A transport from a connection string (ValueError with one line on bad input, a busy port,
-    a ground station that cannot be reached, a serial port that cannot be opened). ``counts`` receives
-    the peer table's and the TCP server's refusals (``peer_table_full``, ``tcp_idle_closed`` ...); ``clock``
-    (s, monotonic) times the peers' silences."""
+    """A transport from a parsed connection string (``GcsParams.connections``): ValueError with one line
+    on a busy port, a ground station that cannot be reached, a serial port that cannot be opened.
+    ``counts`` receives the peer table's and the TCP server's refusals (``peer_table_full``,
+    ``tcp_idle_closed`` ...); ``clock`` (s, monotonic) times the peers' silences."""
+    kind, host, port = (c.kind, c.device, c.baud) if c.kind == "serial" else (c.kind, c.host, c.port)
     counts = counts if counts is not None else Counter()
     peers = PeerTable(max_peers, clock, counts)   # the servers' (tcpin, udp*) place table
-    kind, host, port = parse_endpoint(spec)
     if kind == "tcpin":
         return TcpServerTransport(host, port, max_peers, counts=counts, clock=clock, peers=peers)
     if kind == "tcp":
@@ -437,5 +437,5 @@ def open_endpoint(spec: str, max_peers: int = 8, counts: Counter[str] | None = N
     try:
         return UdpTransport(kind, host, port, max_peers, counts=counts, clock=clock, peers=peers)
     except socket.gaierror as exc:
-        raise ValueError(f"{spec!r}: unknown host ({exc})") from None
+        raise ValueError(f"{c.text!r}: unknown host ({exc})") from None
 

@@ -27,6 +27,7 @@ from autopilot_bridge.planning_worker import PlanReply, PlanRequest, WorkerStats
 from hil import scenario as scenarios
 from hil import settings
 from hil.assembly import computer_config, planning_world, run_options
+from planner.gridmap import OccupancyGrid
 
 
 @dataclass
@@ -89,7 +90,8 @@ def build_computer(scenario: str = "harbour", overrides: tuple[str, ...] = (), w
     scen = scenarios.load(scenario, cfg.current, cfg.planner.safety_radius, cfg.geodesy)
     world = planning_world(cfg, scen)
     link, worker = ScriptedLink(), InlineWorker(online_cycle_handler(world))
-    ap = Autopilot(computer_config(cfg), world, Devices(link, worker), run_options(cfg, lockstep=True))
+    ap = Autopilot(computer_config(cfg), world, Devices(link, worker), run_options(cfg, lockstep=True),
+                   grid=OccupancyGrid(world.occ.copy(), world.resolution))
     return ap, link, worker
 
 
