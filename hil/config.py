@@ -520,6 +520,8 @@ def field_docs(cls: type[DataclassInstance]) -> list[tuple[str, str, str]]:
     """(key, unit, help) for every field of a config dataclass, recursively, for --help texts."""
     out = []
     for f in dataclasses.fields(cls):
+        if not f.init:   # computed from the others (e.g. gcs.connections), never written
+            continue
         tp = typing.get_type_hints(cls)[f.name]
         if isinstance(tp, type) and dataclasses.is_dataclass(tp):
             out += [(f"{f.name}.{k}", u, h) for k, u, h in field_docs(tp)]

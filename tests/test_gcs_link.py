@@ -142,6 +142,21 @@ def test_tcpin_parses_frames_split_across_reads_and_answers_the_connection(closi
     assert read_until(c, "AIS_VESSEL", link) is not None
 
 
+def test_gcs_endpoints_are_parsed_once_when_the_section_is_read():
+    """[gcs] endpoints become typed connections as the section is read: a bad one is refused there, in one
+    line naming the key; the devices open the parsed ones; written back, the section holds the strings only."""
+    from common.tables import to_table
+
+    p = GcsParams(endpoints=("udp:127.0.0.1:5", "tcpin:0.0.0.0:5760", "serial:/dev/ttyUSB0:57600"))
+    assert [(c.kind, c.host or c.device, c.port or c.baud) for c in p.connections] == [
+        ("udpin", "127.0.0.1", 5), ("tcpin", "0.0.0.0", 5760), ("serial", "/dev/ttyUSB0", 57600)]
+    table = to_table(p)
+    assert "connections" not in table and table["endpoints"] == list(p.endpoints)
+    assert GcsParams(**{k: tuple(v) if isinstance(v, list) else v for k, v in table.items()}) == p
+    with pytest.raises(ValueError, match="^endpoints: "):
+        GcsParams(endpoints=("udpx:1.2.3.4:5",))
+
+
 def test_endpoint_strings_and_signing_keys(tmp_path):
     assert parse_endpoint("udpout:127.0.0.1:14550") == ("udpout", "127.0.0.1", 14550)
     assert parse_endpoint("udp:1.2.3.4:5") == ("udpin", "1.2.3.4", 5)  # mavutil's udp: is udpin: (issue 16)
