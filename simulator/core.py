@@ -123,7 +123,6 @@ class SimulatorCore:
         # its BATTERY_STATUS is due, with the mean power of those frames (a pack changes over minutes).
         self._energy_due, self._frames_due = 0.0, 0
         self.battery_due = _Schedule(bp.rate_hz, self.frame_dt)
-        self.codec = Codec(cfg.link.system_id, cfg.link.component_id, accept=("HIL_ACTUATOR_CONTROLS",))
         # The only peer whose commands count: the vessel computer's ids from the same configuration.
         self.peer_ids = (cfg.computer.system_id, cfg.computer.component_id)
         i = cfg.sim.initial
@@ -153,6 +152,7 @@ class SimulatorCore:
             ais = cfg.traffic
             self.traffic = Traffic(tuple(traffic), ais, cfg.sim.seed, self.geo)
             self.truth_codec = Codec(cfg.link.system_id, ais.truth_component_id)
+        self.codec = Codec(cfg.link.system_id, cfg.link.component_id, accept=("HIL_ACTUATOR_CONTROLS",))
 
     # -- time ------------------------------------------------------------------------------
     @property

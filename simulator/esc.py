@@ -41,8 +41,6 @@ from common.can_params import CanParams
 from common.transfer_times import TransferTimes
 
 if TYPE_CHECKING:
-    from can.typechecking import CanFilter
-
     from simulator.config import EscParams
     from simulator.vessel import Vessel
 
@@ -80,18 +78,6 @@ MAX_FRAMES_PER_POLL = 256  # CAN frames one poll() reads at most (a flood waits 
 # each frame costs more (inside User-Mode Linux ~0.4 ms a frame): a fifth of the 10 ms frame.
 POLL_BUDGET_S = 0.002
 CLOCK_EVERY = 4            # frames between clock reads (inside UML a clock read is a 33 us system call)
-
-
-def kernel_filters(params: CanParams) -> list[CanFilter] | None:
-    """The ESC nodes' receive filter on SocketCAN: messages (service bit 0) from the autopilot's node only,
-    applied by the kernel, so a flood from other nodes never reaches the simulator's socket: it costs no
-    step any work and waits in no queue ahead of the autopilot's commands (issue 31). Frames dropped there
-    are not counted (``unknown_node`` then counts nothing on SocketCAN). None on other interfaces: python-can
-    filters those in software inside ``recv``, which with a timeout of 0 returns None at the first frame it
-    filters out and would cut a poll short."""
-    if params.interface != "socketcan":
-        return None
-    return [{"can_id": params.autopilot_node_id, "can_mask": 0xFF, "extended": True}]
 
 
 class EscBank:

@@ -95,6 +95,7 @@ def build_simulator(cfg: HilConfig, world: WorldMap | None, traffic: tuple[ShipS
             check_covers(t=(0.0, settings.sim.duration))
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
+    # The parts of common/ first (the socket, the CAN bus), then the devices built on them.
     try:
         endpoint = UdpEndpoint(settings.link.commands_on, settings.link.state_to)
     except ValueError as exc:
@@ -102,11 +103,12 @@ def build_simulator(cfg: HilConfig, world: WorldMap | None, traffic: tuple[ShipS
     esc: EscBank | None = None
     try:
         if settings.can.actuators == "can":
-            from common.can_params import open_bus
-            from simulator.esc import EscBank, kernel_filters
+            from common.can_params import kernel_filters, open_bus
+            from simulator.esc import EscBank
 
             can = settings.can
-            esc = EscBank(open_bus(can, can_filters=kernel_filters(can)), can, settings.esc, core.vessel)
+            bus = open_bus(can, can_filters=kernel_filters(can, from_node=can.autopilot_node_id))
+            esc = EscBank(bus, can, settings.esc, core.vessel)
             if can_record:
                 esc.applied_times.start(spill_to=can_record)
         server = SimulatorServer(core, endpoint, lockstep=settings.sim.lockstep, duration=settings.sim.duration,

@@ -86,13 +86,14 @@ def leg(cfg: HilConfig, duration_s: float, rate: float, time_budget: bool, filte
 
     from autopilot_bridge.can_actuators import CanActuators
     from common import dronecan_codec as dc
-    from common.can_params import open_bus
+    from common.can_params import kernel_filters, open_bus
     from hil.assembly.simulator import simulator_settings
     from simulator.core import Command, SimulatorCore
-    from simulator.esc import EscBank, kernel_filters
+    from simulator.esc import EscBank
 
     if cfg.can.interface == "socketcan":
-        esc_bus = open_bus(cfg.can, can_filters=kernel_filters(cfg.can) if filtered else None)
+        esc_filters = kernel_filters(cfg.can, cfg.can.autopilot_node_id) if filtered else None
+        esc_bus = open_bus(cfg.can, can_filters=esc_filters)
         ap_bus, flood_bus = open_bus(cfg.can), open_bus(cfg.can)
     else:
         channel = f"can-flood-{next(_channels)}"
