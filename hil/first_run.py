@@ -35,8 +35,9 @@ PLANNER_SOURCES = ("planner/_kernels.py", "planner/_tree.py")
 # rounds at load 0.6-2.5), so ~32 s; the planner's group 13.7 s (was 14.3 s), so `hil plan` ~19 s still.
 # At cf757b3 (guidance's sum and search, the PGNode's kernels in the other group) four interleaved rounds
 # on fresh clones at load 0.2-2.9 gave 33.1-40.6 s of CPU (mean 37.2; bbd8929's 38.1-41.7, mean 39.3:
-# docs/performance.md, "Fifth pass"), so ~37 s.
-COLD_COMPILE_S = 37
+# docs/performance.md, "Fifth pass"), so ~37 s. At 719ad96/019714e a brand-new checkout's first run took
+# 30.6 s of CPU quiet and 34.6-36.8 s on fresh clones at load ~2 ("Sixth pass"), so ~34 s.
+COLD_COMPILE_S = 34
 COLD_PLAN_COMPILE_S = 19
 
 
