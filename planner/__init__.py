@@ -17,6 +17,7 @@ ALGORITHMS = ALGORITHM_NAMES
 
 if TYPE_CHECKING:
     from planner.problem import PlanningProblem
+    from planner.registry import WarmUp
     from planner.result import PlannerResult
     from planner.termination import Termination
 
@@ -52,7 +53,7 @@ def warm_up() -> float:
     return _warm_up()
 
 
-def warm_up_info(algorithms: tuple[str, ...] | None = None, tree_reuse: bool = True, png: bool = True):
+def warm_up_info(algorithms: tuple[str, ...] | None = None, tree_reuse: bool = True, png: bool = True) -> WarmUp:
     """:func:`warm_up`, returning ``planner.registry.WarmUp(seconds, compiled)``: ``compiled`` is
     True when numba had to compile (a cold cache) rather than load machine code. ``algorithms``:
     only these planners' kernels (default: every registered planner's); ``tree_reuse`` False:

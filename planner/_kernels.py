@@ -12,23 +12,33 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 from llvmlite import ir
 from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+if TYPE_CHECKING:
+    import numpy as np
+    from numba.core.base import BaseContext
+    from numba.core.types import Type
+    from numba.core.typing.context import BaseContext as TypingContext
+    from numba.core.typing.templates import Signature
+
 CORNER_EPS = 1e-9
 
 
-def _clock_gettime(clock_id: int):
+def _clock_gettime(clock_id: int) -> Callable[[np.ndarray], int]:
     """An intrinsic calling libc clock_gettime(clock_id, buf) on an int64[2] (a timespec)."""
 
     @intrinsic
-    def call(typingctx, buf):
+    def call(typingctx: TypingContext, buf: Type) -> tuple[Signature, Callable[..., ir.Value]]:
         sig = types.int64(buf)
 
-        def codegen(context, builder, signature, args):
+        def codegen(context: BaseContext, builder: ir.IRBuilder, signature: Signature,
+                    args: Sequence[ir.Value]) -> ir.Value:
             arr = context.make_array(signature.args[0])(context, builder, args[0])
             ptr = builder.bitcast(arr.data, ir.IntType(8).as_pointer())
             fnty = ir.FunctionType(ir.IntType(32), [ir.IntType(32), ir.IntType(8).as_pointer()])
@@ -46,21 +56,21 @@ _clock_gettime_thread_cpu = _clock_gettime(3)  # CLOCK_THREAD_CPUTIME_ID on Linu
 
 
 @njit(cache=True)
-def monotonic_ns(buf):
+def monotonic_ns(buf: np.ndarray) -> int:
     """Nanoseconds of CLOCK_MONOTONIC; ``buf`` is a scratch int64[2] (timespec)."""
     _clock_gettime_monotonic(buf)  # numba passes the typing context itself
     return buf[0] * 1_000_000_000 + buf[1]
 
 
 @njit(cache=True)
-def thread_cpu_ns(buf):
+def thread_cpu_ns(buf: np.ndarray) -> int:
     """Nanoseconds of the calling thread's CPU clock (time.thread_time_ns's clock on Linux)."""
     _clock_gettime_thread_cpu(buf)  # numba passes the typing context itself
     return buf[0] * 1_000_000_000 + buf[1]
 
 
 @njit(cache=True)
-def cell_blocked(occ, row, col):
+def cell_blocked(occ: np.ndarray, row: int, col: int) -> bool:
     rows, cols = occ.shape
     if row < 0 or col < 0 or row >= rows or col >= cols:
         return True
@@ -68,7 +78,7 @@ def cell_blocked(occ, row, col):
 
 
 @njit(cache=True)
-def segment_free(occ, res, x0, y0, x1, y1):
+def segment_free(occ: np.ndarray, res: float, x0: float, y0: float, x1: float, y1: float) -> bool:
     """True if the closed segment (x0, y0)-(x1, y1) (metres) touches no obstacle cell and stays
     inside the map. Cell (r, c) covers [c res, (c+1) res) x [r res, (r+1) res)."""
     gx0 = x0 / res
@@ -122,7 +132,7 @@ def segment_free(occ, res, x0, y0, x1, y1):
 
 
 @njit(cache=True)
-def polyline_free(occ, res, path):
+def polyline_free(occ: np.ndarray, res: float, path: np.ndarray) -> bool:
     """True if every segment of the polyline ``path`` (N, 2), metres, is :func:`segment_free`
     (True for fewer than two points)."""
     for k in range(path.shape[0] - 1):
@@ -132,7 +142,8 @@ def polyline_free(occ, res, path):
 
 
 @njit(cache=True)
-def field_at(fvx, fvy, fres, fox, foy, x, y):
+def field_at(fvx: np.ndarray, fvy: np.ndarray, fres: float, fox: float, foy: float, x: float,
+             y: float) -> tuple[float, float]:
     """Bilinear interpolation of a gridded field, clamped at the edges."""
     rows, cols = fvx.shape
     gx = (x - fox) / fres
@@ -153,7 +164,8 @@ def field_at(fvx, fvy, fres, fox, foy, x, y):
 
 
 @njit(cache=True)
-def sigmoid_arg(dx, dy, length, vx, vy, gamma_alpha):
+def sigmoid_arg(dx: float, dy: float, length: float, vx: float, vy: float,
+                gamma_alpha: float) -> tuple[float, bool]:
     """cos(alpha_y) - gamma_alpha sin(alpha_y) for motion (dx, dy) of norm ``length`` in current
     (vx, vy); returns (value, ok) with ok False when the current is zero."""
     nv = math.hypot(vx, vy)
@@ -166,7 +178,8 @@ def sigmoid_arg(dx, dy, length, vx, vy, gamma_alpha):
 
 
 @njit(cache=True)
-def edge_cost(x0, y0, x1, y1, use_field, fvx, fvy, fres, fox, foy, step, d_alpha, gamma_alpha):
+def edge_cost(x0: float, y0: float, x1: float, y1: float, use_field: bool, fvx: np.ndarray, fvy: np.ndarray,
+              fres: float, fox: float, foy: float, step: float, d_alpha: float, gamma_alpha: float) -> float:
     """Eq. (12) along a segment, in pieces of at most ``step`` (alpha_y at each midpoint)."""
     dx = x1 - x0
     dy = y1 - y0

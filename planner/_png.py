@@ -19,7 +19,7 @@ from planner.png import hypot, pg_node
 
 
 @njit(cache=True)
-def _nearest_index(ref, x, y):
+def _nearest_index(ref: np.ndarray, x: float, y: float) -> int:
     """Index of the first reference point nearest (x, y)."""
     best = 0
     bd = hypot(ref[0, 0] - x, ref[0, 1] - y)
@@ -32,7 +32,8 @@ def _nearest_index(ref, x, y):
 
 
 @njit(cache=True)
-def raw_target(sx, sy, heading, gx, gy, ref, nav_ratio, tol, max_iter, box):
+def raw_target(sx: float, sy: float, heading: float, gx: float, gy: float, ref: np.ndarray, nav_ratio: float,
+               tol: float, max_iter: int, box: np.ndarray) -> tuple[float, float]:
     """The PGNode of eqs. (7)-(8), clipped to ``box`` (xmin, xmax, ymin, ymax); ``heading`` nan =
     none (the heading towards the reference point nearest the start). The USV covers its
     straight-line distance to the goal in one guidance step (s_t = |goal - start| / 2), so the
@@ -55,7 +56,8 @@ def raw_target(sx, sy, heading, gx, gy, ref, nav_ratio, tol, max_iter, box):
 
 
 @njit(cache=True)
-def _usable(occ, labels, res, x, y, region, box, cx, cy, radius):
+def _usable(occ: np.ndarray, labels: np.ndarray, res: float, x: float, y: float, region: int, box: np.ndarray,
+            cx: float, cy: float, radius: float) -> bool:
     c = int(math.floor(x / res))
     r = int(math.floor(y / res))
     if r < 0 or c < 0 or r >= occ.shape[0] or c >= occ.shape[1] or occ[r, c] != 0:
@@ -68,7 +70,8 @@ def _usable(occ, labels, res, x, y, region, box, cx, cy, radius):
 
 
 @njit(cache=True)
-def repair(x, y, occ, labels, res, region, box, cx, cy, radius):
+def repair(x: float, y: float, occ: np.ndarray, labels: np.ndarray, res: float, region: int, box: np.ndarray,
+           cx: float, cy: float, radius: float) -> tuple[float, float]:
     """(x, y) itself if it is free, in the start's free region (label ``region``) and in the
     sampling domain (``box``, and the disc of ``radius`` about (cx, cy) when radius > 0); else the
     nearest cell centre that is; else (nan, nan). Rings of cells outwards from (x, y)'s cell: a
@@ -106,7 +109,7 @@ def repair(x, y, occ, labels, res, region, box, cx, cy, radius):
     return bx, by
 
 
-def reference(ref, start, goal) -> np.ndarray:
+def reference(ref: np.ndarray | None, start: tuple[float, float], goal: tuple[float, float]) -> np.ndarray:
     """The reference polyline as a float64 (M >= 2, 2) array: the straight start-goal line when
     there is none."""
     if ref is None or len(ref) < 2:

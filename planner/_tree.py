@@ -47,8 +47,8 @@ certain. Collision checks are the exact cell traversal of :mod:`planner._kernels
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import NamedTuple, cast
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, NamedTuple, cast
 
 import numpy as np
 from numba import njit
@@ -56,6 +56,13 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from planner._kernels import edge_cost, field_at, monotonic_ns, segment_free, thread_cpu_ns
+
+if TYPE_CHECKING:
+    from llvmlite import ir
+    from numba.core.base import BaseContext
+    from numba.core.types import Type
+    from numba.core.typing.context import BaseContext as TypingContext
+    from numba.core.typing.templates import Signature
 
 # algorithm codes
 RRT_STAR = 0
@@ -177,7 +184,7 @@ _REL = 1e-12
 
 
 @njit(cache=True)
-def _within(dx, dy, r):
+def _within(dx: float, dy: float, r: float) -> bool:
     """math.hypot(dx, dy) <= r, exactly, mostly without calling hypot (r > 0 finite)."""
     d2 = dx * dx + dy * dy
     r2 = r * r
@@ -189,12 +196,12 @@ def _within(dx, dy, r):
 
 
 @njit(cache=True)
-def seed_rng(seed):
+def seed_rng(seed: int) -> None:
     np.random.seed(seed)
 
 
 @njit(cache=True)
-def _wrap(a):
+def _wrap(a: float) -> float:
     if a > 8.0 * math.pi or a < -8.0 * math.pi:  # a huge angle (1e300): one modulo, never a long loop
         a = a % TWO_PI  # numba has no math.fmod; % gives [0, 2 pi), inf gives nan
     while a > math.pi:
@@ -205,7 +212,7 @@ def _wrap(a):
 
 
 @njit(cache=True)
-def _fan_ok(head, dx, dy, max_turn):
+def _fan_ok(head: float, dx: float, dy: float, max_turn: float) -> bool:
     """Section 2.4: the new edge must lie in the fan of half-angle max_turn about the heading."""
     if math.isnan(head) or max_turn >= math.pi:
         return True
@@ -213,7 +220,7 @@ def _fan_ok(head, dx, dy, max_turn):
 
 
 @njit(cache=True)
-def _fan_bounds(max_turn):
+def _fan_bounds(max_turn: float) -> tuple[float, float, bool]:
     """(cos_pass, cos_fail, usable) for _fan_ok_cos: a direction whose cosine with the heading is
     >= cos_pass is inside the fan, <= cos_fail outside, whatever the rounding of _fan_ok's atan2
     (1e-7 rad and 1e-12 of slack, far above both computations' errors)."""
@@ -224,7 +231,7 @@ def _fan_bounds(max_turn):
 
 
 @njit(cache=True)
-def _fan_ok_cos(head, hx, hy, dx, dy, max_turn, fb):
+def _fan_ok_cos(head: float, hx: float, hy: float, dx: float, dy: float, max_turn: float, fb: np.ndarray) -> bool:
     """_fan_ok(head, dx, dy, max_turn), exactly, with (hx, hy) = (cos head, sin head): decided on
     a dot product and a square root (no atan2) unless the direction lies within 1e-7 rad of the
     fan's edge."""
@@ -242,7 +249,7 @@ def _fan_ok_cos(head, hx, hy, dx, dy, max_turn, fb):
 
 
 @njit(cache=True, inline="always")
-def _bucket(x, y, cfg):
+def _bucket(x: float, y: float, cfg: np.record) -> tuple[int, int]:
     bx = int(x / cfg.bucket)  # buckets cover the whole map from (0, 0)
     by = int(y / cfg.bucket)
     bx = min(max(bx, 0), cfg.nbx - 1)
@@ -251,7 +258,7 @@ def _bucket(x, y, cfg):
 
 
 @njit(cache=True, inline="always")
-def _insert_bucket(i, cfg, tree):
+def _insert_bucket(i: int, cfg: np.record, tree: Tree) -> None:
     bx, by = _bucket(tree.X[i, 0], tree.X[i, 1], cfg)
     b = by * cfg.nbx + bx
     tree.node_next[i] = tree.bucket_head[b]
@@ -259,7 +266,7 @@ def _insert_bucket(i, cfg, tree):
 
 
 @njit(cache=True)
-def _knn(qx, qy, k, cfg, tree, out_i, out_d):
+def _knn(qx: float, qy: float, k: int, cfg: np.record, tree: Tree, out_i: np.ndarray, out_d: np.ndarray) -> int:
     """k nearest nodes (Euclidean), ascending; returns how many were found (<= k). Squared
     distances while scanning (no square root per candidate), roots of the k results at the end.
 
@@ -327,7 +334,8 @@ def _knn(qx, qy, k, cfg, tree, out_i, out_d):
 
 
 @njit(cache=True)
-def _near_pos(qx, qy, radius, cfg, tree, out_i, mark):
+def _near_pos(qx: float, qy: float, radius: float, cfg: np.record, tree: Tree, out_i: np.ndarray,
+              mark: int) -> tuple[int, int]:
     """Nodes within ``radius`` (at most NEAR_CAP of them), and how many it had found when it
     reached bucket ``mark`` (NEAR_CAP if it never did)."""
     X = tree.X
@@ -359,7 +367,7 @@ def _near_pos(qx, qy, radius, cfg, tree, out_i, mark):
 
 
 @njit(cache=True, inline="always")
-def _in_domain(x, y, cfg):
+def _in_domain(x: float, y: float, cfg: np.record) -> bool:
     if x < cfg.bx0 or x > cfg.bx1 or y < cfg.by0 or y > cfg.by1:
         return False
     if cfg.dom_r > 0.0:
@@ -368,7 +376,7 @@ def _in_domain(x, y, cfg):
 
 
 @njit(cache=True)
-def _uniform(cfg):
+def _uniform(cfg: np.record) -> tuple[float, float]:
     x = 0.0
     y = 0.0
     for _ in range(64):
@@ -380,7 +388,7 @@ def _uniform(cfg):
 
 
 @njit(cache=True)
-def _in_ellipse(x, y, sx, sy, gx, gy, cb):
+def _in_ellipse(x: float, y: float, sx: float, sy: float, gx: float, gy: float, cb: float) -> bool:
     """math.hypot(x - sx, y - sy) + math.hypot(x - gx, y - gy) <= cb, exactly (see _REL)."""
     ax = x - sx
     ay = y - sy
@@ -395,7 +403,7 @@ def _in_ellipse(x, y, sx, sy, gx, gy, cb):
 
 
 @njit(cache=True)
-def _informed(cfg, c_best):
+def _informed(cfg: np.record, c_best: float) -> tuple[float, float]:
     """Gammell et al. 2014: uniform sample of the prolate hyperspheroid (an ellipse in 2-D) with
     foci start and goal and transverse diameter c_best / f_min (f_min D_C <= Ed keeps it a lower
     bound of the cost through a point), intersected with the sampling domain."""
@@ -438,7 +446,7 @@ def _informed(cfg, c_best):
 
 
 @njit(cache=True, inline="always")
-def _children_fan_ok(j, new_head, tree, max_turn):
+def _children_fan_ok(j: int, new_head: float, tree: Tree, max_turn: float) -> bool:
     if max_turn >= math.pi:
         return True
     X = tree.X
@@ -452,7 +460,7 @@ def _children_fan_ok(j, new_head, tree, max_turn):
 
 
 @njit(cache=True)
-def _reparent(j, p, new_cost, tree):
+def _reparent(j: int, p: int, new_cost: float, tree: Tree) -> None:
     """Make p the parent of j and propagate the cost change to j's subtree."""
     X = tree.X
     first_child = tree.first_child
@@ -488,7 +496,7 @@ def _reparent(j, p, new_cost, tree):
 
 
 @njit(cache=True, inline="always")
-def _set_direction(i, x, y, nv, world, cfg):
+def _set_direction(i: int, x: float, y: float, nv: np.ndarray, world: World, cfg: np.record) -> None:
     """nv[i] = the unit vector of the current at (x, y), or (0, 0) where there is none."""
     vx, vy = field_at(world.fvx, world.fvy, cfg.field_res, cfg.field_ox, cfg.field_oy, x, y)
     v = math.hypot(vx, vy)
@@ -501,7 +509,7 @@ def _set_direction(i, x, y, nv, world, cfg):
 
 
 @njit(cache=True, inline="always")
-def _add_node(x, y, p, c, world, cfg, tree, state):
+def _add_node(x: float, y: float, p: int, c: float, world: World, cfg: np.record, tree: Tree, state: np.record) -> int:
     """Append node (x, y) with parent p and cost c; returns its index."""
     X = tree.X
     i = state.n
@@ -522,20 +530,20 @@ def _add_node(x, y, p, c, world, cfg, tree, state):
 
 
 @njit(cache=True, inline="always")
-def _cost(x0, y0, x1, y1, fvx, fvy, cfg):
+def _cost(x0: float, y0: float, x1: float, y1: float, fvx: np.ndarray, fvy: np.ndarray, cfg: np.record) -> float:
     """The edge cost (m): its length, or eq. (12) with a current (fvx, fvy)."""
     return edge_cost(x0, y0, x1, y1, cfg.use_field != 0, fvx, fvy, cfg.field_res, cfg.field_ox,
                      cfg.field_oy, cfg.step, cfg.d_alpha, cfg.gamma)
 
 
 @njit(cache=True, inline="always")
-def _free(world, cfg, state, x0, y0, x1, y1):
+def _free(world: World, cfg: np.record, state: np.record, x0: float, y0: float, x1: float, y1: float) -> bool:
     state.checks += 1
     return segment_free(world.occ, cfg.res, x0, y0, x1, y1)
 
 
 @njit(cache=True, inline="always")
-def _dd_failed(i, dd, cfg):
+def _dd_failed(i: int, dd: np.ndarray, cfg: np.record) -> None:
     """A failed (colliding) extension from node i: its dynamic domain becomes bounded (DD0), or,
     already bounded, shrinks by the adaptive factor (Jaillet et al. 2005), never below DDMIN."""
     if math.isinf(dd[i]):
@@ -545,7 +553,7 @@ def _dd_failed(i, dd, cfg):
 
 
 @njit(cache=True, inline="always")
-def _extension_refused(j, by_fan, cfg, tree, state):
+def _extension_refused(j: int, by_fan: bool, cfg: np.record, tree: Tree, state: np.record) -> None:
     """DDRRT*: the extension from node j failed, by collision or (by_fan) by the turning-radius fan
     of section 2.4. A collision always counts as a failed extension; the fan only with the
     paper's reading (failed_extension = "collision+turn": it counts constraint violations too)."""
@@ -558,7 +566,7 @@ def _extension_refused(j, by_fan, cfg, tree, state):
 
 
 @njit(cache=True)
-def _sort_by(keys, idx, m):
+def _sort_by(keys: np.ndarray, idx: np.ndarray, m: int) -> None:
     """Insertion sort of idx[:m] by keys[:m] (m is small)."""
     for a in range(1, m):
         kk = keys[a]
@@ -573,7 +581,7 @@ def _sort_by(keys, idx, m):
 
 
 @njit(cache=True)
-def _stable_argsort(keys, m):
+def _stable_argsort(keys: np.ndarray, m: int) -> np.ndarray:
     """The indices of keys[:m] in ascending order, equal keys in index order (NaN last): the
     permutation of ``np.argsort(keys[:m], kind="mergesort")``, by a bottom-up merge sort. numba's
     own merge sort took 1.3 s of CPU to compile cold, this one ~0.2 s (issue 32 point 4)."""
@@ -607,7 +615,7 @@ def _stable_argsort(keys, m):
 
 
 @njit(cache=True, inline="always")
-def _parent_key(j, nx, ny, world, cfg, tree):
+def _parent_key(j: int, nx: float, ny: float, world: World, cfg: np.record, tree: Tree) -> tuple[float, bool]:
     """(key, exact): the cost to (nx, ny) through node j. With a current, exact. For length, a
     square root instead of math.hypot (exact = False): within 7.2e-16 relative of the exact key,
     which _first_valid_parent computes only for the candidates that can be the minimum."""
@@ -620,13 +628,15 @@ def _parent_key(j, nx, ny, world, cfg, tree):
 
 
 @njit(cache=True, inline="always")
-def _cost_through(i, nx, ny, X, cost, fvx, fvy, cfg):
+def _cost_through(i: int, nx: float, ny: float, X: np.ndarray, cost: np.ndarray, fvx: np.ndarray, fvy: np.ndarray,
+                  cfg: np.record) -> float:
     """The exact cost to (nx, ny) through node i."""
     return cost[i] + _cost(X[i, 0], X[i, 1], nx, ny, fvx, fvy, cfg)
 
 
 @njit(cache=True, inline="always")
-def _try_parent(j, nx, ny, world, cfg, tree, state, track_failed):
+def _try_parent(j: int, nx: float, ny: float, world: World, cfg: np.record, tree: Tree, state: np.record,
+                track_failed: bool) -> bool:
     """True if the edge from node j to (nx, ny) is in j's fan and collision-free; with
     ``track_failed`` (DDRRT*) a refusal counts as a failed extension (_extension_refused)."""
     X = tree.X
@@ -641,7 +651,7 @@ def _try_parent(j, nx, ny, world, cfg, tree, state, track_failed):
 
 
 @njit(cache=True, inline="always")
-def _min_key(near_c, left):
+def _min_key(near_c: np.ndarray, left: int) -> float:
     m = near_c[0]
     for a in range(1, left):
         if near_c[a] < m:
@@ -654,7 +664,9 @@ def _min_key(near_c, left):
 # literal 0 while grow is being typed is a type of its own: _first_valid_parent was compiled three
 # times, _knn and _sort_by twice (issue 32 point 4: the cold compile).
 @njit(cache=True)
-def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, world, cfg, tree, state, track_failed, lower_bounds):
+def _first_valid_parent(near_i: np.ndarray, near_c: np.ndarray, near_x: np.ndarray, nc: int, nx: float, ny: float,
+                        world: World, cfg: np.record, tree: Tree, state: np.record, track_failed: bool,
+                        lower_bounds: bool) -> tuple[int, float]:
     """RRT*'s choose-parent: the first candidate, in ascending cost order, whose edge to (nx, ny)
     is in its fan and collision-free; returns (node, cost through it) or (-1, 0.0). With
     ``track_failed`` (DDRRT*) a refused candidate counts as a failed extension and bounds or
@@ -725,7 +737,7 @@ def _first_valid_parent(near_i, near_c, near_x, nc, nx, ny, world, cfg, tree, st
 
 
 @njit(cache=True, inline="always")
-def _first_solution(state, clock):
+def _first_solution(state: np.record, clock: np.ndarray) -> None:
     """At the first exact solution: the iteration, the collision checks so far, the monotonic and
     the thread's CPU clock, so that time to a first solution can be judged independent of the
     platform (issue 34)."""
@@ -736,7 +748,7 @@ def _first_solution(state, clock):
 
 
 @njit(cache=True, inline="always")
-def _try_goal(i, world, cfg, tree, state, clock):
+def _try_goal(i: int, world: World, cfg: np.record, tree: Tree, state: np.record, clock: np.ndarray) -> None:
     """After node i joined the tree: track the closest node and connect the goal exactly."""
     X = tree.X
     cost = tree.cost
@@ -777,7 +789,8 @@ def _try_goal(i, world, cfg, tree, state, clock):
 
 
 @njit(cache=True, inline="always")
-def _rewire(j, new, hx, hy, world, cfg, tree, state, fan):
+def _rewire(j: int, new: int, hx: float, hy: float, world: World, cfg: np.record, tree: Tree, state: np.record,
+            fan: np.ndarray) -> None:
     """Make q_new the parent of node j if that is cheaper and the edge is valid (fan limit for the
     edge and for j's children, collision-free): the rewiring step shared by RRT* and DDRRT*.
     The tests are side-effect free until the collision check, so the cheap ones come first;
@@ -801,7 +814,7 @@ def _rewire(j, new, hx, hy, world, cfg, tree, state, fan):
 
 
 @njit(cache=True, inline="always")
-def _rewire_cannot_pay(j, new, X, cost, lbf, margin):
+def _rewire_cannot_pay(j: int, new: int, X: np.ndarray, cost: np.ndarray, lbf: float, margin: float) -> bool:
     """True if rewiring node j through q_new cannot lower its cost, decided on a square root:
     lbf * sqrt(...) * (1 - margin) <= the computed edge cost (_edge_lower_factor), and rounding is
     monotone, so this refuses only candidates that _rewire's exact comparison refuses too. Kept
@@ -815,7 +828,8 @@ def _rewire_cannot_pay(j, new, X, cost, lbf, margin):
 
 
 @njit(cache=True, inline="always")
-def _rewire_through(new, p, rw_i, count, world, cfg, tree, state, dv):
+def _rewire_through(new: int, p: int, rw_i: np.ndarray, count: int, world: World, cfg: np.record, tree: Tree,
+                    state: np.record, dv: Derived) -> None:
     """Rewire step (RRT* and DDRRT* lines 18-21): offer q_new as the parent of rw_i[:count]."""
     X = tree.X
     cost = tree.cost
@@ -834,7 +848,7 @@ def _rewire_through(new, p, rw_i, count, world, cfg, tree, state, dv):
 
 
 @njit(cache=True)
-def _edge_lower_factor(cfg):
+def _edge_lower_factor(cfg: np.record) -> float:
     """f with edge cost >= f x edge length for every edge: 1 for length; for eq. (12), where each
     piece costs min(1, D_alpha / (1 + exp(cos a - gamma sin a))) x its length and the exponent is
     at most 1 when gamma >= 0, f = min(1, D_alpha / (1 + e)). 0 (no bound used) otherwise."""
@@ -847,7 +861,7 @@ def _edge_lower_factor(cfg):
 
 
 @njit(cache=True)
-def _esd_floor(a, gamma):
+def _esd_floor(a: float, gamma: float) -> float:
     """A value below eq. (11)'s second term a / (1 + exp(-arg)) for every alpha_y, whatever its
     rounding: arg = cos a - gamma sin a >= -1 - gamma when gamma >= 0 (-inf, no floor, otherwise),
     and the term grows with arg."""
@@ -858,7 +872,7 @@ def _esd_floor(a, gamma):
 
 
 @njit(cache=True)
-def _derive(cfg):
+def _derive(cfg: np.record) -> Derived:
     """The Derived constants of a configuration (computed in the kernel, as before: the same floats)."""
     lbf = _edge_lower_factor(cfg)
     use_field = cfg.use_field != 0
@@ -871,11 +885,11 @@ def _derive(cfg):
     return Derived(lbf, lb_margin, use_field and lbf > 0.0, esd_plain, _esd_floor(esd_plain, cfg.gamma), fan)
 
 
-def _unowned_typer(typingctx, arr):
+def _unowned_typer(typingctx: TypingContext, arr: Type) -> tuple[Signature, Callable[..., ir.Value]]:
     """A view of ``arr`` without its reference count (a null meminfo): taking it out of a named
     tuple then costs no atomic increment and decrement. Only for arrays that the caller of
     ``grow`` keeps alive for the whole call."""
-    def codegen(context, builder, sig, args):
+    def codegen(context: BaseContext, builder: ir.IRBuilder, sig: Signature, args: Sequence[ir.Value]) -> ir.Value:
         src = context.make_array(sig.args[0])(context, builder, args[0])
         out = context.make_array(sig.return_type)(context, builder)
         for name in ("parent", "nitems", "itemsize", "data", "shape", "strides"):
@@ -889,7 +903,7 @@ _unowned = cast(Callable[[np.ndarray], np.ndarray], intrinsic(_unowned_typer))
 
 
 @njit(cache=True)
-def _borrowed(world, tree, buf):
+def _borrowed(world: World, tree: Tree, buf: Scratch) -> tuple[World, Tree, Scratch]:
     """world, tree and buf as views without reference counts (see _unowned): the kernel reads
     their members in every step, and numba counts a reference per read otherwise (perf: a fifth
     of DDRRT*'s time in atomic increments and decrements)."""
@@ -904,13 +918,13 @@ def _borrowed(world, tree, buf):
 
 
 @njit(cache=True)
-def node_direction(i, x, y, world, cfg_a, tree):
+def node_direction(i: int, x: float, y: float, world: World, cfg_a: np.ndarray, tree: Tree) -> None:
     """Entry point for the solve loop: the root's current direction (see _set_direction)."""
     _set_direction(i, x, y, tree.nv, world, cfg_a[0])
 
 
 @njit(cache=True, inline="always")
-def _sample(cfg, tree, state):
+def _sample(cfg: np.record, tree: Tree, state: np.record) -> tuple[float, float, bool]:
     """A sample (x, y, from_png): the PNG node with probability P (DDRRT*), else the goal with
     the goal bias, else uniform in the domain (Informed RRT* with a solution: in its ellipse)."""
     if cfg.use_png != 0 and state.png_hit == 0 and np.random.random() < cfg.png_p:
@@ -925,7 +939,7 @@ def _sample(cfg, tree, state):
 
 
 @njit(cache=True, inline="always")
-def _sample_ddrrt(cfg, state):
+def _sample_ddrrt(cfg: np.record, state: np.record) -> tuple[float, float, bool]:
     """:func:`_sample` for DDRRT* (``cfg.algo`` DDRRT_STAR: no informed branch), the same draws. Its
     own function so that ``grow_ddrrt`` does not compile the Informed RRT* sampler it never runs."""
     if cfg.use_png != 0 and state.png_hit == 0 and np.random.random() < cfg.png_p:
@@ -937,7 +951,7 @@ def _sample_ddrrt(cfg, state):
 
 
 @njit(cache=True, inline="always")
-def _steer(q0, d0, sx, sy, X, step):
+def _steer(q0: int, d0: float, sx: float, sy: float, X: np.ndarray, step: float) -> tuple[float, float]:
     """q_new: the sample, or the point a step from node q0 (d0 from it) towards it."""
     if d0 > step:
         return X[q0, 0] + (sx - X[q0, 0]) * step / d0, X[q0, 1] + (sy - X[q0, 1]) * step / d0
@@ -945,7 +959,8 @@ def _steer(q0, d0, sx, sy, X, step):
 
 
 @njit(cache=True, inline="always")
-def _dd_candidates(sx, sy, cfg, tree, state, buf, dv):
+def _dd_candidates(sx: float, sy: float, cfg: np.record, tree: Tree, state: np.record, buf: Scratch,
+                   dv: Derived) -> int:
     """Figure 6 lines 5-11: of the k nearest nodes, those whose dynamic domain (a disc, Yershova
     2005) holds the sample and whose D_C (eq. (12) with one alpha_y, the current at the node, as
     eq. (11)'s) is within ESD (eq. (11)), in distance order: buf.ext_i, their D_C in buf.ext_k;
@@ -990,7 +1005,7 @@ def _dd_candidates(sx, sy, cfg, tree, state, buf, dv):
 
 
 @njit(cache=True, inline="always")
-def _first_smallest(keys, m):
+def _first_smallest(keys: np.ndarray, m: int) -> int:
     """Index of the first of the smallest keys[:m] (the head of a stable sort)."""
     b = 0
     for a in range(1, m):
@@ -1000,7 +1015,8 @@ def _first_smallest(keys, m):
 
 
 @njit(cache=True, inline="always")
-def _dd_choose_parent(nx, ny, ne, world, cfg, tree, state, buf, dv):
+def _dd_choose_parent(nx: float, ny: float, ne: int, world: World, cfg: np.record, tree: Tree, state: np.record,
+                      buf: Scratch, dv: Derived) -> tuple[int, float, int]:
     """Figure 6 lines 12-17: the extendable nodes within a step of q_new, in D_C order (a stable
     sort of that subset, keys in buf.kn_d, gives the order sorting all of them would give it),
     into buf.rw_i; returns (parent, its cost, how many), parent -1 if none is valid."""
@@ -1043,7 +1059,8 @@ def _dd_choose_parent(nx, ny, ne, world, cfg, tree, state, buf, dv):
 
 
 @njit(cache=True, inline="always")
-def _ddrrt_extend(sx, sy, from_png, world, cfg, tree, state, buf, dv):
+def _ddrrt_extend(sx: float, sy: float, from_png: bool, world: World, cfg: np.record, tree: Tree, state: np.record,
+                  buf: Scratch, dv: Derived) -> int:
     """One DDRRT* extension towards the sample (Figure 6); returns q_new's index or -1."""
     X = tree.X
     ne = _dd_candidates(sx, sy, cfg, tree, state, buf, dv)
@@ -1072,7 +1089,8 @@ def _ddrrt_extend(sx, sy, from_png, world, cfg, tree, state, buf, dv):
 
 
 @njit(cache=True, inline="always")
-def _rrt_choose_parent(nx, ny, q0, nn, world, cfg, tree, state, buf, dv):
+def _rrt_choose_parent(nx: float, ny: float, q0: int, nn: int, world: World, cfg: np.record, tree: Tree,
+                       state: np.record, buf: Scratch, dv: Derived) -> tuple[int, float]:
     """Choose-parent over the near ball buf.near_i[:nn] and the nearest node q0, in ascending cost
     order; the nearest is not required to be valid itself (with the fan limit it often is not).
     Returns (parent, its cost), parent -1 if none is valid."""
@@ -1111,7 +1129,8 @@ def _rrt_choose_parent(nx, ny, q0, nn, world, cfg, tree, state, buf, dv):
 
 
 @njit(cache=True, inline="always")
-def _rrt_extend(sx, sy, world, cfg, tree, state, buf, dv):
+def _rrt_extend(sx: float, sy: float, world: World, cfg: np.record, tree: Tree, state: np.record, buf: Scratch,
+                dv: Derived) -> int:
     """One RRT* extension towards the sample (Karaman & Frazzoli 2011, radius version); returns
     q_new's index or -1."""
     X = tree.X
@@ -1143,7 +1162,8 @@ def _rrt_extend(sx, sy, world, cfg, tree, state, buf, dv):
     return new
 
 
-def grow(world, cfg_a, tree, state_a, scratch, max_iter, deadline_ns, stop_on_exact, cpu_deadline_ns=-1):
+def grow(world: World, cfg_a: np.ndarray, tree: Tree, state_a: np.ndarray, scratch: Scratch, max_iter: int,
+         deadline_ns: int, stop_on_exact: bool, cpu_deadline_ns: int = -1) -> int:
     """Run up to max_iter iterations; see the module docstring for the arguments and the return
     codes. ``cfg_a`` and ``state_a`` are 1-element arrays of CONFIG and STATE; the caller keeps
     world, tree and scratch alive during the call. DDRRT* runs :func:`grow_ddrrt`, RRT* and
@@ -1159,7 +1179,7 @@ def grow_kernel(algo: int) -> Callable[..., int]:
 
 
 @njit(cache=True, inline="always")
-def _stop_before(deadline_ns, cpu_deadline_ns, cfg, state, buf):
+def _stop_before(deadline_ns: int, cpu_deadline_ns: int, cfg: np.record, state: np.record, buf: Scratch) -> int:
     """The return code that ends the search before the next iteration, or -1 to go on."""
     if deadline_ns >= 0 and monotonic_ns(buf.clock) >= deadline_ns:
         return DONE_DEADLINE
@@ -1171,7 +1191,8 @@ def _stop_before(deadline_ns, cpu_deadline_ns, cfg, state, buf):
 
 
 @njit(cache=True)
-def grow_ddrrt(world, cfg_a, tree, state_a, scratch, max_iter, deadline_ns, stop_on_exact, cpu_deadline_ns=-1):
+def grow_ddrrt(world: World, cfg_a: np.ndarray, tree: Tree, state_a: np.ndarray, scratch: Scratch, max_iter: int,
+               deadline_ns: int, stop_on_exact: bool, cpu_deadline_ns: int = -1) -> int:
     """:func:`grow` for DDRRT* (``cfg.algo`` DDRRT_STAR)."""
     cfg = cfg_a[0]
     state = state_a[0]
@@ -1193,7 +1214,8 @@ def grow_ddrrt(world, cfg_a, tree, state_a, scratch, max_iter, deadline_ns, stop
 
 
 @njit(cache=True)
-def grow_rrt(world, cfg_a, tree, state_a, scratch, max_iter, deadline_ns, stop_on_exact, cpu_deadline_ns=-1):
+def grow_rrt(world: World, cfg_a: np.ndarray, tree: Tree, state_a: np.ndarray, scratch: Scratch, max_iter: int,
+             deadline_ns: int, stop_on_exact: bool, cpu_deadline_ns: int = -1) -> int:
     """:func:`grow` for RRT* and Informed RRT* (``cfg.algo`` RRT_STAR or INFORMED_RRT_STAR)."""
     cfg = cfg_a[0]
     state = state_a[0]
@@ -1215,7 +1237,8 @@ def grow_rrt(world, cfg_a, tree, state_a, scratch, max_iter, deadline_ns, stop_o
 
 
 @njit(cache=True)
-def seed_tree(world, cfg_a, tree, state_a, clock, nodes, parents):
+def seed_tree(world: World, cfg_a: np.ndarray, tree: Tree, state_a: np.ndarray, clock: np.ndarray, nodes: np.ndarray,
+              parents: np.ndarray) -> int:
     """Start the search from a reused tree (section 3.5, line 3): append ``nodes[1:]`` (m, 2) to
     a tree that holds only its root, ``nodes[0]`` being that root's place and ``parents`` (m,)
     each node's parent index into ``nodes`` (smaller than its own; -1 for the root). A node is

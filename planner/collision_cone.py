@@ -65,7 +65,8 @@ class ConeAssessment:
     inside: bool           # r <= R now: already within the combined radius
 
 
-def assess(own_pos, own_vel, obs_pos, obs_vel, radius: float) -> ConeAssessment:
+def assess(own_pos: tuple[float, float], own_vel: tuple[float, float], obs_pos: tuple[float, float],
+           obs_vel: tuple[float, float], radius: float) -> ConeAssessment:
     """Eqs. (9)-(10) from positions (m) and velocity vectors (m/s) in one frame; R = ``radius``."""
     ox, oy = float(own_pos[0]), float(own_pos[1])
     fx, fy = float(obs_pos[0]), float(obs_pos[1])

@@ -90,12 +90,12 @@ def wrap360(deg: float) -> float:
     return d + 360.0 if d < 0 else d
 
 
-def bearing_deg(frm, to) -> float:
+def bearing_deg(frm: tuple[float, float], to: tuple[float, float]) -> float:
     """True bearing (deg clockwise from north) from NED point ``frm`` to ``to``."""
     return wrap360(math.degrees(math.atan2(to[1] - frm[1], to[0] - frm[0])))
 
 
-def relative_bearing(own_pos, own_course: float, tgt_pos) -> float:
+def relative_bearing(own_pos: tuple[float, float], own_course: float, tgt_pos: tuple[float, float]) -> float:
     """Bearing (deg, [0, 360), clockwise from the own ship's course ``own_course`` in rad) of the target."""
     return wrap360(bearing_deg(own_pos, tgt_pos) - math.degrees(own_course))
 
@@ -111,7 +111,8 @@ class Encounter:
     aspect: float              # deg, relative bearing of us from the target's course
 
 
-def classify(own_pos, own_course: float, own_speed: float, tgt_pos, tgt_course: float, tgt_speed: float,
+def classify(own_pos: tuple[float, float], own_course: float, own_speed: float, tgt_pos: tuple[float, float],
+             tgt_course: float, tgt_speed: float,
              p: ColregsParams = ColregsParams()) -> Encounter:
     """Rules 13-15 from positions (NED m), courses (rad, clockwise from north) and speeds (m/s)."""
     b = relative_bearing(own_pos, own_course, tgt_pos)        # where the target is, from our bow

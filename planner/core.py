@@ -24,7 +24,7 @@ from scipy import ndimage
 
 from planner import _tree
 from planner.cost import min_cost_factor, path_cost, path_length
-from planner.field import GridField
+from planner.field import DisturbanceField, GridField
 from planner.gridmap import OccupancyGrid
 from planner.params import PlannerParams
 from planner.problem import PlanningProblem
@@ -73,7 +73,7 @@ def compiled_cpu_clock_ok() -> bool:
     return _CPU_CLOCK_OK
 
 
-def _none(reason: str, t0: float, start=None) -> PlannerResult:
+def _none(reason: str, t0: float, start: tuple[float, float] | None = None) -> PlannerResult:
     nodes = np.zeros((0, 2)) if start is None else np.asarray([start], dtype=np.float64)
     return PlannerResult(
         status="none", path=np.zeros((0, 2)), cost=math.inf, length=math.inf, iterations=0,
@@ -108,7 +108,7 @@ def sampled_field(problem: PlanningProblem, params: PlannerParams | None = None)
     return g.shifted(float(drift[0]), float(drift[1]))
 
 
-def disturbance(problem: PlanningProblem, params: PlannerParams):
+def disturbance(problem: PlanningProblem, params: PlannerParams) -> DisturbanceField | None:
     """The field eq. (12)'s alpha_y is measured against (see :func:`sampled_field`); problem.field
     itself when alpha_y = "current" (the costs stay those of the caller's field)."""
     if params.alpha_y == "resultant" and problem.wave_drift is not None:
@@ -283,7 +283,8 @@ class TreePlanner:
         res.diagnostics["reused_nodes"] = reused
         return res
 
-    def _result(self, problem, t0, tree: _tree.Tree, st, why, cpu_s=0.0, cpu0_ns=0, png=None) -> PlannerResult:
+    def _result(self, problem: PlanningProblem, t0: float, tree: _tree.Tree, st: np.void, why: str, cpu_s: float = 0.0,
+                cpu0_ns: int = 0, png: tuple[float, float] | None = None) -> PlannerResult:
         """The result of a search: the path to the goal (or to the closest node), the tree, the
         kernel's counters; ``st`` is the kernel's state record."""
         X, parent, cost, dd = tree.X, tree.parent, tree.cost, tree.dd

@@ -12,10 +12,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import TYPE_CHECKING, TypeGuard
 
 import numpy as np
+import numpy.typing as npt
 
-from planner.field import GridField
+from planner.field import DisturbanceField, GridField
+
+if TYPE_CHECKING:
+    from planner.params import PlannerParams
 
 ZERO_CURRENT = 1e-9  # m/s; below this the current has no direction
 
@@ -45,11 +50,11 @@ def min_cost_factor(d_alpha: float = 1.0, gamma_alpha: float = 0.1) -> float:
     return min(1.0, d_alpha / (1.0 + math.e))
 
 
-def _uses_current(field, params) -> bool:
+def _uses_current(field: DisturbanceField | None, params: PlannerParams) -> TypeGuard[DisturbanceField]:
     return field is not None and params.objective == "current"
 
 
-def _pieces(p, q, step: float):
+def _pieces(p: npt.ArrayLike, q: npt.ArrayLike, step: float) -> tuple[np.ndarray, np.ndarray, float, int]:
     p = np.asarray(p, dtype=np.float64)
     q = np.asarray(q, dtype=np.float64)
     d = q - p
@@ -58,7 +63,7 @@ def _pieces(p, q, step: float):
     return p, d, length, n
 
 
-def segment_cost(p, q, field, params) -> float:
+def segment_cost(p: npt.ArrayLike, q: npt.ArrayLike, field: DisturbanceField | None, params: PlannerParams) -> float:
     """Eq. (12) along the straight segment p -> q (Euclidean length with no field)."""
     p, d, length, n = _pieces(p, q, params.step)
     if not _uses_current(field, params) or length == 0.0:
@@ -92,7 +97,7 @@ def segment_cost(p, q, field, params) -> float:
     return total
 
 
-def path_cost(path: np.ndarray, field, params) -> float:
+def path_cost(path: np.ndarray, field: DisturbanceField | None, params: PlannerParams) -> float:
     """Sum of :func:`segment_cost` over consecutive waypoints."""
     path = np.asarray(path, dtype=np.float64)
     if len(path) < 2:
@@ -107,7 +112,7 @@ def _sum_of_segments(path: np.ndarray, segment: Callable[[np.ndarray, np.ndarray
     return float(sum(segment(path[i], path[i + 1]) for i in range(len(path) - 1)))
 
 
-def path_cost_fn(field, params) -> Callable[[np.ndarray], float]:
+def path_cost_fn(field: DisturbanceField | None, params: PlannerParams) -> Callable[[np.ndarray], float]:
     """``lambda p: path_cost(p, field, params)`` that computes each segment's cost once: pruning
     asks for the cost of a sub-path again each time it grows by a waypoint. The same terms summed in
     the same order, so the same floats."""

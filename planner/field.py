@@ -6,12 +6,13 @@ import math
 from typing import Protocol
 
 import numpy as np
+import numpy.typing as npt
 
 
 class DisturbanceField(Protocol):
     """(vx, vy) in m/s (map frame: x east, y north) at points (x, y) in metres; vectorised."""
 
-    def __call__(self, x, y) -> tuple: ...
+    def __call__(self, x: npt.ArrayLike, y: npt.ArrayLike) -> tuple: ...
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -24,7 +25,8 @@ class GridField:
     """A field sampled on a regular grid (``vx[row, col]`` at x = origin_x + col * resolution,
     y = origin_y + row * resolution), bilinearly interpolated, clamped at the edges."""
 
-    def __init__(self, vx: np.ndarray, vy: np.ndarray, resolution: float, origin=(0.0, 0.0)) -> None:
+    def __init__(self, vx: np.ndarray, vy: np.ndarray, resolution: float,
+                 origin: tuple[float, float] = (0.0, 0.0)) -> None:
         vx = np.asarray(vx, dtype=np.float64)
         vy = np.asarray(vy, dtype=np.float64)
         if vx.ndim != 2 or vx.shape != vy.shape or min(vx.shape) < 1:
@@ -82,7 +84,7 @@ class GridField:
                        + a.item(r1, c0) * (1 - fx) * fy + a.item(r1, c1) * fx * fy)
         return out[0], out[1]
 
-    def __call__(self, x, y):
+    def __call__(self, x: npt.ArrayLike, y: npt.ArrayLike) -> tuple[np.ndarray | float, np.ndarray | float]:
         scalar = np.isscalar(x) and np.isscalar(y)
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
@@ -103,7 +105,8 @@ class GridField:
         return out[0], out[1]
 
 
-def encounter_angle(heading_x, heading_y, vx, vy):
+def encounter_angle(heading_x: npt.ArrayLike, heading_y: npt.ArrayLike, vx: npt.ArrayLike,
+                    vy: npt.ArrayLike) -> np.ndarray | float:
     """alpha_y in [0, pi]: angle between the direction of motion (heading_x, heading_y) and the
     disturbance (vx, vy). NaN where either vector is zero (the cost is then Euclidean)."""
     hx, hy, vx, vy = (np.asarray(a, dtype=np.float64) for a in (heading_x, heading_y, vx, vy))

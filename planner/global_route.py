@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 from scipy import ndimage
 
@@ -96,8 +97,8 @@ def _fail(status: RouteStatus, index: int, reason: str) -> GlobalRoute:
     return GlobalRoute(status, np.zeros((0, 2)), (), index, reason)
 
 
-def plan_chart_route(chart: OccupancyGrid, waypoints, safety_radius: float, spacing: float = DEFAULT_SPACING,
-                     margin_factor: float = 2.0) -> GlobalRoute:
+def plan_chart_route(chart: OccupancyGrid, waypoints: npt.ArrayLike, safety_radius: float,
+                     spacing: float = DEFAULT_SPACING, margin_factor: float = 2.0) -> GlobalRoute:
     """:func:`plan_route` on ``chart`` (raw obstacles) inflated by ``safety_radius`` (m), routing the
     legs that need it with ``margin_factor`` times that clearance where the wider margin leaves a
     way (see ``preferred``)."""
@@ -106,7 +107,7 @@ def plan_chart_route(chart: OccupancyGrid, waypoints, safety_radius: float, spac
     return plan_route(grid, waypoints, spacing, preferred=preferred)
 
 
-def plan_route(grid: OccupancyGrid, waypoints, spacing: float = DEFAULT_SPACING,
+def plan_route(grid: OccupancyGrid, waypoints: npt.ArrayLike, spacing: float = DEFAULT_SPACING,
                start_may_be_blocked: bool = True, preferred: OccupancyGrid | None = None) -> GlobalRoute:
     """The global route through ``waypoints`` ((M, 2), start first, metres) on ``grid``.
 
@@ -176,12 +177,12 @@ def plan_route(grid: OccupancyGrid, waypoints, spacing: float = DEFAULT_SPACING,
     return _assemble(legs_vertices, spacing)
 
 
-def _cell(grid: OccupancyGrid, p) -> tuple[int, int]:
+def _cell(grid: OccupancyGrid, p: np.ndarray) -> tuple[int, int]:
     r, c = grid.cell_of(float(p[0]), float(p[1]))
     return min(max(r, 0), grid.rows - 1), min(max(c, 0), grid.cols - 1)
 
 
-def _nearest_free(grid: OccupancyGrid, p) -> np.ndarray:
+def _nearest_free(grid: OccupancyGrid, p: np.ndarray) -> np.ndarray:
     _, idx = ndimage.distance_transform_edt(grid.occ, return_indices=True)
     r, c = _cell(grid, p)
     rr, cc = idx[0][r, c], idx[1][r, c]
@@ -201,7 +202,7 @@ def _assemble(legs_vertices: list[tuple[np.ndarray, bool]], spacing: float) -> G
     return GlobalRoute(RouteStatus.OK, np.concatenate(out), tuple(legs))
 
 
-def densify(vertices, spacing: float) -> np.ndarray:
+def densify(vertices: npt.ArrayLike, spacing: float) -> np.ndarray:
     """The polyline with points inserted so that consecutive points are at most ``spacing`` m
     apart; every vertex is kept (evenly spaced inside each segment)."""
     v = np.asarray(vertices, dtype=float).reshape(-1, 2)
@@ -214,7 +215,7 @@ def densify(vertices, spacing: float) -> np.ndarray:
     return np.concatenate(out)
 
 
-def _theta_star(grid: OccupancyGrid, occ: np.ndarray, a, b) -> np.ndarray | None:
+def _theta_star(grid: OccupancyGrid, occ: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray | None:
     """Lazy Theta* from point ``a`` to point ``b`` (both on free cells): the polyline's vertices,
     the exact points at both ends, or None."""
     res = grid.resolution
@@ -252,7 +253,7 @@ def _shortcut(occ: np.ndarray, res: float, verts: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _heap_push(keys, items, size, key, item):
+def _heap_push(keys: np.ndarray, items: np.ndarray, size: int, key: float, item: int) -> int:
     i = size
     keys[i] = key
     items[i] = item
@@ -267,7 +268,7 @@ def _heap_push(keys, items, size, key, item):
 
 
 @njit(cache=True)
-def _heap_pop(keys, items, size):
+def _heap_pop(keys: np.ndarray, items: np.ndarray, size: int) -> tuple[int, int]:
     item = items[0]
     size -= 1
     keys[0] = keys[size]
@@ -289,13 +290,13 @@ def _heap_pop(keys, items, size):
 
 
 @njit(cache=True)
-def _los(occ, r0, c0, r1, c1):
+def _los(occ: np.ndarray, r0: int, c0: int, r1: int, c1: int) -> bool:
     """Line of sight between two cell centres (exact traversal, in cell units)."""
     return segment_free(occ, 1.0, c0 + 0.5, r0 + 0.5, c1 + 0.5, r1 + 0.5)
 
 
 @njit(cache=True)
-def _lazy_theta_star(occ, sr, sc, gr, gc):
+def _lazy_theta_star(occ: np.ndarray, sr: int, sc: int, gr: int, gc: int) -> np.ndarray:
     """Lazy Theta* (Nash, Koenig, Tovey 2010) on the 8-connected cell graph, costs in cell units.
     A diagonal move needs both side cells free (no corner cutting). Returns the (K, 2) [row, col]
     vertices from start to goal, or an empty array."""

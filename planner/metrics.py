@@ -22,10 +22,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 from scipy.special import gammainc
 
 from planner.cost import path_cost, path_length
+from planner.field import DisturbanceField
 from planner.gridmap import OccupancyGrid
+from planner.params import PlannerParams
 
 DEFAULT_TURN_THRESHOLD = math.radians(10.0)
 
@@ -36,7 +39,8 @@ def collision_free_probability(clearances: np.ndarray, sigma: float, n: int = 2)
     return float(np.prod(gammainc(n / 2.0, 0.5 * c * c)))
 
 
-def waypoint_alpha_sums(points, directions, field) -> tuple[float, float]:
+def waypoint_alpha_sums(points: npt.ArrayLike, directions: npt.ArrayLike,
+                        field: DisturbanceField | None) -> tuple[float, float]:
     """Σcos alpha_y and Σsin alpha_y at waypoints: alpha_y between the current at each point
     ((N, 2) map-frame metres) and the direction ((N, 2), any length) the vessel leaves it in.
     Points where the current or the direction is zero are skipped; (0, 0) without a field."""
@@ -54,8 +58,9 @@ def waypoint_alpha_sums(points, directions, field) -> tuple[float, float]:
     return float(np.sum(c)), float(np.sum(np.sqrt(1.0 - c * c)))
 
 
-def path_metrics(path, field, grid: OccupancyGrid | None, params, clearance_sigma: float = 0.5,
-                 turn_threshold: float = DEFAULT_TURN_THRESHOLD) -> dict:
+def path_metrics(path: npt.ArrayLike, field: DisturbanceField | None, grid: OccupancyGrid | None,
+                 params: PlannerParams, clearance_sigma: float = 0.5,
+                 turn_threshold: float = DEFAULT_TURN_THRESHOLD) -> dict[str, float]:
     """Table 3 indicators of ``path`` ((N, 2) map-frame metres); see the module docstring."""
     p = np.asarray(path, dtype=np.float64)
     out = {"waypoints": int(len(p)), "length": path_length(p), "cost": path_cost(p, field, params)}

@@ -474,7 +474,7 @@ def _plan_cycle_once(ctx: OnlineContext, state: VesselState, index: int, seed: i
 
         traffic = relax_for_start(traffic)
         keep = 2.0 * grid.resolution
-        def traffic_grid(g):
+        def traffic_grid(g: OccupancyGrid) -> OccupancyGrid:
             return paint(g, traffic, pos, params.perceptual_radius, keep_free=pos, keep_radius=keep)
         plain_goal = _free_subgoal(ctx, grid, pos, sub_index, sub_point)
         grid = traffic_grid(grid)

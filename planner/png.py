@@ -87,7 +87,8 @@ def _acos(x: float) -> float:
 
 
 @njit(cache=True)
-def pg_node(usv_pos, usv_heading, target_pos, target_heading, s_t, nav_ratio=3.0, tol=1e-3, max_iter=20):
+def pg_node(usv_pos: tuple[float, float], usv_heading: float, target_pos: tuple[float, float], target_heading: float,
+            s_t: float, nav_ratio: float = 3.0, tol: float = 1e-3, max_iter: int = 20) -> tuple[float, float]:
     """The PGNode (x, y) of eqs. (7)-(8) (map frame, metres; headings in rad)."""
     ux, uy = float(usv_pos[0]), float(usv_pos[1])
     px, py = float(target_pos[0]), float(target_pos[1])

@@ -96,7 +96,7 @@ class DubinsPath:
         return x, y, th
 
 
-def _advance(x, y, th, kind, s, r):
+def _advance(x: float, y: float, th: float, kind: str, s: float, r: float) -> tuple[float, float, float]:
     if kind == "S":
         return x + s * math.cos(th), y + s * math.sin(th), th
     if kind == "L":
@@ -106,7 +106,7 @@ def _advance(x, y, th, kind, s, r):
     return x - r * (math.sin(th1) - math.sin(th)), y + r * (math.cos(th1) - math.cos(th)), th1
 
 
-def _word_segments(word: str, a: float, b: float, d: float):
+def _word_segments(word: str, a: float, b: float, d: float) -> tuple[float, float, float] | None:
     """Normalised (t, p, q) of one word, or None when the word does not exist for this pose."""
     sa, sb, ca, cb = math.sin(a), math.sin(b), math.cos(a), math.cos(b)
     cab = math.cos(a - b)
@@ -153,7 +153,8 @@ def _word_segments(word: str, a: float, b: float, d: float):
     raise ValueError(f"unknown Dubins word {word!r}")
 
 
-def dubins_path(q0, q1, radius: float, word: str | None = None) -> DubinsPath:
+def dubins_path(q0: tuple[float, float, float], q1: tuple[float, float, float], radius: float,
+                word: str | None = None) -> DubinsPath:
     """The shortest Dubins path from pose q0 to q1 (x, y, theta; metres, rad) with turning radius
     ``radius`` (> 0), or the path of the given ``word``. ValueError if ``word`` is impossible."""
     if not radius > 0:
@@ -240,7 +241,8 @@ def _leg_ok(grid: OccupancyGrid, piece: DubinsPath, radius: float, step: float) 
     return curv_ok and grid.polyline_free(poses[:, :2]), poses
 
 
-def _try_headings(wp, heads, i, grid, radius, step, fixed_start) -> bool:
+def _try_headings(wp: np.ndarray, heads: np.ndarray, i: int, grid: OccupancyGrid, radius: float, step: float,
+                  fixed_start: bool) -> bool:
     """Leg i violates: try the incoming/outgoing leg directions instead of the bisector at its
     end waypoint, then at its start waypoint; keep the first choice that clears the adjacent legs."""
     legs = np.arctan2(np.diff(wp[:, 1]), np.diff(wp[:, 0]))

@@ -17,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 
 @dataclass(frozen=True)
@@ -26,8 +27,8 @@ class Subgoal:
     rule: int
 
 
-def select_subgoal(reference_path: np.ndarray, position, radius: float, goal_index: int | None = None,
-                   start=None) -> Subgoal:
+def select_subgoal(reference_path: np.ndarray, position: npt.ArrayLike, radius: float, goal_index: int | None = None,
+                   start: npt.ArrayLike | None = None) -> Subgoal:
     """The subgoal for a vessel at ``position`` (the perceptual domain's centre) with perceptual
     radius ``radius`` (metres). ``start`` is the local planning start point (default
     ``position``; the root of the next local tree may lie ahead of the vessel), q_j is the

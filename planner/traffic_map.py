@@ -69,7 +69,7 @@ class TrafficSnapshot:
     speed_factors: tuple[float, ...] = (1.0, 0.6, 0.35)  # tried in turn by planner.online.plan_cycle
 
 
-def _in_zone(dx, dy, hx, hy, z: Zone):
+def _in_zone(dx: np.ndarray, dy: np.ndarray, hx: float, hy: float, z: Zone) -> np.ndarray:
     along = dx * hx + dy * hy
     stbd = dx * hy - dy * hx          # right-hand perpendicular of (hx, hy) in the map frame
     return (along >= z.along[0]) & (along <= z.along[1]) & (stbd >= z.starboard[0]) & (stbd <= z.starboard[1])
