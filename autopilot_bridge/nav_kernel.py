@@ -41,7 +41,8 @@ def _all_finite(a: np.ndarray) -> bool:
 
 
 @njit(cache=True, error_model="numpy")
-def predict(x: np.ndarray, P: np.ndarray, dt: float, q_a: float, q_r: float, q_b: float):
+def predict(x: np.ndarray, P: np.ndarray, dt: float, q_a: float, q_r: float, q_b: float
+            ) -> tuple[np.ndarray, np.ndarray]:
     """(x, P) propagated by ``dt`` s > 0: eq. (2), F P F^T + Q (white acceleration integrated over dt)."""
     psi, u, v = x[_PSI, 0], x[_U, 0], x[_V, 0]
     c, s = math.cos(psi), math.sin(psi)
@@ -70,7 +71,7 @@ def predict(x: np.ndarray, P: np.ndarray, dt: float, q_a: float, q_r: float, q_b
 
 
 @njit(cache=True, error_model="numpy")
-def _model(x: np.ndarray, kind: int):
+def _model(x: np.ndarray, kind: int) -> tuple[np.ndarray, np.ndarray, int]:
     """(H, h(x), index of an angle row or -1) of a measurement kind."""
     if kind == GPS_POS or kind == GPS_VEL or kind == DVL:
         H = np.zeros((2, _N))
@@ -105,7 +106,8 @@ def _model(x: np.ndarray, kind: int):
 
 
 @njit(cache=True, error_model="numpy")
-def _update(xp: np.ndarray, Pp: np.ndarray, kind: int, z: np.ndarray, Rm: np.ndarray, gate: float):
+def _update(xp: np.ndarray, Pp: np.ndarray, kind: int, z: np.ndarray, Rm: np.ndarray, gate: float
+            ) -> tuple[int, np.ndarray, np.ndarray]:
     """The gated update of the prediction (xp, Pp) by measurement ``z`` (m x 1) of ``kind`` with
     noise covariance ``Rm`` (m x m): (code, x, P), the prediction itself unless the code is OK."""
     H, hx, angle = _model(xp, kind)
@@ -147,7 +149,7 @@ def _update(xp: np.ndarray, Pp: np.ndarray, kind: int, z: np.ndarray, Rm: np.nda
 @njit(cache=True, error_model="numpy")
 def step(x: np.ndarray, P: np.ndarray, dt: float, q_a: float, q_r: float, q_b: float,
          kind: int, z: np.ndarray, Rm: np.ndarray, gate: float,
-         kind2: int, z2: np.ndarray, Rm2: np.ndarray, gate2: float):
+         kind2: int, z2: np.ndarray, Rm2: np.ndarray, gate2: float) -> tuple[int, int, np.ndarray, np.ndarray]:
     """Predict by ``dt`` s (none when 0), then the gated update by measurement ``z`` (m x 1) of
     ``kind`` with noise covariance ``Rm`` (m x m); then, unless ``kind2`` is :data:`NONE`, the same
     for a second measurement at the same time (``z2``, ``Rm2``, ``gate2``), as a second call would:

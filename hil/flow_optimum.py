@@ -29,14 +29,21 @@ checks it against :func:`hil.optimum.shortest_path` (exact) on the repository's 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
+import numpy.typing as npt
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from hil.optimum import segment_clear
+
+if TYPE_CHECKING:
+    # A current in the map frame, vectorised: (x east, y north) m -> (v_east, v_north) m/s.
+    from hil.plots import MapField as MapCurrent
 
 PIECE = 0.25          # m, integration step of the cost
 ZERO_CURRENT = 1e-9   # m/s
@@ -54,7 +61,7 @@ class FlowField:
     spacing: float
 
     @classmethod
-    def sample(cls, current, width: float, height: float, spacing: float = 0.5) -> FlowField:
+    def sample(cls, current: MapCurrent | None, width: float, height: float, spacing: float = 0.5) -> FlowField:
         """Sample ``current(x, y) -> (vx, vy)`` (vectorised, map frame) over the map; None = still water."""
         if current is None:
             return cls(np.zeros((1, 1)), np.zeros((1, 1)), spacing)
@@ -67,7 +74,7 @@ class FlowField:
 
 
 @numba.njit(cache=True)
-def _flow(vx, vy, h, x, y):
+def _flow(vx: np.ndarray, vy: np.ndarray, h: float, x: float, y: float) -> tuple[float, float]:
     rows, cols = vx.shape
     gx = min(max(x / h, 0.0), cols - 1.0)
     gy = min(max(y / h, 0.0), rows - 1.0)
@@ -85,7 +92,8 @@ def _flow(vx, vy, h, x, y):
 
 
 @numba.njit(cache=True)
-def _seg_cost(vx, vy, h, d_alpha, gamma, x0, y0, x1, y1):
+def _seg_cost(vx: np.ndarray, vy: np.ndarray, h: float, d_alpha: float, gamma: float, x0: float, y0: float,
+              x1: float, y1: float) -> float:
     dx = x1 - x0
     dy = y1 - y0
     length = math.sqrt(dx * dx + dy * dy)
@@ -109,7 +117,9 @@ def _seg_cost(vx, vy, h, d_alpha, gamma, x0, y0, x1, y1):
 
 
 @numba.njit(cache=True)
-def _lattice_edges(occ, res, vx, vy, h, d_alpha, gamma, stencil, node_of):
+def _lattice_edges(occ: np.ndarray, res: float, vx: np.ndarray, vy: np.ndarray, h: float, d_alpha: float,
+                   gamma: float, stencil: np.ndarray, node_of: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     rows, cols = occ.shape
     src = []
     dst = []
@@ -136,7 +146,7 @@ def _lattice_edges(occ, res, vx, vy, h, d_alpha, gamma, stencil, node_of):
 
 
 @numba.njit(cache=True)
-def _path_cost(vx, vy, h, d_alpha, gamma, path):
+def _path_cost(vx: np.ndarray, vy: np.ndarray, h: float, d_alpha: float, gamma: float, path: np.ndarray) -> float:
     total = 0.0
     for k in range(path.shape[0] - 1):
         total += _seg_cost(vx, vy, h, d_alpha, gamma, path[k, 0], path[k, 1], path[k + 1, 0], path[k + 1, 1])
@@ -144,7 +154,8 @@ def _path_cost(vx, vy, h, d_alpha, gamma, path):
 
 
 @numba.njit(cache=True)
-def _relax(occ, res, vx, vy, h, d_alpha, gamma, path, step0, rounds):
+def _relax(occ: np.ndarray, res: float, vx: np.ndarray, vy: np.ndarray, h: float, d_alpha: float, gamma: float,
+           path: np.ndarray, step0: float, rounds: int) -> np.ndarray:
     """Move each inner vertex along 8 directions while the cost of its two edges falls and both stay
     clear; the step halves when no move helps, down to step0 / 2^rounds."""
     n = path.shape[0]
@@ -191,7 +202,7 @@ class FlowOptimum:
 class FlowJudge:
     """Eq. (12) costs and optima on one map and current (parameters D_alpha, gamma_alpha of eq. (12))."""
 
-    def __init__(self, occ: np.ndarray, resolution: float, current=None, d_alpha: float = 1.0,
+    def __init__(self, occ: np.ndarray, resolution: float, current: MapCurrent | None = None, d_alpha: float = 1.0,
                  gamma_alpha: float = 0.1, spacing: float = 0.5) -> None:
         self.occ = np.ascontiguousarray(occ, dtype=np.bool_)
         self.res = float(resolution)
@@ -199,15 +210,15 @@ class FlowJudge:
         self.flow = FlowField.sample(current, cols * self.res, rows * self.res, spacing)
         self.d_alpha, self.gamma = float(d_alpha), float(gamma_alpha)
 
-    def _args(self):
+    def _args(self) -> tuple[np.ndarray, np.ndarray, float, float, float]:
         return self.flow.vx, self.flow.vy, self.flow.spacing, self.d_alpha, self.gamma
 
-    def path_cost(self, path) -> float:
+    def path_cost(self, path: npt.ArrayLike) -> float:
         """Eq. (12) integrated along the polyline ``path`` (N, 2), metres."""
         p = np.ascontiguousarray(path, dtype=np.float64)
         return float(_path_cost(*self._args(), p)) if len(p) >= 2 else 0.0
 
-    def clear(self, a, b) -> bool:
+    def clear(self, a: Sequence[float], b: Sequence[float]) -> bool:
         return bool(segment_clear(self.occ, self.res, float(a[0]), float(a[1]), float(b[0]), float(b[1])))
 
     def optimum(self, start: tuple[float, float], goal: tuple[float, float], rounds: int = 3) -> FlowOptimum:

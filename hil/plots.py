@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     from planner.result import PlannerResult
 
 # A current in the map frame: (x east, y north) m -> (v_east, v_north) m/s (hil.scenario.MapFrameCurrent)
-MapField = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+MapField = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray | float, np.ndarray | float]]
 
 
 def _draw_map(ax: Axes, occ: np.ndarray, resolution: float, inflated: np.ndarray | None = None) -> None:
@@ -71,10 +71,12 @@ def _draw_field(ax: Axes, field: MapField | None, width: float, height: float, n
     ax.quiver(X, Y, U, V, color="#2a8f8f", alpha=0.6, width=0.003, zorder=1)
 
 
-def _path(ax: Axes, path: np.ndarray, **kw) -> None:   # kw: matplotlib Line2D properties, passed on
+def _path(ax: Axes, path: np.ndarray, *, color: str | None = None, lw: float | None = None, ls: str = "-",
+          zorder: float | None = None, label: str | None = None) -> None:
+    """``path`` (N, 2) m as a line; None: matplotlib's default for that Line2D property."""
     path = np.asarray(path).reshape(-1, 2)
     if len(path):
-        ax.plot(path[:, 0], path[:, 1], **kw)
+        ax.plot(path[:, 0], path[:, 1], color=color, lw=lw, ls=ls, zorder=zorder, label=label)
 
 
 def plot_plan(out: str | Path, occ: np.ndarray, resolution: float, start: tuple[float, float],

@@ -50,6 +50,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Literal, TypeVar
 
 import numpy as np
+import numpy.typing as npt
 
 from common.params import param
 from hil import charts, config
@@ -269,7 +270,7 @@ class MapFrameCurrent:
     def __init__(self, ned_field: CurrentSource, t: float) -> None:
         self.ned_field, self.t = ned_field, float(t)
 
-    def __call__(self, x, y):
+    def __call__(self, x: npt.ArrayLike, y: npt.ArrayLike) -> tuple[np.ndarray | float, np.ndarray | float]:
         v_north, v_east = self.ned_field.velocity(y, x, self.t)   # NED x = north = map y
         if np.ndim(x) == 0 and np.ndim(y) == 0:
             return float(v_east), float(v_north)

@@ -37,8 +37,10 @@ from planner.params import ALGORITHM_NAMES
 
 if TYPE_CHECKING:
     import numpy as np
+    import numpy.typing as npt
 
     from hil.flow_optimum import FlowJudge
+    from planner.field import DisturbanceField, GridField
     from planner.params import PlannerParams
     from planner.problem import PlanningProblem
 
@@ -119,17 +121,17 @@ class IslandWorld:
         self.occ = occ
 
     @staticmethod
-    def map_field():
+    def map_field() -> DisturbanceField:
         import numpy as np
 
-        def stream(x, y):
+        def stream(x: npt.ArrayLike, y: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
             x = np.asarray(x, dtype=float)
             y = np.asarray(y, dtype=float)
             vx = np.where(y > 22.5, 0.5, -0.5) + 0.0 * x
             return vx, np.zeros_like(vx)
         return stream
 
-    def planning_field(self):
+    def planning_field(self) -> GridField:
         from planner.field import GridField
         return GridField.sample(self.map_field(), 60.0, 40.0, 0.5)
 
@@ -166,7 +168,8 @@ class OursRunner:
 class OmplRunner:
     """OMPL's geometric RRT* on the same grid, with a Python state-validity checker."""
 
-    def __init__(self, occ: np.ndarray, resolution: float, start, goal, step: float) -> None:
+    def __init__(self, occ: np.ndarray, resolution: float, start: tuple[float, float], goal: tuple[float, float],
+                 step: float) -> None:
         from ompl import base as ob
         from ompl import geometric as og
         from ompl import util as ou
@@ -185,7 +188,7 @@ class OmplRunner:
         rows, cols = occ.shape
         free = ~occ
 
-        def valid(state) -> bool:
+        def valid(state: Sequence[float]) -> bool:   # an OMPL state: its coordinates by index
             c, r = int(state[0] / resolution), int(state[1] / resolution)
             return 0 <= r < rows and 0 <= c < cols and bool(free[r, c])
 
@@ -229,7 +232,8 @@ class OmplRunner:
                 "first": dt if (first and exact) else None}
 
 
-def _measure(runner, seeds: list[int], budgets: tuple[float, ...], optimum: float, label: str) -> JsonTable:
+def _measure(runner: OursRunner | OmplRunner, seeds: list[int], budgets: tuple[float, ...], optimum: float,
+             label: str) -> JsonTable:
     firsts: list[float | None] = []
     ratios: dict[float, list[float]] = {b: [] for b in budgets}
     rates: list[float] = []

@@ -15,7 +15,11 @@ from hil.scenario_names import available as scenario_names
 from planner.params import ALGORITHM_NAMES, SEED_MAX
 
 if TYPE_CHECKING:
+    import numpy as np
+
+    from hil.scenario import Scenario
     from hil.settings import HilConfig
+    from planner.field import DisturbanceField
     from planner.gridmap import OccupancyGrid
     from planner.params import PlannerParams
     from planner.result import PlannerResult
@@ -116,10 +120,16 @@ def add_parser(sub: argparse._SubParsersAction, parents: list[argparse.ArgumentP
     p.set_defaults(func=run)
 
 
-def _problem_inputs(args: argparse.Namespace, settings):
+# (occ, resolution m/cell, start, goal m, heading rad or None, scenario or None, planner overrides, label)
+ProblemInputs = tuple["np.ndarray", float, tuple[float, float], tuple[float, float], "float | None",
+                      "Scenario | None", dict[str, object], str]
+
+
+def _problem_inputs(args: argparse.Namespace, settings: HilConfig) -> ProblemInputs:
+    """(occ, resolution, start, goal, heading (None: --map without --heading), the scenario or None,
+    its planner overrides, label)"""
     from hil import scenario as scenarios
 
-    """(occ, resolution, start, goal, heading, field or None, overrides, label)"""
     if args.scenario:
         if args.map is not None or args.resolution is not None:
             raise UsageError("--scenario already names the map: do not combine it with --map/--resolution")
@@ -142,7 +152,8 @@ def _problem_inputs(args: argparse.Namespace, settings):
     return occ, args.resolution, args.start, args.goal, args.heading, None, {}, args.map.name
 
 
-def _map_field(args: argparse.Namespace, settings, sc, raw):
+def _map_field(args: argparse.Namespace, settings: HilConfig, sc: Scenario | None
+               ) -> tuple[DisturbanceField | None, str]:
     """(the map-frame current or None, a phrase saying where it came from)."""
     from hil.scenario import MapFrameCurrent
 
@@ -166,7 +177,8 @@ def _map_field(args: argparse.Namespace, settings, sc, raw):
     return GridField.uniform(ve, vn), f"uniform {ve:g},{vn:g} m/s (east, north)"
 
 
-def _judged(grid, map_field, params, start, goal, path) -> dict[str, float]:
+def _judged(grid: OccupancyGrid, map_field: DisturbanceField | None, params: PlannerParams,
+            start: tuple[float, float], goal: tuple[float, float], path: np.ndarray) -> dict[str, float]:
     """The path's eq. (12) cost and the least one (hil.flow_optimum, independent of the planner),
     computed after the search: the current itself (not the planner's 1 m grid of it), pieces of
     0.25 m."""
@@ -174,7 +186,7 @@ def _judged(grid, map_field, params, start, goal, path) -> dict[str, float]:
 
     t0 = time.monotonic()
     judge = FlowJudge(grid.occ, grid.resolution, map_field, params.d_alpha, params.gamma_alpha)
-    best = judge.optimum(tuple(start), tuple(goal))
+    best = judge.optimum((float(start[0]), float(start[1])), (float(goal[0]), float(goal[1])))
     cost = judge.path_cost(path)
     console.progress(f"hil plan: eq. (12) optimum {best.cost:.2f} (judge, {time.monotonic() - t0:.1f} s); "
                      f"this path {cost:.2f}: {cost / best.cost:.4f} x the optimum")
@@ -252,7 +264,7 @@ def run(args: argparse.Namespace) -> int:
                              f"obstacle or the map edge (the map inflated by [planner] safety_radius); move it "
                              f"or lower --inflate")
     free_regions(grid)  # labelled once here (cached on the grid), not inside the search budget
-    map_field, current_source = _map_field(args, settings, sc, raw)
+    map_field, current_source = _map_field(args, settings, sc)
     field = None
     if params.objective == "current" and map_field is not None:
         field = GridField.sample(map_field, raw.width, raw.height, 1.0)
@@ -260,7 +272,8 @@ def run(args: argparse.Namespace) -> int:
         console.progress(f"hil plan: no current ({current_source}): --objective current costs the length; "
                          f"give --current config or --current VE,VN")
     drift = wave_drift(settings) if params.alpha_y == "resultant" else None
-    problem = PlanningProblem(grid=grid, start=tuple(start), goal=tuple(goal), start_heading=heading, field=field,
+    problem = PlanningProblem(grid=grid, start=(float(start[0]), float(start[1])),
+                              goal=(float(goal[0]), float(goal[1])), start_heading=heading, field=field,
                               wave_drift=drift)
     setup_s = time.monotonic() - t_setup
     console.progress(f"hil plan: {params.algorithm} on {label} ({raw.width:g} m x {raw.height:g} m), "
