@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 from planner.traffic_map import Zone
 
@@ -58,7 +59,8 @@ REQUIRED_ACTION = {HEAD_ON: "alter to starboard, pass port to port", OVERTAKING:
                    CROSSING_STAND_ON: "stand on", STATIC: "keep clear"}
 
 
-def _p(help: str, unit: str = "", *, gt=None, ge=None, lt=None, le=None, default=None):
+def _p(help: str, unit: str = "", *, gt: float | None = None, ge: float | None = None, lt: float | None = None,
+       le: float | None = None, default: object = None) -> Any:   # a field specifier: Any, as dataclasses.field's own
     return field(default=default, metadata={"help": help, "unit": unit, "gt": gt, "ge": ge, "lt": lt, "le": le})
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 
 @dataclass(frozen=True)
@@ -45,7 +45,8 @@ OBJECTIVES = ("length", "current")
 SEED_MAX = 2**63 - 1  # the compiled generator (numpy.random.seed under numba) takes a signed 64-bit integer
 
 
-def _p(help: str, unit: str = "", *, gt=None, ge=None, lt=None, le=None, default=None):
+def _p(help: str, unit: str = "", *, gt: float | None = None, ge: float | None = None, lt: float | None = None,
+       le: float | None = None, default: object = None) -> Any:   # a field specifier: Any, as dataclasses.field's own
     meta = {"help": help, "unit": unit, "gt": gt, "ge": ge, "lt": lt, "le": le}
     return field(default=default, metadata=meta)
 
