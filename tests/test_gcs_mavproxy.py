@@ -242,6 +242,33 @@ def test_mavproxy_flies_a_qgc_plan_as_ardurover_with_pause_resume_guided_hold_an
     assert reached[:5] == [1, 2, 3, 4, 5], reached          # item 0 (home) never: ArduPilot's convention
 
 
+def _harbour_session(tmp_path: Path) -> tuple[subprocess.Popen, Console, Gcs]:
+    """`hil run` of the harbour waiting for arm at --speedup 4, MAVProxy (system 255) on its ground-station
+    endpoint and a second ground station (254) that watches."""
+    port = free_udp_port()
+    proc = start_run(tmp_path / "run", "--scenario", "harbour", "--duration", "5000", "--wait-for-arm",
+                     "--speedup", "4", "--gcs", f"udpin:127.0.0.1:{port}")
+    mp = Console([MAVPROXY, f"--master=udpout:127.0.0.1:{port}", "--source-system=255",
+                  "--default-modules=mode,arm,cmdlong,wp", f"--state-basedir={tmp_path / 'mavproxy'}"], tmp_path)
+    watcher = Gcs(f"udpout:127.0.0.1:{port}", sysid=254)
+    return proc, mp, watcher
+
+
+def _ned(p) -> tuple[float, float]:
+    """A GLOBAL_POSITION_INT's position, NED m from the harbour's origin."""
+    return GEO.geodetic_to_sea_level(p.lat * 1e-7, p.lon * 1e-7)
+
+
+def _guided_to(mp: Console, target: tuple[float, float]) -> None:
+    """MAVProxy: `mode GUIDED`, then `guided` to ``target`` (NED m) as a mission item (not DO_REPOSITION)."""
+    mp.send("mode GUIDED")
+    mp.expect("DO_SET_MODE: ACCEPTED")
+    lat, lon = GEO.sea_level_to_geodetic(*target)
+    mp.send("set guided_use_reposition 0")
+    mp.send(f"guided {lat:.7f} {lon:.7f} 0")
+    mp.expect("TYPE_MISSION: ACCEPTED")
+
+
 def test_mavproxy_guided_then_disarm_beside_the_breakwater_is_refused_and_disarm_force_is_taken(tmp_path):
     """Issue 31: MAVProxy's `guided LAT LON ALT` as ArduPilot's guided "fly to" (MISSION_ITEM_INT with
     current = 2, as QGroundControl's "Go to location" on an ArduPilot vehicle) is refused in HOLD
@@ -252,12 +279,7 @@ def test_mavproxy_guided_then_disarm_beside_the_breakwater_is_refused_and_disarm
     from common.mavlink import MAV_TYPE as M
 
     target = (104.0, 92.0)                  # NED m, as tests/test_holding_ground.py's
-    port = free_udp_port()
-    proc = start_run(tmp_path / "run", "--scenario", "harbour", "--duration", "5000", "--wait-for-arm",
-                     "--speedup", "4", "--gcs", f"udpin:127.0.0.1:{port}")
-    mp = Console([MAVPROXY, f"--master=udpout:127.0.0.1:{port}", "--source-system=255",
-                  "--default-modules=mode,arm,cmdlong,wp", f"--state-basedir={tmp_path / 'mavproxy'}"], tmp_path)
-    watcher = Gcs(f"udpout:127.0.0.1:{port}", sysid=254)
+    proc, mp, watcher = _harbour_session(tmp_path)
     try:
         mp.expect("Detected vehicle 1:1", timeout=240)
         assert watcher.connect(60) is not None and watcher.recv("GLOBAL_POSITION_INT", 60) is not None
@@ -273,8 +295,7 @@ def test_mavproxy_guided_then_disarm_beside_the_breakwater_is_refused_and_disarm
         mp.expect("TYPE_MISSION: ACCEPTED")
 
         def there(p) -> bool:
-            n, e = GEO.geodetic_to_sea_level(p.lat * 1e-7, p.lon * 1e-7)
-            return math.dist((n, e), target) <= 1.0
+            return math.dist(_ned(p), target) <= 1.0
         assert watcher.recv("GLOBAL_POSITION_INT", 240, there) is not None
         mp.send("disarm")
         mp.expect("COMPONENT_ARM_DISARM: TEMPORARILY_REJECTED")
@@ -301,27 +322,14 @@ def test_mavproxy_mode_changes_every_second_beside_the_breakwater_keep_the_boat_
     from support.closed_loop import COLLISION_CLEARANCE, clearance
 
     target = (105.9, 92.0)
-    port = free_udp_port()
-    proc = start_run(tmp_path / "run", "--scenario", "harbour", "--duration", "5000", "--wait-for-arm",
-                     "--speedup", "4", "--gcs", f"udpin:127.0.0.1:{port}")
-    mp = Console([MAVPROXY, f"--master=udpout:127.0.0.1:{port}", "--source-system=255",
-                  "--default-modules=mode,arm,cmdlong,wp", f"--state-basedir={tmp_path / 'mavproxy'}"], tmp_path)
-    watcher = Gcs(f"udpout:127.0.0.1:{port}", sysid=254)
+    proc, mp, watcher = _harbour_session(tmp_path)
     try:
         mp.expect("Detected vehicle 1:1", timeout=240)
         assert watcher.connect(60) is not None and watcher.recv("GLOBAL_POSITION_INT", 60) is not None
         mp.send("arm throttle")
         mp.expect("COMPONENT_ARM_DISARM: ACCEPTED")
-        mp.send("mode GUIDED")
-        mp.expect("DO_SET_MODE: ACCEPTED")
-        lat, lon = GEO.sea_level_to_geodetic(*target)
-        mp.send("set guided_use_reposition 0")
-        mp.send(f"guided {lat:.7f} {lon:.7f} 0")
-        mp.expect("TYPE_MISSION: ACCEPTED")
-
-        def ned(p) -> tuple[float, float]:
-            return GEO.geodetic_to_sea_level(p.lat * 1e-7, p.lon * 1e-7)
-        arrived = watcher.recv("GLOBAL_POSITION_INT", 240, lambda p: math.dist(ned(p), target) <= 3.0)
+        _guided_to(mp, target)
+        arrived = watcher.recv("GLOBAL_POSITION_INT", 240, lambda p: math.dist(_ned(p), target) <= 3.0)
         assert arrived is not None
         t0, worst, k = arrived.time_boot_ms, math.inf, 0
         modes = ("LOITER", "HOLD", "MANUAL", "GUIDED")
@@ -331,7 +339,7 @@ def test_mavproxy_mode_changes_every_second_beside_the_breakwater_keep_the_boat_
             k += 1
             p = watcher.recv("GLOBAL_POSITION_INT", 10)
             assert p is not None, "the run stopped streaming"
-            worst = min(worst, clearance(*ned(p)))
+            worst = min(worst, clearance(*_ned(p)))
             if p.time_boot_ms - t0 > 60_000:
                 break
         assert k >= 8, k
@@ -349,15 +357,7 @@ def test_mavproxy_guided_entered_again_keeps_station_instead_of_resuming_the_old
     half-way, then `mode GUIDED` again. A second ground station sees the boat keep station where GUIDED was
     entered (80 s of vehicle time at --speedup 4); until b26c891 it went on to the old target."""
     target = (64.0, 22.0)                   # NED m, 24 m north of the start, open water (15 m clear)
-    port = free_udp_port()
-    proc = start_run(tmp_path / "run", "--scenario", "harbour", "--duration", "5000", "--wait-for-arm",
-                     "--speedup", "4", "--gcs", f"udpin:127.0.0.1:{port}")
-    mp = Console([MAVPROXY, f"--master=udpout:127.0.0.1:{port}", "--source-system=255",
-                  "--default-modules=mode,arm,cmdlong,wp", f"--state-basedir={tmp_path / 'mavproxy'}"], tmp_path)
-    watcher = Gcs(f"udpout:127.0.0.1:{port}", sysid=254)
-
-    def ned(p) -> tuple[float, float]:
-        return GEO.geodetic_to_sea_level(p.lat * 1e-7, p.lon * 1e-7)
+    proc, mp, watcher = _harbour_session(tmp_path)
     try:
         mp.expect("Detected vehicle 1:1", timeout=240)
         assert watcher.connect(60) is not None
@@ -365,14 +365,9 @@ def test_mavproxy_guided_entered_again_keeps_station_instead_of_resuming_the_old
         assert start is not None
         mp.send("arm throttle")
         mp.expect("COMPONENT_ARM_DISARM: ACCEPTED")
-        mp.send("mode GUIDED")
-        mp.expect("DO_SET_MODE: ACCEPTED")
-        lat, lon = GEO.sea_level_to_geodetic(*target)
-        mp.send("set guided_use_reposition 0")
-        mp.send(f"guided {lat:.7f} {lon:.7f} 0")
-        mp.expect("TYPE_MISSION: ACCEPTED")
-        half = math.dist(ned(start), target) / 2.0
-        assert watcher.recv("GLOBAL_POSITION_INT", 240, lambda p: math.dist(ned(p), target) <= half) is not None
+        _guided_to(mp, target)
+        half = math.dist(_ned(start), target) / 2.0
+        assert watcher.recv("GLOBAL_POSITION_INT", 240, lambda p: math.dist(_ned(p), target) <= half) is not None
         mp.send("mode LOITER")
         mp.expect("DO_SET_MODE: ACCEPTED")
         mp.send("mode GUIDED")
@@ -380,12 +375,12 @@ def test_mavproxy_guided_entered_again_keeps_station_instead_of_resuming_the_old
         assert watcher.recv("HEARTBEAT", 10, lambda h: h.get_srcSystem() == 1 and h.custom_mode == 15) is not None
         entered = watcher.recv("GLOBAL_POSITION_INT", 10)
         assert entered is not None
-        here, t0, farthest, nearest = ned(entered), entered.time_boot_ms, 0.0, math.inf
+        here, t0, farthest, nearest = _ned(entered), entered.time_boot_ms, 0.0, math.inf
         while True:
             p = watcher.recv("GLOBAL_POSITION_INT", 10)
             assert p is not None, "the run stopped streaming"
-            farthest = max(farthest, math.dist(ned(p), here))
-            nearest = min(nearest, math.dist(ned(p), target))
+            farthest = max(farthest, math.dist(_ned(p), here))
+            nearest = min(nearest, math.dist(_ned(p), target))
             if p.time_boot_ms - t0 > 80_000:
                 break
         assert farthest <= 5.0, farthest                          # kept station where GUIDED was entered
