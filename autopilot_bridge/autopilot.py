@@ -22,8 +22,9 @@ Event-driven by the simulator's sensor frames (one per IMU period). For each new
    :class:`autopilot_bridge.can_actuators.CanActuators`.
 
 This class is the frame pipeline that runs those steps in order; the steps' parts are components of
-their own, each owning its parameters (:mod:`autopilot_bridge.parameters`): the helm (step 3-4,
-:mod:`autopilot_bridge.helm`), plan acceptance (:mod:`autopilot_bridge.plan_acceptance`), the planning
+their own, each owning its parameters (:mod:`autopilot_bridge.parameters`): the world keeper (the grid with
+its sensed obstacles and fence, the global route, what the planner worker is told:
+:mod:`autopilot_bridge.world_keeper`), the helm (step 3-4, :mod:`autopilot_bridge.helm`), plan acceptance (:mod:`autopilot_bridge.plan_acceptance`), the planning
 hand-off (:mod:`autopilot_bridge.plan_handoff`), station keeping, the vehicle's modes and mission
 (:mod:`autopilot_bridge.vehicle`). Ground stations command it through
 :class:`autopilot_bridge.vehicle_commands.VehicleCommands` (``commands``, the
@@ -55,28 +56,24 @@ from autopilot_bridge.computer_setup import AutopilotStats, ComputerConfig, Devi
 from autopilot_bridge.control import HeadingPID, SpeedController, Thrust
 from autopilot_bridge.course import Course
 from autopilot_bridge.current_estimate import CurrentObserver
-from autopilot_bridge.geofence import FENCE_HOLD, FENCE_RTL, GeoFence
 from autopilot_bridge.helm import Helm
-from autopilot_bridge.hil_link import RangeScan, SensorFrame
-from autopilot_bridge.local_planning import World, WorldUpdate, map_to_ned_path
+from autopilot_bridge.hil_link import SensorFrame
+from autopilot_bridge.local_planning import World, map_to_ned_path
 from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavigationFilter, NavState
-from autopilot_bridge.obstacle_map import SensedObstacles, path_blocked
 from autopilot_bridge.onboard_failsafes import OnboardFailsafes
 from autopilot_bridge.onboard_status import OnboardSensors, OnboardStatus
 from autopilot_bridge.parameters import ParamTable, bind
 from autopilot_bridge.plan_acceptance import AcceptedPath, PlanAcceptance
 from autopilot_bridge.plan_handoff import PlanHandoff
-from autopilot_bridge.planner_tuning import PlannerTuning
-from autopilot_bridge.route_planning import RouteKeeper
 from autopilot_bridge.station_keeping import StationKeeper
 from autopilot_bridge.summary import AutopilotSummary, ControlLatency, NavigationCounts, WorkerStartup
 from autopilot_bridge.vehicle import MIS_DONE_HOLD, MIS_DONE_LOITER, Vehicle, Waypoint
 from autopilot_bridge.vehicle_api import VehicleStatus
 from autopilot_bridge.vehicle_commands import VehicleCommands
+from autopilot_bridge.world_keeper import WorldKeeper
 from common.dronecan_layout import RAW_COMMAND_MAX, quantize
 from common.mavlink import MAV_TYPE as M
-from planner.fence import Fence
 from planner.gridmap import OccupancyGrid
 
 _logger = logging.getLogger(__name__)
@@ -106,12 +103,6 @@ class Autopilot:
         # The chart plus the obstacles sensed on the way (kept across simulator restarts: the
         # world did not change).
         self.grid = grid
-        self.sensed = SensedObstacles(world.occ, world.resolution, params.sensed_confirm_hits,
-                                      params.sensed_explain_radius)
-        # The global route (autopilot_bridge/route_planning.py): planned on this grid for every new
-        # route, re-planned when sensed obstacles block it.
-        self.routes = RouteKeeper(self.grid, safety, log=self.log)
-        self.routes.adopt(reference_ned)
         self.stats = AutopilotStats()
         self.track = array("d")   # t, north, east, psi of the estimate at 10 Hz, flat (8 bytes a value)
         # What a ground station commands (autopilot_bridge.vehicle). Without one the scenario's
@@ -125,10 +116,6 @@ class Autopilot:
         goal = (world.goal[1], world.goal[0])
         self.course = Course(goal_ned=goal, goal_radius=params.goal_tolerance, reference_ned=reference_ned,
                              target=goal)
-        self._route_version = 0
-        self._world_version = 0
-        self._sent_overrides: dict[str, float] = {}
-        self._fence_enabled = 1.0
         # Lockstep with a ground station attached: simulated time passes at most pace_speedup x wall
         # time (None: only while disarmed, at 1x), so that a person can follow the boat.
         self.pace_speedup = pace_speedup
@@ -137,8 +124,11 @@ class Autopilot:
         self._local_path: tuple[int, tuple[tuple[float, float], ...]] = (0, ())   # (paths accepted, newest, NED)
         self.planning = PlanHandoff(self.worker, params, self.lockstep, self.seed, self.stats, self._event,
                                     speed=self.vehicle.speed_setpoint)
-        self.planner_tuning = PlannerTuning(world.params)
-        self.acceptance = PlanAcceptance(params, self.grid, self.sensed, self.planning, self.course, self.stats)
+        # The grid's sensed obstacles and fence, the global route over it, the planner's tuning
+        # (autopilot_bridge/world_keeper.py).
+        self.keeper = WorldKeeper(world, grid, params, self.vehicle, self.course, self.planning, self.stats,
+                                  self._event, self.log)
+        self.acceptance = PlanAcceptance(params, self.grid, self.keeper.sensed, self.planning, self.course, self.stats)
         self.station = StationKeeper(params.loiter_radius, params.loiter_speed,
                                      Thrust(0.0, 0.0, 0.0, 0.0, False), params.station_keeping)
         self.current = CurrentObserver(propulsion.surge, prior=self._field_prior(world))
@@ -146,22 +136,20 @@ class Autopilot:
                          self.acceptance, HeadingPID(config.control), SpeedController(config.control, propulsion.surge),
                          self.station, self.current, self._event, self._count_fallback)
         self.station.zero_thrust = self.helm.zero_thrust
-        self.geofence = GeoFence()
-        self._fence_versions = 0
-        self.vehicle.rally_target = self.geofence.rally_point
-        self.helm.fence_depth = self.geofence.depth
+        self.helm.fence_depth = self.keeper.geofence.depth
         self.nav: NavigationFilter   # built by _reset, as after every simulator restart
         # Telemetry's truth: sensor health and the pack (BATT_* parameters, low-battery failsafe).
         self.onboard = OnboardSensors(BatteryMonitor(config.battery, self._battery_failsafe, self._event))
         self.failsafes = OnboardFailsafes(self.vehicle, self._event)
         self._reset()
         # One table of every component's own declarations: the parameter service reads and writes them.
-        self.param_table = ParamTable(bind(self.vehicle, self.planning, self.planner_tuning, self.helm.heading_pid,
-                                           self.helm.speed_ctl, self.station, self.geofence,
+        self.param_table = ParamTable(bind(self.vehicle, self.planning, self.keeper.planner_tuning,
+                                           self.helm.heading_pid, self.helm.speed_ctl, self.station,
+                                           self.keeper.geofence,
                                            self.onboard.battery))
         self.commands = VehicleCommands(self.vehicle, self.grid, safety, self.param_table, self.actuators,
-                                        lambda: self._status, self._record_event, self.geofence,
-                                        self._fence_changed, onboard=self.onboard_status,
+                                        lambda: self._status, self._record_event, self.keeper.geofence,
+                                        self.keeper.fence_changed, onboard=self.onboard_status,
                                         current=lambda: self.current.velocity,
                                         coast_s=propulsion.surge.m11 / propulsion.surge.d_u)
         self.grid.polyline_free(np.zeros((0, 2)))   # plan acceptance's check compiled now, not in a frame
@@ -200,50 +188,6 @@ class Autopilot:
     def local_paths(self) -> tuple[AcceptedPath, ...]:
         """The accepted local paths, for the run's record."""
         return tuple(self.acceptance.local_paths)
-
-    # -- the geofence -------------------------------------------------------------------------------
-    def _fence_changed(self, fence: Fence | None = None) -> None:
-        """A new fence (upload, clear) or the fence switched on or off or breached: the grids and the route."""
-        if fence is not None:
-            self._fence_versions += 1
-            self.geofence.fence = Fence(fence.inclusion_polygons, fence.exclusion_polygons, fence.inclusion_circles,
-                                        fence.exclusion_circles, version=self._fence_versions)
-        occ = self.world.occ.copy()
-        cells = self.sensed.cells()
-        if len(cells):
-            occ[cells[:, 0], cells[:, 1]] = True
-        plan_fence = self.geofence.for_planning()
-        if not plan_fence.empty:
-            occ |= plan_fence.forbidden(occ.shape, self.grid.resolution)
-        self.grid.replace(occ)
-        if self.vehicle.route is not None and len(self.routes.waypoints) >= 2:
-            self.course.reference_ned = self.routes.set_route(self.routes.waypoints)
-        self._world_version += 1
-
-    def _check_fence(self, t: float, s: NavState) -> None:
-        """A breach acts once (FENCE_ACTION); the fence leaves the planning grids until the boat is back."""
-        if self.geofence.enable != self._fence_enabled:
-            self._fence_enabled = self.geofence.enable
-            self._fence_changed()
-        change = self.geofence.check(s.x, s.y)
-        if change is None:
-            return
-        self._fence_changed()
-        if change == "cleared":
-            self._event(t, "fence: back inside, breach over")
-            return
-        action = self.geofence.action
-        v = self.vehicle
-        if action == FENCE_RTL and v.mode != Mode.RTL:
-            ok, why = v.set_mode(Mode.RTL, (s.x, s.y))
-            self._event(t, f"fence breach: {why if ok else 'RTL refused (' + why + '), holding station'}", True)
-            if not ok:
-                v.set_mode(Mode.LOITER, (s.x, s.y))
-        elif action == FENCE_HOLD:
-            v.set_mode(Mode.LOITER, (s.x, s.y))
-            self._event(t, "fence breach: holding station (LOITER)", True)
-        else:
-            self._event(t, "fence breach (FENCE_ACTION 0: reported only)", True)
 
     def _event(self, t: float, text: str, warning: bool = False) -> None:
         self.stats.events.append((t, text))
@@ -298,7 +242,7 @@ class Autopilot:
         taking this core) cost ~2 ms on the frames that did it in lockstep."""
         s, self.helm.plan_due = self.helm.plan_due, None
         if s is not None:
-            self.planning.submit(s, self.sensed, self.traffic, self.world_update())
+            self.planning.submit(s, self.keeper.sensed, self.traffic, self.keeper.update())
 
     # -- one frame -----------------------------------------------------------------------------
     def on_frame(self, f: SensorFrame, received_at: float) -> None:
@@ -333,7 +277,7 @@ class Autopilot:
             c.behaviour.to(Behaviour.IDLE)      # navigation is ready
             c.next_plan_t = t
         if f.scan is not None and self.p.sensed_obstacles:
-            self._sense(t, f.scan, s)
+            self.keeper.sense(t, f.scan, s)
         if self.traffic is not None:
             texts, replan = self.traffic.on_frame(t, s, self.link.take_ais(), self.telemetry)
             for text in texts:
@@ -345,9 +289,9 @@ class Autopilot:
             self.track.extend((t, s.x, s.y, s.psi))
 
         self.vehicle.update(s.x, s.y, t)
-        self._check_fence(t, s)
+        self.keeper.check_fence(t, s)
         self.failsafes.check(s, c.behaviour.state)
-        self._apply_route(t)
+        self.keeper.apply_route(t)
         v = self.vehicle
         # The active mode decides where the thrust comes from (autopilot_bridge.modes), after the keep-off guard
         # (autopilot_bridge.keep_off); disarmed: none.
@@ -383,38 +327,7 @@ class Autopilot:
         if self.telemetry is not None:
             self.telemetry.on_frame(status)
 
-    # -- routes and the planner's world ---------------------------------------------------------------
-    def _apply_route(self, t: float) -> None:
-        """Follow a new global reference path (mission upload, AUTO/RTL/GUIDED entered), atomically."""
-        r = self.vehicle.route
-        if r is None or r.version == self._route_version:
-            return
-        self._route_version = r.version
-        c = self.course
-        c.reference_ned = self.routes.set_route(r.path)   # legs of any length: routed on the chart
-        c.goal_ned = (float(r.path[-1][0]), float(r.path[-1][1]))
-        c.goal_radius = r.goal_radius
-        c.target = c.goal_ned
-        c.los = None
-        c.behaviour.new_route()
-        c.complete_t = None
-        self.planning.route_changed()   # whatever the worker is planning now is for the old route
-        c.next_plan_t = t
-        self._world_version += 1
-
-    def world_update(self) -> WorldUpdate | None:
-        """What the planner worker must use instead of the World it started with (None: nothing changed)."""
-        overrides = self.planner_tuning.overrides()
-        if overrides != self._sent_overrides:     # a ground station tuned the planner
-            self._sent_overrides = overrides
-            self._world_version += 1
-        if self._world_version == 0:   # no route, re-planned route or parameter since the start
-            return None
-        ref = self.course.reference_ned[:, ::-1].copy()          # NED -> map (x east, y north)
-        fence = self.geofence.for_planning()
-        return WorldUpdate(self._world_version, (float(ref[-1][0]), float(ref[-1][1])), ref, dict(overrides),
-                           None if fence.empty else fence)
-
+    # -- pacing ----------------------------------------------------------------------------------
     def _pace(self, t: float, speedup: float) -> None:
         """Lockstep with a person watching: let simulated time pass no faster than ``speedup`` x wall time.
 
@@ -429,26 +342,6 @@ class Autopilot:
         if ahead > 0.0:
             time.sleep(min(ahead, 0.1))
             self.helm.waited = True  # a paced frame measures the pacing, not the control loop
-
-    def _sense(self, t: float, scan: RangeScan, s: NavState) -> None:
-        """Add a range scan's new obstacles to the map; replan at once if they are near the path ahead."""
-        new = self.sensed.add_scan(scan.bearings, scan.ranges, s.x, s.y, s.psi, scan.sector_width)
-        if len(new) == 0:
-            return
-        self.grid.mark(new)
-        c = self.course
-        replanned = self.routes.on_sensed(new, (s.x, s.y))
-        if replanned is not None:
-            c.reference_ned = replanned
-            self._world_version += 1
-            self._event(t, "sensed obstacle on the global route: route re-planned")
-        if c.behaviour.state is Behaviour.PLANNED and c.los is not None:
-            ahead = c.los.path[c.los.index:]
-            if path_blocked(ahead, new, self.grid.resolution, self.p.sensed_path_clearance):
-                self.stats.sensed_replans += 1
-                self._event(t, "sensed obstacle near the local path: replanning")
-                c.next_plan_t = t
-                c.path_invalid = True
 
     def _send(self, time_usec: int, cmd: Thrust, received_at: float) -> None:
         port, stdb = cmd.port_cmd, cmd.stdb_cmd
@@ -525,7 +418,7 @@ class Autopilot:
             simulator_restarts=self.stats.simulator_restarts,
             navigation=NavigationCounts(updates=dict(self.nav.stats.updates), rejected=dict(self.nav.stats.rejected),
                                         position_resets=self.nav.stats.position_resets),
-            sensed_obstacles={**self.sensed.summary(), "replans": self.stats.sensed_replans},
+            sensed_obstacles={**self.keeper.sensed.summary(), "replans": self.stats.sensed_replans},
             link_rejects=dict(self.link.rejects),
             truth_messages_ignored=self.link.truth_ignored,
             control_latency_ms=ControlLatency(p50=lat.percentile(50) or 0.0, p99=lat.percentile(99) or 0.0,

@@ -63,7 +63,7 @@ UNIT_MODULES = frozenset("""
     planner_issue34 flow_optimum planner_registry planner_stable_argsort planner_tree_golden thread_cpu_deadline
     planner_guidance planner_kgrowth planner_metrics planner_postprocess process_logging reactive route_planning
     run_judging run_plot scenarios sim_sensors sim_vessel sim_waves simulator_assembly summaries tiers tracking_stats
-    traffic_planning vehicle
+    traffic_planning vehicle world_keeper
 """.split())
 INTEGRATION_MODULES = frozenset("""
     ardupilot_json

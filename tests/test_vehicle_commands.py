@@ -75,7 +75,7 @@ def test_the_fence_refuses_targets_rally_points_and_mission_items_outside_it():
     bad = c.check_mission(items, GEO.geodetic_to_sea_level)
     assert bad is not None and bad[0] == 1 and "geofence" in bad[2]
     c.replace_rally(((30.0, 30.0),))
-    assert ap.geofence.rally_point((45.0, 25.0)) == (30.0, 30.0)
+    assert ap.keeper.geofence.rally_point((45.0, 25.0)) == (30.0, 30.0)
     assert c.set_mode(Mode.RTL).ok and tuple(ap.vehicle.route.path[-1]) == (30.0, 30.0)   # RTL to the rally point
 
 

@@ -74,8 +74,8 @@ def test_parameters_are_declared_by_their_owners_once_with_range_units_and_doc(s
     table = s.link.params_table
     names = [p.name for p in table.params]
     assert len(names) == len(set(names))
-    owners = (s.ap.vehicle, s.ap.planning, s.ap.planner_tuning, s.ap.helm.heading_pid, s.ap.helm.speed_ctl,
-              s.ap.station, s.ap.geofence, s.link.failsafe, s.link.identity,
+    owners = (s.ap.vehicle, s.ap.planning, s.ap.keeper.planner_tuning, s.ap.helm.heading_pid, s.ap.helm.speed_ctl,
+              s.ap.station, s.ap.keeper.geofence, s.link.failsafe, s.link.identity,
               s.ap.onboard.battery)
     declared = [d.name for o in owners for d in declarations(o)]
     assert sorted(declared) == sorted(names)
@@ -272,11 +272,11 @@ def test_fence_parameters_reach_the_planning_grid_and_the_breach_action():
     assert s.param_set("FENCE_ACTION", 2)
     s.ap.commands.replace_fence(Fence(exclusion_circles=(Circle(e, n, 5.0),)))
     s.fix(0.05)
-    assert s.ap.geofence.breached and s.ap.vehicle.mode == Mode.LOITER
+    assert s.ap.keeper.geofence.breached and s.ap.vehicle.mode == Mode.LOITER
     s.ap.commands.set_mode(Mode.AUTO)
     s.ap.commands.replace_fence(Fence())
     s.fix(0.05)
-    assert not s.ap.geofence.breached
+    assert not s.ap.keeper.geofence.breached
     assert s.param_set("FENCE_ACTION", 1)
     s.ap.commands.replace_fence(Fence(exclusion_circles=(Circle(e, n, 5.0),)))
     s.fix(0.05)

@@ -183,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
         gcs=None if autopilot.telemetry is None else autopilot.telemetry.summary(),
         local_paths=tuple(autopilot.local_paths),
         estimated_track=tuple(map(tuple, np.frombuffer(autopilot.track, dtype=float).reshape(-1, 4).round(3).tolist())),
-        sensed_cells=tuple(map(tuple, autopilot.sensed.cells().tolist())),
+        sensed_cells=tuple(map(tuple, autopilot.keeper.sensed.cells().tolist())),
     )
     table = to_table(summary)
     written = True
