@@ -22,10 +22,11 @@ Event-driven by the simulator's sensor frames (one per IMU period). For each new
    :class:`autopilot_bridge.can_actuators.CanActuators`.
 
 This class is the frame pipeline that runs those steps in order; the steps' parts are components of
-their own, each owning its parameters (:mod:`autopilot_bridge.parameters`): the world keeper (the grid with
-its sensed obstacles and fence, the global route, what the planner worker is told:
-:mod:`autopilot_bridge.world_keeper`), the helm (step 3-4, :mod:`autopilot_bridge.helm`), plan acceptance (:mod:`autopilot_bridge.plan_acceptance`), the planning
-hand-off (:mod:`autopilot_bridge.plan_handoff`), station keeping, the vehicle's modes and mission
+their own, each owning its parameters (:mod:`autopilot_bridge.parameters`): the world keeper (the grid
+with its sensed obstacles and fence, the global route, what the planner worker is told:
+:mod:`autopilot_bridge.world_keeper`), the helm (step 3-4, :mod:`autopilot_bridge.helm`), plan
+acceptance (:mod:`autopilot_bridge.plan_acceptance`), the planning hand-off
+(:mod:`autopilot_bridge.plan_handoff`), station keeping, the vehicle's modes and mission
 (:mod:`autopilot_bridge.vehicle`). Ground stations command it through
 :class:`autopilot_bridge.vehicle_commands.VehicleCommands` (``commands``, the
 :class:`autopilot_bridge.vehicle_api.VehicleApi`) and read the frozen

@@ -20,8 +20,10 @@ sensor and collision judge) is this same grid plus the scenario's uncharted disc
 Readers. GeoJSON (RFC 7946: always longitude/latitude) is read by the standard library and shapely.
 Other files go through pyogrio (GDAL): shapefiles (.shp with .dbf/.shx, and .prj when present),
 GeoPackage, KML and S-57 ENC cells (.000: the obstacle layers only; no S-57 cell has been read
-here). Files in a projected CRS are refused: export them
-in WGS-84 (EPSG:4326).
+here). A layer in another coordinate reference system (a shapefile's .prj in UTM, a GeoPackage in a
+national grid, a GeoJSON of the 2008 specification with a ``crs`` member) is transformed to WGS-84
+longitude/latitude by pyproj (PROJ) before anything else; a file without a CRS must already be in
+longitude/latitude degrees, and one whose CRS PROJ does not know is refused in one line.
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ from common.geodesy import LocalFrame
 from hil.errors import ConfigError
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping
+    from collections.abc import Callable, Mapping
 
     from shapely.geometry.base import BaseGeometry  # shapely is untyped: Any to mypy
 
@@ -49,6 +51,9 @@ if TYPE_CHECKING:
 # (depth areas, fairways, lights ...) cover the water itself and are not read.
 S57_OBSTACLE_LAYERS = frozenset({"LNDARE", "SLCONS", "OBSTRN", "PONTON", "HULKES", "PILPNT", "MORFAC", "WRECKS",
                                  "UWTROC", "DRYDOC", "FLODOC", "GATCON", "DAMCON", "CAUSWY", "PYLONS", "BRIDGE"})
+# CRS names that already mean longitude/latitude on WGS-84 (or a datum within ~1 m of it: NAD83, ETRS89).
+LONLAT_CRS = frozenset({"EPSG:4326", "OGC:CRS84", "EPSG:4269", "EPSG:4258", "urn:ogc:def:crs:OGC:1.3:CRS84",
+                        "urn:ogc:def:crs:EPSG::4326", "urn:ogc:def:crs:OGC::CRS84"})
 CHART_SUFFIXES = (".geojson", ".json", ".shp", ".gpkg", ".kml", ".000")
 MAX_CELLS = 16_000_000   # 4000 x 4000 cells: a planning grid the planner and the simulator hold in memory
 
@@ -102,6 +107,9 @@ def _read_geojson(path: Path) -> list[ChartFeature]:
         items = [doc]
     else:
         items = [{"type": "Feature", "geometry": doc, "properties": {}}]
+    crs = doc.get("crs")   # GeoJSON 2008's CRS member (RFC 7946 dropped it): {"type": "name", ...}
+    name = crs.get("properties", {}).get("name") if isinstance(crs, dict) and crs.get("type") == "name" else None
+    to_lonlat = _to_lonlat(str(name), str(path)) if isinstance(name, str) and name not in LONLAT_CRS else None
     out = []
     for i, f in enumerate(items):
         if not isinstance(f, dict) or not isinstance(f.get("geometry"), dict):
@@ -113,8 +121,33 @@ def _read_geojson(path: Path) -> list[ChartFeature]:
         props = f.get("properties") if isinstance(f.get("properties"), dict) else None
         if props and props.get("obstacle") is False:
             continue   # marked as no obstacle (a water area, a label)
+        if to_lonlat is not None:
+            geom = to_lonlat(geom)
         out.append(ChartFeature(geom, _buffer_of(props, f"{path}: feature {i}")))
     return out
+
+
+def _to_lonlat(crs: str, where: str) -> Callable[[BaseGeometry], BaseGeometry]:
+    """A function taking a geometry in ``crs`` (as GDAL or a GeoJSON names it) to WGS-84 longitude/latitude
+    degrees, by PROJ's transformation between the two; ConfigError in one line for a CRS PROJ does not know."""
+    import shapely
+    from pyproj import CRS, Transformer
+    from pyproj.exceptions import CRSError
+
+    try:
+        source = CRS.from_user_input(crs)
+    except CRSError:
+        raise ConfigError(f"{where}: coordinates in {crs}, a coordinate reference system PROJ does not know; "
+                          "export the chart in WGS-84 longitude/latitude (EPSG:4326)") from None
+    transformer = Transformer.from_crs(source, CRS.from_epsg(4326), always_xy=True)
+
+    def move(xy: np.ndarray) -> np.ndarray:
+        lon, lat = transformer.transform(xy[:, 0], xy[:, 1])
+        return np.column_stack((lon, lat))
+
+    def convert(geom: BaseGeometry) -> BaseGeometry:
+        return shapely.transform(geom, move)
+    return convert
 
 
 def _read_ogr(path: Path) -> list[ChartFeature]:
@@ -137,9 +170,7 @@ def _read_ogr(path: Path) -> list[ChartFeature]:
         except Exception as exc:
             raise ConfigError(f"{path}: layer {layer}: cannot be read ({str(exc).splitlines()[0]})") from None
         crs = meta.get("crs")
-        if crs and crs not in ("EPSG:4326", "OGC:CRS84", "EPSG:4269", "EPSG:4258"):
-            raise ConfigError(f"{path}: layer {layer}: coordinates in {crs}; export the chart in WGS-84 "
-                              "longitude/latitude (EPSG:4326)")
+        to_lonlat = _to_lonlat(str(crs), f"{path}: layer {layer}") if crs and crs not in LONLAT_CRS else None
         names = [str(n) for n in meta.get("fields", [])]
         keep = fields[names.index("obstacle")] if "obstacle" in names else None
         buffers = fields[names.index("buffer")] if "buffer" in names else None
@@ -148,7 +179,9 @@ def _read_ogr(path: Path) -> list[ChartFeature]:
                 continue
             b = None if buffers is None else buffers[i]
             b = None if b is None or (isinstance(b, float) and math.isnan(b)) else b
-            out.append(ChartFeature(shapely.from_wkb(g), _buffer_of({"buffer": b}, f"{path}: layer {layer}")))
+            geom = shapely.from_wkb(g)
+            out.append(ChartFeature(geom if to_lonlat is None else to_lonlat(geom),
+                                    _buffer_of({"buffer": b}, f"{path}: layer {layer}")))
     return out
 
 
@@ -171,7 +204,8 @@ def read_chart(path: str | Path) -> list[ChartFeature]:
             lon0, lat0, lon1, lat1 = f.geometry.bounds
             if not (-180 <= lon0 <= lon1 <= 360 and -89 <= lat0 <= lat1 <= 89):
                 raise ConfigError(f"{p}: coordinates ({lon0:g}, {lat0:g}) are not longitude/latitude degrees; "
-                                  "export the chart in WGS-84 (EPSG:4326)")
+                                  "give the file its coordinate reference system (a shapefile's .prj) or "
+                                  "export it in WGS-84 (EPSG:4326)")
         _CACHE[key] = feats
     return _CACHE[key]
 

@@ -1,5 +1,6 @@
-"""Vector charts as scenario maps (hil.charts): GeoJSON and shapefiles in longitude/latitude rasterised
-onto the planning grid, the run's origin at the map's corner, bad charts refused in one line."""
+"""Vector charts as scenario maps (hil.charts): GeoJSON and shapefiles, in longitude/latitude or a
+projected CRS, rasterised onto the planning grid, the run's origin at the map's corner, bad charts
+refused in one line."""
 
 from __future__ import annotations
 
@@ -65,15 +66,79 @@ def test_a_shapefile_gives_the_same_grid_as_the_geojson(tmp_path):
     np.testing.assert_array_equal(shp.occ, gj.occ)
 
 
-def test_a_projected_shapefile_is_refused(tmp_path):
+def _utm(geoms: list, epsg: int) -> list:
+    """The geometries (longitude/latitude) in UTM metres, as a GIS would export them (PROJ)."""
+    import shapely
+    from pyproj import Transformer
+
+    t = Transformer.from_crs(4326, epsg, always_xy=True)
+    return [shapely.transform(g, lambda xy: np.column_stack(t.transform(xy[:, 0], xy[:, 1]))) for g in geoms]
+
+
+def _polygons(doc: dict) -> tuple[list, dict]:
+    from shapely.geometry import shape
+
+    idx = [i for i, f in enumerate(doc["features"]) if f["geometry"]["type"] == "Polygon"]
+    return ([shape(doc["features"][i]["geometry"]) for i in idx],
+            {"type": "FeatureCollection", "features": [doc["features"][i] for i in idx]})
+
+
+UTM_ZONE = int((FRAME.lon0 + 180.0) // 6.0) + 1
+UTM_EPSG = (32600 if FRAME.lat0 >= 0 else 32700) + UTM_ZONE   # WGS 84 / UTM, the chart's own zone
+EXTENT = (0.0, 0.0, 200.0, 150.0)
+
+
+def test_a_projected_shapefile_is_transformed_to_longitude_latitude(tmp_path):
     pyogrio = pytest.importorskip("pyogrio")
+    pytest.importorskip("pyproj")
+    import shapely
+
+    geoms, only_polygons = _polygons(harbour_chart(FRAME))
+    utm = _utm(geoms, UTM_EPSG)
+    assert utm[0].bounds[0] > 1000.0                                      # metres, not degrees
+    pyogrio.raw.write(tmp_path / "utm.shp", shapely.to_wkb(np.array(utm, dtype=object)), field_data=[],
+                      fields=[], geometry_type="Polygon", crs=f"EPSG:{UTM_EPSG}", driver="ESRI Shapefile")
+    assert (tmp_path / "utm.prj").exists()
+    shp = charts.rasterise(tmp_path / "utm.shp", 0.5, FRAME, extent=EXTENT)
+    gj = charts.rasterise(_chart(tmp_path, only_polygons, "p.geojson"), 0.5, FRAME, extent=EXTENT)
+    assert shp.occ.sum() > 1000
+    np.testing.assert_array_equal(shp.occ, gj.occ)
+
+
+def test_a_geojson_of_2008_with_a_projected_crs_member_is_transformed(tmp_path):
+    pytest.importorskip("pyproj")
+    from shapely.geometry import mapping
+
+    geoms, only_polygons = _polygons(harbour_chart(FRAME))
+    doc = {"type": "FeatureCollection",
+           "crs": {"type": "name", "properties": {"name": f"urn:ogc:def:crs:EPSG::{UTM_EPSG}"}},
+           "features": [{"type": "Feature", "properties": {}, "geometry": mapping(g)} for g in _utm(geoms, UTM_EPSG)]}
+    projected = charts.rasterise(_chart(tmp_path, doc, "utm.geojson"), 0.5, FRAME, extent=EXTENT)
+    lonlat = charts.rasterise(_chart(tmp_path, only_polygons, "p.geojson"), 0.5, FRAME, extent=EXTENT)
+    assert projected.occ.sum() > 1000
+    np.testing.assert_array_equal(projected.occ, lonlat.occ)
+
+
+def test_a_crs_proj_does_not_know_and_a_file_without_one_in_metres_are_refused(tmp_path):
+    pyogrio = pytest.importorskip("pyogrio")
+    pytest.importorskip("pyproj")
     import shapely
     from shapely.geometry import box
 
-    pyogrio.raw.write(tmp_path / "utm.shp", shapely.to_wkb(np.array([box(500000, 4300000, 500100, 4300100)])),
-                      field_data=[], fields=[], geometry_type="Polygon", crs="EPSG:32651", driver="ESRI Shapefile")
-    with pytest.raises(ConfigError, match="coordinates in EPSG:32651; export the chart in WGS-84") as err:
-        charts.rasterise(tmp_path / "utm.shp", 1.0, FRAME)
+    doc = {"type": "FeatureCollection", "crs": {"type": "name", "properties": {"name": "EPSG:999999"}},
+           "features": [{"type": "Feature", "properties": {},
+                         "geometry": {"type": "Point", "coordinates": [500000.0, 4300000.0]}}]}
+    with pytest.raises(ConfigError, match="coordinates in EPSG:999999, a coordinate reference system PROJ "
+                                          "does not know") as err:
+        charts.rasterise(_chart(tmp_path, doc, "unknown.geojson"), 1.0, FRAME)
+    assert "\n" not in str(err.value)
+    with pytest.warns(UserWarning, match="'crs' was not provided"):   # a shapefile without its .prj
+        pyogrio.raw.write(tmp_path / "noprj.shp", shapely.to_wkb(np.array([box(500000, 4300000, 500100, 4300100)])),
+                          field_data=[], fields=[], geometry_type="Polygon", driver="ESRI Shapefile")
+    assert not (tmp_path / "noprj.prj").exists()
+    with pytest.raises(ConfigError, match="not longitude/latitude degrees; give the file its coordinate "
+                                          "reference system") as err:
+        charts.rasterise(tmp_path / "noprj.shp", 1.0, FRAME)
     assert "\n" not in str(err.value)
 
 
