@@ -52,6 +52,13 @@ class Connection:
     def address(self) -> tuple[str, int]:
         return self.host, self.port
 
+    @property
+    def endpoint(self) -> tuple[str, str, int]:
+        """(kind, host, port); for serial, (kind, device, baud)."""
+        if self.kind == "serial":
+            return self.kind, self.device, self.baud
+        return self.kind, self.host, self.port
+
 
 @dataclass(frozen=True)
 class Role:

@@ -35,12 +35,12 @@ from tests.test_gcs_link import GEO, ais, free_tcp_port, gcs_heartbeat, params, 
 ])
 def test_every_form_parses(text, role, expected):
     conn = c.parse(text, role)
-    assert (conn.kind, conn.host, conn.port) == expected
+    assert (conn.kind, conn.host, conn.port) == expected == conn.endpoint
 
 
 def test_serial_form():
     conn = c.parse("serial:/dev/ttyUSB0:57600", c.GCS)
-    assert (conn.kind, conn.device, conn.baud) == ("serial", "/dev/ttyUSB0", 57600)
+    assert (conn.kind, conn.device, conn.baud) == ("serial", "/dev/ttyUSB0", 57600) == conn.endpoint
 
 
 @pytest.mark.parametrize("text, role, says", [

@@ -48,10 +48,7 @@ def parse_endpoint(text: str) -> tuple[str, str, int]:
     """(kind, host, port) from a connection string (``common.connection``, role GCS); ``udp:`` gives
     "udpin"; for ``serial:DEVICE:BAUD`` the host is the device and the port the baud rate.
     ValueError with one line naming the accepted forms otherwise."""
-    c = connection.parse(text, connection.GCS)
-    if c.kind == "serial":
-        return c.kind, c.device, c.baud
-    return c.kind, c.host, c.port
+    return connection.parse(text, connection.GCS).endpoint
 
 
 class UdpTransport:
@@ -425,7 +422,7 @@ def open_endpoint(c: connection.Connection, max_peers: int = 8, counts: Counter[
     on a busy port, a ground station that cannot be reached, a serial port that cannot be opened.
     ``counts`` receives the peer table's and the TCP server's refusals (``peer_table_full``,
     ``tcp_idle_closed`` ...); ``clock`` (s, monotonic) times the peers' silences."""
-    kind, host, port = (c.kind, c.device, c.baud) if c.kind == "serial" else (c.kind, c.host, c.port)
+    kind, host, port = c.endpoint
     counts = counts if counts is not None else Counter()
     peers = PeerTable(max_peers, clock, counts)   # the servers' (tcpin, udp*) place table
     if kind == "tcpin":
