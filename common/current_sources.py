@@ -18,7 +18,9 @@ scipy) with the eastward and northward velocity found by CF ``standard_name``
 ``_assuming_no_tide`` variants) or by the names given in ``east_variable`` / ``north_variable``, on
 1-D latitude and longitude coordinates (degrees north/east) and optionally time and depth (the
 level nearest the surface is used). Units ``m s-1`` (as variously spelt), ``cm s-1`` or knots; missing values
-(land in ocean-model output) read as still water. The run's t = 0 is the file's time ``start_time``
+(land in ocean-model output) read as still water. A single station's series (a moored ADCP: latitude
+and longitude of one value each, as variables or as dimensions of size 1) is taken as the current
+over the whole map, varying in time only. The run's t = 0 is the file's time ``start_time``
 (ISO 8601, UTC; default: the file's first time); a file with one time slice is a steady current.
 On loading, each time slice is resampled onto a
 regular NED grid (each node's latitude and longitude from the exact tangent-plane conversion of
@@ -55,6 +57,7 @@ _UNITS = {"m s-1": 1.0, "m/s": 1.0, "m.s-1": 1.0, "m s**-1": 1.0, "m/second": 1.
 MAX_SPEED = 10.0        # m/s: faster than any tidal race (Saltstraumen ~ 11 m/s is the one known exception)
 MAX_NODES = 512         # per axis of the resampled NED grid
 MAX_VALUES = 20_000_000  # time slices x nodes: a larger file must be cut down first
+STATION_REACH = 1.0e7   # m: a single station's current holds this far from the origin (further, the same)
 
 
 class CurrentSourceError(ValueError):
@@ -132,6 +135,22 @@ def _axis(ds: xr.Dataset, var: xr.DataArray, kind: str) -> str | None:
     return None
 
 
+def _station(ds: xr.Dataset, kind: str) -> float | None:
+    """A single station's latitude or longitude (degrees): a variable of one value that is one (CF
+    attributes or usual names), as a moored ADCP's time series gives its position; None if none."""
+    names = {"latitude": ("lat", "latitude"), "longitude": ("lon", "longitude")}[kind]
+    units = {"latitude": ("degrees_north", "degree_north", "degree_N", "degrees_N"),
+             "longitude": ("degrees_east", "degree_east", "degree_E", "degrees_E")}[kind]
+    for name, var in ds.variables.items():
+        if var.size == 1 and (var.attrs.get("standard_name") == kind or var.attrs.get("units") in units
+                              or str(name).lower() in names):
+            try:
+                return float(np.asarray(var.values, dtype=float).ravel()[0])
+            except (TypeError, ValueError):
+                return None
+    return None
+
+
 def _scale(var: xr.DataArray, path: str) -> float:
     units = " ".join(str(var.attrs.get("units", "m s-1")).strip().lower().replace("^", "").split())
     units = units.replace("metres", "m").replace("meters", "m").replace("metre", "m").replace("meter", "m")
@@ -161,9 +180,14 @@ def read_netcdf(path: str, east_variable: str = "", north_variable: str = "") ->
         if u_var.dims != v_var.dims:
             raise CurrentSourceError(f"{path}: {u_var.name} and {v_var.name} are on different dimensions")
         dims = {k: _axis(ds, u_var, k) for k in ("latitude", "longitude", "time", "depth")}
-        if dims["latitude"] is None or dims["longitude"] is None:
-            raise CurrentSourceError(f"{path}: {u_var.name}: no 1-D latitude/longitude dimensions (dims: "
-                                     f"{', '.join(map(str, u_var.dims))}; curvilinear grids are not supported)")
+        station = None
+        if dims["latitude"] is None and dims["longitude"] is None:
+            la, lo = _station(ds, "latitude"), _station(ds, "longitude")
+            station = None if la is None or lo is None else (la, lo)
+        if (dims["latitude"] is None or dims["longitude"] is None) and station is None:
+            raise CurrentSourceError(f"{path}: {u_var.name}: no 1-D latitude/longitude dimensions and no single "
+                                     f"station's position (dims: {', '.join(map(str, u_var.dims))}; curvilinear "
+                                     "grids are not supported)")
         sel: dict[str, int] = {}
         if dims["depth"] is not None:
             depth = np.asarray(ds[dims["depth"]].values if dims["depth"] in ds.variables
@@ -178,8 +202,12 @@ def read_netcdf(path: str, east_variable: str = "", north_variable: str = "") ->
         order = [d for d in (dims["time"], dims["latitude"], dims["longitude"]) if d is not None]
         u = np.asarray(u_var.isel(sel).transpose(*order).values, dtype=float) * _scale(u_var, path)
         v = np.asarray(v_var.isel(sel).transpose(*order).values, dtype=float) * _scale(v_var, path)
-        lat = np.asarray(ds[dims["latitude"]].values, dtype=float)
-        lon = np.asarray(ds[dims["longitude"]].values, dtype=float)
+        if station is not None:   # one station: its series as a 1 x 1 grid
+            u, v = u[..., None, None], v[..., None, None]
+            lat, lon = np.array([station[0]]), np.array([station[1]])
+        else:
+            lat = np.asarray(ds[dims["latitude"]].values, dtype=float)
+            lon = np.asarray(ds[dims["longitude"]].values, dtype=float)
         times = None
         if dims["time"] is not None:
             tv = ds[dims["time"]].values
@@ -196,8 +224,9 @@ def read_netcdf(path: str, east_variable: str = "", north_variable: str = "") ->
 
 def _checked(g: RawCurrentGrid, path: str) -> RawCurrentGrid:
     lat, lon, u, v, times = g.lat, g.lon, g.u, g.v, g.times
-    if lat.size < 2 or lon.size < 2:
-        raise CurrentSourceError(f"{path}: needs at least 2 latitudes and 2 longitudes (has {lat.size} x {lon.size})")
+    if (lat.size < 2 or lon.size < 2) and not (lat.size == 1 and lon.size == 1):
+        raise CurrentSourceError(f"{path}: needs at least 2 latitudes and 2 longitudes, or one station "
+                                 f"(has {lat.size} x {lon.size})")
     if not (np.all(np.isfinite(lat)) and np.all(np.isfinite(lon)) and np.all(np.abs(lat) <= 90)):
         raise CurrentSourceError(f"{path}: latitude/longitude values are not degrees")
     if np.all(np.diff(lat) < 0):   # north to south, as many model files are
@@ -253,6 +282,29 @@ class GriddedCurrent:
     def __init__(self, raw: RawCurrentGrid, frame: LocalFrame, start_time: float | None = None,
                  source: str = "current file") -> None:
         self.source = source
+        self.station = raw.lat.size == 1 and raw.lon.size == 1
+        if self.station:
+            # One station (a moored ADCP's series): its current everywhere, as two nodes either side of
+            # every map (queries clamp to them), and no extent to check a map against.
+            self.north_axis = self.east_axis = np.array([-STATION_REACH, STATION_REACH])
+            self.ve = np.ascontiguousarray(np.broadcast_to(raw.u, (raw.u.shape[0], 2, 2)))
+            self.vn = np.ascontiguousarray(np.broadcast_to(raw.v, (raw.v.shape[0], 2, 2)))
+        else:
+            self._resample(raw, frame, source)
+        self.steady = raw.times is None
+        if raw.times is None:
+            self.times = np.zeros(1)
+        else:
+            t0 = float(raw.times[0]) if start_time is None else float(start_time)
+            self.times = np.asarray(raw.times, dtype=float) - t0
+        self._times = [float(t) for t in self.times]
+        self.n0, self.e0 = float(self.north_axis[0]), float(self.east_axis[0])
+        self.dn = float(self.north_axis[1] - self.north_axis[0])
+        self.de = float(self.east_axis[1] - self.east_axis[0])
+        self.rows, self.cols = self.north_axis.size, self.east_axis.size
+
+    def _resample(self, raw: RawCurrentGrid, frame: LocalFrame, source: str) -> None:
+        """The file's grid bilinearly interpolated at the nodes of a regular NED grid inside it."""
         lat, lon = raw.lat, raw.lon
         lon = lon + 360.0 * np.round((frame.lon0 - lon.mean()) / 360.0)  # 0..360 files against a -180..180 origin
         # The NED box inside the file's latitude/longitude box (its edges bow slightly in NED).
@@ -284,22 +336,13 @@ class GriddedCurrent:
                 node_lat[i, j], node_lon[i, j] = frame.sea_level_to_geodetic(float(n), float(e))
         self.ve = np.ascontiguousarray(_bilinear(lat, lon, raw.u, node_lat, node_lon))
         self.vn = np.ascontiguousarray(_bilinear(lat, lon, raw.v, node_lat, node_lon))
-        self.steady = raw.times is None
-        if raw.times is None:
-            self.times = np.zeros(1)
-        else:
-            t0 = float(raw.times[0]) if start_time is None else float(start_time)
-            self.times = np.asarray(raw.times, dtype=float) - t0
-        self._times = [float(t) for t in self.times]
-        self.n0, self.e0 = float(n0), float(e0)
-        self.dn = float(self.north_axis[1] - self.north_axis[0])
-        self.de = float(self.east_axis[1] - self.east_axis[0])
-        self.rows, self.cols = nn, ne
 
     # -- coverage ------------------------------------------------------------------------------
     @property
     def extent(self) -> tuple[float, float, float, float]:
-        """(north_min, north_max, east_min, east_max) in metres: where the file has data."""
+        """(north_min, north_max, east_min, east_max) in metres: where the file has data (a station: everywhere)."""
+        if self.station:
+            return -math.inf, math.inf, -math.inf, math.inf
         return self.n0, float(self.north_axis[-1]), self.e0, float(self.east_axis[-1])
 
     def time_span(self) -> tuple[float, float]:

@@ -108,6 +108,51 @@ def test_a_steady_file_has_no_time_limit(tmp_path):
     assert g.velocity_at(0.0, 0.0, 5e5) == pytest.approx((-0.1, 0.2), abs=1e-4)
 
 
+def _station_file(path: Path, layout: str) -> Path:
+    """A moored ADCP's series as its tools write one: velocity on time alone, the position as one-value
+    latitude/longitude (or as dimensions of size 1), 400 m east of the origin, hourly for 2 h."""
+    import xarray as xr
+
+    la, lo = FRAME.sea_level_to_geodetic(0.0, 400.0)
+    times = np.array(HOURS[:3], dtype="datetime64[ns]")
+    u, v = np.array([0.1, 0.3, -0.2]), np.array([0.0, 0.05, 0.1])
+    attrs_u = {"standard_name": "eastward_sea_water_velocity", "units": "cm s-1"}
+    attrs_v = {"standard_name": "northward_sea_water_velocity", "units": "cm s-1"}
+    if layout == "scalar":
+        ds = xr.Dataset({"u": (("time",), u * 100, attrs_u), "v": (("time",), v * 100, attrs_v)},
+                        coords={"time": times, "lat": ((), la, {"units": "degrees_north"}),
+                                "lon": ((), lo, {"units": "degrees_east"})})
+    else:
+        dims = ("time", "latitude", "longitude")
+        ds = xr.Dataset({"u": (dims, (u * 100)[:, None, None], attrs_u),
+                         "v": (dims, (v * 100)[:, None, None], attrs_v)},
+                        coords={"time": times, "latitude": [la], "longitude": [lo]})
+    ds.to_netcdf(path)
+    return path
+
+
+@pytest.mark.parametrize("layout", ["scalar", "size-1 dimensions"])
+def test_a_single_stations_series_is_the_current_over_the_whole_map(tmp_path, layout):
+    g = load_file(str(_station_file(tmp_path / "adcp.nc", layout)), FRAME)
+    # half an hour: half-way between the first two samples, wherever the boat is
+    assert g.velocity_at(-3000.0, 5000.0, 1800.0) == pytest.approx((0.025, 0.2), abs=1e-9)
+    assert g.velocity_at(0.0, 0.0, 1800.0) == pytest.approx((0.025, 0.2), abs=1e-9)
+    vn, ve = g.velocity(np.array([0.0, 2e4]), np.array([0.0, -2e4]), 5400.0)
+    np.testing.assert_allclose(vn, [0.075, 0.075], atol=1e-9)
+    np.testing.assert_allclose(ve, [0.05, 0.05], atol=1e-9)
+    g.check_covers((-1e4, 1e4), (-1e4, 1e4), (0.0, 7200.0))       # any map; its two hours
+    with pytest.raises(CurrentSourceError, match="does not cover the run's time"):
+        g.check_covers(t=(0.0, 7300.0))
+
+
+def test_a_scenario_with_a_stations_series_plans_with_it_everywhere(tmp_path):
+    _station_file(tmp_path / "adcp.nc", "scalar")
+    scen = scenarios.load(str(_scenario(tmp_path, 'file = "adcp.nc"\nfield_time = 3600.0\n')))
+    f = scen.map_field()           # map frame: (x east, y north) -> (v_east, v_north)
+    assert f(10.0, 10.0) == pytest.approx((0.3, 0.05), abs=1e-9) == f(190.0, 140.0)
+    assert scen.planning_field().at(150.0, 120.0) == pytest.approx((0.3, 0.05), abs=1e-6)
+
+
 def _write_bad(path: Path, kind: str) -> Path:
     import xarray as xr
 
@@ -125,6 +170,8 @@ def _write_bad(path: Path, kind: str) -> Path:
         u = np.full((5, 5), 30.0)
     if kind == "missing":
         u[:] = np.nan
+    if kind == "row":
+        lat, u = lat[:1], u[:1]
     if kind == "curvilinear":
         LA, LO = np.meshgrid(lat, lon, indexing="ij")
         ds = xr.Dataset({"uo": (("y", "x"), u, attrs_u), "vo": (("y", "x"), u, attrs_v)},
@@ -147,6 +194,7 @@ def _write_bad(path: Path, kind: str) -> Path:
     ("fast", "42.4 m/s is not a sea current"),
     ("missing", "every velocity value is missing"),
     ("curvilinear", "curvilinear grids are not supported"),
+    ("row", "needs at least 2 latitudes and 2 longitudes, or one station \\(has 1 x 5\\)"),
     ("novelocity", "no variable with standard_name 'eastward_sea_water_velocity'"),
 ])
 def test_unusable_files_are_refused_in_one_line(tmp_path, kind, message):
