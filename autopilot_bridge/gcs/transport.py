@@ -56,17 +56,14 @@ class UdpTransport:
 
     stream = False
 
-    def __init__(self, kind: str, host: str, port: int, max_peers: int = 8, *,
-                 counts: Counter[str] | None = None, clock: Callable[[], float] = time.monotonic,
-                 peers: PeerTable | None = None) -> None:
-        """``peers``: the peer table, built by :func:`open_endpoint` (None: one of ``max_peers`` here)."""
+    def __init__(self, kind: str, host: str, port: int, peers: PeerTable) -> None:
+        """``peers``: the endpoint's peer table, built by :func:`open_endpoint`."""
         self.kind = kind
-        self.peers = peers if peers is not None else PeerTable(max_peers, clock, counts)
+        self.peers = peers
         bind = f"{host}:{port}" if kind == "udpin" else ("127.0.0.1:0" if host in ("127.0.0.1", "localhost")
                                                          else "0.0.0.0:0")
         self.ep = UdpEndpoint(bind, [])
         self.fixed = [(socket.gethostbyname(host), port)] if kind == "udpout" else []
-        self.max_peers = max_peers
         self.sent = 0
 
     @property
@@ -118,10 +115,9 @@ class TcpServerTransport:
 
     stream = True
 
-    def __init__(self, host: str, port: int, max_peers: int = 8, *, counts: Counter[str] | None = None,
-                 clock: Callable[[], float] = time.monotonic, peers: PeerTable | None = None) -> None:
-        """``peers``: the peer table, counting into ``counts``, built by :func:`open_endpoint` (None: one
-        of ``max_peers`` here)."""
+    def __init__(self, host: str, port: int, peers: PeerTable) -> None:
+        """``peers``: the endpoint's peer table, built by :func:`open_endpoint`; its clock times the
+        connections and its counts receive the closes."""
         self.lsock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self.lsock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
@@ -131,12 +127,10 @@ class TcpServerTransport:
             raise ValueError(f"cannot listen on TCP {host}:{port}: {exc.strerror or exc}") from None
         self.lsock.listen(16)
         self.lsock.setblocking(False)
-        self.clock = clock
-        self.counts: Counter[str] = counts if counts is not None else Counter()
+        self.peers = peers
+        self.clock, self.counts = peers.clock, peers.counts
         self.conns: dict[TcpPeer, socket.socket] = {}
         self.pending: dict[Hashable, float] = {}      # connection -> when it was accepted (s, clock)
-        self.peers = peers if peers is not None else PeerTable(max_peers, clock, self.counts)
-        self.max_peers = max_peers
         self.sent = 0
         self._closed: list[Hashable] = []             # connections closed here, reported by the next receive()
 
@@ -426,13 +420,13 @@ def open_endpoint(c: connection.Connection, max_peers: int = 8, counts: Counter[
     counts = counts if counts is not None else Counter()
     peers = PeerTable(max_peers, clock, counts)   # the servers' (tcpin, udp*) place table
     if kind == "tcpin":
-        return TcpServerTransport(host, port, max_peers, counts=counts, clock=clock, peers=peers)
+        return TcpServerTransport(host, port, peers)
     if kind == "tcp":
         return TcpClientTransport(host, port)
     if kind == "serial":
         return SerialTransport(host, port)
     try:
-        return UdpTransport(kind, host, port, max_peers, counts=counts, clock=clock, peers=peers)
+        return UdpTransport(kind, host, port, peers)
     except socket.gaierror as exc:
         raise ValueError(f"{c.text!r}: unknown host ({exc})") from None
 
