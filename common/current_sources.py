@@ -15,18 +15,19 @@ so the boat feels the current the planner plans with.
 Files. A netCDF file (read with xarray; netCDF-4/HDF5 through the netCDF4 library, netCDF-3 through
 scipy) with the eastward and northward velocity found by CF ``standard_name``
 (``eastward_sea_water_velocity`` / ``northward_sea_water_velocity``, or their ``surface_`` and
-``_assuming_no_tide`` variants) or by the names given in ``east_variable`` / ``north_variable``, on
-1-D latitude and longitude coordinates (degrees north/east) and optionally time and depth (the
-level nearest the surface is used). Units ``m s-1`` (as variously spelt), ``cm s-1`` or knots; missing values
-(land in ocean-model output) read as still water. A single station's series (a moored ADCP: latitude
-and longitude of one value each, as variables or as dimensions of size 1) is taken as the current
-over the whole map, varying in time only. The run's t = 0 is the file's time ``start_time``
-(ISO 8601, UTC; default: the file's first time); a file with one time slice is a steady current.
-On loading, each time slice is resampled onto a
-regular NED grid (each node's latitude and longitude from the exact tangent-plane conversion of
-``common.geodesy``, the file bilinearly interpolated there); queries then interpolate bilinearly in
-space and linearly in time, clamped at the edges. :meth:`GriddedCurrent.check_covers` refuses, in
-one line, a file that does not cover a map or a run's time span.
+``_assuming_no_tide`` variants) or by the names given in ``east_variable`` / ``north_variable``, on 1-D
+latitude and longitude coordinates (degrees north/east) and optionally time and depth (the level nearest
+the surface is used: the highest of a coordinate that is ``positive = "up"``). Units ``m s-1`` (as
+variously spelt), ``cm s-1`` or knots; missing values (land in ocean-model output) read as still water.
+A single station's series (a moored ADCP: latitude and longitude of one value each, as variables or as
+dimensions of size 1) is taken as the current over the whole map, varying in time only, if it lies
+within ``STATION_MAX_DISTANCE`` of the origin. The run's t = 0 is the file's time ``start_time`` (ISO
+8601, UTC; default: the file's first time); a file with one time slice is a steady current. On loading,
+each time slice is resampled onto a regular NED grid (each node's latitude and longitude from the exact
+tangent-plane conversion of ``common.geodesy``, the file bilinearly interpolated there); queries then
+interpolate bilinearly in space and linearly in time, clamped at the edges.
+:meth:`GriddedCurrent.check_covers` refuses, in one line, a file that does not cover a map or a run's
+time span.
 """
 
 from __future__ import annotations
@@ -57,7 +58,10 @@ _UNITS = {"m s-1": 1.0, "m/s": 1.0, "m.s-1": 1.0, "m s**-1": 1.0, "m/second": 1.
 MAX_SPEED = 10.0        # m/s: faster than any tidal race (Saltstraumen ~ 11 m/s is the one known exception)
 MAX_NODES = 512         # per axis of the resampled NED grid
 MAX_VALUES = 20_000_000  # time slices x nodes: a larger file must be cut down first
-STATION_REACH = 1.0e7   # m: a single station's current holds this far from the origin (further, the same)
+STATION_REACH = 1.0e7   # m: a single station's grid nodes, either side of the origin (queries clamp to them)
+# m: a single station's current is taken as the current of a harbour-sized area around it; a station farther
+# from the origin than this is surely another place's (a tidal stream changes over a few km along a coast).
+STATION_MAX_DISTANCE = 20_000.0
 
 
 class CurrentSourceError(ValueError):
@@ -127,7 +131,8 @@ def _axis(ds: xr.Dataset, var: xr.DataArray, kind: str) -> str | None:
         c = ds[dim] if dim in ds.variables else None
         attrs = c.attrs if c is not None else {}
         if (attrs.get("standard_name") == kind or attrs.get("units") in units or attrs.get("axis") == cf_axis
-                or (kind == "time" and c is not None and np.issubdtype(c.dtype, np.datetime64))):
+                or (kind == "time" and c is not None and np.issubdtype(c.dtype, np.datetime64))
+                or (kind == "depth" and str(attrs.get("positive", "")).lower() in ("up", "down"))):
             return str(dim)
     for dim in var.dims:
         if str(dim).lower() in names and (dim in ds.variables or kind == "depth"):
@@ -147,7 +152,7 @@ def _station(ds: xr.Dataset, kind: str) -> float | None:
             try:
                 return float(np.asarray(var.values, dtype=float).ravel()[0])
             except (TypeError, ValueError):
-                return None
+                continue   # a name or a label, not the position
     return None
 
 
@@ -190,9 +195,12 @@ def read_netcdf(path: str, east_variable: str = "", north_variable: str = "") ->
                                      "grids are not supported)")
         sel: dict[str, int] = {}
         if dims["depth"] is not None:
-            depth = np.asarray(ds[dims["depth"]].values if dims["depth"] in ds.variables
-                               else np.arange(u_var.sizes[dims["depth"]]), dtype=float)
-            sel[dims["depth"]] = int(np.argmin(np.abs(depth)))
+            z = ds[dims["depth"]] if dims["depth"] in ds.variables else None
+            depth = np.asarray(z.values if z is not None else np.arange(u_var.sizes[dims["depth"]]), dtype=float)
+            # The level nearest the surface: the highest of a coordinate that is positive up (a model's z <= 0,
+            # an upward-looking ADCP's height above the bed), else the shallowest depth.
+            up = z is not None and str(z.attrs.get("positive", "")).lower() == "up"
+            sel[dims["depth"]] = int(np.nanargmax(depth)) if up else int(np.nanargmin(np.abs(depth)))
         for dim in u_var.dims:
             if dim not in dims.values() and dim not in sel:
                 if u_var.sizes[dim] != 1:
@@ -227,7 +235,8 @@ def _checked(g: RawCurrentGrid, path: str) -> RawCurrentGrid:
     if (lat.size < 2 or lon.size < 2) and not (lat.size == 1 and lon.size == 1):
         raise CurrentSourceError(f"{path}: needs at least 2 latitudes and 2 longitudes, or one station "
                                  f"(has {lat.size} x {lon.size})")
-    if not (np.all(np.isfinite(lat)) and np.all(np.isfinite(lon)) and np.all(np.abs(lat) <= 90)):
+    if not (np.all(np.isfinite(lat)) and np.all(np.isfinite(lon)) and np.all(np.abs(lat) <= 90)
+            and np.all(np.abs(lon) <= 360)):
         raise CurrentSourceError(f"{path}: latitude/longitude values are not degrees")
     if np.all(np.diff(lat) < 0):   # north to south, as many model files are
         lat, u, v = lat[::-1].copy(), u[:, ::-1], v[:, ::-1]
@@ -286,6 +295,13 @@ class GriddedCurrent:
         if self.station:
             # One station (a moored ADCP's series): its current everywhere, as two nodes either side of
             # every map (queries clamp to them), and no extent to check a map against.
+            lat, lon = float(raw.lat[0]), float(raw.lon[0])
+            lon += 360.0 * round((frame.lon0 - lon) / 360.0)   # 0..360 against -180..180
+            away = math.hypot(*frame.geodetic_to_sea_level(lat, lon))
+            if not away <= STATION_MAX_DISTANCE:
+                raise CurrentSourceError(
+                    f"{source}: its one station ({lat:.5f}, {lon:.5f}) is {away / 1e3:.0f} km from the origin; "
+                    f"a station's current is used within {STATION_MAX_DISTANCE / 1e3:.0f} km of it")
             self.north_axis = self.east_axis = np.array([-STATION_REACH, STATION_REACH])
             self.ve = np.ascontiguousarray(np.broadcast_to(raw.u, (raw.u.shape[0], 2, 2)))
             self.vn = np.ascontiguousarray(np.broadcast_to(raw.v, (raw.v.shape[0], 2, 2)))
@@ -380,6 +396,10 @@ class GriddedCurrent:
 
     def velocity_at(self, north: float, east: float, t: float) -> tuple[float, float]:
         """(v_north, v_east) m/s at one point (plain floats)."""
+        if self.station:   # the same everywhere: in time only, exactly
+            k0, k1, ft = self._slices(t)
+            return (self.vn.item(k0, 0, 0) * (1 - ft) + self.vn.item(k1, 0, 0) * ft,
+                    self.ve.item(k0, 0, 0) * (1 - ft) + self.ve.item(k1, 0, 0) * ft)
         gy = (north - self.n0) / self.dn
         gx = (east - self.e0) / self.de
         if gy != gy or gx != gx:
@@ -408,6 +428,10 @@ class GriddedCurrent:
         for tv in np.unique(tt):
             m = tt == tv
             k0, k1, ft = self._slices(float(tv))
+            if self.station:   # the same everywhere: in time only, exactly
+                vn[m] = self.vn.item(k0, 0, 0) * (1 - ft) + self.vn.item(k1, 0, 0) * ft
+                ve[m] = self.ve.item(k0, 0, 0) * (1 - ft) + self.ve.item(k1, 0, 0) * ft
+                continue
             vn[m] = (_bilinear(self.north_axis, self.east_axis, self.vn[k0], n[m], e[m]) * (1 - ft)
                      + _bilinear(self.north_axis, self.east_axis, self.vn[k1], n[m], e[m]) * ft)
             ve[m] = (_bilinear(self.north_axis, self.east_axis, self.ve[k0], n[m], e[m]) * (1 - ft)

@@ -52,7 +52,7 @@ if TYPE_CHECKING:
 S57_OBSTACLE_LAYERS = frozenset({"LNDARE", "SLCONS", "OBSTRN", "PONTON", "HULKES", "PILPNT", "MORFAC", "WRECKS",
                                  "UWTROC", "DRYDOC", "FLODOC", "GATCON", "DAMCON", "CAUSWY", "PYLONS", "BRIDGE"})
 # CRS names that already mean longitude/latitude on WGS-84 (or a datum within ~1 m of it: NAD83, ETRS89).
-LONLAT_CRS = frozenset({"EPSG:4326", "OGC:CRS84", "EPSG:4269", "EPSG:4258", "urn:ogc:def:crs:OGC:1.3:CRS84",
+LONLAT_CRS = frozenset({"EPSG:4326", "OGC:CRS84", "CRS:84", "EPSG:4269", "EPSG:4258", "urn:ogc:def:crs:OGC:1.3:CRS84",
                         "urn:ogc:def:crs:EPSG::4326", "urn:ogc:def:crs:OGC::CRS84"})
 CHART_SUFFIXES = (".geojson", ".json", ".shp", ".gpkg", ".kml", ".000")
 MAX_CELLS = 16_000_000   # 4000 x 4000 cells: a planning grid the planner and the simulator hold in memory
@@ -107,9 +107,16 @@ def _read_geojson(path: Path) -> list[ChartFeature]:
         items = [doc]
     else:
         items = [{"type": "Feature", "geometry": doc, "properties": {}}]
+    to_lonlat = None
     crs = doc.get("crs")   # GeoJSON 2008's CRS member (RFC 7946 dropped it): {"type": "name", ...}
-    name = crs.get("properties", {}).get("name") if isinstance(crs, dict) and crs.get("type") == "name" else None
-    to_lonlat = _to_lonlat(str(name), str(path)) if isinstance(name, str) and name not in LONLAT_CRS else None
+    if crs is not None:
+        props = crs.get("properties") if isinstance(crs, dict) else None
+        name = props.get("name") if isinstance(props, dict) and crs.get("type") == "name" else None
+        if not isinstance(name, str):
+            raise ConfigError(f"{path}: a 'crs' member that does not name a coordinate reference system "
+                              '(expected {"type": "name", "properties": {"name": "EPSG:..."}}); '
+                              "remove it if the file is in WGS-84 longitude/latitude")
+        to_lonlat = _to_lonlat(name, str(path)) if name not in LONLAT_CRS else None
     out = []
     for i, f in enumerate(items):
         if not isinstance(f, dict) or not isinstance(f.get("geometry"), dict):
@@ -132,17 +139,23 @@ def _to_lonlat(crs: str, where: str) -> Callable[[BaseGeometry], BaseGeometry]:
     degrees, by PROJ's transformation between the two; ConfigError in one line for a CRS PROJ does not know."""
     import shapely
     from pyproj import CRS, Transformer
-    from pyproj.exceptions import CRSError
+    from pyproj.exceptions import CRSError, ProjError
 
+    export = "export the chart in WGS-84 longitude/latitude (EPSG:4326)"
     try:
         source = CRS.from_user_input(crs)
-    except CRSError:
-        raise ConfigError(f"{where}: coordinates in {crs}, a coordinate reference system PROJ does not know; "
-                          "export the chart in WGS-84 longitude/latitude (EPSG:4326)") from None
-    transformer = Transformer.from_crs(source, CRS.from_epsg(4326), always_xy=True)
+        if source.is_geocentric:
+            raise ConfigError(f"{where}: coordinates in {crs}, a geocentric (x, y, z) system, not a map's; {export}")
+        transformer = Transformer.from_crs(source, CRS.from_epsg(4326), always_xy=True)
+    except (CRSError, ProjError):   # unknown, or known but not transformable to WGS-84 (a CAD drawing's LOCAL_CS)
+        raise ConfigError(f"{where}: coordinates in {crs}, a coordinate reference system PROJ does not know "
+                          f"or cannot take to WGS-84; {export}") from None
 
     def move(xy: np.ndarray) -> np.ndarray:
         lon, lat = transformer.transform(xy[:, 0], xy[:, 1])
+        if not (np.all(np.isfinite(lon)) and np.all(np.isfinite(lat))):
+            raise ConfigError(f"{where}: coordinates outside the area where {crs} is defined "
+                              f"(e.g. {float(xy[0, 0]):g}, {float(xy[0, 1]):g}); {export}")
         return np.column_stack((lon, lat))
 
     def convert(geom: BaseGeometry) -> BaseGeometry:
@@ -203,8 +216,9 @@ def read_chart(path: str | Path) -> list[ChartFeature]:
         for f in feats:
             lon0, lat0, lon1, lat1 = f.geometry.bounds
             if not (-180 <= lon0 <= lon1 <= 360 and -89 <= lat0 <= lat1 <= 89):
+                named = " (a shapefile's .prj)" if p.suffix.lower() == ".shp" else ""
                 raise ConfigError(f"{p}: coordinates ({lon0:g}, {lat0:g}) are not longitude/latitude degrees; "
-                                  "give the file its coordinate reference system (a shapefile's .prj) or "
+                                  f"give the file its coordinate reference system{named} or "
                                   "export it in WGS-84 (EPSG:4326)")
         _CACHE[key] = feats
     return _CACHE[key]

@@ -142,6 +142,36 @@ def test_a_crs_proj_does_not_know_and_a_file_without_one_in_metres_are_refused(t
     assert "\n" not in str(err.value)
 
 
+def _point_with_crs(crs: object, x: float = 500000.0, y: float = 4300000.0) -> dict:
+    return {"type": "FeatureCollection", "crs": crs,
+            "features": [{"type": "Feature", "properties": {}, "geometry": {"type": "Point", "coordinates": [x, y]}}]}
+
+
+@pytest.mark.parametrize("crs, x, y, message", [
+    ({"type": "name", "properties": None}, 500000.0, 4300000.0, "a 'crs' member that does not name"),
+    ({"type": "link", "properties": {"href": "data.crs", "type": "proj4"}}, 500000.0, 4300000.0,
+     "a 'crs' member that does not name"),
+    ({"type": "name", "properties": {"name": "EPSG:4978"}}, 500000.0, 4300000.0, "a geocentric .x, y, z. system"),
+    ({"type": "name", "properties": {"name": 'LOCAL_CS["arbitrary",UNIT["metre",1]]'}}, 10.0, 20.0,
+     "PROJ does not know or cannot take to WGS-84"),
+    ({"type": "name", "properties": {"name": "ESRI:102003"}}, 500000.0, 5500000.0,
+     "coordinates outside the area where ESRI:102003 is defined"),
+])
+def test_a_crs_that_cannot_give_longitude_latitude_is_refused_in_one_line(tmp_path, crs, x, y, message):
+    pytest.importorskip("pyproj")
+    with pytest.raises(ConfigError, match=message) as err:
+        charts.rasterise(_chart(tmp_path, _point_with_crs(crs, x, y), "c.geojson"), 1.0, FRAME)
+    assert "\n" not in str(err.value)
+
+
+def test_crs84_named_as_ogc_writes_it_is_longitude_latitude(tmp_path):
+    la, lo = FRAME.sea_level_to_geodetic(20.0, 30.0)
+    doc = {**_point_with_crs({"type": "name", "properties": {"name": "CRS:84"}}, lo, la)}
+    doc["features"][0]["properties"] = {"buffer": 2.0}
+    grid = charts.rasterise(_chart(tmp_path, doc, "c.geojson"), 0.5, FRAME, extent=(0.0, 0.0, 60.0, 40.0))
+    assert _cell(grid, 30.0, 20.0) and not _cell(grid, 34.0, 20.0)
+
+
 @pytest.mark.parametrize("doc, message", [
     ("not json", "not a GeoJSON file"),
     ({"type": "FeatureCollection", "features": []}, "the chart has no features"),

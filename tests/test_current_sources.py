@@ -145,6 +145,37 @@ def test_a_single_stations_series_is_the_current_over_the_whole_map(tmp_path, la
         g.check_covers(t=(0.0, 7300.0))
 
 
+def test_a_station_far_from_the_origin_is_refused_in_one_line(tmp_path):
+    import xarray as xr
+
+    la, lo = FRAME.sea_level_to_geodetic(30_000.0, 0.0)              # 30 km north
+    ds = xr.Dataset({"u": (("time",), [0.1, 0.2], {"standard_name": "eastward_sea_water_velocity"}),
+                     "v": (("time",), [0.0, 0.1], {"standard_name": "northward_sea_water_velocity"})},
+                    coords={"time": np.array(HOURS[:2], dtype="datetime64[ns]"), "lat": la, "lon": lo})
+    ds.to_netcdf(tmp_path / "far.nc")
+    with pytest.raises(CurrentSourceError, match="is 30 km from the origin; a station's current is used within 20 km"):
+        load_file(str(tmp_path / "far.nc"), FRAME)
+
+
+def test_an_upward_looking_adcp_gives_its_top_bin(tmp_path):
+    """A bottom-mounted ADCP's bins are heights above the bed (``positive = "up"``), on a dimension of its
+    own name: the top bin is the one nearest the surface."""
+    import xarray as xr
+
+    la, lo = FRAME.sea_level_to_geodetic(0.0, 0.0)
+    east = np.array([[0.9, 0.6, 0.4, 0.2], [0.8, 0.5, 0.3, 0.1]])      # [time, bin]: slower towards the top
+    ds = xr.Dataset({"u": (("time", "bin"), east, {"standard_name": "eastward_sea_water_velocity"}),
+                     "v": (("time", "bin"), 0.5 * east, {"standard_name": "northward_sea_water_velocity"})},
+                    coords={"time": np.array(HOURS[:2], dtype="datetime64[ns]"),
+                            "bin": ("bin", [1.0, 3.0, 5.0, 7.0], {"positive": "up", "units": "m",
+                                                                  "long_name": "height above the bed"}),
+                            "latitude": la, "longitude": lo})
+    ds.to_netcdf(tmp_path / "adcp.nc")
+    g = load_file(str(tmp_path / "adcp.nc"), FRAME)
+    assert g.velocity_at(10.0, -10.0, 0.0) == (0.1, 0.2)
+    assert g.velocity_at(10.0, -10.0, 3600.0) == (0.05, 0.1)
+
+
 def test_a_scenario_with_a_stations_series_plans_with_it_everywhere(tmp_path):
     _station_file(tmp_path / "adcp.nc", "scalar")
     scen = scenarios.load(str(_scenario(tmp_path, 'file = "adcp.nc"\nfield_time = 3600.0\n')))
