@@ -3,11 +3,15 @@ grid it changes, the fence and its breach, the route it plans, and what the plan
 
 from __future__ import annotations
 
+import dataclasses
+import math
+
 import numpy as np
 import pytest
 
 from autopilot_bridge.computer_setup import AutopilotStats
 from autopilot_bridge.course import Course
+from autopilot_bridge.hil_link import RangeScan
 from autopilot_bridge.local_planning import map_to_ned_path, online_cycle_handler
 from autopilot_bridge.modes import Mode
 from autopilot_bridge.navigation import NavState
@@ -129,3 +133,46 @@ def test_a_new_vehicle_route_is_routed_on_the_grid_and_restarts_planning(compile
     np.testing.assert_array_equal(update.reference_path, route[:, ::-1])
     p.keeper.apply_route(5.1)                                        # the same route: nothing new
     assert p.keeper.update() is not None and p.keeper.update().version == update.version
+
+
+def test_without_home_a_breachs_rtl_is_refused_and_the_boat_holds_station(compiled: None) -> None:
+    p = Parts()                                                      # FENCE_ACTION 1 (RTL), no home yet
+    n, e = p.start
+    p.keeper.fence_changed(Fence(exclusion_circles=(Circle(e, n, 5.0),)))
+    p.keeper.check_fence(1.0, p.at(n, e))
+    assert p.vehicle.mode == Mode.LOITER
+    assert p.events[-1] == (1.0, "fence breach: RTL refused (RTL: no home position), holding station", True)
+
+
+def test_a_fence_across_the_route_reroutes_the_course(compiled: None) -> None:
+    p = Parts()
+    n, e = p.start
+    p.vehicle.set_mode(Mode.GUIDED, (n, e))
+    assert p.vehicle.reposition((n + 30.0, e), (n, e))[0]
+    p.keeper.apply_route(1.0)
+    straight = p.course.reference_ned.copy()
+    assert len(straight) >= 2
+    p.keeper.fence_changed(Fence(exclusion_circles=(Circle(e, n + 15.0, 3.0),)))   # on the way north
+    around = p.course.reference_ned
+    assert tuple(around[-1]) == (n + 30.0, e)
+    clearance = np.hypot(around[:, 0] - (n + 15.0), around[:, 1] - e).min()
+    assert clearance > 3.0 and not np.array_equal(around, straight)
+
+
+def test_a_sensed_obstacle_on_the_route_is_marked_and_the_route_replanned(compiled: None) -> None:
+    p = Parts()
+    n, e = p.start
+    leg = p.course.reference_ned[1] - p.course.reference_ned[0]
+    s = dataclasses.replace(p.at(n, e), psi=math.atan2(leg[1], leg[0]))   # heading along the route's first leg
+    before = p.course.reference_ned.copy()
+    scan = RangeScan((0.0,), (6.0,), 20.0, 0.0)                         # a return 6 m ahead, off the chart
+    for k in range(p.keeper.p.sensed_confirm_hits):
+        assert p.keeper.sensed.count == 0 and p.keeper.update() is None  # not yet confirmed
+        p.keeper.sense(1.0 + k, scan, s)
+    cells = p.keeper.sensed.cells()
+    assert len(cells) == 1 and p.grid.occ[cells[0][0], cells[0][1]] and not p.world.occ[cells[0][0], cells[0][1]]
+    confirmed_at = float(p.keeper.p.sensed_confirm_hits)                 # the scan that confirmed the cell
+    assert p.events == [(confirmed_at, "sensed obstacle on the global route: route re-planned", False)]
+    assert not np.array_equal(p.course.reference_ned, before) and p.keeper.routes.replans == 1
+    update = p.keeper.update()
+    assert update is not None and update.version == 1
