@@ -219,15 +219,33 @@ def read_netcdf(path: str, east_variable: str = "", north_variable: str = "") ->
         times = None
         if dims["time"] is not None:
             tv = ds[dims["time"]].values
-            if not np.issubdtype(tv.dtype, np.datetime64):
+            if tv.dtype == object and tv.size and hasattr(tv.flat[0], "calendar"):
+                times = _cftime_seconds(tv, path)
+            elif not np.issubdtype(tv.dtype, np.datetime64):
                 raise CurrentSourceError(f"{path}: time: not decodable as dates (a CF 'units' of "
-                                         "'seconds since ...' and a standard calendar are needed)")
-            times = tv.astype("datetime64[ns]").astype(np.int64) / 1e9
+                                         "'seconds since ...' is needed)")
+            else:
+                times = tv.astype("datetime64[ns]").astype(np.int64) / 1e9
             if times.size == 1:       # one time slice: a snapshot, taken as steady
                 times, u, v = None, u[0], v[0]
     if times is None:
         u, v = u[None], v[None]
     return _checked(RawCurrentGrid(lat, lon, times, u, v), path)
+
+
+def _cftime_seconds(dates: np.ndarray, path: str) -> np.ndarray:
+    """Times of a non-standard CF calendar (``noleap``, ``360_day`` ..., decoded by xarray as cftime dates)
+    as seconds since the Unix epoch: the first date taken on the standard calendar, the others by their
+    intervals in the file's own calendar (what the model stepped through)."""
+    from datetime import UTC, datetime
+
+    d0 = dates.flat[0]
+    try:
+        first = datetime(d0.year, d0.month, d0.day, d0.hour, d0.minute, d0.second, tzinfo=UTC).timestamp()
+    except ValueError:
+        raise CurrentSourceError(f"{path}: time: its first date {d0} (calendar {d0.calendar}) is no date of the "
+                                 "standard calendar; cut the file to start on one") from None
+    return np.array([first + (d - d0).total_seconds() for d in dates.ravel()], dtype=float)
 
 
 def _checked(g: RawCurrentGrid, path: str) -> RawCurrentGrid:

@@ -176,6 +176,37 @@ def test_an_upward_looking_adcp_gives_its_top_bin(tmp_path):
     assert g.velocity_at(10.0, -10.0, 3600.0) == (0.05, 0.1)
 
 
+def _calendar_file(path: Path, calendar: str, first: str) -> Path:
+    import xarray as xr
+
+    la0, lo0, la1, lo1 = metres_box(FRAME, -150.0, -150.0, 350.0, 400.0)
+    lat, lon = np.linspace(la0, la1, 3), np.linspace(lo0, lo1, 3)
+    east = np.array([0.1, 0.2, 0.4])[:, None, None] * np.ones((3, 3, 3))
+    ds = xr.Dataset({"uo": (("time", "lat", "lon"), east, {"standard_name": "eastward_sea_water_velocity"}),
+                     "vo": (("time", "lat", "lon"), -east, {"standard_name": "northward_sea_water_velocity"})},
+                    coords={"time": ("time", [0.0, 1.0, 2.0],
+                                     {"units": f"hours since {first}", "calendar": calendar}),
+                            "lat": lat, "lon": lon})
+    ds.to_netcdf(path)
+    return path
+
+
+def test_a_model_calendar_without_leap_days_is_read(tmp_path):
+    path = str(_calendar_file(tmp_path / "noleap.nc", "noleap", "2023-03-01 00:00:00"))
+    g = load_file(path, FRAME)
+    assert g.time_span() == (0.0, 7200.0)
+    assert g.velocity_at(0.0, 0.0, 5400.0) == pytest.approx((-0.3, 0.3), abs=1e-12)
+    shifted = load_file(path, FRAME, start_time="2023-03-01T01:00:00Z")       # the run starts at the 2nd slice
+    assert shifted.velocity_at(0.0, 0.0, 0.0) == pytest.approx((-0.2, 0.2), abs=1e-12)
+
+
+def test_a_first_date_the_standard_calendar_lacks_is_refused_in_one_line(tmp_path):
+    path = str(_calendar_file(tmp_path / "360.nc", "360_day", "2023-02-30 00:00:00"))
+    with pytest.raises(CurrentSourceError, match="first date 2023-02-30 00:00:00 .calendar 360_day. is no date") as err:
+        load_file(path, FRAME)
+    assert "\n" not in str(err.value)
+
+
 def test_a_scenario_with_a_stations_series_plans_with_it_everywhere(tmp_path):
     _station_file(tmp_path / "adcp.nc", "scalar")
     scen = scenarios.load(str(_scenario(tmp_path, 'file = "adcp.nc"\nfield_time = 3600.0\n')))
