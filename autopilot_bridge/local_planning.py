@@ -142,10 +142,10 @@ def online_cycle_handler(world: World, warm_up: CycleInput | None = None) \
         if update is not None and (rebuilt or update.version != applied["version"]):
             # Same maps (and their inflation caches); new route and planner parameters.
             ctx.goal = (float(update.goal[0]), float(update.goal[1]))
-            ctx.reference_path = np.asarray(update.reference_path, dtype=float).reshape(-1, 2)
+            ctx.params = replace(ctx.params, **update.planner_overrides)  # type: ignore[arg-type]  # float fields
+            ctx.set_reference(update.reference_path)   # within reach of the (new) perceptual radius
             if update.version != applied["version"]:
                 ctx.progress = 0              # a new route begins where the vessel is
-            ctx.params = replace(ctx.params, **update.planner_overrides)  # type: ignore[arg-type]  # float fields
             applied["version"] = update.version
         if request.iterations is not None:
             ctx.online = replace(world.online, local_iterations=int(request.iterations), local_time=0.0)

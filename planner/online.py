@@ -34,6 +34,7 @@ from dataclasses import field as dc_field
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
+import numpy.typing as npt
 from scipy import ndimage
 
 from planner import make_planner
@@ -186,10 +187,15 @@ class OnlineContext:
     progress: int = 0              # index of the reference point the vessel was last nearest (see select_local_subgoal)
 
     def __post_init__(self) -> None:
-        self.reference_path = np.asarray(self.reference_path, dtype=float).reshape(-1, 2)
+        self.set_reference(self.reference_path)
         if self.safe_grid is None:
             radius = self.params.safety_radius
             self.safe_grid = self.grid.inflate(radius) if radius > 0 else self.grid
+
+    def set_reference(self, reference_path: npt.ArrayLike) -> None:
+        """The reference path to follow, within reach of the perceptual radius (:func:`within_reach`):
+        set it after ``params`` when both change."""
+        self.reference_path = within_reach(reference_path, self.params.perceptual_radius)
 
     @property
     def safe(self) -> OccupancyGrid:
@@ -265,6 +271,21 @@ class OnlineContext:
         c = min(max(int(point[0] / res), 0), occ.shape[1] - 1)
         rr, cc = idx[0][r, c], idx[1][r, c]
         return (float((cc + 0.5) * res), float((rr + 0.5) * res))
+
+
+def within_reach(reference_path: npt.ArrayLike, radius: float) -> np.ndarray:
+    """The reference path with points added where two waypoints lie more than half the perceptual
+    ``radius`` (m) apart; every waypoint kept, and the path itself where no gap is that wide.
+
+    Section 3.1 chooses subgoals among the reference waypoints. With a gap wider than the domain, the
+    only waypoint in reach is q_j, the one the vessel is at, and every cycle planned back to it: with
+    PLN_PERCEPT_RAD = 6.5 m on a route of 10 m spacing, the chaos ground station's boat dithered
+    beside the quay for minutes, never past the midpoint that would make the next waypoint q_j, until
+    the current set it on (2026-11-29)."""
+    path = np.asarray(reference_path, dtype=float).reshape(-1, 2)
+    if len(path) < 2 or not np.any(np.hypot(*np.diff(path, axis=0).T) > 0.5 * radius):
+        return path
+    return _densify(path, 0.5 * radius)
 
 
 def resample(path: np.ndarray, spacing: float) -> np.ndarray:

@@ -495,6 +495,42 @@ def test_without_keeping_station_a_blocked_boat_is_set_onto_the_quay(monkeypatch
     assert worst < 0.5, worst
 
 
+GUIDED_WEST = (91.85, 78.12)   # the chaos client's last GUIDED target, 42 m west of the pier head
+
+
+def _guided_west_from_the_pier(perceptual_radius: float) -> tuple[float, float]:
+    """Armed beside the pier head (99.4 m N, 119.1 m E, bow -121 degrees, the current setting east onto it),
+    PLN_PERCEPT_RAD set, then GUIDED to ``GUIDED_WEST`` for 25 s: the least chart clearance of the hull's
+    centre (m) and how far (m) it is left from the target."""
+    from support.closed_loop import ClosedLoop
+
+    loop = ClosedLoop((99.39, 119.11), math.radians(-121.0))
+    assert loop.ap.param_table.set("PLN_PERCEPT_RAD", perceptual_radius)[0]
+    loop.run(1.0)
+    assert loop.ap.commands.arm(True).ok and loop.ap.commands.goto(*GUIDED_WEST).ok
+    worst = loop.run(25.0)
+    return worst, math.dist(loop.core.state[:2], GUIDED_WEST)
+
+
+def test_a_small_perceptual_radius_still_takes_the_boat_away_from_the_pier():
+    """The chaos hour of 2026-11-29 (seed 31, unsigned, collision at 1,194.8 s): with PLN_PERCEPT_RAD at 6.46 m
+    (valid, 5..200 m) and the route's waypoints 10 m apart, section 3.1's subgoal was always the waypoint the
+    boat was at; each local path was finished as it arrived, the reactive behaviour turned the boat on the
+    spot beside the pier for minutes, and the current set it on. The planner now adds reference points within
+    half the radius (planner.online.within_reach): the boat leaves for its target, clear of the pier."""
+    worst, left = _guided_west_from_the_pier(6.45877)
+    assert worst >= 2.0 and left < 20.0, (worst, left)
+
+
+def test_without_the_reference_within_reach_a_small_radius_keeps_the_boat_at_the_pier(monkeypatch):
+    """The control case: the reference path as given, the same boat is still beside the pier after 25 s."""
+    import planner.online as online
+
+    monkeypatch.setattr(online, "within_reach", lambda path, radius: np.asarray(path, dtype=float).reshape(-1, 2))
+    worst, left = _guided_west_from_the_pier(6.45877)
+    assert left > 35.0 and worst < 2.0, (worst, left)
+
+
 def _creep_beside_the_pier(start: tuple[float, float], heading_deg: float, seconds: float) -> float:
     """0.2 m/s on the heading ``heading_deg`` from ``start``, west of the pier head at (96 m N, 122 m E), where
     the current (0.4 m/s) sets east onto it: the least chart clearance (m) of the hull's centre."""

@@ -151,6 +151,32 @@ def test_subgoal_does_not_jump_behind_a_folded_reference_path():
     assert rule3 != 1 and point3 != ctx.goal
 
 
+def test_a_reference_path_wider_spaced_than_the_domain_is_brought_within_reach():
+    """Waypoints 10 m apart and a perceptual radius of 6.5 m: section 3.1's rules would only ever find
+    q_j, the waypoint the vessel is at. The context adds points at most half the radius apart (keeping
+    every waypoint), so the subgoal lies ahead of the vessel and moves on as it does."""
+    from planner.online import select_local_subgoal, within_reach
+
+    ref = np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0], [30.0, 0.0]])
+    same = within_reach(ref, 33.0)                      # no gap wider than 16.5 m: the path itself
+    assert np.array_equal(same, ref)
+    near = within_reach(ref, 6.5)
+    assert np.all(np.hypot(*np.diff(near, axis=0).T) <= 3.25 + 1e-12)
+    assert all(any(np.array_equal(w, q) for q in near) for w in ref)
+    grid = OccupancyGrid(np.zeros((40, 80), dtype=bool), 0.5)
+    ctx = make_context(grid, (30.0, 0.0), ref, replace(PlannerParams(), perceptual_radius=6.5),
+                       OnlineParams(), "ddrrt-star")
+    x, picked = 0.0, []
+    for _ in range(12):                                  # the vessel moves to each subgoal in turn
+        point, _, _ = select_local_subgoal(ctx, (x, 0.0))
+        assert point[0] > x + 1.0                         # always ahead of it
+        picked.append(point[0])
+        x = point[0] - 1.0                               # it gets most of the way before the next cycle
+        if point == ctx.goal:
+            break
+    assert picked[-1] == 30.0, picked
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_vessel_inside_the_inflation_plans_out_of_it_not_along_the_wall(seed):
     """Pushed 1.5 m from the labyrinth's north wall (inside the 2 m safety inflation), the vessel
