@@ -68,11 +68,12 @@ from autopilot_bridge.parameters import ParamTable, bind
 from autopilot_bridge.plan_acceptance import AcceptedPath, PlanAcceptance
 from autopilot_bridge.plan_handoff import PlanHandoff
 from autopilot_bridge.station_keeping import StationKeeper
-from autopilot_bridge.summary import AutopilotSummary, ControlLatency, NavigationCounts, WorkerStartup
+from autopilot_bridge.summary import AutopilotSummary, ComputerCurrent, ControlLatency, NavigationCounts, WorkerStartup
 from autopilot_bridge.vehicle import MIS_DONE_HOLD, MIS_DONE_LOITER, Vehicle, Waypoint
 from autopilot_bridge.vehicle_api import VehicleStatus
 from autopilot_bridge.vehicle_commands import VehicleCommands
 from autopilot_bridge.world_keeper import WorldKeeper
+from common.current_tally import CurrentTally
 from common.dronecan_layout import RAW_COMMAND_MAX, quantize
 from common.mavlink import MAV_TYPE as M
 from planner.gridmap import OccupancyGrid
@@ -132,7 +133,10 @@ class Autopilot:
         self.acceptance = PlanAcceptance(params, self.grid, self.keeper.sensed, self.planning, self.course, self.stats)
         self.station = StationKeeper(params.loiter_radius, params.loiter_speed,
                                      Thrust(0.0, 0.0, 0.0, 0.0, False), params.station_keeping)
-        self.current = CurrentObserver(propulsion.surge, prior=self._field_prior(world))
+        self._planner_current = self._field_prior(world)
+        self.current = CurrentObserver(propulsion.surge, prior=self._planner_current)
+        # The planner's field and this computer's estimate where the boat was (10 Hz), for the summary.
+        self.current_seen = (CurrentTally(), CurrentTally())
         self.helm = Helm(params, propulsion, self.course, self.vehicle, self.grid, safety, self.planning,
                          self.acceptance, HeadingPID(config.control), SpeedController(config.control, propulsion.surge),
                          self.station, self.current, self._event, self._count_fallback)
@@ -288,6 +292,9 @@ class Autopilot:
                 c.path_invalid = True
         if self.stats.frames % 10 == 0:  # the estimated track at 10 Hz, for the run's plot
             self.track.extend((t, s.x, s.y, s.psi))
+            if self._planner_current is not None:
+                self.current_seen[0].add(*self._planner_current(s.x, s.y))
+            self.current_seen[1].add(*self.current.velocity)
 
         self.vehicle.update(s.x, s.y, t)
         self.keeper.check_fence(t, s)
@@ -430,4 +437,5 @@ class Autopilot:
             events=tuple(f"{t:.2f}s {e}" for t, e in self.stats.events),
             can=self.actuators.summary(),
             traffic=None if self.traffic is None else self.traffic.summary(),
+            current=ComputerCurrent(planner_field=self.current_seen[0].stats(), estimate=self.current_seen[1].stats()),
         )

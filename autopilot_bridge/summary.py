@@ -11,6 +11,7 @@ fills them, read back as strictly as the dataclasses).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypedDict
 
 from autopilot_bridge.can_actuators import CanPathSummary
 from autopilot_bridge.gcs.link import GcsSummary
@@ -18,6 +19,7 @@ from autopilot_bridge.hil_link import LinkSummary
 from autopilot_bridge.plan_acceptance import AcceptedPath
 from autopilot_bridge.tracking_stats import TrackingSummary
 from autopilot_bridge.traffic_awareness import TrafficSummary
+from common.current_tally import CurrentStats
 from common.tables import absent_when_none
 from common.udp import BusyPollSummary
 
@@ -47,6 +49,15 @@ class NavigationCounts:
     updates: dict[str, int]
     rejected: dict[str, int]
     position_resets: int
+
+
+class ComputerCurrent(TypedDict):
+    """The current as the vessel computer met it, sampled at 10 Hz where its estimate put the boat (m/s,
+    NED): the planner's field (eq. (12)'s, frozen at ``field_time``; None without a current) and the
+    computer's own estimate (:class:`autopilot_bridge.current_estimate.CurrentObserver`)."""
+
+    planner_field: CurrentStats | None
+    estimate: CurrentStats | None
 
 
 @dataclass(frozen=True)
@@ -85,6 +96,7 @@ class AutopilotSummary:
     events: tuple[str, ...]              # "12.34s what happened"
     can: CanPathSummary | None = absent_when_none()       # CAN actuators only
     traffic: TrafficSummary | None = None                 # None without traffic
+    current: ComputerCurrent | None = absent_when_none()  # the planner's field and the estimate along the way
     link: LinkSummary | None = absent_when_none()         # the HIL link's refusals
     busy_poll: BusyPollSummary | None = absent_when_none()  # lockstep waits for frames
     gcs: GcsSummary | None = absent_when_none()           # the ground-station link's counters

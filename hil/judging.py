@@ -18,6 +18,7 @@ from hil.run_summary import (
     BusyPollEnds,
     HilSimulatorSection,
     RunCan,
+    RunCurrent,
     RunSecurity,
     RunSummary,
     RunTraffic,
@@ -225,6 +226,10 @@ def summarise(run: RunRecord, tap: TapRecords, cfg: HilConfig,
         encounters=encounters,
         traffic=traffic,
         can=can,
+        current=None if sim is None else RunCurrent(
+            source=sim["current"]["source"], felt=sim["current"]["felt"],
+            planner_field=None if ap is None or ap.current is None else ap.current["planner_field"],
+            estimate=None if ap is None or ap.current is None else ap.current["estimate"]),
     )
 
 

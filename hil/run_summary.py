@@ -17,6 +17,7 @@ from autopilot_bridge.gcs.link import GcsSummary
 from autopilot_bridge.hil_link import LinkSummary
 from autopilot_bridge.summary import AutopilotSummary, ControlLatency, NavigationCounts
 from autopilot_bridge.tracking_stats import TrackingSummary
+from common.current_tally import CurrentStats
 from common.tables import absent_when_none
 from common.udp import BusyPollSummary
 from hil.ardupilot import ArduPilotSimulatorSection, ArduRoverSetup
@@ -84,6 +85,18 @@ class HilSimulatorSection(TypedDict):
     cpus: dict[str, int] | None
 
 
+class RunCurrent(TypedDict):
+    """The current three ways, each sampled along the boat's way (m/s, NED): the ``[current]`` source, the
+    truth the simulator applied at the hull (once a frame), the planner's field where the vessel computer
+    put the boat (10 Hz; None without a current) and the computer's own estimate from ground velocity and
+    thrust (10 Hz). Where the three agree, the current given is the one the boat felt and planned with."""
+
+    source: str
+    felt: CurrentStats | None
+    planner_field: CurrentStats | None
+    estimate: CurrentStats | None
+
+
 class SimulatorSecurity(CommandPort):
     """What the simulator refused, by reason, and its command port's counters."""
 
@@ -149,6 +162,7 @@ class RunSummary:
     encounters: tuple[EncounterVerdict, ...] | None = absent_when_none()   # scenarios with traffic
     traffic: RunTraffic | None = absent_when_none()
     can: RunCan | None = absent_when_none()                      # --actuators can
+    current: RunCurrent | None = absent_when_none()              # where the vessel computer flew
     run_folder: str | None = absent_when_none()
     plot: str | None = absent_when_none()
     plot_error: str | None = absent_when_none()

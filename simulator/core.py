@@ -14,6 +14,7 @@ from collections import Counter
 from typing import TYPE_CHECKING, TypedDict
 
 from common.current_sources import NoCurrent, make_current
+from common.current_tally import CurrentTally
 from common.dronecan_layout import RAW_COMMAND_MAX
 from common.geodesy import LocalFrame
 from common.mavlink import MAV_TYPE, Codec
@@ -103,6 +104,7 @@ class SimulatorCore:
         self.geo = LocalFrame(cfg.geodesy.lat0, cfg.geodesy.lon0, cfg.geodesy.alt0)
         # eq. (13), a uniform current or a file's (common.current_sources): the planner's source too
         self.current = make_current(cfg.current, self.geo) or NoCurrent()
+        self.current_felt = CurrentTally()   # the current at the hull, once a frame
         rngs = sensor_rngs(cfg.sim.seed)
         s = cfg.sensors
         self.waves = WaveModel(cfg.waves, cfg.vessel, rngs["waves"])
@@ -247,6 +249,7 @@ class SimulatorCore:
             self.distance += math.hypot(self.state[0] - x0, self.state[1] - y0)
             self.waves.advance(self.dt)
             self._env = self._environment(self.n * self.frame_dt + k * self.dt)
+        self.current_felt.add(*self._env[1])
         self.n += 1
 
     # -- output ----------------------------------------------------------------------------

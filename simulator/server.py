@@ -11,6 +11,7 @@ import time
 from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, NotRequired, TypedDict
 
+from common.current_tally import CurrentStats, describe
 from common.percentiles import StreamingPercentiles
 from common.udp import BusyPoll, BusyPollSummary, UdpEndpoint
 from simulator.core import OUT_OF_STEP, BatterySummary, Command, SimulatorCore, TruthState
@@ -89,6 +90,13 @@ class SimulatorCanSummary(EscBankSummary):
     mavlink_commands_ignored: int
 
 
+class SimulatorCurrent(TypedDict):
+    """The current the hull felt: the ``[current]`` source and its samples, once a frame (m/s, NED)."""
+
+    source: str
+    felt: CurrentStats | None
+
+
 class SimulatorSummary(TypedDict):
     """What `hil sim` prints at its end (times in s, distances in m): the steps, the traffic on its ports,
     rejects by reason, the failsafes, the stalls, the battery and the truth at the end."""
@@ -119,6 +127,7 @@ class SimulatorSummary(TypedDict):
     distance_m: float
     ais: AisCounts | None
     final_state: TruthState
+    current: SimulatorCurrent
     can: NotRequired[SimulatorCanSummary]   # --actuators can
     commands_on: NotRequired[str]        # "host:port" of the command port (added by `hil sim`)
 
@@ -433,6 +442,7 @@ class SimulatorServer:
             ais=None if c.traffic is None else AisCounts(ships=len(c.traffic.ships), reports=c.traffic.reports_sent,
                                                          lost=c.traffic.reports_lost),
             final_state=c.truth(),
+            current=SimulatorCurrent(source=describe(c.cfg.current), felt=c.current_felt.stats()),
         )
         if self.pipeline:
             out["pipeline_skips"] = self.pipeline_skips

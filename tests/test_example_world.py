@@ -5,6 +5,7 @@ and a chart and a current file written here as a user's tools would write them."
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -39,10 +40,24 @@ def _run(hil, tmp_path: Path, scenario: str, duration: float = 400.0) -> dict:
     return json.loads(r.stdout)
 
 
+def _current_seen(s: dict, north: float, east: float, tol: float, estimate_tol: float) -> None:
+    """The run's ``current`` section: the truth the hull felt and the planner's field along the track near
+    (north, east) m/s, and the vessel computer's own estimate (from ground velocity and thrust) near both."""
+    c = s["current"]
+    for part in ("felt", "planner_field"):
+        assert (c[part]["mean_north_m_s"], c[part]["mean_east_m_s"]) == pytest.approx((north, east), abs=tol), part
+    est, felt = c["estimate"], c["felt"]
+    assert math.hypot(est["mean_north_m_s"] - felt["mean_north_m_s"],
+                      est["mean_east_m_s"] - felt["mean_east_m_s"]) < estimate_tol
+
+
 @pytest.mark.slow
 def test_a_run_on_the_example_world_reaches_the_goal_without_collision(hil, tmp_path):
     s = _run(hil, tmp_path, "bay")
     assert s["reached_goal"] and s["collisions"] == 0 and s["min_clearance_m"] > 0.5
+    # configs/worlds/bay/currents.nc: 0.3 m/s east and 0.05 m/s north at the start of its M2 cycle
+    assert s["current"]["source"].startswith("file ") and s["current"]["source"].endswith("currents.nc")
+    _current_seen(s, 0.05, 0.30, tol=0.01, estimate_tol=0.05)
 
 
 @pytest.mark.slow
@@ -73,6 +88,9 @@ file = "currents.nc"
 """)
     s = _run(hil, tmp_path, str(tmp_path / "users.toml"))
     assert s["reached_goal"] and s["collisions"] == 0
+    # the file's 0.4 m/s north at its first hour (the planner's field_time 0), turning east by 0.1 m/s an
+    # hour while the run lasts its few minutes
+    _current_seen(s, 0.40, 0.0, tol=0.02, estimate_tol=0.08)
 
 
 @pytest.mark.slow
@@ -98,3 +116,5 @@ uniform = [0.0, 1.0]
     # the current is felt: she holds her track heading into it (measured: 0.21 rad RMS off the track's
     # course; 0.035 rad on the same scenario in still water)
     assert s["tracking"]["heading_error_rms_rad"] > 0.1
+    assert s["current"]["source"] == "uniform [0, 1] m/s east, north"
+    _current_seen(s, 1.0, 0.0, tol=1e-4, estimate_tol=0.1)

@@ -32,8 +32,9 @@ from planner.params import ALGORITHM_NAMES
 if TYPE_CHECKING:
     from types import FrameType
 
+    from common.current_tally import CurrentStats
     from hil.placement import Placement
-    from hil.run_summary import RunSummary
+    from hil.run_summary import RunCurrent, RunSummary
     from hil.settings import HilConfig
 
 FRAME_TIMEOUT_S = 15.0  # wall seconds to wait for the simulator's next frame before giving up
@@ -301,6 +302,21 @@ PROBLEM_COUNTER = re.compile(r"reject|refus|drop|overrun|restart|error|lost|loss
                              r"collision|fallback|malformed|invalid|overflow|kill", re.I)
 
 
+def current_line(c: RunCurrent) -> str:
+    """The current felt, planned with and estimated along the way: mean speed (m/s) and set (the direction
+    it flows toward, degrees from north)."""
+    def part(name: str, st: CurrentStats | None) -> str:
+        if st is None:
+            return f"{name} -"
+        set_deg = math.degrees(math.atan2(st["mean_east_m_s"], st["mean_north_m_s"])) % 360.0
+        return f"{name} {st['mean_speed_m_s']:.2f} m/s set {set_deg:03.0f}"
+    source = c["source"]
+    if source.startswith("file "):
+        source = "file " + Path(source[5:]).name
+    return (f"current ({source}): " + ", ".join(
+        (part("felt", c["felt"]), part("planner", c["planner_field"]), part("estimated", c["estimate"]))))
+
+
 def human_summary(s: RunSummary) -> list[str]:
     """The run in at most 15 lines: outcome, time, clearance, errors, non-zero problem counters
     (everything else: --json and summary.json)."""
@@ -327,6 +343,8 @@ def human_summary(s: RunSummary) -> list[str]:
                  f"{num(tr.get('cross_track_rms_m'), ' m')} (max {num(tr.get('cross_track_max_m'), ' m')}); "
                  f"control latency p99 {num(None if lat is None else lat.p99, ' ms')}")
     lines.append(f"planning: {fmt(s.planning_cycles)} cycles, {fmt(s.plans_accepted)} plans accepted")
+    if s.current is not None and s.current["source"] != "none":
+        lines.append(current_line(s.current))
     if s.traffic is not None:
         shown = {k: v for k, v in s.traffic.items() if not isinstance(v, (dict, list)) and v is not None}
         lines.append("traffic: " + ", ".join(f"{k} {fmt(v)}" for k, v in list(shown.items())[:6]))
