@@ -19,11 +19,21 @@ sensor and collision judge) is this same grid plus the scenario's uncharted disc
 
 Readers. GeoJSON (RFC 7946: always longitude/latitude) is read by the standard library and shapely.
 Other files go through pyogrio (GDAL): shapefiles (.shp with .dbf/.shx, and .prj when present),
-GeoPackage, KML and S-57 ENC cells (.000: the obstacle layers only; no S-57 cell has been read
-here). A layer in another coordinate reference system (a shapefile's .prj in UTM, a GeoPackage in a
-national grid, a GeoJSON of the 2008 specification with a ``crs`` member) is transformed to WGS-84
-longitude/latitude by pyproj (PROJ) before anything else; a file without a CRS must already be in
-longitude/latitude degrees, and one whose CRS PROJ does not know is refused in one line.
+GeoPackage (every layer), KML/KMZ, FlatGeobuf and S-57 ENC cells (.000: the obstacle layers only; no
+S-57 cell with features has been read here: GDAL cannot write one). A layer in another coordinate
+reference system (a shapefile's .prj in UTM, a GeoPackage layer in a national grid, a GeoJSON of the
+2008 specification with a ``crs`` member) is transformed to WGS-84 longitude/latitude by pyproj
+(PROJ) before anything else; a file without a CRS must already be in longitude/latitude degrees, and
+one whose CRS PROJ does not know is refused in one line.
+
+Geometry as users' tools write it. Holes stay water (a basin cut out of the land); multipolygons,
+collections (nested ones too) are taken part by part; Z and M coordinates are dropped; a feature
+without geometry or with an empty one is no obstacle (the rest of the file is read); curves are
+linearised by GDAL. An invalid polygon (a self-intersecting bow-tie, overlapping parts of one
+multipolygon) is repaired as drawn (:func:`_repaired`: shells less holes, both lobes of a bow-tie
+land) rather than refused. The ``obstacle`` and ``buffer`` fields are found in any case
+(``OBSTACLE``), ``obstacle`` may be a boolean, 0/1 or text (false/no/n/f/0, true/yes/y/t/1), ``buffer``
+a number or a number as text (KML's ExtendedData); other values are refused in one line.
 """
 
 from __future__ import annotations
@@ -54,7 +64,7 @@ S57_OBSTACLE_LAYERS = frozenset({"LNDARE", "SLCONS", "OBSTRN", "PONTON", "HULKES
 # CRS names that already mean longitude/latitude on WGS-84 (or a datum within ~1 m of it: NAD83, ETRS89).
 LONLAT_CRS = frozenset({"EPSG:4326", "OGC:CRS84", "CRS:84", "EPSG:4269", "EPSG:4258", "urn:ogc:def:crs:OGC:1.3:CRS84",
                         "urn:ogc:def:crs:EPSG::4326", "urn:ogc:def:crs:OGC::CRS84"})
-CHART_SUFFIXES = (".geojson", ".json", ".shp", ".gpkg", ".kml", ".000")
+CHART_SUFFIXES = (".geojson", ".json", ".shp", ".gpkg", ".kml", ".kmz", ".fgb", ".000")
 MAX_CELLS = 16_000_000   # 4000 x 4000 cells: a planning grid the planner and the simulator hold in memory
 
 
@@ -81,13 +91,49 @@ class ChartGrid:
     resolution: float
 
 
-def _buffer_of(props: Mapping[str, object] | None, source: str) -> float | None:
-    if not props or props.get("buffer") is None:
+def _field(props: Mapping[str, object] | None, name: str) -> object:
+    """A property by name, in any case (``buffer``, ``BUFFER``: a shapefile's fields are often upper case)."""
+    if not props:
         return None
-    b = props["buffer"]
-    if isinstance(b, bool) or not isinstance(b, (int, float)) or not (0 <= b <= 1000):
-        raise ConfigError(f"{source}: a feature's buffer must be a number of metres in 0..1000 (got {b!r})")
+    if name in props:
+        return props[name]
+    return next((v for k, v in props.items() if isinstance(k, str) and k.lower() == name), None)
+
+
+def _buffer_of(props: Mapping[str, object] | None, source: str) -> float | None:
+    b = _field(props, "buffer")
+    refused = f"{source}: a feature's buffer must be a number of metres in 0..1000 (got {b!r})"
+    if isinstance(b, str):      # KML's ExtendedData, a text field: "3", "2.5"
+        if not b.strip():
+            return None
+        try:
+            b = float(b)
+        except ValueError:
+            raise ConfigError(refused) from None
+    if b is None or (isinstance(b, (float, np.floating)) and math.isnan(b)):
+        return None     # no value: the default (a null in a GeoPackage, NaN from a float column)
+    if isinstance(b, (bool, np.bool_)) or not isinstance(b, (int, float, np.number)) or not 0 <= b <= 1000:
+        raise ConfigError(refused)
     return float(b)
+
+
+_NO = frozenset({"false", "f", "no", "n", "0"})
+_YES = frozenset({"true", "t", "yes", "y", "1", ""})
+
+
+def _is_obstacle(props: Mapping[str, object] | None, source: str) -> bool:
+    """The feature's ``obstacle`` property: false, 0, "false"/"no"/"n"/"f"/"0" (any case) make it no obstacle;
+    true, 1, their words, an empty text or no value at all an obstacle; anything else is refused."""
+    v = _field(props, "obstacle")
+    if v is None or isinstance(v, (bool, np.bool_)):
+        return v is None or bool(v)
+    if isinstance(v, (int, np.integer)) and v in (0, 1):
+        return bool(v)
+    if isinstance(v, (float, np.floating)) and (math.isnan(v) or v in (0.0, 1.0)):
+        return math.isnan(v) or bool(v)
+    if isinstance(v, str) and v.strip().lower() in _NO | _YES:
+        return v.strip().lower() not in _NO
+    raise ConfigError(f"{source}: a feature's obstacle property must be true or false (got {v!r})")
 
 
 def _read_geojson(path: Path) -> list[ChartFeature]:
@@ -126,7 +172,7 @@ def _read_geojson(path: Path) -> list[ChartFeature]:
         except Exception as exc:  # shapely raises several kinds for malformed coordinates
             raise ConfigError(f"{path}: feature {i}: bad geometry ({type(exc).__name__}: {exc})") from None
         props = f.get("properties") if isinstance(f.get("properties"), dict) else None
-        if props and props.get("obstacle") is False:
+        if not _is_obstacle(props, f"{path}: feature {i}"):
             continue   # marked as no obstacle (a water area, a label)
         if to_lonlat is not None:
             geom = to_lonlat(geom)
@@ -178,23 +224,27 @@ def _read_ogr(path: Path) -> list[ChartFeature]:
         raise ConfigError(f"{path}: cannot be read as a chart ({str(exc).splitlines()[0]})") from None
     out: list[ChartFeature] = []
     for layer in layers:
+        where = f"{path}: layer {layer}"
         try:
             meta, _fids, wkb, fields = pyogrio.raw.read(path, layer=layer, force_2d=True)
         except Exception as exc:
-            raise ConfigError(f"{path}: layer {layer}: cannot be read ({str(exc).splitlines()[0]})") from None
+            raise ConfigError(f"{where}: cannot be read ({str(exc).splitlines()[0]})") from None
         crs = meta.get("crs")
-        to_lonlat = _to_lonlat(str(crs), f"{path}: layer {layer}") if crs and crs not in LONLAT_CRS else None
+        to_lonlat = _to_lonlat(str(crs), where) if crs and crs not in LONLAT_CRS else None
         names = [str(n) for n in meta.get("fields", [])]
-        keep = fields[names.index("obstacle")] if "obstacle" in names else None
-        buffers = fields[names.index("buffer")] if "buffer" in names else None
         for i, g in enumerate(wkb):
-            if g is None or (keep is not None and keep[i] in (False, 0, "false", "no")):
+            if g is None:
+                continue   # a feature without geometry (a label, a record): no obstacle
+            props = {n: fields[k][i] for k, n in enumerate(names) if n.lower() in ("obstacle", "buffer")}
+            if not _is_obstacle(props, f"{where}: feature {i}"):
                 continue
-            b = None if buffers is None else buffers[i]
-            b = None if b is None or (isinstance(b, float) and math.isnan(b)) else b
-            geom = shapely.from_wkb(g)
-            out.append(ChartFeature(geom if to_lonlat is None else to_lonlat(geom),
-                                    _buffer_of({"buffer": b}, f"{path}: layer {layer}")))
+            buffer = _buffer_of(props, f"{where}: feature {i}")
+            try:
+                geom = shapely.from_wkb(g)
+            except Exception as exc:  # shapely.errors.GEOSException: e.g. a curve (CIRCULARSTRING) GEOS cannot hold
+                raise ConfigError(f"{where}: feature {i}: geometry shapely cannot read ({str(exc).splitlines()[0]}); "
+                                  "export curves as straight segments (linearised)") from None
+            out.append(ChartFeature(geom if to_lonlat is None else to_lonlat(geom), buffer))
     return out
 
 
@@ -253,6 +303,34 @@ def to_metres(geometry: BaseGeometry, frame: LocalFrame) -> BaseGeometry:
     return shapely.transform(geometry, convert)
 
 
+def _parts(geometry: BaseGeometry) -> list[BaseGeometry]:
+    """The single points, lines and polygons of a geometry, collections within collections opened; empty
+    parts (a GeoPackage's POLYGON EMPTY, a null member) left out."""
+    import shapely
+
+    out = []
+    for g in shapely.get_parts(geometry):
+        if g.geom_type in ("GeometryCollection", "MultiPoint", "MultiLineString", "MultiPolygon"):
+            out.extend(_parts(g))
+        elif not g.is_empty:
+            out.append(g)
+    return out
+
+
+def _repaired(polygon: BaseGeometry) -> BaseGeometry:
+    """A polygon or multipolygon made valid, as drawn: the union of its shells less the union of its holes
+    (GEOS's make_valid, method "structure": a bow-tie's two lobes are both land, overlapping parts of a
+    multipolygon are land once, a hole stays water), plus any zero-area part (a spike, a polygon drawn
+    flat) kept as the line it is, marking the cells it touches. A valid polygon is returned as it is."""
+    import shapely
+
+    if polygon.is_valid:
+        return polygon
+    fixed = shapely.make_valid(polygon, method="structure", keep_collapsed=True)
+    flat = [p for p in shapely.get_parts(shapely.make_valid(polygon)) if p.geom_type not in ("Polygon", "MultiPolygon")]
+    return shapely.union_all([fixed, *flat]) if flat else fixed
+
+
 def rasterise(path: str | Path, resolution: float, positions: LocalFrame, extent: tuple[float, ...] = (),
               default_buffer: float = 2.0) -> ChartGrid:
     """The chart at ``path`` on a grid of ``resolution`` m (see the module's docstring); ``extent``
@@ -265,14 +343,16 @@ def rasterise(path: str | Path, resolution: float, positions: LocalFrame, extent
     shapes = []
     for f in feats:
         b = default_buffer if f.buffer is None else f.buffer
-        for g in shapely.get_parts(to_metres(f.geometry, frame)):   # a collection's members one by one
+        for g in _parts(to_metres(f.geometry, frame)):   # a collection's members one by one
             if g.geom_type in ("Point", "LineString", "LinearRing"):
                 if b <= 0:
                     raise ConfigError(f"{path}: points and lines need a buffer > 0 m (chart_buffer or a "
                                       "'buffer' property)")
                 g = g.buffer(b)
-            elif b > 0 and f.buffer is not None:
-                g = g.buffer(b)
+            else:
+                g = _repaired(g)
+                if b > 0 and f.buffer is not None:
+                    g = g.buffer(b)
             shapes.append(g)
     world = shapely.union_all(shapes)
     if extent:

@@ -303,3 +303,180 @@ def test_a_feature_marked_as_no_obstacle_is_skipped(tmp_path):
     grid = charts.rasterise(_chart(tmp_path, doc), 0.5, FRAME)
     assert not _cell(grid, 30.0, 60.0)                # open water inside the 'basin' polygon
     assert _cell(grid, 100.0, 10.0)                   # the quay still is land
+
+
+# --- Charts as other tools write them: GDAL's own writers through pyogrio -------------------------------
+
+def _check_cells(grid: charts.ChartGrid, features: list) -> int:
+    """Assert every cell the features decide (see support.world_files.basin_harbour); how many were checked."""
+    checked = [(name, x, y, occupied) for _l, name, _g, _p, cells in features for x, y, occupied in cells]
+    wrong = [(name, x, y, occupied) for name, x, y, occupied in checked if _cell(grid, x, y) != occupied]
+    assert not wrong, f"cells (feature, x, y, should be occupied) that are not: {wrong}"
+    return len(checked)
+
+
+BASIN_EXTENT = (0.0, 0.0, 200.0, 150.0)
+CGCS2000_GK_120E = 4549     # CGCS2000 / 3-degree Gauss-Kruger CM 120E: China's national grid, north-first axes
+
+
+def test_a_geopackage_of_several_layers_in_several_crs_as_gdal_writes_it(tmp_path):
+    """Land with a basin cut out of it (a hole: water) and an island in UTM, 3-D piers with a null and an
+    empty geometry in longitude/latitude, hazards (a pile with an integer buffer, a bow-tie, a geometry
+    collection, an anchorage that is no obstacle) in a national grid, and an empty layer."""
+    pytest.importorskip("pyogrio")
+    pytest.importorskip("pyproj")
+    from support.world_files import basin_harbour, write_ogr_chart
+
+    feats = basin_harbour()
+    path = write_ogr_chart(tmp_path / "harbour.gpkg", "GPKG", feats, FRAME,
+                           crs={"land": UTM_EPSG, "piers": 4326, "hazards": CGCS2000_GK_120E})
+    write_ogr_chart(path, "GPKG", [("empty", "x", None, {}, [])], FRAME)   # a layer of one feature without geometry
+    import pyogrio
+
+    assert {str(n) for n, _t in pyogrio.list_layers(path)} == {"land", "piers", "hazards", "empty"}
+    assert pyogrio.read_info(path, layer="land")["crs"] == f"EPSG:{UTM_EPSG}"
+    grid = charts.rasterise(path, 0.5, FRAME, extent=BASIN_EXTENT)
+    assert _check_cells(grid, feats) == 17
+    # the default extent: the land's bounds, its south-west corner the origin
+    whole = charts.rasterise(path, 0.5, FRAME)
+    assert whole.occ.shape == (300, 400) and whole.origin == pytest.approx((LAT0, LON0), abs=1e-6)
+
+
+def _without(feats: list, *names: str) -> list:
+    return [f for f in feats if f[1] not in names]
+
+
+@pytest.mark.parametrize("name, driver, crs, options, left_out", [
+    ("rfc7946.geojson", "GeoJSON", UTM_EPSG, {"layer_options": {"RFC7946": "YES"}}, ()),  # GDAL reprojects to lon/lat
+    ("crs-member.geojson", "GeoJSON", UTM_EPSG, {"layer_options": {"RFC7946": "NO"}}, ()),   # 2008: a crs member
+    ("harbour.fgb", "FlatGeobuf", UTM_EPSG, {"layer_options": {"SPATIAL_INDEX": "NO"}}, ()),
+    # GDAL's KML writers refuse an empty polygon and a self-intersecting one
+    ("libkml.kml", "LIBKML", 4326, {}, ("empty", "bow-tie")),
+    ("kml.kml", "KML", 4326, {}, ("empty", "bow-tie")),
+])
+def test_a_chart_gdal_writes_in_one_file_gives_the_harbour(tmp_path, name, driver, crs, options, left_out):
+    pytest.importorskip("pyogrio")
+    pytest.importorskip("pyproj")
+    from support.world_files import basin_harbour, write_ogr_chart
+
+    feats = _without(basin_harbour(), *left_out)
+    if driver in ("GeoJSON", "FlatGeobuf"):          # one layer per file
+        feats = [("harbour", *f[1:]) for f in feats]
+    path = write_ogr_chart(tmp_path / name, driver, feats, FRAME, crs=crs, **options)
+    if name == "crs-member.geojson":
+        assert json.loads(path.read_text())["crs"]["properties"]["name"] == f"urn:ogc:def:crs:EPSG::{UTM_EPSG}"
+    grid = charts.rasterise(path, 0.5, FRAME, extent=BASIN_EXTENT)
+    assert _check_cells(grid, feats) == (14 if "bow-tie" in left_out else 17)
+
+
+def test_a_kmz_of_one_layer_is_read(tmp_path):
+    pytest.importorskip("pyogrio")
+    from support.world_files import basin_harbour, write_ogr_chart
+
+    feats = [f for f in basin_harbour() if f[0] == "land"]
+    path = write_ogr_chart(tmp_path / "land.kmz", "LIBKML", feats, FRAME)
+    assert charts.is_chart(path)
+    assert _check_cells(charts.rasterise(path, 0.5, FRAME, extent=BASIN_EXTENT), feats) == 6
+
+
+def test_a_polygon_shapefile_with_upper_case_integer_fields(tmp_path):
+    """A shapefile in UTM (.prj) holding the land with its hole, the pier and the bow-tie, and the
+    anchorage marked OBSTACLE = 0 in an integer field, as tools that write upper-case names do."""
+    pyogrio = pytest.importorskip("pyogrio")
+    pytest.importorskip("pyproj")
+    import shapely
+    from support.world_files import basin_harbour, to_lonlat
+
+    feats = [f for f in basin_harbour() if f[2] is not None and f[2].geom_type in ("Polygon", "MultiPolygon")
+             and not f[2].is_empty]
+    utm = _utm([shapely.force_2d(to_lonlat(f[2], FRAME)) for f in feats], UTM_EPSG)
+    obstacle = np.array([0 if f[3].get("obstacle") is False else 1 for f in feats], dtype=np.int32)
+    pyogrio.raw.write(tmp_path / "harbour.shp", shapely.to_wkb(np.array(utm, dtype=object)),
+                      field_data=[obstacle, np.zeros(len(feats), dtype=np.int32)], fields=["OBSTACLE", "BUFFER"],
+                      geometry_type="MultiPolygon", crs=f"EPSG:{UTM_EPSG}", driver="ESRI Shapefile")
+    assert (tmp_path / "harbour.prj").exists()
+    grid = charts.rasterise(tmp_path / "harbour.shp", 0.5, FRAME, extent=BASIN_EXTENT)
+    assert _check_cells(grid, feats) == 12
+
+
+def test_an_s57_cell_gdal_writes_holds_no_obstacle_layer_and_is_refused(tmp_path):
+    """GDAL's S-57 driver creates a cell (its DSID record) but has no CreateLayer: pyogrio cannot write
+    an object class into it (a cell with features needs its vector primitives and their linkages,
+    which only ogr2ogr from another S-57 cell supplies). What it writes is read by the S-57 reader
+    and refused in one line: no obstacle layer."""
+    pyogrio = pytest.importorskip("pyogrio")
+    import shapely
+    from shapely.geometry import box
+
+    path = tmp_path / "TEST0001.000"
+    land = np.array([shapely.to_wkb(box(LON0, LAT0, LON0 + 0.001, LAT0 + 0.001))], dtype=object)
+    with pytest.raises(Exception, match="CreateLayer.. not supported"):
+        pyogrio.raw.write(path, land, field_data=[], fields=[], layer="LNDARE", driver="S57",
+                          geometry_type="Polygon", crs="EPSG:4326")
+    assert [str(n) for n, _t in pyogrio.list_layers(path)] == ["DSID"]
+    with pytest.raises(ConfigError, match="the chart has no features") as err:
+        charts.rasterise(path, 0.5, FRAME)
+    assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("props, message", [
+    ({"obstacle": "perhaps"}, "obstacle property must be true or false .got 'perhaps'."),
+    ({"obstacle": 2}, "obstacle property must be true or false"),
+    ({"buffer": "three"}, "buffer must be a number of metres in 0..1000 .got 'three'."),
+    ({"BUFFER": 2000}, "buffer must be a number of metres"),
+])
+def test_obstacle_and_buffer_values_that_mean_nothing_are_refused_in_one_line(tmp_path, props, message):
+    doc = {"type": "Feature", "properties": props, "geometry": {"type": "Point", "coordinates": [LON0, LAT0]}}
+    with pytest.raises(ConfigError, match=message) as err:
+        charts.rasterise(_chart(tmp_path, doc), 0.5, FRAME)
+    assert "\n" not in str(err.value)
+
+
+def test_obstacle_and_buffer_as_text_and_in_any_case(tmp_path):
+    """KML's ExtendedData and many GIS exports give text; a shapefile's fields are often upper case."""
+    def point(x: float, props: dict) -> dict:
+        return {"type": "Feature", "properties": props,
+                "geometry": {"type": "Point", "coordinates": list(reversed(FRAME.sea_level_to_geodetic(20.0, x)))}}
+
+    doc = {"type": "FeatureCollection", "features": [
+        point(10.0, {"Obstacle": "No"}), point(20.0, {"obstacle": "false"}), point(30.0, {"OBSTACLE": 0}),
+        point(40.0, {"obstacle": "yes", "Buffer": "3"}), point(50.0, {"obstacle": ""}),
+        point(0.0, {"buffer": 0.2}), point(60.0, {"buffer": 0.2})]}
+    grid = charts.rasterise(_chart(tmp_path, doc), 0.5, FRAME, extent=(0.0, 0.0, 60.0, 40.0))
+    assert not _cell(grid, 10.0, 20.0) and not _cell(grid, 20.0, 20.0) and not _cell(grid, 30.0, 20.0)
+    assert _cell(grid, 42.5, 20.0) and not _cell(grid, 43.9, 20.0)      # grown by its text "3"
+    assert _cell(grid, 50.0, 20.0) and _cell(grid, 51.5, 20.0)           # empty text: an obstacle, the default 2 m
+
+
+def test_invalid_polygons_are_repaired_as_drawn(tmp_path):
+    """Both lobes of a bow-tie are land (buffer(0) keeps one); overlapping parts of one multipolygon are
+    land once, not a hole; a polygon drawn flat marks the cells its line touches."""
+    from support.world_files import lonlat
+
+    def ring(pts: list) -> list:
+        return [lonlat(FRAME, x, y) for x, y in [*pts, pts[0]]]
+
+    def feature(kind: str, coordinates: list) -> dict:
+        return {"type": "Feature", "properties": {}, "geometry": {"type": kind, "coordinates": coordinates}}
+
+    doc = {"type": "FeatureCollection", "features": [
+        feature("Polygon", [ring([(0, 0), (20, 20), (20, 0), (0, 20)])]),
+        feature("MultiPolygon", [[ring([(30, 0), (45, 0), (45, 15), (30, 15)])],
+                                 [ring([(35, 5), (50, 5), (50, 20), (35, 20)])]]),
+        feature("Polygon", [ring([(0, 30), (50, 30), (0, 30)])]),
+    ]}
+    grid = charts.rasterise(_chart(tmp_path, doc), 0.5, FRAME, extent=(0.0, 0.0, 50.0, 40.0))
+    assert _cell(grid, 2.0, 10.0) and _cell(grid, 18.0, 10.0) and not _cell(grid, 10.0, 2.0)   # the lobes, the gap
+    assert _cell(grid, 40.0, 10.0) and _cell(grid, 32.0, 2.0) and _cell(grid, 48.0, 18.0)     # the overlap is land
+    assert _cell(grid, 25.0, 30.2) and not _cell(grid, 25.0, 31.5)                            # the flat polygon
+
+
+def test_a_collection_inside_a_collection_and_3d_coordinates(tmp_path):
+    from support.world_files import lonlat
+
+    nested = {"type": "Point", "coordinates": [*lonlat(FRAME, 7, 7), 5.0]}
+    doc = {"type": "Feature", "properties": {}, "geometry": {"type": "GeometryCollection", "geometries": [
+        {"type": "GeometryCollection", "geometries": [nested]}, {"type": "Point", "coordinates": [LON0, LAT0, 5.0]}]}}
+    grid = charts.rasterise(_chart(tmp_path, doc), 0.5, FRAME, extent=(0.0, 0.0, 10.0, 10.0))
+    assert _cell(grid, 1.0, 1.0) and not _cell(grid, 2.5, 2.5)      # the outer point, grown by chart_buffer (2 m)
+    assert _cell(grid, 8.0, 8.0) and not _cell(grid, 9.5, 9.5)      # the nested one too

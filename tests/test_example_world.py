@@ -94,6 +94,31 @@ file = "currents.nc"
 
 
 @pytest.mark.slow
+def test_a_gdal_written_geopackage_harbour_with_a_basin_runs_as_a_scenario(hil, tmp_path):
+    """A GeoPackage written by GDAL itself (pyogrio's writer): the land a multipolygon in UTM whose hole
+    is the basin the whole run happens in (filled, the start would be inside the land), 3-D piers in
+    longitude/latitude, hazards in China's national grid (a pile, a self-intersecting bow-tie, a
+    geometry collection, an anchorage marked no obstacle where the goal is), nulls and an empty layer."""
+    pytest.importorskip("pyogrio")
+    pytest.importorskip("pyproj")
+    from support.world_files import basin_harbour, write_ogr_chart
+
+    write_ogr_chart(tmp_path / "basin.gpkg", "GPKG", basin_harbour(), LocalFrame(LAT0, LON0),
+                    crs={"land": 32651, "piers": 4326, "hazards": 4549})
+    (tmp_path / "basin.toml").write_text("""name = "basin"
+description = "a GDAL-written GeoPackage harbour: the basin a hole in the land"
+kind = "fixed"
+map = "basin.gpkg"
+resolution = 0.5
+start = [30.0, 40.0]
+start_heading = 1.5708
+goal = [160.0, 112.0]
+""")
+    s = _run(hil, tmp_path, str(tmp_path / "basin.toml"), duration=300.0)
+    assert s["reached_goal"] and s["collisions"] == 0 and s["min_clearance_m"] > 1.0
+
+
+@pytest.mark.slow
 def test_a_1_m_s_cross_current_is_crossed(hil, tmp_path):
     """A uniform 1 m/s current across an eastward route on open water (a third of the boat's top speed):
     she crabs along the route to the goal."""

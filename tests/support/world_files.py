@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -80,3 +80,81 @@ def harbour_chart(frame: LocalFrame) -> dict:
          "geometry": {"type": "Point", "coordinates": lonlat(frame, 199.8, 149.8)}},
     ]
     return {"type": "FeatureCollection", "features": feats}
+
+
+# A harbour whose basin is a hole cut out of the land, as charts drawn in a GIS have it, in metres from
+# a frame's origin (x east, y north): (layer, name, geometry in metres, properties, cells it decides as
+# (x, y, occupied)). Land 200 m x 150 m around a basin (20..180 m east, 20..130 m north) with an island
+# in it (one MultiPolygon); a pier drawn in 3-D; a pile (an integer buffer); a self-intersecting
+# bow-tie (both lobes are land); a GeometryCollection of a point and a line (buffer 1 m); an anchorage
+# marked obstacle = false over open water; a feature without geometry and one with an empty geometry.
+def basin_harbour() -> list[tuple[str, str, object, dict, list[tuple[float, float, bool]]]]:
+    from shapely.geometry import GeometryCollection, LineString, MultiPolygon, Point, Polygon, box
+
+    land = MultiPolygon([Polygon(box(0, 0, 200, 150).exterior.coords, [box(20, 20, 180, 130).exterior.coords]),
+                         box(90, 60, 110, 90)])
+    pier = Polygon([(40, 20, 1.5), (50, 20, 1.5), (50, 70, 1.5), (40, 70, 1.5)])
+    return [
+        ("land", "land", land, {}, [(10, 10, True), (190, 140, True), (100, 75, True),   # land, the island
+                                    (30, 50, False), (120, 40, False), (60, 110, False)]),  # the basin: water
+        ("piers", "pier", pier, {"obstacle": True}, [(45, 50, True), (52, 50, False)]),
+        ("piers", "no geometry", None, {}, []),
+        ("piers", "empty", Polygon(), {}, []),
+        ("hazards", "pile", Point(150, 40), {"buffer": 2}, [(151.5, 40, True), (153, 40, False)]),
+        ("hazards", "bow-tie", Polygon([(150, 60), (170, 80), (170, 60), (150, 80)]), {},
+         [(152, 70, True), (168, 70, True), (160, 62, False)]),
+        ("hazards", "collection", GeometryCollection([Point(30, 110), LineString([(60, 125), (80, 125)])]),
+         {"buffer": 1.0}, [(30.8, 110.3, True), (70, 125.5, True), (70, 127.5, False)]),
+        ("hazards", "anchorage", box(130, 100, 170, 125), {"obstacle": False}, [(150, 112, False)]),
+    ]
+
+
+def to_lonlat(geometry: object, frame: LocalFrame) -> object:
+    """A geometry in metres from ``frame``'s origin (x east, y north; z kept) in longitude/latitude."""
+    import shapely
+
+    def move(xy: np.ndarray) -> np.ndarray:
+        out = xy.copy()
+        for i, row in enumerate(xy):
+            out[i, 0], out[i, 1] = lonlat(frame, float(row[0]), float(row[1]))
+        return out
+
+    return shapely.transform(geometry, move, include_z=bool(shapely.has_z(geometry)))
+
+
+def write_ogr_chart(path: Path, driver: str, features: Sequence[tuple], frame: LocalFrame,
+                    crs: Mapping[str, int] | int = 4326, geometry_type: str = "Unknown", **options: object) -> Path:
+    """Write ``features`` (as :func:`basin_harbour` gives them) with GDAL itself, through pyogrio's
+    writer, one layer per layer name (``crs``: the EPSG code of every layer, or of each by name; the
+    coordinates are transformed by PROJ as a GIS exports them). Fields ``name`` (text), ``buffer``
+    (integer when every given value is whole, else real) and ``obstacle`` (boolean), null where a
+    feature has none. ``options`` go to pyogrio (``layer_options``, ``dataset_options``)."""
+    import warnings
+
+    import pyogrio.raw
+    import shapely
+    from pyproj import Transformer
+
+    for layer in dict.fromkeys(f[0] for f in features):
+        epsg = crs if isinstance(crs, int) else crs[layer]
+        t = Transformer.from_crs(4326, epsg, always_xy=True)
+
+        def project(g: object, t: Transformer = t) -> object:
+            return shapely.transform(g, lambda xy: np.column_stack(t.transform(xy[:, 0], xy[:, 1])))
+
+        rows = [f for f in features if f[0] == layer]
+        wkb = np.array([None if g is None else shapely.to_wkb(project(to_lonlat(g, frame)), output_dimension=3)
+                        for _l, _n, g, _p, _c in rows], dtype=object)
+        buffers = [p.get("buffer") for *_x, p, _c in rows]
+        whole = all(b is None or float(b).is_integer() for b in buffers) and any(b is not None for b in buffers)
+        obstacle = [p.get("obstacle") for *_x, p, _c in rows]
+        data = [np.array([r[1] for r in rows], dtype=object),
+                np.array([0 if b is None else b for b in buffers], dtype=np.int32 if whole else float),
+                np.array([bool(o) for o in obstacle], dtype=bool)]
+        masks = [None, np.array([b is None for b in buffers]), np.array([o is None for o in obstacle])]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")    # pyogrio's notes on promoting types
+            pyogrio.raw.write(path, wkb, field_data=data, fields=["name", "buffer", "obstacle"], field_mask=masks,
+                              layer=layer, driver=driver, geometry_type=geometry_type, crs=f"EPSG:{epsg}",
+                              append=path.exists(), **options)
+    return path
