@@ -58,10 +58,18 @@ _UNITS = {"m s-1": 1.0, "m/s": 1.0, "m.s-1": 1.0, "m s**-1": 1.0, "m/second": 1.
 MAX_SPEED = 10.0        # m/s: faster than any tidal race (Saltstraumen ~ 11 m/s is the one known exception)
 MAX_NODES = 512         # per axis of the resampled NED grid
 MAX_VALUES = 20_000_000  # time slices x nodes: a larger file must be cut down first
-STATION_REACH = 1.0e7   # m: a single station's grid nodes, either side of the origin (queries clamp to them)
 # m: a single station's current is taken as the current of a harbour-sized area around it; a station farther
 # from the origin than this is surely another place's (a tidal stream changes over a few km along a coast).
 STATION_MAX_DISTANCE = 20_000.0
+
+
+# Latitude and longitude, wherever they are looked for (a grid's axes, a station's position): the usual
+# names (lower-cased) and the CF units of degrees north/east; a CF standard_name equal to the key also counts.
+_POSITION: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "latitude": (("lat", "latitude"), ("degrees_north", "degree_north", "degree_N", "degrees_N")),
+    "longitude": (("lon", "longitude"), ("degrees_east", "degree_east", "degree_E", "degrees_E")),
+}
+_OTHER_AXIS_NAMES = {"time": ("time", "t", "ocean_time"), "depth": ("depth", "z", "lev", "level", "deptht", "s_rho")}
 
 
 class CurrentSourceError(ValueError):
@@ -122,10 +130,8 @@ def _find_velocity(ds: xr.Dataset, names: tuple[str, ...], given: str, which: st
 
 def _axis(ds: xr.Dataset, var: xr.DataArray, kind: str) -> str | None:
     """The name of ``var``'s dimension that is latitude, longitude, time or depth (CF attributes or usual names)."""
-    names = {"latitude": ("lat", "latitude"), "longitude": ("lon", "longitude"),
-             "time": ("time", "t", "ocean_time"), "depth": ("depth", "z", "lev", "level", "deptht", "s_rho")}[kind]
-    units = {"latitude": ("degrees_north", "degree_north", "degree_N", "degrees_N"),
-             "longitude": ("degrees_east", "degree_east", "degree_E", "degrees_E")}.get(kind, ())
+    names = _POSITION[kind][0] if kind in _POSITION else _OTHER_AXIS_NAMES[kind]
+    units = _POSITION[kind][1] if kind in _POSITION else ()
     cf_axis = {"latitude": "Y", "longitude": "X", "time": "T", "depth": "Z"}[kind]
     for dim in var.dims:
         c = ds[dim] if dim in ds.variables else None
@@ -143,9 +149,7 @@ def _axis(ds: xr.Dataset, var: xr.DataArray, kind: str) -> str | None:
 def _station(ds: xr.Dataset, kind: str) -> float | None:
     """A single station's latitude or longitude (degrees): a variable of one value that is one (CF
     attributes or usual names), as a moored ADCP's time series gives its position; None if none."""
-    names = {"latitude": ("lat", "latitude"), "longitude": ("lon", "longitude")}[kind]
-    units = {"latitude": ("degrees_north", "degree_north", "degree_N", "degrees_N"),
-             "longitude": ("degrees_east", "degree_east", "degree_E", "degrees_E")}[kind]
+    names, units = _POSITION[kind]
     for name, var in ds.variables.items():
         if var.size == 1 and (var.attrs.get("standard_name") == kind or var.attrs.get("units") in units
                               or str(name).lower() in names):
@@ -303,16 +307,18 @@ def parse_time(text: str, what: str = "current.start_time") -> float:
 
 
 class GriddedCurrent:
-    """A gridded current in NED: ``vn``, ``ve`` [slice, row (north), col (east)] on a regular grid
-    (``north0 + row * dn``, ``east0 + col * de``); ``times`` (s of run time) of the slices."""
+    """A gridded current in NED: ``vn``, ``ve`` (m/s) [slice, row (north), col (east)] on a regular grid
+    (``n0 + row * dn``, ``e0 + col * de``, m); ``times`` (s of run time) of the slices. One station's
+    series (``station``) is held as [slice, 1, 1], the same everywhere."""
 
     def __init__(self, raw: RawCurrentGrid, frame: LocalFrame, start_time: float | None = None,
                  source: str = "current file") -> None:
         self.source = source
         self.station = raw.lat.size == 1 and raw.lon.size == 1
         if self.station:
-            # One station (a moored ADCP's series): its current everywhere, as two nodes either side of
-            # every map (queries clamp to them), and no extent to check a map against.
+            # One station (a moored ADCP's series): its current everywhere, in time only; ``vn``, ``ve`` hold
+            # its series [slice, 1, 1] and the queries answer from them directly, with no grid to interpolate
+            # on and no extent to check a map against.
             lat, lon = float(raw.lat[0]), float(raw.lon[0])
             lon += 360.0 * round((frame.lon0 - lon) / 360.0)   # 0..360 against -180..180
             away = math.hypot(*frame.geodetic_to_sea_level(lat, lon))
@@ -320,9 +326,8 @@ class GriddedCurrent:
                 raise CurrentSourceError(
                     f"{source}: its one station ({lat:.5f}, {lon:.5f}) is {away / 1e3:.0f} km from the origin; "
                     f"a station's current is used within {STATION_MAX_DISTANCE / 1e3:.0f} km of it")
-            self.north_axis = self.east_axis = np.array([-STATION_REACH, STATION_REACH])
-            self.ve = np.ascontiguousarray(np.broadcast_to(raw.u, (raw.u.shape[0], 2, 2)))
-            self.vn = np.ascontiguousarray(np.broadcast_to(raw.v, (raw.v.shape[0], 2, 2)))
+            self.north_axis = self.east_axis = np.zeros(1)   # the station's one node (not used by queries)
+            self.ve, self.vn = raw.u, raw.v
         else:
             self._resample(raw, frame, source)
         self.steady = raw.times is None
@@ -333,9 +338,11 @@ class GriddedCurrent:
             self.times = np.asarray(raw.times, dtype=float) - t0
         self._times = [float(t) for t in self.times]
         self.n0, self.e0 = float(self.north_axis[0]), float(self.east_axis[0])
-        self.dn = float(self.north_axis[1] - self.north_axis[0])
-        self.de = float(self.east_axis[1] - self.east_axis[0])
         self.rows, self.cols = self.north_axis.size, self.east_axis.size
+        self.dn = self.de = 0.0     # a station's: no grid
+        if not self.station:
+            self.dn = float(self.north_axis[1] - self.north_axis[0])
+            self.de = float(self.east_axis[1] - self.east_axis[0])
 
     def _resample(self, raw: RawCurrentGrid, frame: LocalFrame, source: str) -> None:
         """The file's grid bilinearly interpolated at the nodes of a regular NED grid inside it."""
