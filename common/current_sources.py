@@ -16,16 +16,23 @@ Files. A netCDF file (read with xarray; netCDF-4/HDF5 through the netCDF4 librar
 scipy) with the eastward and northward velocity found by CF ``standard_name``
 (``eastward_sea_water_velocity`` / ``northward_sea_water_velocity``, or their ``surface_`` and
 ``_assuming_no_tide`` variants) or by the names given in ``east_variable`` / ``north_variable``, on 1-D
-latitude and longitude coordinates (degrees north/east) and optionally time and depth (the level nearest
-the surface is used: the highest of a coordinate that is ``positive = "up"``). Units ``m s-1`` (as
+latitude and longitude coordinates (degrees north/east), or on a curvilinear grid (two dimensions of
+its own, eta x xi, with 2-D latitude/longitude found by the velocity's CF ``coordinates`` attribute,
+``standard_name``, units or usual names: ROMS's ``lat_rho``/``lon_rho``, NEMO's ``nav_lat``/``nav_lon``),
+and optionally time and depth (the level nearest the surface is used: the highest of a coordinate that
+is ``positive = "up"``). Grid-relative velocity (``sea_water_x_velocity``/``..._y_...``, ROMS's u, v at
+rho points) is turned east/north by the grid's ``angle`` (radians from east to xi, counter-clockwise:
+ROMS's convention); ROMS's ``mask_rho`` marks land. Units ``m s-1`` (as
 variously spelt), ``cm s-1`` or knots; missing values (land in ocean-model output) read as still water.
 A single station's series (a moored ADCP: latitude and longitude of one value each, as variables or as
 dimensions of size 1) is taken as the current over the whole map, varying in time only, if it lies
 within ``STATION_MAX_DISTANCE`` of the origin. The run's t = 0 is the file's time ``start_time`` (ISO
 8601, UTC; default: the file's first time); a file with one time slice is a steady current. On loading,
 each time slice is resampled onto a regular NED grid (each node's latitude and longitude from the exact
-tangent-plane conversion of ``common.geodesy``, the file bilinearly interpolated there); queries then
-interpolate bilinearly in space and linearly in time, clamped at the edges.
+tangent-plane conversion of ``common.geodesy``, the file bilinearly interpolated there; a curvilinear
+file's nodes converted to NED metres the same way and its cells' triangles interpolated linearly,
+:func:`_cell_triangles`); queries then interpolate bilinearly in space and linearly in time, clamped at
+the edges.
 :meth:`GriddedCurrent.check_covers` refuses, in one line, a file that does not cover a map or a run's
 time span.
 """
