@@ -68,6 +68,9 @@ MAX_VALUES = 20_000_000  # time slices x nodes: a larger file must be cut down f
 # m: a single station's current is taken as the current of a harbour-sized area around it; a station farther
 # from the origin than this is surely another place's (a tidal stream changes over a few km along a coast).
 STATION_MAX_DISTANCE = 20_000.0
+# m: a curvilinear grid's nodes farther from the origin than this (great circle) are left out: a tangent
+# plane is no map of them (beyond a quarter of the globe they would fold back over the origin's area).
+CURVILINEAR_REACH = 1_000_000.0
 
 
 # Latitude and longitude, wherever they are looked for (a grid's axes, a curvilinear grid's 2-D
@@ -555,6 +558,13 @@ class GriddedCurrent:
         regular NED grid over its nodes' bounding box (``covered``: the NED nodes inside its cells)."""
         lon = raw.lon + 360.0 * np.round((frame.lon0 - np.nanmean(raw.lon)) / 360.0)   # 0..360 against -180..180
         placed = np.isfinite(raw.lat) & np.isfinite(lon)
+        la, lo, la0 = np.radians(raw.lat), np.radians(lon - frame.lon0), math.radians(frame.lat0)
+        with np.errstate(invalid="ignore"):
+            cos_arc = np.sin(la) * math.sin(la0) + np.cos(la) * math.cos(la0) * np.cos(lo)
+            placed &= np.arccos(np.clip(np.nan_to_num(cos_arc, nan=-1.0), -1.0, 1.0)) * 6_371_000.0 <= CURVILINEAR_REACH
+        if not placed.any():
+            raise CurrentSourceError(f"{source}: its curvilinear grid has no node within "
+                                     f"{CURVILINEAR_REACH / 1e3:.0f} km of the origin")
         pn = np.full(raw.lat.shape, np.nan)
         pe = np.full(raw.lat.shape, np.nan)
         for (i, j) in zip(*np.nonzero(placed), strict=True):

@@ -201,6 +201,9 @@ def _staggered_only(path: Path) -> Path:
     (_staggered_only, "u and v are on different dimensions .grid-relative u, v on staggered points"),
     (lambda p: write_curvilinear_current(p, FRAME, _e_linear, _n_linear, shape=(1, 5)),
      "a curvilinear grid needs at least 2 x 2 nodes"),
+    # at the antipode: on the tangent plane it would lie right over the origin's area
+    (lambda p: write_curvilinear_current(p, LocalFrame(-LAT0, LON0 - 180.0), _e_linear, _n_linear),
+     "its curvilinear grid has no node within 1000 km of the origin"),
 ])
 def test_unusable_curvilinear_files_are_refused_in_one_line(tmp_path, make, message):
     with pytest.raises(CurrentSourceError, match=message) as err:
