@@ -16,16 +16,23 @@ Files. A netCDF file (read with xarray; netCDF-4/HDF5 through the netCDF4 librar
 scipy) with the eastward and northward velocity found by CF ``standard_name``
 (``eastward_sea_water_velocity`` / ``northward_sea_water_velocity``, or their ``surface_`` and
 ``_assuming_no_tide`` variants) or by the names given in ``east_variable`` / ``north_variable``, on 1-D
-latitude and longitude coordinates (degrees north/east) and optionally time and depth (the level nearest
-the surface is used: the highest of a coordinate that is ``positive = "up"``). Units ``m s-1`` (as
+latitude and longitude coordinates (degrees north/east), or on a curvilinear grid (two dimensions of
+its own, eta x xi, with 2-D latitude/longitude found by the velocity's CF ``coordinates`` attribute,
+``standard_name``, units or usual names: ROMS's ``lat_rho``/``lon_rho``, NEMO's ``nav_lat``/``nav_lon``),
+and optionally time and depth (the level nearest the surface is used: the highest of a coordinate that
+is ``positive = "up"``). Grid-relative velocity (``sea_water_x_velocity``/``..._y_...``, ROMS's u, v at
+rho points) is turned east/north by the grid's ``angle`` (radians from east to xi, counter-clockwise:
+ROMS's convention); ROMS's ``mask_rho`` marks land. Units ``m s-1`` (as
 variously spelt), ``cm s-1`` or knots; missing values (land in ocean-model output) read as still water.
 A single station's series (a moored ADCP: latitude and longitude of one value each, as variables or as
 dimensions of size 1) is taken as the current over the whole map, varying in time only, if it lies
 within ``STATION_MAX_DISTANCE`` of the origin. The run's t = 0 is the file's time ``start_time`` (ISO
 8601, UTC; default: the file's first time); a file with one time slice is a steady current. On loading,
 each time slice is resampled onto a regular NED grid (each node's latitude and longitude from the exact
-tangent-plane conversion of ``common.geodesy``, the file bilinearly interpolated there); queries then
-interpolate bilinearly in space and linearly in time, clamped at the edges.
+tangent-plane conversion of ``common.geodesy``, the file bilinearly interpolated there; a curvilinear
+file's nodes converted to NED metres the same way and its cells' triangles interpolated linearly,
+:func:`_cell_triangles`); queries then interpolate bilinearly in space and linearly in time, clamped at
+the edges.
 :meth:`GriddedCurrent.check_covers` refuses, in one line, a file that does not cover a map or a run's
 time span.
 """
@@ -58,10 +65,26 @@ _UNITS = {"m s-1": 1.0, "m/s": 1.0, "m.s-1": 1.0, "m s**-1": 1.0, "m/second": 1.
 MAX_SPEED = 10.0        # m/s: faster than any tidal race (Saltstraumen ~ 11 m/s is the one known exception)
 MAX_NODES = 512         # per axis of the resampled NED grid
 MAX_VALUES = 20_000_000  # time slices x nodes: a larger file must be cut down first
-STATION_REACH = 1.0e7   # m: a single station's grid nodes, either side of the origin (queries clamp to them)
 # m: a single station's current is taken as the current of a harbour-sized area around it; a station farther
 # from the origin than this is surely another place's (a tidal stream changes over a few km along a coast).
 STATION_MAX_DISTANCE = 20_000.0
+# m: a curvilinear grid's nodes farther from the origin than this (great circle) are left out: a tangent
+# plane is no map of them (beyond a quarter of the globe they would fold back over the origin's area).
+CURVILINEAR_REACH = 1_000_000.0
+
+
+# Latitude and longitude, wherever they are looked for (a grid's axes, a curvilinear grid's 2-D
+# coordinates, a station's position): the usual names (lower-cased; ROMS's lat_rho, NEMO's nav_lat) and
+# the CF units of degrees north/east; a CF standard_name equal to the key also counts.
+_POSITION: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "latitude": (("lat", "latitude", "lat_rho", "nav_lat"), ("degrees_north", "degree_north", "degree_N", "degrees_N")),
+    "longitude": (("lon", "longitude", "lon_rho", "nav_lon"), ("degrees_east", "degree_east", "degree_E", "degrees_E")),
+}
+# Grid-relative velocity (along a curvilinear grid's xi and eta lines: ROMS's u, v), by CF standard_name prefix.
+X_PREFIX, Y_PREFIX = "sea_water_x_velocity", "sea_water_y_velocity"
+# A grid's angle from east to its xi axis (ROMS's ``angle``, radians, counter-clockwise): name or standard_name.
+ANGLE_NAMES = ("angle", "angle_of_rotation_from_east_to_x")
+_OTHER_AXIS_NAMES = {"time": ("time", "t", "ocean_time"), "depth": ("depth", "z", "lev", "level", "deptht", "s_rho")}
 
 
 class CurrentSourceError(ValueError):
@@ -96,8 +119,9 @@ class UniformCurrent:
 
 @dataclass(frozen=True)
 class RawCurrentGrid:
-    """A file's surface current as read: ``u``/``v`` (east/north, m/s) [time, lat, lon]; ``times``
-    in seconds since the Unix epoch (None: a steady field, one slice)."""
+    """A file's surface current as read: ``u``/``v`` (east/north, m/s) [time, lat, lon], or on a curvilinear
+    grid [time, eta, xi] with ``lat``/``lon`` 2-D [eta, xi] (degrees; NaN where a node has no position);
+    ``times`` in seconds since the Unix epoch (None: a steady field, one slice)."""
 
     lat: np.ndarray
     lon: np.ndarray
@@ -116,16 +140,18 @@ def _find_velocity(ds: xr.Dataset, names: tuple[str, ...], given: str, which: st
         for var in ds.data_vars.values():
             if var.attrs.get("standard_name") == name:
                 return var
+    prefix = X_PREFIX if which == "east" else Y_PREFIX   # grid-relative (ROMS's u, v): rotated by the grid's angle
+    for var in ds.data_vars.values():
+        if _grid_relative(var, prefix):
+            return var
     raise CurrentSourceError(f"{path}: no variable with standard_name {names[0]!r}; name it with "
                              f"current.{which}_variable (variables: {', '.join(map(str, ds.data_vars))})")
 
 
 def _axis(ds: xr.Dataset, var: xr.DataArray, kind: str) -> str | None:
     """The name of ``var``'s dimension that is latitude, longitude, time or depth (CF attributes or usual names)."""
-    names = {"latitude": ("lat", "latitude"), "longitude": ("lon", "longitude"),
-             "time": ("time", "t", "ocean_time"), "depth": ("depth", "z", "lev", "level", "deptht", "s_rho")}[kind]
-    units = {"latitude": ("degrees_north", "degree_north", "degree_N", "degrees_N"),
-             "longitude": ("degrees_east", "degree_east", "degree_E", "degrees_E")}.get(kind, ())
+    names = _POSITION[kind][0] if kind in _POSITION else _OTHER_AXIS_NAMES[kind]
+    units = _POSITION[kind][1] if kind in _POSITION else ()
     cf_axis = {"latitude": "Y", "longitude": "X", "time": "T", "depth": "Z"}[kind]
     for dim in var.dims:
         c = ds[dim] if dim in ds.variables else None
@@ -143,9 +169,7 @@ def _axis(ds: xr.Dataset, var: xr.DataArray, kind: str) -> str | None:
 def _station(ds: xr.Dataset, kind: str) -> float | None:
     """A single station's latitude or longitude (degrees): a variable of one value that is one (CF
     attributes or usual names), as a moored ADCP's time series gives its position; None if none."""
-    names = {"latitude": ("lat", "latitude"), "longitude": ("lon", "longitude")}[kind]
-    units = {"latitude": ("degrees_north", "degree_north", "degree_N", "degrees_N"),
-             "longitude": ("degrees_east", "degree_east", "degree_E", "degrees_E")}[kind]
+    names, units = _POSITION[kind]
     for name, var in ds.variables.items():
         if var.size == 1 and (var.attrs.get("standard_name") == kind or var.attrs.get("units") in units
                               or str(name).lower() in names):
@@ -153,6 +177,56 @@ def _station(ds: xr.Dataset, kind: str) -> float | None:
                 return float(np.asarray(var.values, dtype=float).ravel()[0])
             except (TypeError, ValueError):
                 continue   # a name or a label, not the position
+    return None
+
+
+def _is_position(kind: str, name: object, attrs: dict) -> bool:
+    """Whether a variable of this name and these attributes is latitude (``kind``) or longitude."""
+    names, units = _POSITION[kind]
+    return attrs.get("standard_name") == kind or attrs.get("units") in units or str(name).lower() in names
+
+
+def _grid_2d(ds: xr.Dataset, var: xr.DataArray) -> tuple[str, str] | None:
+    """The names of the 2-D latitude and longitude of ``var``'s curvilinear grid, on two of its dimensions:
+    those its CF ``coordinates`` attribute names first, then any variable (CF attributes or usual names)."""
+    listed = str(var.attrs.get("coordinates") or var.encoding.get("coordinates") or "").split()
+    candidates = [n for n in listed if n in ds.variables] + [str(n) for n in ds.variables if n not in listed]
+    found: dict[str, str] = {}
+    for kind in ("latitude", "longitude"):
+        for name in candidates:
+            c = ds[name]
+            if c.ndim == 2 and set(c.dims) <= set(var.dims) and _is_position(kind, name, c.attrs):
+                found[kind] = name
+                break
+    if len(found) < 2 or set(ds[found["latitude"]].dims) != set(ds[found["longitude"]].dims):
+        return None
+    return found["latitude"], found["longitude"]
+
+
+def _grid_relative(var: xr.DataArray, prefix: str) -> bool:
+    return str(var.attrs.get("standard_name", "")).startswith(prefix)
+
+
+def _angle(ds: xr.Dataset, horizontal: tuple[str, str], path: str) -> np.ndarray | None:
+    """A grid's angle (radians) from east to its xi axis on the ``horizontal`` dimensions, or None."""
+    for name, var in ds.variables.items():
+        if (str(name).lower() in ANGLE_NAMES or var.attrs.get("standard_name") in ANGLE_NAMES) \
+                and set(var.dims) == set(horizontal):
+            units = str(var.attrs.get("units", "radians")).strip().lower()
+            scale = math.pi / 180.0 if units.startswith("degree") else 1.0
+            if not (units.startswith("degree") or units in ("radians", "radian", "rad", "1", "")):
+                raise CurrentSourceError(f"{path}: {name}: units {var.attrs.get('units')!r} not understood "
+                                         "(expected radians or degrees)")
+            return np.asarray(var.transpose(*horizontal).values, dtype=float) * scale
+    return None
+
+
+def _land_mask(ds: xr.Dataset, horizontal: tuple[str, str]) -> np.ndarray | None:
+    """True on land, from a ROMS ``mask_rho`` or a CF ``sea_binary_mask`` (0 = land) on the grid, or None."""
+    for name, var in ds.variables.items():
+        if (str(name).lower() == "mask_rho" or var.attrs.get("standard_name") == "sea_binary_mask") \
+                and set(var.dims) == set(horizontal):
+            return np.asarray(var.transpose(*horizontal).values, dtype=float) == 0.0
     return None
 
 
@@ -182,17 +256,34 @@ def read_netcdf(path: str, east_variable: str = "", north_variable: str = "") ->
     with ds:
         u_var = _find_velocity(ds, EAST_NAMES, east_variable, "east", path)
         v_var = _find_velocity(ds, NORTH_NAMES, north_variable, "north", path)
+        rotate = _grid_relative(u_var, X_PREFIX) or _grid_relative(v_var, Y_PREFIX)
+        if rotate and not (_grid_relative(u_var, X_PREFIX) and _grid_relative(v_var, Y_PREFIX)):
+            raise CurrentSourceError(f"{path}: {u_var.name} and {v_var.name}: one grid-relative and one "
+                                     "eastward/northward component")
         if u_var.dims != v_var.dims:
-            raise CurrentSourceError(f"{path}: {u_var.name} and {v_var.name} are on different dimensions")
+            staggered = " (grid-relative u, v on staggered points, as ROMS's: give u_eastward/v_northward)"
+            raise CurrentSourceError(f"{path}: {u_var.name} and {v_var.name} are on different dimensions"
+                                     f"{staggered if rotate else ''}")
         dims = {k: _axis(ds, u_var, k) for k in ("latitude", "longitude", "time", "depth")}
+        # 1-D axes that are latitude and longitude by name, units or standard_name make a rectilinear grid; else
+        # 2-D latitude/longitude on two of the velocity's dimensions make a curvilinear one.
+        rectilinear = all(dims[k] is not None and _is_position(k, dims[k], ds[dims[k]].attrs)
+                          for k in ("latitude", "longitude"))
+        grid2d = None if rectilinear else _grid_2d(ds, u_var)
+        horizontal = ("", "")
+        if grid2d is not None:
+            horizontal = (str(ds[grid2d[0]].dims[0]), str(ds[grid2d[0]].dims[1]))   # (eta, xi)
+            dims["latitude"], dims["longitude"] = horizontal
+            if dims["depth"] in horizontal:
+                dims["depth"] = None
         station = None
         if dims["latitude"] is None and dims["longitude"] is None:
             la, lo = _station(ds, "latitude"), _station(ds, "longitude")
             station = None if la is None or lo is None else (la, lo)
         if (dims["latitude"] is None or dims["longitude"] is None) and station is None:
-            raise CurrentSourceError(f"{path}: {u_var.name}: no 1-D latitude/longitude dimensions and no single "
-                                     f"station's position (dims: {', '.join(map(str, u_var.dims))}; curvilinear "
-                                     "grids are not supported)")
+            raise CurrentSourceError(f"{path}: {u_var.name}: no latitude/longitude (1-D axes or a curvilinear "
+                                     "grid's 2-D coordinates) and no single station's position (dims: "
+                                     f"{', '.join(map(str, u_var.dims))})")
         sel: dict[str, int] = {}
         if dims["depth"] is not None:
             z = ds[dims["depth"]] if dims["depth"] in ds.variables else None
@@ -210,9 +301,25 @@ def read_netcdf(path: str, east_variable: str = "", north_variable: str = "") ->
         order = [d for d in (dims["time"], dims["latitude"], dims["longitude"]) if d is not None]
         u = np.asarray(u_var.isel(sel).transpose(*order).values, dtype=float) * _scale(u_var, path)
         v = np.asarray(v_var.isel(sel).transpose(*order).values, dtype=float) * _scale(v_var, path)
+        if rotate:
+            if grid2d is None or (angle := _angle(ds, horizontal, path)) is None:
+                raise CurrentSourceError(f"{path}: {u_var.name}, {v_var.name} are grid-relative (standard_name "
+                                         f"{X_PREFIX}...) and the file has no grid angle on their grid to turn "
+                                         "them east/north by; give eastward/northward velocity")
+            # ROMS's convention (its angle: from east to the xi axis, counter-clockwise; its u2rho/rotate
+            # step in the post-processing of u_eastward/v_northward): east = u cos a - v sin a,
+            # north = u sin a + v cos a.
+            ca, sa = np.cos(angle), np.sin(angle)
+            u, v = u * ca - v * sa, u * sa + v * ca
         if station is not None:   # one station: its series as a 1 x 1 grid
             u, v = u[..., None, None], v[..., None, None]
             lat, lon = np.array([station[0]]), np.array([station[1]])
+        elif grid2d is not None:
+            lat = np.asarray(ds[grid2d[0]].transpose(*horizontal).values, dtype=float)
+            lon = np.asarray(ds[grid2d[1]].transpose(*horizontal).values, dtype=float)
+            land = _land_mask(ds, horizontal)
+            if land is not None:
+                u, v = np.where(land, np.nan, u), np.where(land, np.nan, v)
         else:
             lat = np.asarray(ds[dims["latitude"]].values, dtype=float)
             lon = np.asarray(ds[dims["longitude"]].values, dtype=float)
@@ -250,6 +357,8 @@ def _cftime_seconds(dates: np.ndarray, path: str) -> np.ndarray:
 
 def _checked(g: RawCurrentGrid, path: str) -> RawCurrentGrid:
     lat, lon, u, v, times = g.lat, g.lon, g.u, g.v, g.times
+    if lat.ndim == 2:
+        return _checked_values(_checked_curvilinear(g, path), path)
     if (lat.size < 2 or lon.size < 2) and not (lat.size == 1 and lon.size == 1):
         raise CurrentSourceError(f"{path}: needs at least 2 latitudes and 2 longitudes, or one station "
                                  f"(has {lat.size} x {lon.size})")
@@ -263,6 +372,24 @@ def _checked(g: RawCurrentGrid, path: str) -> RawCurrentGrid:
     for name, axis in (("latitude", lat), ("longitude", lon)):
         if not np.all(np.diff(axis) > 0):
             raise CurrentSourceError(f"{path}: {name} is not monotonic")
+    return _checked_values(RawCurrentGrid(lat, lon, times, u, v), path)
+
+
+def _checked_curvilinear(g: RawCurrentGrid, path: str) -> RawCurrentGrid:
+    """A curvilinear grid's positions: degrees where given (a node without one, NaN, is left out)."""
+    lat, lon = g.lat, g.lon
+    if lat.shape[0] < 2 or lat.shape[1] < 2:
+        raise CurrentSourceError(f"{path}: a curvilinear grid needs at least 2 x 2 nodes (has {lat.shape[0]} x "
+                                 f"{lat.shape[1]})")
+    placed = np.isfinite(lat) & np.isfinite(lon)
+    if not placed.any() or np.any(np.abs(lat[placed]) > 90) or np.any(np.abs(lon[placed]) > 360):
+        raise CurrentSourceError(f"{path}: latitude/longitude values are not degrees")
+    return RawCurrentGrid(np.where(placed, lat, np.nan), np.where(placed, lon, np.nan), g.times, g.u, g.v)
+
+
+def _checked_values(g: RawCurrentGrid, path: str) -> RawCurrentGrid:
+    """Times increasing; missing velocity (land) as still water; no impossible speed."""
+    lat, lon, u, v, times = g.lat, g.lon, g.u, g.v, g.times
     if times is not None:
         if not np.all(np.diff(times) > 0):
             raise CurrentSourceError(f"{path}: time is not increasing")
@@ -289,6 +416,53 @@ def _bilinear(axis_y: np.ndarray, axis_x: np.ndarray, grid: np.ndarray, y: np.nd
             + grid[..., iy + 1, ix] * fy * (1 - fx) + grid[..., iy + 1, ix + 1] * fy * fx)
 
 
+def _cell_triangles(pn: np.ndarray, pe: np.ndarray, placed: np.ndarray, north_axis: np.ndarray,
+                    east_axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the nodes of a regular NED grid (``north_axis`` x ``east_axis``, m) fall in a curvilinear grid
+    whose nodes are at ``pn``, ``pe`` (m) [eta, xi]: each cell with four placed corners split into two
+    triangles along its diagonal, each NED node linearly interpolated in the triangle that holds it.
+    Returns the three file nodes (flat indices into [eta, xi]; -1: the NED node is in no cell) and their
+    weights (summing to 1), each [NED node (row-major), 3]."""
+    ny, nx = pn.shape
+    ids = np.arange(ny * nx).reshape(ny, nx)
+    a, b, c, d = ids[:-1, :-1].ravel(), ids[:-1, 1:].ravel(), ids[1:, 1:].ravel(), ids[1:, :-1].ravel()
+    tri = np.concatenate([np.stack([a, b, c], axis=1), np.stack([a, c, d], axis=1)])
+    tri = tri[placed.ravel()[tri].all(axis=1)]
+    tn, te = pn.ravel()[tri], pe.ravel()[tri]                        # [triangle, corner] m
+    rows, cols = north_axis.size, east_axis.size
+    n0, dn = float(north_axis[0]), float(north_axis[1] - north_axis[0])
+    e0, de = float(east_axis[0]), float(east_axis[1] - east_axis[0])
+    # The NED nodes in each triangle's bounding box, all triangles' at once.
+    r0 = np.clip(np.ceil((tn.min(axis=1) - n0) / dn - 1e-9), 0, rows - 1).astype(np.int64)
+    r1 = np.clip(np.floor((tn.max(axis=1) - n0) / dn + 1e-9), 0, rows - 1).astype(np.int64)
+    c0 = np.clip(np.ceil((te.min(axis=1) - e0) / de - 1e-9), 0, cols - 1).astype(np.int64)
+    c1 = np.clip(np.floor((te.max(axis=1) - e0) / de + 1e-9), 0, cols - 1).astype(np.int64)
+    width = np.maximum(c1 - c0 + 1, 0)
+    count = np.maximum(r1 - r0 + 1, 0) * width
+    t = np.repeat(np.arange(tri.shape[0]), count)
+    k = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+    r, col = r0[t] + k // width[t], c0[t] + k % width[t]
+    qn, qe = north_axis[r], east_axis[col]
+    an, bn, cn = tn[t, 0], tn[t, 1], tn[t, 2]
+    ae, be, ce = te[t, 0], te[t, 1], te[t, 2]
+    det = (bn - an) * (ce - ae) - (cn - an) * (be - ae)
+    ok = det != 0.0
+    det = np.where(ok, det, 1.0)
+    wb = ((qn - an) * (ce - ae) - (cn - an) * (qe - ae)) / det
+    wc = ((bn - an) * (qe - ae) - (qn - an) * (be - ae)) / det
+    wa = 1.0 - wb - wc
+    tol = 1e-9
+    inside = ok & (wa >= -tol) & (wb >= -tol) & (wc >= -tol)
+    node = (r * cols + col)[inside]
+    node, first = np.unique(node, return_index=True)     # a node on a shared edge: either triangle (equal values)
+    corners = np.full((rows * cols, 3), -1, dtype=np.int64)
+    weights = np.zeros((rows * cols, 3))
+    corners[node] = tri[t[inside][first]]
+    weights[node] = np.clip(np.stack([wa, wb, wc], axis=1)[inside][first], 0.0, 1.0)
+    weights[node] /= weights[node].sum(axis=1, keepdims=True)
+    return corners, weights
+
+
 def parse_time(text: str, what: str = "current.start_time") -> float:
     """ISO 8601 (UTC unless it says otherwise) -> seconds since the Unix epoch; CurrentSourceError."""
     from datetime import UTC, datetime
@@ -303,16 +477,21 @@ def parse_time(text: str, what: str = "current.start_time") -> float:
 
 
 class GriddedCurrent:
-    """A gridded current in NED: ``vn``, ``ve`` [slice, row (north), col (east)] on a regular grid
-    (``north0 + row * dn``, ``east0 + col * de``); ``times`` (s of run time) of the slices."""
+    """A gridded current in NED: ``vn``, ``ve`` (m/s) [slice, row (north), col (east)] on a regular grid
+    (``n0 + row * dn``, ``e0 + col * de``, m); ``times`` (s of run time) of the slices. One station's
+    series (``station``) is held as [slice, 1, 1], the same everywhere."""
 
     def __init__(self, raw: RawCurrentGrid, frame: LocalFrame, start_time: float | None = None,
                  source: str = "current file") -> None:
         self.source = source
         self.station = raw.lat.size == 1 and raw.lon.size == 1
+        # A curvilinear file's: True at the NED nodes inside its grid (elsewhere the nearest such node's
+        # values, as queries beyond a rectilinear file clamp to its edge); None for the others.
+        self.covered: np.ndarray | None = None
         if self.station:
-            # One station (a moored ADCP's series): its current everywhere, as two nodes either side of
-            # every map (queries clamp to them), and no extent to check a map against.
+            # One station (a moored ADCP's series): its current everywhere, in time only; ``vn``, ``ve`` hold
+            # its series [slice, 1, 1] and the queries answer from them directly, with no grid to interpolate
+            # on and no extent to check a map against.
             lat, lon = float(raw.lat[0]), float(raw.lon[0])
             lon += 360.0 * round((frame.lon0 - lon) / 360.0)   # 0..360 against -180..180
             away = math.hypot(*frame.geodetic_to_sea_level(lat, lon))
@@ -320,9 +499,10 @@ class GriddedCurrent:
                 raise CurrentSourceError(
                     f"{source}: its one station ({lat:.5f}, {lon:.5f}) is {away / 1e3:.0f} km from the origin; "
                     f"a station's current is used within {STATION_MAX_DISTANCE / 1e3:.0f} km of it")
-            self.north_axis = self.east_axis = np.array([-STATION_REACH, STATION_REACH])
-            self.ve = np.ascontiguousarray(np.broadcast_to(raw.u, (raw.u.shape[0], 2, 2)))
-            self.vn = np.ascontiguousarray(np.broadcast_to(raw.v, (raw.v.shape[0], 2, 2)))
+            self.north_axis = self.east_axis = np.zeros(1)   # the station's one node (not used by queries)
+            self.ve, self.vn = raw.u, raw.v
+        elif raw.lat.ndim == 2:
+            self._resample_curvilinear(raw, frame, source)
         else:
             self._resample(raw, frame, source)
         self.steady = raw.times is None
@@ -333,9 +513,11 @@ class GriddedCurrent:
             self.times = np.asarray(raw.times, dtype=float) - t0
         self._times = [float(t) for t in self.times]
         self.n0, self.e0 = float(self.north_axis[0]), float(self.east_axis[0])
-        self.dn = float(self.north_axis[1] - self.north_axis[0])
-        self.de = float(self.east_axis[1] - self.east_axis[0])
         self.rows, self.cols = self.north_axis.size, self.east_axis.size
+        self.dn = self.de = 0.0     # a station's: no grid
+        if not self.station:
+            self.dn = float(self.north_axis[1] - self.north_axis[0])
+            self.de = float(self.east_axis[1] - self.east_axis[0])
 
     def _resample(self, raw: RawCurrentGrid, frame: LocalFrame, source: str) -> None:
         """The file's grid bilinearly interpolated at the nodes of a regular NED grid inside it."""
@@ -371,13 +553,81 @@ class GriddedCurrent:
         self.ve = np.ascontiguousarray(_bilinear(lat, lon, raw.u, node_lat, node_lon))
         self.vn = np.ascontiguousarray(_bilinear(lat, lon, raw.v, node_lat, node_lon))
 
+    def _resample_curvilinear(self, raw: RawCurrentGrid, frame: LocalFrame, source: str) -> None:
+        """A curvilinear file's grid, linearly interpolated on its cells' triangles, at the nodes of a
+        regular NED grid over its nodes' bounding box (``covered``: the NED nodes inside its cells)."""
+        lon = raw.lon + 360.0 * np.round((frame.lon0 - np.nanmean(raw.lon)) / 360.0)   # 0..360 against -180..180
+        placed = np.isfinite(raw.lat) & np.isfinite(lon)
+        la, lo, la0 = np.radians(raw.lat), np.radians(lon - frame.lon0), math.radians(frame.lat0)
+        with np.errstate(invalid="ignore"):
+            cos_arc = np.sin(la) * math.sin(la0) + np.cos(la) * math.cos(la0) * np.cos(lo)
+            placed &= np.arccos(np.clip(np.nan_to_num(cos_arc, nan=-1.0), -1.0, 1.0)) * 6_371_000.0 <= CURVILINEAR_REACH
+        if not placed.any():
+            raise CurrentSourceError(f"{source}: its curvilinear grid has no node within "
+                                     f"{CURVILINEAR_REACH / 1e3:.0f} km of the origin")
+        pn = np.full(raw.lat.shape, np.nan)
+        pe = np.full(raw.lat.shape, np.nan)
+        for (i, j) in zip(*np.nonzero(placed), strict=True):
+            pn[i, j], pe[i, j] = frame.geodetic_to_sea_level(float(raw.lat[i, j]), float(lon[i, j]))
+        # Node spacing: half the file's typical cell side (m; the median along each grid direction, the smaller),
+        # so that a grid turned against north keeps its detail; at most MAX_NODES per axis.
+        sides = [np.hypot(np.diff(pn, axis=a), np.diff(pe, axis=a)) for a in (0, 1)]
+        side = min(float(np.nanmedian(x)) if np.isfinite(x).any() else math.inf for x in sides)
+        if not math.isfinite(side) or side <= 0.0:
+            raise CurrentSourceError(f"{source}: its curvilinear grid has no cell with a position at each corner")
+        n0, n1 = float(np.nanmin(pn)), float(np.nanmax(pn))
+        e0, e1 = float(np.nanmin(pe)), float(np.nanmax(pe))
+        step = 0.5 * side
+        nn = int(min(MAX_NODES, max(2, math.ceil((n1 - n0) / step) + 1)))
+        ne = int(min(MAX_NODES, max(2, math.ceil((e1 - e0) / step) + 1)))
+        slices = raw.u.shape[0]
+        if slices * nn * ne > MAX_VALUES:
+            raise CurrentSourceError(f"{source}: {slices} time slices of {nn} x {ne} nodes is too large; cut the "
+                                     "file to the area and time of the run first")
+        self.north_axis = np.linspace(n0, n1, nn)
+        self.east_axis = np.linspace(e0, e1, ne)
+        corners, weights = _cell_triangles(pn, pe, placed, self.north_axis, self.east_axis)
+        covered = corners[:, 0] >= 0
+        if not covered.any():
+            raise CurrentSourceError(f"{source}: its curvilinear grid covers no area")
+        # Each uncovered node takes the nearest covered node's values (clamping, as at a rectilinear file's edge).
+        from scipy import ndimage
+
+        self.covered = covered.reshape(nn, ne)
+        nearest = ndimage.distance_transform_edt(~self.covered, return_distances=False, return_indices=True)
+        source_node = (nearest[0] * ne + nearest[1]).ravel()
+        c, w = corners[source_node], weights[source_node]
+        self.ve = np.empty((slices, nn, ne))
+        self.vn = np.empty((slices, nn, ne))
+        for k in range(slices):   # one slice at a time: [node, 3] gathers, not [slice, node, 3]
+            self.ve[k] = np.einsum("nc,nc->n", raw.u[k].ravel()[c], w).reshape(nn, ne)
+            self.vn[k] = np.einsum("nc,nc->n", raw.v[k].ravel()[c], w).reshape(nn, ne)
+
     # -- coverage ------------------------------------------------------------------------------
     @property
     def extent(self) -> tuple[float, float, float, float]:
-        """(north_min, north_max, east_min, east_max) in metres: where the file has data (a station: everywhere)."""
+        """(north_min, north_max, east_min, east_max) in metres: where the file has data (a station: everywhere;
+        a curvilinear grid: the box around the NED nodes inside it, which it need not fill)."""
         if self.station:
             return -math.inf, math.inf, -math.inf, math.inf
+        if self.covered is not None:
+            rows, cols = np.nonzero(self.covered)
+            return (float(self.north_axis[rows.min()]), float(self.north_axis[rows.max()]),
+                    float(self.east_axis[cols.min()]), float(self.east_axis[cols.max()]))
         return self.n0, float(self.north_axis[-1]), self.e0, float(self.east_axis[-1])
+
+    def _covers_box(self, north: tuple[float, float], east: tuple[float, float]) -> bool:
+        """A curvilinear file: whether every NED node of the cells the box (m) touches is inside its grid,
+        so that the current anywhere in the box is interpolated from the file's values only."""
+        if self.covered is None:
+            return True
+        lo_r = int(math.floor((north[0] - self.n0) / self.dn + 1e-9))
+        hi_r = int(math.ceil((north[1] - self.n0) / self.dn - 1e-9))
+        lo_c = int(math.floor((east[0] - self.e0) / self.de + 1e-9))
+        hi_c = int(math.ceil((east[1] - self.e0) / self.de - 1e-9))
+        if lo_r < 0 or lo_c < 0 or hi_r >= self.rows or hi_c >= self.cols:
+            return False
+        return bool(self.covered[lo_r:hi_r + 1, lo_c:hi_c + 1].all())
 
     def time_span(self) -> tuple[float, float]:
         """(first, last) run time (s) the file covers; (-inf, inf) for a steady file."""
@@ -391,10 +641,12 @@ class GriddedCurrent:
         n0, n1, e0, e1 = self.extent
         tol = 1e-6
         if north is not None and east is not None and (
-                north[0] < n0 - tol or north[1] > n1 + tol or east[0] < e0 - tol or east[1] > e1 + tol):
+                north[0] < n0 - tol or north[1] > n1 + tol or east[0] < e0 - tol or east[1] > e1 + tol
+                or not self._covers_box(north, east)):
+            within = " (not all of it: a curvilinear grid)" if self.covered is not None else ""
             raise CurrentSourceError(
                 f"{self.source}: does not cover {what} (it covers north {n0:.0f}..{n1:.0f} m, east {e0:.0f}.."
-                f"{e1:.0f} m of the origin; {what} spans north {north[0]:.0f}..{north[1]:.0f} m, "
+                f"{e1:.0f} m of the origin{within}; {what} spans north {north[0]:.0f}..{north[1]:.0f} m, "
                 f"east {east[0]:.0f}..{east[1]:.0f} m)")
         first, last = self.time_span()
         if t is not None and (t[0] < first - tol or t[1] > last + tol):

@@ -234,10 +234,10 @@ def _write_bad(path: Path, kind: str) -> Path:
         u[:] = np.nan
     if kind == "row":
         lat, u = lat[:1], u[:1]
-    if kind == "curvilinear":
+    if kind == "unplaced":   # 2-D positions that say nothing of being latitude/longitude
         LA, LO = np.meshgrid(lat, lon, indexing="ij")
         ds = xr.Dataset({"uo": (("y", "x"), u, attrs_u), "vo": (("y", "x"), u, attrs_v)},
-                        coords={"nav_lat": (("y", "x"), LA), "nav_lon": (("y", "x"), LO)})
+                        coords={"yy": (("y", "x"), LA), "xx": (("y", "x"), LO)})
         ds.to_netcdf(path)
         return path
     ds = xr.Dataset({"uo": (("latitude", "longitude"), u, attrs_u),
@@ -255,7 +255,7 @@ def _write_bad(path: Path, kind: str) -> Path:
     ("units", "units .knots per fortnight. not understood"),
     ("fast", "42.4 m/s is not a sea current"),
     ("missing", "every velocity value is missing"),
-    ("curvilinear", "curvilinear grids are not supported"),
+    ("unplaced", "no latitude/longitude .1-D axes or a curvilinear grid's 2-D coordinates. and no single station"),
     ("row", "needs at least 2 latitudes and 2 longitudes, or one station \\(has 1 x 5\\)"),
     ("novelocity", "no variable with standard_name 'eastward_sea_water_velocity'"),
 ])

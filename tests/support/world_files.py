@@ -157,4 +157,112 @@ def write_ogr_chart(path: Path, driver: str, features: Sequence[tuple], frame: L
             pyogrio.raw.write(path, wkb, field_data=data, fields=["name", "buffer", "obstacle"], field_mask=masks,
                               layer=layer, driver=driver, geometry_type=geometry_type, crs=f"EPSG:{epsg}",
                               append=path.exists(), **options)
+
+Field = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
+
+
+def write_curvilinear_current(path: Path, frame: LocalFrame, east: Field, north: Field, *, layout: str = "roms",
+                              centre: tuple[float, float] = (100.0, 120.0), angle_deg: float = 30.0,
+                              shape: tuple[int, int] = (41, 45), spacing: float = 25.0,
+                              seconds: Sequence[float] = (0.0, 3600.0, 7200.0),
+                              land: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+                              grid_relative: bool = False) -> Path:
+    """A curvilinear current file written with netCDF4 itself, as an ocean model's tools write one.
+
+    The grid: ``shape`` = (eta, xi) nodes ``spacing`` m apart, its xi axis ``angle_deg`` counter-clockwise
+    from east, centred ``centre`` = (north, east) m from ``frame``'s origin; each node's latitude/longitude
+    from ``frame``. ``east(t_s, n, e)``/``north(...)`` give the earth-referenced velocity (m/s) at a node's
+    NED position (m) at ``t_s`` s after the first time; ``land(n, e)`` True where a node is land.
+
+    ``layout = "roms"``: ROMS's history file: ``u_eastward``/``v_northward`` (or, ``grid_relative``, only
+    the grid's ``u``/``v`` at rho points with ``angle``) on (ocean_time, s_rho, eta_rho, xi_rho), ``s_rho``
+    positive up (the surface level last; the levels below hold a decoy), ``lat_rho``/``lon_rho``,
+    ``mask_rho``; land as fill values south of ``centre`` and only masked (a decoy 5 m/s) north of it; also the
+    staggered ``u``/``v`` and their ``lat_u`` ... as ROMS writes them. ``layout = "cf"``: a model's CF file:
+    ``uvel``/``vvel`` by standard name on (time, nj, ni), whose ``coordinates`` attribute names 2-D
+    ``TLAT``/``TLONG`` (degrees), with a decoy ``ULAT``/``ULONG`` half a cell off written first; land NaN."""
+    import netCDF4
+
+    ny, nx = shape
+    th = np.radians(angle_deg)
+    y, x = np.meshgrid((np.arange(ny) - (ny - 1) / 2) * spacing, (np.arange(nx) - (nx - 1) / 2) * spacing,
+                       indexing="ij")
+    def place(dx: float, dy: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        n = centre[0] + (x + dx) * np.sin(th) + (y + dy) * np.cos(th)
+        e = centre[1] + (x + dx) * np.cos(th) - (y + dy) * np.sin(th)
+        ll = np.array([frame.sea_level_to_geodetic(a, b) for a, b in zip(n.ravel(), e.ravel(), strict=True)])
+        return n, e, ll[:, 0].reshape(n.shape), ll[:, 1].reshape(n.shape)
+
+    n, e, lat, lon = place(0.0, 0.0)
+    is_land = np.zeros(shape, bool) if land is None else np.asarray(land(n, e), bool)
+    ue = np.array([east(t, n, e) for t in seconds])
+    vn = np.array([north(t, n, e) for t in seconds])
+    fill = 1.0e37 if layout == "roms" else -999.0
+    with netCDF4.Dataset(path, "w") as ds:
+        ds.Conventions = "CF-1.4" if layout == "roms" else "CF-1.8"
+        if layout == "roms":
+            tdim, hdims = "ocean_time", ("eta_rho", "xi_rho")
+            for name, size in (("ocean_time", None), ("s_rho", 3), ("eta_rho", ny), ("xi_rho", nx),
+                               ("eta_u", ny), ("xi_u", nx - 1), ("eta_v", ny - 1), ("xi_v", nx)):
+                ds.createDimension(name, size)
+            t = ds.createVariable("ocean_time", "f8", ("ocean_time",))
+            t.long_name, t.units, t.calendar = "time since initialization", "seconds since 2024-05-01 00:00:00", \
+                "gregorian"
+            t[:] = np.asarray(seconds) + 86400.0
+            s = ds.createVariable("s_rho", "f8", ("s_rho",))
+            s.long_name, s.positive, s.standard_name = "S-coordinate at RHO-points", "up", "ocean_s_coordinate_g2"
+            s[:] = [-5 / 6, -0.5, -1 / 6]
+            for grid, (dx, dy), dims in (("rho", (0.0, 0.0), hdims), ("u", (spacing / 2, 0.0), ("eta_u", "xi_u"))):
+                la, lo = (lat, lon) if grid == "rho" else place(dx, dy)[2:]
+                if grid == "u":
+                    la, lo = la[:, :-1], lo[:, :-1]
+                for name, values, units, std in ((f"lat_{grid}", la, "degree_north", "latitude"),
+                                                 (f"lon_{grid}", lo, "degree_east", "longitude")):
+                    var = ds.createVariable(name, "f8", dims)
+                    var.long_name, var.units, var.standard_name = f"{std} of {grid.upper()}-points", units, std
+                    var[:] = values
+            m = ds.createVariable("mask_rho", "f8", hdims)
+            m.long_name, m.flag_values, m.flag_meanings = "mask on RHO-points", np.array([0.0, 1.0]), "land water"
+            m[:] = np.where(is_land, 0.0, 1.0)
+            a = ds.createVariable("angle", "f8", hdims)
+            a.long_name, a.units = "angle between XI-axis and EAST", "radians"
+            a[:] = np.full(shape, th)
+            if grid_relative:
+                c, sn = np.cos(th), np.sin(th)
+                fields = (("u", ue * c + vn * sn, "sea_water_x_velocity"),
+                          ("v", -ue * sn + vn * c, "sea_water_y_velocity"))
+            else:
+                fields = (("u_eastward", ue, "eastward_sea_water_velocity"),
+                          ("v_northward", vn, "northward_sea_water_velocity"))
+                staggered = ds.createVariable("u", "f4", ("ocean_time", "s_rho", "eta_u", "xi_u"), fill_value=fill)
+                staggered.standard_name, staggered.units = "sea_water_x_velocity_at_u_location", "meter second-1"
+                staggered[:] = np.zeros((len(seconds), 3, ny, nx - 1))
+            for name, values, std in fields:
+                var = ds.createVariable(name, "f4", ("ocean_time", "s_rho", *hdims), fill_value=fill)
+                var.long_name, var.units, var.standard_name = f"{name} momentum component", "meter second-1", std
+                var.coordinates = "lon_rho lat_rho s_rho ocean_time"
+                data = np.ma.masked_array(np.repeat(values[:, None], 3, axis=1).astype("f4"))
+                data[:, :2] = 7.5                                    # deeper levels: not the surface
+                half = is_land & (n < centre[0])                       # the south half
+                data[:, :, half] = np.ma.masked                       # land as fill values ...
+                data[:, :, is_land & ~half] = 5.0                     # ... or only in mask_rho
+                var[:] = data
+        else:
+            tdim, hdims = "time", ("nj", "ni")
+            for name, size in (("time", None), ("nj", ny), ("ni", nx)):
+                ds.createDimension(name, size)
+            t = ds.createVariable("time", "f8", ("time",))
+            t.units, t.standard_name = "hours since 2024-05-01 00:00:00", "time"
+            t[:] = np.asarray(seconds) / 3600.0
+            _, _, ula, ulo = place(spacing / 2, spacing / 2)
+            for name, values, units in (("ULAT", ula, "degrees_north"), ("ULONG", ulo, "degrees_east"),
+                                        ("TLAT", lat, "degrees_north"), ("TLONG", lon, "degrees_east")):
+                var = ds.createVariable(name, "f8", hdims)
+                var.units = units
+                var[:] = values
+            for name, values, std in (("uvel", ue, "eastward_sea_water_velocity"),
+                                      ("vvel", vn, "northward_sea_water_velocity")):
+                var = ds.createVariable(name, "f4", (tdim, *hdims), fill_value=fill)
+                var.units, var.standard_name, var.coordinates = "cm/s", std, "TLONG TLAT"
+                var[:] = np.ma.masked_array(values * 100.0, mask=np.broadcast_to(is_land, values.shape))
     return path
