@@ -157,6 +157,8 @@ def write_ogr_chart(path: Path, driver: str, features: Sequence[tuple], frame: L
             pyogrio.raw.write(path, wkb, field_data=data, fields=["name", "buffer", "obstacle"], field_mask=masks,
                               layer=layer, driver=driver, geometry_type=geometry_type, crs=f"EPSG:{epsg}",
                               append=path.exists(), **options)
+    return path
+
 
 Field = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
 
