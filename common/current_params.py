@@ -37,6 +37,8 @@ class CurrentParams:
                                 default="")
     start_time: str = param("the file's time at the run's t = 0 (ISO 8601, UTC; '' = the file's first time)",
                             default="")
+    reach: float = param("how far from the geodesy origin a current file is read (0 = all of it; a scenario sets "
+                         "it from its map: the corners' distance + 2 km)", "m", ge=0.0, le=1_000_000.0, default=0.0)
 
     def __post_init__(self) -> None:
         if len(self.uniform) not in (0, 2):

@@ -65,6 +65,8 @@ _UNITS = {"m s-1": 1.0, "m/s": 1.0, "m.s-1": 1.0, "m s**-1": 1.0, "m/second": 1.
 MAX_SPEED = 10.0        # m/s: faster than any tidal race (Saltstraumen ~ 11 m/s is the one known exception)
 MAX_NODES = 512         # per axis of the resampled NED grid
 MAX_VALUES = 20_000_000  # time slices x nodes: a larger file must be cut down first
+MAX_READ = 50_000_000   # time slices x file nodes read from disk (u and v each, after the reach's window)
+M_PER_DEG_MIN = 110_000.0   # m per degree of latitude, rounded down (110,574 m at the equator): windows err wide
 # m: a single station's current is taken as the current of a harbour-sized area around it; a station farther
 # from the origin than this is surely another place's (a tidal stream changes over a few km along a coast).
 STATION_MAX_DISTANCE = 20_000.0
@@ -240,8 +242,12 @@ def _scale(var: xr.DataArray, path: str) -> float:
     return _UNITS[units]
 
 
-def read_netcdf(path: str, east_variable: str = "", north_variable: str = "") -> RawCurrentGrid:
-    """Read a file's surface current (see the module's docstring); CurrentSourceError in one line."""
+def read_netcdf(path: str, east_variable: str = "", north_variable: str = "",
+                near: tuple[float, float, float] | None = None) -> RawCurrentGrid:
+    """Read a file's surface current (see the module's docstring); CurrentSourceError in one line.
+    ``near`` = (latitude deg, longitude deg, reach m): read only the file's nodes within ``reach`` of that
+    point (with one node of the file's spacing beyond, for the interpolation at the window's edge), so
+    that a regional or global file costs what the run's area of it does."""
     try:
         import xarray as xr
     except ImportError:  # pragma: no cover - a dependency of the project
@@ -299,8 +305,22 @@ def read_netcdf(path: str, east_variable: str = "", north_variable: str = "") ->
                                              "is neither latitude, longitude, time nor depth")
                 sel[str(dim)] = 0
         order = [d for d in (dims["time"], dims["latitude"], dims["longitude"]) if d is not None]
-        u = np.asarray(u_var.isel(sel).transpose(*order).values, dtype=float) * _scale(u_var, path)
-        v = np.asarray(v_var.isel(sel).transpose(*order).values, dtype=float) * _scale(v_var, path)
+        window: dict[str, slice | np.ndarray] = {}
+        lon_window: np.ndarray | None = None      # rectilinear: the window's longitudes, made increasing
+        if near is not None and station is None:
+            if grid2d is not None:
+                window = _curvilinear_window(ds[grid2d[0]].transpose(*horizontal).values,
+                                             ds[grid2d[1]].transpose(*horizontal).values, horizontal, near)
+            else:
+                window, lon_window = _rectilinear_window(ds[dims["latitude"]].values, ds[dims["longitude"]].values,
+                                                         (str(dims["latitude"]), str(dims["longitude"])), near)
+        read = math.prod(len(range(u_var.sizes[d])[w]) if isinstance(w, slice) else len(w) for d, w in window.items())
+        read *= math.prod(u_var.sizes[d] for d in order if d not in window)
+        if read > MAX_READ:
+            raise CurrentSourceError(f"{path}: {read:,} velocity values to read (at most {MAX_READ:,}): cut the "
+                                     "file to the run's time (and area) first")
+        u = np.asarray(u_var.isel({**sel, **window}).transpose(*order).values, dtype=float) * _scale(u_var, path)
+        v = np.asarray(v_var.isel({**sel, **window}).transpose(*order).values, dtype=float) * _scale(v_var, path)
         if rotate:
             if grid2d is None or (angle := _angle(ds, horizontal, path)) is None:
                 raise CurrentSourceError(f"{path}: {u_var.name}, {v_var.name} are grid-relative (standard_name "
@@ -315,14 +335,17 @@ def read_netcdf(path: str, east_variable: str = "", north_variable: str = "") ->
             u, v = u[..., None, None], v[..., None, None]
             lat, lon = np.array([station[0]]), np.array([station[1]])
         elif grid2d is not None:
-            lat = np.asarray(ds[grid2d[0]].transpose(*horizontal).values, dtype=float)
-            lon = np.asarray(ds[grid2d[1]].transpose(*horizontal).values, dtype=float)
+            lat = np.asarray(ds[grid2d[0]].transpose(*horizontal).isel(window).values, dtype=float)
+            lon = np.asarray(ds[grid2d[1]].transpose(*horizontal).isel(window).values, dtype=float)
             land = _land_mask(ds, horizontal)
             if land is not None:
+                land = np.asarray(land)[tuple(window.get(d, slice(None)) for d in horizontal)]
                 u, v = np.where(land, np.nan, u), np.where(land, np.nan, v)
         else:
-            lat = np.asarray(ds[dims["latitude"]].values, dtype=float)
-            lon = np.asarray(ds[dims["longitude"]].values, dtype=float)
+            lat_name = str(dims["latitude"])
+            lat = np.asarray(ds[lat_name].isel({lat_name: window[lat_name]}).values if lat_name in window
+                             else ds[lat_name].values, dtype=float)
+            lon = (lon_window if lon_window is not None else np.asarray(ds[dims["longitude"]].values, dtype=float))
         times = None
         if dims["time"] is not None:
             tv = ds[dims["time"]].values
@@ -338,6 +361,63 @@ def read_netcdf(path: str, east_variable: str = "", north_variable: str = "") ->
     if times is None:
         u, v = u[None], v[None]
     return _checked(RawCurrentGrid(lat, lon, times, u, v), path)
+
+
+def _degrees_of(reach: float, lat: float) -> tuple[float, float]:
+    """``reach`` m as degrees of latitude and of longitude at latitudes up to ``lat`` (deg), erring wide."""
+    dlat = reach / M_PER_DEG_MIN
+    worst = min(abs(lat) + dlat, 89.9)
+    return dlat, reach / (M_PER_DEG_MIN * math.cos(math.radians(worst)))
+
+
+def _wrapped(lon: np.ndarray, lon0: float) -> np.ndarray:
+    """Longitudes as degrees east of ``lon0`` in [-180, 180) (a 0..360 file against a -180..180 origin)."""
+    return (np.asarray(lon, dtype=float) - lon0 + 180.0) % 360.0 - 180.0
+
+
+def _axis_window(values: np.ndarray, half_width: float) -> np.ndarray:
+    """Indices of a 1-D axis (offsets from the window's centre, deg) within ``half_width`` of it, widened
+    by one spacing of the axis on each side; all of them when fewer than two would remain."""
+    finite = values[np.isfinite(values)]
+    step = float(np.median(np.abs(np.diff(np.sort(finite))))) if finite.size > 1 else 0.0
+    idx = np.flatnonzero(np.abs(values) <= half_width + 1.5 * step)
+    return idx if idx.size >= 2 else np.arange(values.size)
+
+
+def _rectilinear_window(lat: np.ndarray, lon: np.ndarray, names: tuple[str, str], near: tuple[float, float, float]
+                        ) -> tuple[dict[str, slice | np.ndarray], np.ndarray | None]:
+    """The isel window of a rectilinear file near ``near`` = (lat deg, lon deg, reach m), and its
+    longitudes as an increasing axis (a window across the file's seam at 0/360 or +-180 is put in order)."""
+    lat0, lon0, reach = near
+    dlat, dlon = _degrees_of(reach, lat0)
+    rows = _axis_window(np.asarray(lat, dtype=float) - lat0, dlat)
+    out: dict[str, slice | np.ndarray] = {names[0]: slice(int(rows[0]), int(rows[-1]) + 1)}
+    if dlon >= 180.0:
+        return out, None
+    east = _wrapped(lon, lon0)
+    cols = _axis_window(east, dlon)
+    if cols.size == east.size:
+        return out, None
+    cols = cols[np.argsort(east[cols], kind="stable")]
+    out[names[1]] = cols
+    return out, lon0 + east[cols]
+
+
+def _curvilinear_window(lat: np.ndarray, lon: np.ndarray, dims: tuple[str, str], near: tuple[float, float, float]
+                        ) -> dict[str, slice | np.ndarray]:
+    """The isel window (index ranges on the grid's two dimensions) of the nodes of a curvilinear grid near
+    ``near`` = (lat deg, lon deg, reach m), one row and column of cells beyond; none when no node is near
+    (the coverage check then refuses the file)."""
+    lat0, lon0, reach = near
+    dlat, dlon = _degrees_of(reach, lat0)
+    inside = (np.abs(np.asarray(lat, dtype=float) - lat0) <= dlat) & (np.abs(_wrapped(lon, lon0)) <= dlon)
+    if not inside.any():
+        return {}
+    out: dict[str, slice | np.ndarray] = {}
+    for axis, dim in enumerate(dims):
+        hit = np.flatnonzero(inside.any(axis=1 - axis))
+        out[dim] = slice(max(int(hit[0]) - 1, 0), min(int(hit[-1]) + 2, inside.shape[axis]))
+    return out
 
 
 def _cftime_seconds(dates: np.ndarray, path: str) -> np.ndarray:
@@ -713,16 +793,18 @@ _FILE_CACHE: dict[tuple, GriddedCurrent] = {}
 
 
 def load_file(path: str, frame: LocalFrame, east_variable: str = "", north_variable: str = "",
-              start_time: str = "") -> GriddedCurrent:
-    """A current file as a :class:`GriddedCurrent` in ``frame`` (cached per file version and frame)."""
+              start_time: str = "", reach: float = 0.0) -> GriddedCurrent:
+    """A current file as a :class:`GriddedCurrent` in ``frame`` (cached per file version and frame);
+    ``reach`` > 0: only its part within ``reach`` m of the frame's origin (:func:`read_netcdf`)."""
     try:
         mtime = os.stat(path).st_mtime_ns
     except OSError:
         raise CurrentSourceError(f"current.file: no such file {path}") from None
     key = (os.path.abspath(path), mtime, frame.lat0, frame.lon0, frame.alt0, east_variable, north_variable,
-           start_time)
+           start_time, reach)
     if key not in _FILE_CACHE:
-        raw = read_netcdf(path, east_variable, north_variable)
+        raw = read_netcdf(path, east_variable, north_variable,
+                          near=(frame.lat0, frame.lon0, reach) if reach > 0 else None)
         t0 = parse_time(start_time) if start_time else None
         _FILE_CACHE[key] = GriddedCurrent(raw, frame, t0, source=os.path.basename(path))
     return _FILE_CACHE[key]
@@ -737,7 +819,7 @@ def make_current(params: CurrentParams, frame: LocalFrame | None = None) -> Curr
     if file:
         if frame is None:
             raise CurrentSourceError("current.file: needs the geodesy origin")
-        return load_file(file, frame, params.east_variable, params.north_variable, params.start_time)
+        return load_file(file, frame, params.east_variable, params.north_variable, params.start_time, params.reach)
     if uniform:
         return UniformCurrent(float(uniform[0]), float(uniform[1]))
     from common.current_field import CurrentField

@@ -222,7 +222,7 @@ class HilRun:
                 "--set", f"sim.initial.x={north!r}", "--set", f"sim.initial.y={east!r}",
                 "--set", f"sim.initial.psi={psi!r}"]
         for k in ("enabled", "origin_x", "origin_y", "file", "uniform", "east_variable", "north_variable",
-                  "start_time"):
+                  "start_time", "reach"):
             v = getattr(cur, k)
             args += ["--set", f"current.{k}={json.dumps(v)}"]
         if self.traffic_file is not None:

@@ -354,6 +354,7 @@ def map_frame(spec: ScenarioSpec, geodesy: GeodesyParams | None = None) -> Local
 
 
 MAX_LATLON_DISTANCE = 50_000.0   # m from the map's origin: a position farther is a typing mistake
+CURRENT_MARGIN = 2_000.0         # m beyond the map's far corner that a current file is read
 
 
 def positions_in_metres(spec: ScenarioSpec, frame: LocalFrame, source: str,
@@ -500,6 +501,11 @@ def instance(spec: ScenarioSpec, rng: np.random.Generator | None, base_current: 
     scen = _instance(spec, rng, base_current, safety_radius, source, positions)
     if scen.geodesy is None:        # a chart sets its own origin (its map's south-west corner)
         scen.geodesy = geodesy
+    if scen.current.file and scen.current.reach == 0.0:
+        # Read only the file's part around the map (its corners from the NED origin at its corner, and
+        # 2 km for a file's coarse cells): a regional or global file costs what the run's area does.
+        reach = math.ceil((math.hypot(scen.width, scen.height) + CURRENT_MARGIN) / 1000.0) * 1000.0
+        scen.current = dataclasses.replace(scen.current, reach=reach)
     _check_current(scen, source)
     return scen
 

@@ -56,7 +56,7 @@ def hil_main(capsys):
 # A new test module must be listed here: collection fails otherwise, so no test falls through.
 UNIT_MODULES = frozenset("""
     can_codec can_esc charts collision_cone colregs colregs_oracle config config_layers control current_field
-    current_curvilinear current_sources current_tally docs_examples geodesy ardupilot_fence
+    current_curvilinear current_sources current_tally current_window docs_examples geodesy ardupilot_fence
     global_route guidance_kernel mavlink_crc mavlink_fast_path mission_executor modes navigation navigation_fast
     battery_monitor config_ranges encounter_route online percentiles plan_commitment plan_start_course readiness
     planner_algorithms planner_config planner_cost planner_dynamic_domain planner_fence planner_gridmap
