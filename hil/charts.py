@@ -331,6 +331,19 @@ def _repaired(polygon: BaseGeometry) -> BaseGeometry:
     return shapely.union_all([fixed, *flat]) if flat else fixed
 
 
+def _cut(g: BaseGeometry, box: tuple[float, float, float, float] | None, margin: float) -> BaseGeometry:
+    """``g`` (valid, metres) cut to ``box`` (x0, y0, x1, y1) widened by ``margin`` m; ``g`` without a box."""
+    if box is None:
+        return g
+    import shapely
+
+    x0, y0, x1, y1 = box
+    gx0, gy0, gx1, gy1 = shapely.bounds(g)
+    if gx0 >= x0 - margin and gy0 >= y0 - margin and gx1 <= x1 + margin and gy1 <= y1 + margin:
+        return g
+    return shapely.clip_by_rect(g, x0 - margin, y0 - margin, x1 + margin, y1 + margin)
+
+
 def rasterise(path: str | Path, resolution: float, positions: LocalFrame, extent: tuple[float, ...] = (),
               default_buffer: float = 2.0) -> ChartGrid:
     """The chart at ``path`` on a grid of ``resolution`` m (see the module's docstring); ``extent``
@@ -340,6 +353,10 @@ def rasterise(path: str | Path, resolution: float, positions: LocalFrame, extent
     feats = read_chart(path)
     lat0, lon0 = grid_corner(path, positions, extent)
     frame = LocalFrame(lat0, lon0, positions.alt0)
+    # With an extent, each part is cut to it before it is grown (a coastline of a whole region costs what
+    # the map's piece of it does): the cut lies a cell, the part's buffer and a metre outside the grid, so
+    # every cell the part or its buffer touches is marked as without the cut.
+    box = None if not extent else (0.0, 0.0, float(extent[2] - extent[0]), float(extent[3] - extent[1]))
     shapes = []
     for f in feats:
         b = default_buffer if f.buffer is None else f.buffer
@@ -348,12 +365,17 @@ def rasterise(path: str | Path, resolution: float, positions: LocalFrame, extent
                 if b <= 0:
                     raise ConfigError(f"{path}: points and lines need a buffer > 0 m (chart_buffer or a "
                                       "'buffer' property)")
-                g = g.buffer(b)
+                g = _cut(g, box, b + 2.0 * resolution + 1.0).buffer(b)
             else:
                 g = _repaired(g)
-                if b > 0 and f.buffer is not None:
-                    g = g.buffer(b)
-            shapes.append(g)
+                grow = b if b > 0 and f.buffer is not None else 0.0
+                g = _cut(g, box, grow + 2.0 * resolution + 1.0)
+                if grow > 0:
+                    g = g.buffer(grow)
+            if not g.is_empty:
+                shapes.append(g)
+    if not shapes:
+        shapes.append(shapely.Point())
     world = shapely.union_all(shapes)
     if extent:
         width, height = float(extent[2] - extent[0]), float(extent[3] - extent[1])

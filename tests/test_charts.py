@@ -480,3 +480,33 @@ def test_a_collection_inside_a_collection_and_3d_coordinates(tmp_path):
     grid = charts.rasterise(_chart(tmp_path, doc), 0.5, FRAME, extent=(0.0, 0.0, 10.0, 10.0))
     assert _cell(grid, 1.0, 1.0) and not _cell(grid, 2.5, 2.5)      # the outer point, grown by chart_buffer (2 m)
     assert _cell(grid, 8.0, 8.0) and not _cell(grid, 9.5, 9.5)      # the nested one too
+
+
+def test_features_far_beyond_the_extent_are_cut_before_they_grow_and_mark_the_same_cells(tmp_path, monkeypatch):
+    """A coast running kilometres past the map, a long boom (a line) and a buoy whose buffer reaches in
+    from outside: with the cut to the extent (hil/charts.py: _cut) the grid is cell for cell the grid
+    of the whole geometry."""
+    from support.world_files import lonlat
+
+    coast = [lonlat(FRAME, x, 30.0 + 8.0 * np.sin(x / 37.0)) for x in np.arange(-3000.0, 3000.0, 2.0)]
+    ring = coast + [lonlat(FRAME, 3000.0, -2000.0), lonlat(FRAME, -3000.0, -2000.0), coast[0]]
+    doc = {"type": "FeatureCollection", "features": [
+        {"type": "Feature", "properties": {"name": "coast"}, "geometry": {"type": "Polygon", "coordinates": [ring]}},
+        {"type": "Feature", "properties": {"name": "boom", "buffer": 1.5},
+         "geometry": {"type": "LineString", "coordinates": [lonlat(FRAME, -900.0, 120.0), lonlat(FRAME, 60.0, 121.0)]}},
+        {"type": "Feature", "properties": {"name": "buoy", "buffer": 4.0},
+         "geometry": {"type": "Point", "coordinates": lonlat(FRAME, 202.5, 100.0)}},
+        {"type": "Feature", "properties": {"name": "far island"},
+         "geometry": {"type": "Polygon", "coordinates": [[lonlat(FRAME, x, y) for x, y in (
+             (2000.0, 900.0), (2050.0, 900.0), (2050.0, 950.0), (2000.0, 900.0))]]}},
+    ]}
+    path = tmp_path / "coast.geojson"
+    path.write_text(json.dumps(doc))
+    extent = (0.0, 0.0, 200.0, 150.0)
+    cut = charts.rasterise(path, 0.5, FRAME, extent)
+    monkeypatch.setattr(charts, "_cut", lambda g, box, margin: g)
+    whole = charts.rasterise(path, 0.5, FRAME, extent)
+    assert cut.occ.shape == (300, 400)
+    np.testing.assert_array_equal(cut.occ, whole.occ)
+    assert cut.occ[int(100 / 0.5), -1] and cut.occ[int(120 / 0.5), 0] and cut.occ[0, 0]   # buoy, boom, coast
+    assert not cut.occ[int(140 / 0.5), int(100 / 0.5)]

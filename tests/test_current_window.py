@@ -48,8 +48,8 @@ def test_the_window_gives_the_current_the_whole_file_gives(tmp_path):
     """A regional file (2 x 2 deg at 0.02 deg): read whole and read within 8 km of the origin, the same
     current over a 3 km map (both resampled at the file's own spacing)."""
     frame = LocalFrame(38.92, 121.65)
-    path = write_cf_current(tmp_path / "regional.nc", np.arange(37.9, 39.9, 0.02), np.arange(120.6, 122.6, 0.02),
-                            None, lambda t, la, lo: 0.1 + 0.2 * (lo - 121.0), lambda t, la, lo: -0.3 + 0.1 * (la - 38.0))
+    path = write_cf_current(tmp_path / "regional.nc", np.arange(37.9, 39.9, 0.02), np.arange(120.6, 122.6, 0.02), None,
+                            lambda t, la, lo: 0.1 + 0.2 * (lo - 121.0), lambda t, la, lo: -0.3 + 0.1 * (la - 38.0))
     whole, near = load_file(str(path), frame), load_file(str(path), frame, reach=8_000.0)
     assert near.north_axis.size * near.east_axis.size < whole.north_axis.size * whole.east_axis.size / 50
     for north in np.linspace(0.0, 3000.0, 7):
@@ -88,8 +88,9 @@ def test_a_scenario_reads_its_file_within_its_map_and_two_kilometres(tmp_path):
     from hil.config import CONFIG_DIR
 
     lat0, lon0 = 38.92, 121.65
-    write_cf_current(tmp_path / "c.nc", np.arange(lat0 - 1.0, lat0 + 1.0, 0.05), np.arange(lon0 - 1.0, lon0 + 1.0, 0.05),
-                     None, lambda t, la, lo: 0.3 + 0 * la, lambda t, la, lo: 0.1 + 0 * la)
+    write_cf_current(tmp_path / "c.nc", np.arange(lat0 - 1.0, lat0 + 1.0, 0.05),
+                     np.arange(lon0 - 1.0, lon0 + 1.0, 0.05), None,
+                     lambda t, la, lo: 0.3 + 0 * la, lambda t, la, lo: 0.1 + 0 * la)
     (tmp_path / "s.toml").write_text(f"""name = "s"
 description = "regional file"
 kind = "fixed"
