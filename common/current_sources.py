@@ -329,6 +329,7 @@ def read_netcdf(path: str, east_variable: str = "", north_variable: str = "",
             # ROMS's convention (its angle: from east to the xi axis, counter-clockwise; its u2rho/rotate
             # step in the post-processing of u_eastward/v_northward): east = u cos a - v sin a,
             # north = u sin a + v cos a.
+            angle = np.asarray(angle)[tuple(window.get(d, slice(None)) for d in horizontal)]
             ca, sa = np.cos(angle), np.sin(angle)
             u, v = u * ca - v * sa, u * sa + v * ca
         if station is not None:   # one station: its series as a 1 x 1 grid
@@ -377,11 +378,14 @@ def _wrapped(lon: np.ndarray, lon0: float) -> np.ndarray:
 
 def _axis_window(values: np.ndarray, half_width: float) -> np.ndarray:
     """Indices of a 1-D axis (offsets from the window's centre, deg) within ``half_width`` of it, widened
-    by one spacing of the axis on each side; all of them when fewer than two would remain."""
+    by one spacing of the axis on each side; the two nearest when fewer would remain (a file far from the
+    run: the coverage check then refuses it, having read next to nothing)."""
     finite = values[np.isfinite(values)]
     step = float(np.median(np.abs(np.diff(np.sort(finite))))) if finite.size > 1 else 0.0
     idx = np.flatnonzero(np.abs(values) <= half_width + 1.5 * step)
-    return idx if idx.size >= 2 else np.arange(values.size)
+    if idx.size >= 2:
+        return idx
+    return np.sort(np.argsort(np.abs(np.nan_to_num(values, nan=np.inf)), kind="stable")[:2])
 
 
 def _rectilinear_window(lat: np.ndarray, lon: np.ndarray, names: tuple[str, str], near: tuple[float, float, float]
@@ -399,6 +403,8 @@ def _rectilinear_window(lat: np.ndarray, lon: np.ndarray, names: tuple[str, str]
     if cols.size == east.size:
         return out, None
     cols = cols[np.argsort(east[cols], kind="stable")]
+    # A global file holding both ends of its seam (-180 and 180, 0 and 360) has the same meridian twice.
+    cols = cols[np.concatenate(([True], np.diff(east[cols]) > 1e-9))]
     out[names[1]] = cols
     return out, lon0 + east[cols]
 

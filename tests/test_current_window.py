@@ -106,3 +106,37 @@ file = "c.nc"
     expected = math.ceil((math.hypot(scen.width, scen.height) + 2000.0) / 1000.0) * 1000.0
     assert scen.current.reach == expected
     assert scen.current_field().velocity_at(50.0, 50.0, 0.0) == pytest.approx((0.1, 0.3), abs=1e-6)
+
+
+def test_a_grid_relative_curvilinear_file_is_turned_in_its_window(tmp_path):
+    """ROMS's grid-relative u, v with the grid's angle: the angle is cut to the window with the velocity."""
+    from support.world_files import write_curvilinear_current
+
+    frame = LocalFrame(38.92, 121.65)
+    path = write_curvilinear_current(tmp_path / "rel.nc", frame, lambda t, n, e: 0.2 + 0 * n,
+                                     lambda t, n, e: -0.1 + 0 * n, shape=(120, 140), spacing=100.0,
+                                     centre=(0.0, 0.0), grid_relative=True)
+    for reach in (0.0, 1_500.0):
+        g = load_file(str(path), frame, reach=reach)
+        assert g.velocity_at(300.0, -200.0, 0.0) == pytest.approx((-0.1, 0.2), abs=1e-6)
+
+
+@pytest.mark.parametrize("lon0, lons", [(179.95, np.arange(-180.0, 180.01, 0.25)),    # both -180 and 180
+                                        (-0.05, np.arange(0.0, 360.01, 0.25))])       # both 0 and 360
+def test_a_global_file_with_both_ends_of_its_seam_is_read_once_across_it(tmp_path, lon0, lons):
+    path = write_cf_current(tmp_path / "g.nc", np.arange(-10.0, 10.01, 0.25), lons, None,
+                            lambda t, la, lo: 0.2 + 0 * la, lambda t, la, lo: 0.1 + 0 * la)
+    frame = LocalFrame(0.5, lon0)
+    raw = read_netcdf(str(path), near=(frame.lat0, frame.lon0, 3_000.0))
+    assert np.all(np.diff(raw.lon) > 0.2)            # the seam's meridian once
+    g = load_file(str(path), frame, reach=3_000.0)
+    assert g.north_axis.size <= 8 and g.east_axis.size <= 8      # at the file's spacing, not 512 nodes
+    assert g.velocity_at(500.0, -500.0, 0.0) == pytest.approx((0.1, 0.2), abs=1e-6)
+
+
+def test_a_large_file_far_from_the_run_is_refused_for_its_area_having_read_next_to_nothing(tmp_path, monkeypatch):
+    path = write_cf_current(tmp_path / "far.nc", np.arange(10.0, 20.0, 0.05), np.arange(10.0, 20.0, 0.05), None,
+                            lambda t, la, lo: 0.2 + 0 * la, lambda t, la, lo: 0.1 + 0 * la)
+    monkeypatch.setattr(current_sources, "MAX_READ", 100)
+    with pytest.raises(CurrentSourceError, match="area is empty around the origin"):
+        load_file(str(path), LocalFrame(38.92, 121.65), reach=5_000.0)

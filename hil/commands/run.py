@@ -308,6 +308,8 @@ def current_line(c: RunCurrent) -> str:
     def part(name: str, st: CurrentStats | None) -> str:
         if st is None:
             return f"{name} -"
+        if math.hypot(st["mean_east_m_s"], st["mean_north_m_s"]) < 0.005:   # no mean direction to give
+            return f"{name} {st['mean_speed_m_s']:.2f} m/s"
         set_deg = math.degrees(math.atan2(st["mean_east_m_s"], st["mean_north_m_s"])) % 360.0
         return f"{name} {st['mean_speed_m_s']:.2f} m/s set {set_deg:03.0f}"
     source = c["source"]
