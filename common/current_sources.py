@@ -809,10 +809,18 @@ def load_file(path: str, frame: LocalFrame, east_variable: str = "", north_varia
     key = (os.path.abspath(path), mtime, frame.lat0, frame.lon0, frame.alt0, east_variable, north_variable,
            start_time, reach)
     if key not in _FILE_CACHE:
-        raw = read_netcdf(path, east_variable, north_variable,
-                          near=(frame.lat0, frame.lon0, reach) if reach > 0 else None)
-        t0 = parse_time(start_time) if start_time else None
-        _FILE_CACHE[key] = GriddedCurrent(raw, frame, t0, source=os.path.basename(path))
+        try:
+            raw = read_netcdf(path, east_variable, north_variable,
+                              near=(frame.lat0, frame.lon0, reach) if reach > 0 else None)
+            t0 = parse_time(start_time) if start_time else None
+            _FILE_CACHE[key] = GriddedCurrent(raw, frame, t0, source=os.path.basename(path))
+        except CurrentSourceError:
+            raise
+        except (ValueError, TypeError, IndexError, KeyError, OverflowError, MemoryError) as exc:
+            # A layout none of the checks above foresaw: one line naming the file and what numpy or
+            # xarray said, not a traceback (the file is the user's input).
+            first = str(exc).splitlines()[0] if str(exc) else ""
+            raise CurrentSourceError(f"{path}: not read as a current file ({type(exc).__name__}: {first})") from None
     return _FILE_CACHE[key]
 
 

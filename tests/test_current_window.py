@@ -140,3 +140,17 @@ def test_a_large_file_far_from_the_run_is_refused_for_its_area_having_read_next_
     monkeypatch.setattr(current_sources, "MAX_READ", 100)
     with pytest.raises(CurrentSourceError, match="area is empty around the origin"):
         load_file(str(path), LocalFrame(38.92, 121.65), reach=5_000.0)
+
+
+def test_a_layout_no_check_foresaw_is_one_line_not_a_traceback(tmp_path, monkeypatch):
+    path = write_cf_current(tmp_path / "c.nc", np.arange(38.0, 40.0, 0.1), np.arange(121.0, 123.0, 0.1), None,
+                            lambda t, la, lo: 0.2 + 0 * la, lambda t, la, lo: 0.1 + 0 * la)
+
+    def broken(*_args, **_kwargs):
+        raise ValueError("operands could not be broadcast together\nwith shapes (3,44,44) (120,140)")
+
+    monkeypatch.setattr(current_sources, "read_netcdf", broken)
+    with pytest.raises(CurrentSourceError) as err:
+        load_file(str(path), LocalFrame(38.92, 121.65), reach=5_000.0)
+    said = "ValueError: operands could not be broadcast together"
+    assert str(err.value) == f"{path}: not read as a current file ({said})"
