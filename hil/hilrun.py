@@ -85,7 +85,8 @@ LOCKSTEP_TAP_PERIOD_S = 0.01  # wall seconds between the tap's reads in lockstep
 # (after the deciding sample, until the SIGTERM arrives), latencies, paths, and warnings about
 # other runs on this host (a system id in use).
 WALL_CLOCK_KEYS = frozenset({"wall_time_s", "control_latency_ms", "run_folder", "tlog", "plot", "simulator",
-                             "tlog_messages", "navigation", "gcs", "sensed_obstacles", "security", "warnings"})
+                             "tlog_messages", "navigation", "gcs", "sensed_obstacles", "security", "warnings",
+                             "current"})
 
 # Campaigns (Monte Carlo) run many loops at once and nobody watches them: they open no ground-station link.
 NO_GCS = ["gcs.endpoints=[]"]
