@@ -20,7 +20,9 @@ sensor and collision judge) is this same grid plus the scenario's uncharted disc
 Readers. GeoJSON (RFC 7946: always longitude/latitude) is read by the standard library and shapely.
 Other files go through pyogrio (GDAL): shapefiles (.shp with .dbf/.shx, and .prj when present),
 GeoPackage (every layer), KML/KMZ, FlatGeobuf and S-57 ENC cells (.000: the obstacle layers only; no
-S-57 cell with features has been read here: GDAL cannot write one). A layer in another coordinate
+S-57 cell with features has been read here: GDAL cannot write one); any of these zipped, one chart to
+an archive (a shapefile with its sidecar files, an ENC cell as a chart office's download holds it:
+:func:`_zipped_chart`), read from the archive by GDAL. A layer in another coordinate
 reference system (a shapefile's .prj in UTM, a GeoPackage layer in a national grid, a GeoJSON of the
 2008 specification with a ``crs`` member) is transformed to WGS-84 longitude/latitude by pyproj
 (PROJ) before anything else; a file without a CRS must already be in longitude/latitude degrees, and
@@ -64,7 +66,7 @@ S57_OBSTACLE_LAYERS = frozenset({"LNDARE", "SLCONS", "OBSTRN", "PONTON", "HULKES
 # CRS names that already mean longitude/latitude on WGS-84 (or a datum within ~1 m of it: NAD83, ETRS89).
 LONLAT_CRS = frozenset({"EPSG:4326", "OGC:CRS84", "CRS:84", "EPSG:4269", "EPSG:4258", "urn:ogc:def:crs:OGC:1.3:CRS84",
                         "urn:ogc:def:crs:EPSG::4326", "urn:ogc:def:crs:OGC::CRS84"})
-CHART_SUFFIXES = (".geojson", ".json", ".shp", ".gpkg", ".kml", ".kmz", ".fgb", ".000")
+CHART_SUFFIXES = (".geojson", ".json", ".shp", ".gpkg", ".kml", ".kmz", ".fgb", ".000", ".zip")
 MAX_CELLS = 16_000_000   # 4000 x 4000 cells: a planning grid the planner and the simulator hold in memory
 
 
@@ -209,7 +211,30 @@ def _to_lonlat(crs: str, where: str) -> Callable[[BaseGeometry], BaseGeometry]:
     return convert
 
 
-def _read_ogr(path: Path) -> list[ChartFeature]:
+def _zipped_chart(path: Path) -> tuple[Path, str]:
+    """The one chart inside a zip archive (a shapefile with its sidecar files, an ENC cell as NOAA's
+    downloads hold it, a GeoPackage ...): its name inside, for messages and its format, and the path GDAL
+    reads it by (``/vsizip/``). None or several: ConfigError naming them."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as z:
+            names = [n for n in z.namelist() if not n.endswith("/")]
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise ConfigError(f"{path}: cannot be read as a zip archive ({exc})") from None
+    inner = [n for n in names if Path(n).suffix.lower() in CHART_SUFFIXES and Path(n).suffix.lower() != ".zip"
+             and not Path(n).name.startswith(".")]
+    if len(inner) != 1:
+        found = ", ".join(inner[:6]) + (" ..." if len(inner) > 6 else "") if inner else "none"
+        raise ConfigError(f"{path}: a zipped chart must hold exactly one chart file "
+                          f"({', '.join(CHART_SUFFIXES[:-1])}); it holds {found}")
+    return path / inner[0], f"/vsizip/{path.resolve()}/{inner[0]}"
+
+
+def _read_ogr(path: Path, source: str | None = None) -> list[ChartFeature]:
+    """The features of a file GDAL reads; ``source``: what GDAL opens when it is not ``path`` itself (a file
+    inside a zip archive, ``path`` then naming it for messages)."""
+    src = str(path) if source is None else source
     try:
         import pyogrio
         import pyogrio.raw
@@ -217,7 +242,7 @@ def _read_ogr(path: Path) -> list[ChartFeature]:
     except ImportError:  # pragma: no cover - dependencies of the project
         raise ConfigError(f"{path}: reading this chart format needs pyogrio (pip install pyogrio)") from None
     try:
-        layers = [str(name) for name, gtype in pyogrio.list_layers(path) if gtype is not None]
+        layers = [str(name) for name, gtype in pyogrio.list_layers(src) if gtype is not None]
         if path.suffix.lower() == ".000":
             layers = [name for name in layers if name.upper() in S57_OBSTACLE_LAYERS]
     except Exception as exc:  # pyogrio's DataSourceError and friends
@@ -226,7 +251,7 @@ def _read_ogr(path: Path) -> list[ChartFeature]:
     for layer in layers:
         where = f"{path}: layer {layer}"
         try:
-            meta, _fids, wkb, fields = pyogrio.raw.read(path, layer=layer, force_2d=True)
+            meta, _fids, wkb, fields = pyogrio.raw.read(src, layer=layer, force_2d=True)
         except Exception as exc:
             raise ConfigError(f"{where}: cannot be read ({str(exc).splitlines()[0]})") from None
         crs = meta.get("crs")
@@ -259,7 +284,10 @@ def read_chart(path: str | Path) -> list[ChartFeature]:
     except OSError:
         raise ConfigError(f"map: no such chart {p}") from None
     if key not in _CACHE:
-        feats = _read_geojson(p) if p.suffix.lower() in (".geojson", ".json") else _read_ogr(p)
+        if p.suffix.lower() == ".zip":
+            feats = _read_ogr(*_zipped_chart(p))
+        else:
+            feats = _read_geojson(p) if p.suffix.lower() in (".geojson", ".json") else _read_ogr(p)
         feats = [f for f in feats if not f.geometry.is_empty]
         if not feats:
             raise ConfigError(f"{p}: the chart has no features")

@@ -510,3 +510,71 @@ def test_features_far_beyond_the_extent_are_cut_before_they_grow_and_mark_the_sa
     np.testing.assert_array_equal(cut.occ, whole.occ)
     assert cut.occ[int(100 / 0.5), -1] and cut.occ[int(120 / 0.5), 0] and cut.occ[0, 0]   # buoy, boom, coast
     assert not cut.occ[int(140 / 0.5), int(100 / 0.5)]
+
+
+def test_a_zipped_shapefile_gives_the_grid_of_the_shapefile(tmp_path):
+    """A shapefile with its sidecar files in a folder of a zip archive, as a download holds it, beside a
+    README: read from the archive by GDAL, the same grid cell for cell."""
+    import zipfile
+
+    pytest.importorskip("pyogrio")
+    pytest.importorskip("pyproj")
+    from support.world_files import basin_harbour, write_ogr_chart
+
+    feats = [("harbour", *f[1:]) for f in basin_harbour()      # a shapefile holds one kind of geometry
+             if f[2] is not None and f[2].geom_type in ("Polygon", "MultiPolygon") and not f[2].is_empty]
+    shp = write_ogr_chart(tmp_path / "harbour.shp", "ESRI Shapefile", feats, FRAME, crs=UTM_EPSG,
+                          geometry_type="MultiPolygon")
+    archive = tmp_path / "download.zip"
+    with zipfile.ZipFile(archive, "w") as z:
+        for part in sorted(tmp_path.glob("harbour.*")):
+            z.write(part, f"coast/{part.name}")
+        z.writestr("coast/README.txt", "a chart")
+    plain = charts.rasterise(shp, 0.5, FRAME, extent=BASIN_EXTENT)
+    zipped = charts.rasterise(archive, 0.5, FRAME, extent=BASIN_EXTENT)
+    np.testing.assert_array_equal(zipped.occ, plain.occ)
+    assert _check_cells(zipped, feats) == 12      # every cell the features decide
+
+
+def test_an_enc_download_is_opened_at_its_cell(tmp_path):
+    """An ENC as a chart office's zip holds it (ENC_ROOT/CATALOG.031 and the cell in a folder of its own):
+    the cell is found and read by the S-57 reader (GDAL writes only a cell's header, so it is refused,
+    in one line, for holding no obstacle layer, as the same cell unzipped is)."""
+    import zipfile
+
+    pyogrio = pytest.importorskip("pyogrio")
+    import shapely
+    from shapely.geometry import box
+
+    cell = tmp_path / "TEST0001.000"
+    land = np.array([shapely.to_wkb(box(LON0, LAT0, LON0 + 0.001, LAT0 + 0.001))], dtype=object)
+    with pytest.raises(Exception, match="CreateLayer.. not supported"):
+        pyogrio.raw.write(cell, land, field_data=[], fields=[], layer="LNDARE", driver="S57",
+                          geometry_type="Polygon", crs="EPSG:4326")
+    archive = tmp_path / "TEST0001.zip"
+    with zipfile.ZipFile(archive, "w") as z:
+        z.writestr("ENC_ROOT/CATALOG.031", b"catalogue")
+        z.write(cell, "ENC_ROOT/TEST0001/TEST0001.000")
+    with pytest.raises(ConfigError, match="the chart has no features") as err:
+        charts.rasterise(archive, 0.5, FRAME)
+    assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("members, message", [
+    ({"a/one.shp": b"", "b/two.geojson": b"{}"}, "exactly one chart file.*it holds a/one.shp, b/two.geojson"),
+    ({"notes.txt": b"no chart here"}, "exactly one chart file.*it holds none"),
+    (None, "cannot be read as a zip archive"),
+])
+def test_a_zip_without_exactly_one_chart_is_refused_in_one_line(tmp_path, members, message):
+    import zipfile
+
+    archive = tmp_path / "charts.zip"
+    if members is None:
+        archive.write_bytes(b"PK not really a zip")
+    else:
+        with zipfile.ZipFile(archive, "w") as z:
+            for name, data in members.items():
+                z.writestr(name, data)
+    with pytest.raises(ConfigError, match=message) as err:
+        charts.rasterise(archive, 0.5, FRAME)
+    assert "\n" not in str(err.value)
