@@ -489,6 +489,18 @@ def _checked_values(g: RawCurrentGrid, path: str) -> RawCurrentGrid:
     return RawCurrentGrid(lat, lon, times, np.ascontiguousarray(u), np.ascontiguousarray(v))
 
 
+def _ned_axes(north: tuple[float, float], east: tuple[float, float], step: tuple[float, float], slices: int,
+              source: str) -> tuple[np.ndarray, np.ndarray]:
+    """The resampled grid's north and east axes (m) over ``north`` x ``east``, nodes ``step`` (north, east) m
+    apart or farther (at most ``MAX_NODES`` a side); too many values for ``slices`` time slices: one line."""
+    nn = int(min(MAX_NODES, max(2, math.ceil((north[1] - north[0]) / max(step[0], 1e-3)) + 1)))
+    ne = int(min(MAX_NODES, max(2, math.ceil((east[1] - east[0]) / max(step[1], 1e-3)) + 1)))
+    if slices * nn * ne > MAX_VALUES:
+        raise CurrentSourceError(f"{source}: {slices} time slices of {nn} x {ne} nodes is too large; cut the "
+                                 "file to the area and time of the run first")
+    return np.linspace(north[0], north[1], nn), np.linspace(east[0], east[1], ne)
+
+
 def _bilinear(axis_y: np.ndarray, axis_x: np.ndarray, grid: np.ndarray, y: np.ndarray, x: np.ndarray) -> np.ndarray:
     """``grid[..., iy, ix]`` interpolated at (y, x) (arrays of one shape), clamped to the axes."""
     def weights(axis: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -623,14 +635,8 @@ class GriddedCurrent:
         # Node spacing: the file's own (in metres), at most MAX_NODES per axis.
         dlat = float(np.min(np.diff(lat))) * 111_000.0
         dlon = float(np.min(np.diff(lon))) * 111_000.0 * max(math.cos(math.radians(frame.lat0)), 0.01)
-        nn = int(min(MAX_NODES, max(2, math.ceil((n1 - n0) / max(dlat, 1e-3)) + 1)))
-        ne = int(min(MAX_NODES, max(2, math.ceil((e1 - e0) / max(dlon, 1e-3)) + 1)))
-        slices = raw.u.shape[0]
-        if slices * nn * ne > MAX_VALUES:
-            raise CurrentSourceError(f"{source}: {slices} time slices of {nn} x {ne} nodes is too large; cut the "
-                                     "file to the area and time of the run first")
-        self.north_axis = np.linspace(n0, n1, nn)
-        self.east_axis = np.linspace(e0, e1, ne)
+        self.north_axis, self.east_axis = _ned_axes((n0, n1), (e0, e1), (dlat, dlon), raw.u.shape[0], source)
+        nn, ne = self.north_axis.size, self.east_axis.size
         node_lat = np.empty((nn, ne))
         node_lon = np.empty((nn, ne))
         for i, n in enumerate(self.north_axis):
@@ -663,15 +669,9 @@ class GriddedCurrent:
             raise CurrentSourceError(f"{source}: its curvilinear grid has no cell with a position at each corner")
         n0, n1 = float(np.nanmin(pn)), float(np.nanmax(pn))
         e0, e1 = float(np.nanmin(pe)), float(np.nanmax(pe))
-        step = 0.5 * side
-        nn = int(min(MAX_NODES, max(2, math.ceil((n1 - n0) / step) + 1)))
-        ne = int(min(MAX_NODES, max(2, math.ceil((e1 - e0) / step) + 1)))
         slices = raw.u.shape[0]
-        if slices * nn * ne > MAX_VALUES:
-            raise CurrentSourceError(f"{source}: {slices} time slices of {nn} x {ne} nodes is too large; cut the "
-                                     "file to the area and time of the run first")
-        self.north_axis = np.linspace(n0, n1, nn)
-        self.east_axis = np.linspace(e0, e1, ne)
+        self.north_axis, self.east_axis = _ned_axes((n0, n1), (e0, e1), (0.5 * side, 0.5 * side), slices, source)
+        nn, ne = self.north_axis.size, self.east_axis.size
         corners, weights = _cell_triangles(pn, pe, placed, self.north_axis, self.east_axis)
         covered = corners[:, 0] >= 0
         if not covered.any():

@@ -399,20 +399,26 @@ def test_a_polygon_shapefile_with_upper_case_integer_fields(tmp_path):
     assert _check_cells(grid, feats) == 12
 
 
+def _header_only_s57_cell(path: Path) -> Path:
+    """What GDAL's S-57 driver writes when asked for a land area: the cell's header (DSID) alone."""
+    import pyogrio.raw
+    import shapely
+    from shapely.geometry import box
+
+    land = np.array([shapely.to_wkb(box(LON0, LAT0, LON0 + 0.001, LAT0 + 0.001))], dtype=object)
+    with pytest.raises(Exception, match="CreateLayer.. not supported"):
+        pyogrio.raw.write(path, land, field_data=[], fields=[], layer="LNDARE", driver="S57",
+                          geometry_type="Polygon", crs="EPSG:4326")
+    return path
+
+
 def test_an_s57_cell_gdal_writes_holds_no_obstacle_layer_and_is_refused(tmp_path):
     """GDAL's S-57 driver creates a cell (its DSID record) but has no CreateLayer: pyogrio cannot write
     an object class into it (a cell with features needs its vector primitives and their linkages,
     which only ogr2ogr from another S-57 cell supplies). What it writes is read by the S-57 reader
     and refused in one line: no obstacle layer."""
     pyogrio = pytest.importorskip("pyogrio")
-    import shapely
-    from shapely.geometry import box
-
-    path = tmp_path / "TEST0001.000"
-    land = np.array([shapely.to_wkb(box(LON0, LAT0, LON0 + 0.001, LAT0 + 0.001))], dtype=object)
-    with pytest.raises(Exception, match="CreateLayer.. not supported"):
-        pyogrio.raw.write(path, land, field_data=[], fields=[], layer="LNDARE", driver="S57",
-                          geometry_type="Polygon", crs="EPSG:4326")
+    path = _header_only_s57_cell(tmp_path / "TEST0001.000")
     assert [str(n) for n, _t in pyogrio.list_layers(path)] == ["DSID"]
     with pytest.raises(ConfigError, match="the chart has no features") as err:
         charts.rasterise(path, 0.5, FRAME)
@@ -542,15 +548,8 @@ def test_an_enc_download_is_opened_at_its_cell(tmp_path):
     in one line, for holding no obstacle layer, as the same cell unzipped is)."""
     import zipfile
 
-    pyogrio = pytest.importorskip("pyogrio")
-    import shapely
-    from shapely.geometry import box
-
-    cell = tmp_path / "TEST0001.000"
-    land = np.array([shapely.to_wkb(box(LON0, LAT0, LON0 + 0.001, LAT0 + 0.001))], dtype=object)
-    with pytest.raises(Exception, match="CreateLayer.. not supported"):
-        pyogrio.raw.write(cell, land, field_data=[], fields=[], layer="LNDARE", driver="S57",
-                          geometry_type="Polygon", crs="EPSG:4326")
+    pytest.importorskip("pyogrio")
+    cell = _header_only_s57_cell(tmp_path / "TEST0001.000")
     archive = tmp_path / "TEST0001.zip"
     with zipfile.ZipFile(archive, "w") as z:
         z.writestr("ENC_ROOT/CATALOG.031", b"catalogue")
