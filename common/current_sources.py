@@ -171,10 +171,8 @@ def _axis(ds: xr.Dataset, var: xr.DataArray, kind: str) -> str | None:
 def _station(ds: xr.Dataset, kind: str) -> float | None:
     """A single station's latitude or longitude (degrees): a variable of one value that is one (CF
     attributes or usual names), as a moored ADCP's time series gives its position; None if none."""
-    names, units = _POSITION[kind]
     for name, var in ds.variables.items():
-        if var.size == 1 and (var.attrs.get("standard_name") == kind or var.attrs.get("units") in units
-                              or str(name).lower() in names):
+        if var.size == 1 and _is_position(kind, name, var.attrs):
             try:
                 return float(np.asarray(var.values, dtype=float).ravel()[0])
             except (TypeError, ValueError):
@@ -209,8 +207,10 @@ def _grid_relative(var: xr.DataArray, prefix: str) -> bool:
     return str(var.attrs.get("standard_name", "")).startswith(prefix)
 
 
-def _angle(ds: xr.Dataset, horizontal: tuple[str, str], path: str) -> np.ndarray | None:
-    """A grid's angle (radians) from east to its xi axis on the ``horizontal`` dimensions, or None."""
+def _angle(ds: xr.Dataset, horizontal: tuple[str, str], path: str,
+           window: dict[str, slice | np.ndarray]) -> np.ndarray | None:
+    """A grid's angle (radians) from east to its xi axis on the ``horizontal`` dimensions, read within
+    ``window`` (isel), or None."""
     for name, var in ds.variables.items():
         if (str(name).lower() in ANGLE_NAMES or var.attrs.get("standard_name") in ANGLE_NAMES) \
                 and set(var.dims) == set(horizontal):
@@ -219,16 +219,17 @@ def _angle(ds: xr.Dataset, horizontal: tuple[str, str], path: str) -> np.ndarray
             if not (units.startswith("degree") or units in ("radians", "radian", "rad", "1", "")):
                 raise CurrentSourceError(f"{path}: {name}: units {var.attrs.get('units')!r} not understood "
                                          "(expected radians or degrees)")
-            return np.asarray(var.transpose(*horizontal).values, dtype=float) * scale
+            return np.asarray(var.transpose(*horizontal).isel(window).values, dtype=float) * scale
     return None
 
 
-def _land_mask(ds: xr.Dataset, horizontal: tuple[str, str]) -> np.ndarray | None:
-    """True on land, from a ROMS ``mask_rho`` or a CF ``sea_binary_mask`` (0 = land) on the grid, or None."""
+def _land_mask(ds: xr.Dataset, horizontal: tuple[str, str], window: dict[str, slice | np.ndarray]) -> np.ndarray | None:
+    """True on land, from a ROMS ``mask_rho`` or a CF ``sea_binary_mask`` (0 = land) on the grid, read within
+    ``window`` (isel), or None."""
     for name, var in ds.variables.items():
         if (str(name).lower() == "mask_rho" or var.attrs.get("standard_name") == "sea_binary_mask") \
                 and set(var.dims) == set(horizontal):
-            return np.asarray(var.transpose(*horizontal).values, dtype=float) == 0.0
+            return np.asarray(var.transpose(*horizontal).isel(window).values, dtype=float) == 0.0
     return None
 
 
@@ -322,14 +323,13 @@ def read_netcdf(path: str, east_variable: str = "", north_variable: str = "",
         u = np.asarray(u_var.isel({**sel, **window}).transpose(*order).values, dtype=float) * _scale(u_var, path)
         v = np.asarray(v_var.isel({**sel, **window}).transpose(*order).values, dtype=float) * _scale(v_var, path)
         if rotate:
-            if grid2d is None or (angle := _angle(ds, horizontal, path)) is None:
+            if grid2d is None or (angle := _angle(ds, horizontal, path, window)) is None:
                 raise CurrentSourceError(f"{path}: {u_var.name}, {v_var.name} are grid-relative (standard_name "
                                          f"{X_PREFIX}...) and the file has no grid angle on their grid to turn "
                                          "them east/north by; give eastward/northward velocity")
             # ROMS's convention (its angle: from east to the xi axis, counter-clockwise; its u2rho/rotate
             # step in the post-processing of u_eastward/v_northward): east = u cos a - v sin a,
             # north = u sin a + v cos a.
-            angle = np.asarray(angle)[tuple(window.get(d, slice(None)) for d in horizontal)]
             ca, sa = np.cos(angle), np.sin(angle)
             u, v = u * ca - v * sa, u * sa + v * ca
         if station is not None:   # one station: its series as a 1 x 1 grid
@@ -338,9 +338,8 @@ def read_netcdf(path: str, east_variable: str = "", north_variable: str = "",
         elif grid2d is not None:
             lat = np.asarray(ds[grid2d[0]].transpose(*horizontal).isel(window).values, dtype=float)
             lon = np.asarray(ds[grid2d[1]].transpose(*horizontal).isel(window).values, dtype=float)
-            land = _land_mask(ds, horizontal)
+            land = _land_mask(ds, horizontal, window)
             if land is not None:
-                land = np.asarray(land)[tuple(window.get(d, slice(None)) for d in horizontal)]
                 u, v = np.where(land, np.nan, u), np.where(land, np.nan, v)
         else:
             lat_name = str(dims["latitude"])
